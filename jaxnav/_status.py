@@ -1,0 +1,51 @@
+"""Status bit flags accumulated through scans, and their host-side conversion to errors.
+
+Algorithms never raise inside ``jit``; they OR flags into an int32 ``status`` leaf that
+travels through the scan. :func:`raise_for_status` turns a (possibly batched) status into a
+readable exception after the run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+NONFINITE_MEASUREMENT = 1  # a NaN/inf measurement element was masked (information, not an error)
+CHOLESKY_FAILED = 2  # an innovation covariance was not positive definite; update skipped
+NONFINITE_STATE = 4  # the state or covariance became NaN/inf
+ESTIMATOR_FALLBACK = 8  # a noise estimator had too little data/rank and used the prior noise
+SMOOTHER_FAILED = 16  # a predicted covariance in the smoother was not positive definite
+
+_MESSAGES = {
+    NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
+    CHOLESKY_FAILED: "an innovation covariance was not positive definite; its update was skipped",
+    NONFINITE_STATE: "the state or covariance became non-finite",
+    ESTIMATOR_FALLBACK: "the noise estimator fell back to the prior noise (too little data or rank)",
+    SMOOTHER_FAILED: "a predicted covariance was not positive definite in the smoother",
+}
+
+#: flags that are reported but are not errors by default
+INFO_FLAGS = NONFINITE_MEASUREMENT | ESTIMATOR_FALLBACK
+
+
+class StatusError(RuntimeError):
+    """Raised by :func:`raise_for_status` when error flags are set."""
+
+
+def describe(status) -> list[str]:
+    """Human-readable list of the flags set in ``status`` (any shape; flags are OR-ed)."""
+    s = int(np.bitwise_or.reduce(np.asarray(status, dtype=np.int64).ravel(), initial=0))
+    return [msg for bit, msg in _MESSAGES.items() if s & bit]
+
+
+def raise_for_status(status, *, ignore: int = INFO_FLAGS) -> None:
+    """Raise :class:`StatusError` if any flag outside ``ignore`` is set in ``status``.
+
+    Args:
+      status: int array of flags, any shape (a batch is OR-reduced).
+      ignore: bit mask of flags that are informational; default ignores masked measurements and
+        estimator fall-backs.
+    """
+    s = int(np.bitwise_or.reduce(np.asarray(status, dtype=np.int64).ravel(), initial=0))
+    bad = s & ~ignore
+    if bad:
+        raise StatusError("; ".join(describe(bad)))

@@ -1,0 +1,43 @@
+"""The model-agnostic Kalman filter family of the source papers (S0 eqs. (1)-(17), S1 eqs. (7)-(19)).
+
+* :class:`LinearGaussian` model with static or time-varying leaves, :func:`validate_model`.
+* :func:`kalman_filter`: classic KF with Cholesky solves and Joseph update, plus plug-ins:
+  prior-inflation rules :func:`constant`, :func:`attenuated`, :func:`fading` and noise
+  estimators :func:`variance_compensation`, :func:`sage_husa`.
+* :func:`rts_smoother`: fixed-interval smoothing over the saved filter moments.
+* :func:`predict`, :func:`update`, :func:`filter_step`: the pure pieces, for custom scans.
+"""
+
+from jaxnav.filters._estimators import (
+    SageHusa,
+    SageHusaInfo,
+    VarianceCompensation,
+    VCInfo,
+    sage_husa,
+    variance_compensation,
+)
+from jaxnav.filters._kalman import (
+    ALL_OUTPUTS,
+    FilterParams,
+    FilterState,
+    KalmanResult,
+    StepInfo,
+    StepInput,
+    UpdateResult,
+    filter_step,
+    kalman_filter,
+    predict,
+    update,
+)
+from jaxnav.filters._model import LinearGaussian, check_shapes, validate_model
+from jaxnav.filters._models import constant_velocity
+from jaxnav.filters._rules import Attenuated, Constant, Fading, StepContext, attenuated, constant, fading
+from jaxnav.filters._smoother import SmootherResult, rts_smoother
+
+__all__ = [
+    "ALL_OUTPUTS", "Attenuated", "Constant", "Fading", "FilterParams", "FilterState",
+    "KalmanResult", "LinearGaussian", "SageHusa", "SageHusaInfo", "SmootherResult", "StepContext",
+    "StepInfo", "StepInput", "UpdateResult", "VCInfo", "VarianceCompensation", "attenuated",
+    "check_shapes", "constant", "constant_velocity", "fading", "filter_step", "kalman_filter",
+    "predict", "rts_smoother", "sage_husa", "update", "validate_model", "variance_compensation",
+]

@@ -1,0 +1,318 @@
+"""The shared predict/update and the Kalman filter driver (S0 eqs. (4)-(9), S1 eqs. (7)-(11)).
+
+One predict step and one Joseph-form update serve every variant; prior-inflation rules
+(:mod:`._rules`) and noise estimators (:mod:`._estimators`) plug into :func:`filter_step`.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+from typing import Any, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+
+from jaxnav import _status
+from jaxnav._numerics import cho_solve, cholesky, symmetrize, whiten
+from jaxnav.filters._estimators import NoEstimator, PostUpdate
+from jaxnav.filters._model import LinearGaussian, check_shapes
+from jaxnav.filters._rules import NoInflation, StepContext
+
+LOG_2PI = math.log(2.0 * math.pi)
+
+#: every per-epoch output :func:`kalman_filter` can save
+ALL_OUTPUTS = (
+    "means", "covs", "pred_means", "pred_covs", "innovations", "innov_covs",
+    "nis", "logliks", "factors", "noise", "valid",
+)
+
+
+class UpdateResult(NamedTuple):
+    """Output of :func:`update`."""
+
+    x: Any  # (n,) posterior mean
+    P: Any  # (n, n) posterior covariance
+    v: Any  # (m,) innovation (zero where invalid)
+    S: Any  # (m, m) innovation covariance (identity rows/cols where invalid)
+    K: Any  # (n, m) gain
+    nis: Any  # scalar v^T S^{-1} v
+    loglik: Any  # scalar log N(v; 0, S) over the valid components
+    ok: Any  # bool, S was positive definite (else the prior is returned)
+
+
+def predict(x, P, F, GQG, factor=1.0):
+    """Prediction X_{k,k-1} = F X_{k-1}, P_{k,k-1} = f_k F P_{k-1} F^T + G Q G^T.
+
+    S0 eqs. (4), (8); f_k = S (eq. (10)), S_k (eq. (12)) or lambda_k (eq. (13)).
+
+    Args:
+      x: (n,) estimate at k-1.  P: (n, n) its covariance.
+      F: (n, n) transition.  GQG: (n, n) process noise.  factor: scalar inflation f_k.
+    Returns:
+      (x_pred (n,), P_pred (n, n)).
+    """
+    return F @ x, symmetrize(factor * (F @ P @ F.T) + GQG)
+
+
+def update(x_pred, P_pred, z, H, R, valid=None):
+    """Joseph-form measurement update with Cholesky solves (S0 eqs. (5), (7), (9)).
+
+    K = P H^T (H P H^T + R)^{-1}; x = x_pred + K v; P = (I - K H) P (I - K H)^T + K R K^T,
+    symmetrised. Invalid components (``valid`` False) are removed exactly: their H rows are
+    zeroed and their rows/columns of S replaced by the identity, so K has zero columns for them.
+    If S is not positive definite the prior is returned with ``ok = False``.
+
+    Args:
+      x_pred: (n,) prior mean.  P_pred: (n, n) prior covariance.
+      z: (m,) measurement (any value where invalid).  H: (m, n).  R: (m, m).
+      valid: optional (m,) bool.
+    Returns:
+      :class:`UpdateResult`.
+    """
+    m = z.shape[-1]
+    dt = P_pred.dtype
+    if valid is None:
+        valid = jnp.ones((m,), bool)
+    Hm = jnp.where(valid[:, None], H, 0.0)
+    both = valid[:, None] & valid[None, :]
+    Rm = jnp.where(both, R, 0.0)
+    Rm = Rm + jnp.diag(jnp.where(valid, 0.0, 1.0).astype(dt))
+    v = jnp.where(valid, z - Hm @ x_pred, 0.0)
+    PHt = P_pred @ Hm.T
+    S = symmetrize(Hm @ PHt + Rm)
+    L = cholesky(S)
+    ok = jnp.all(jnp.isfinite(L))
+    Lsafe = jnp.where(ok, L, jnp.eye(m, dtype=dt))
+    K = cho_solve(Lsafe, PHt.T).T
+    x = x_pred + K @ v
+    IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - K @ Hm
+    P = symmetrize(IKH @ P_pred @ IKH.T + K @ Rm @ K.T)
+    w = whiten(Lsafe, v)
+    nis = w @ w
+    mv = jnp.sum(valid)
+    loglik = -0.5 * (nis + 2.0 * jnp.sum(jnp.log(jnp.diagonal(Lsafe))) + mv * LOG_2PI)
+    x = jnp.where(ok, x, x_pred)
+    P = jnp.where(ok, P, P_pred)
+    return UpdateResult(x=x, P=P, v=v, S=S, K=jnp.where(ok, K, 0.0), nis=nis, loglik=loglik, ok=ok)
+
+
+class FilterState(NamedTuple):
+    """Carry of the filter scan."""
+
+    x: Any  # (n,) estimate at the last epoch
+    P: Any  # (n, n)
+    k: Any  # scalar float, epochs processed
+    rule: Any  # inflation rule state
+    est: Any  # estimator state
+    status: Any  # int32 status flags (jaxnav._status)
+    loglik: Any  # scalar accumulated log-likelihood
+    n_nonfinite: Any  # int32, non-finite measurement elements masked
+    n_skipped: Any  # int32, epochs with no valid component
+
+
+class FilterParams(NamedTuple):
+    """Static-in-time model parts plus the plug-ins (time-varying leaves come as inputs)."""
+
+    model: LinearGaussian
+    inflation: Any
+    estimator: Any
+
+
+class StepInput(NamedTuple):
+    """Per-epoch inputs: the measurement, user mask, and any time-varying model leaves."""
+
+    z: Any  # (m,)
+    mask: Any  # (m,) bool
+    F: Any = None
+    H: Any = None
+    Q: Any = None
+    R: Any = None
+    G: Any = None
+
+
+class StepInfo(NamedTuple):
+    """Per-epoch outputs (fields not requested are None)."""
+
+    means: Any = None
+    covs: Any = None
+    pred_means: Any = None
+    pred_covs: Any = None
+    innovations: Any = None
+    innov_covs: Any = None
+    nis: Any = None
+    logliks: Any = None
+    factors: Any = None
+    noise: Any = None
+    valid: Any = None
+
+
+def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=ALL_OUTPUTS):
+    """One epoch of the Kalman filter family: predict, inflate, update (S0 eqs. (4)-(17)).
+
+    Args:
+      state: :class:`FilterState` at k-1.
+      inp: :class:`StepInput` for epoch k (time-varying leaves given there, else in params).
+      params: :class:`FilterParams`.
+      save: names of the per-epoch outputs to return (see ``ALL_OUTPUTS``).
+    Returns:
+      (state at k, :class:`StepInfo`).
+    """
+    model, rule, est = params
+    F = model.F if inp.F is None else inp.F
+    H = model.H if inp.H is None else inp.H
+    Q = model.Q if inp.Q is None else inp.Q
+    R = model.R if inp.R is None else inp.R
+    G = model.G if inp.G is None else inp.G
+    dt = state.P.dtype
+    n = state.x.shape[0]
+
+    finite = jnp.isfinite(inp.z)
+    valid = inp.mask & finite
+    observed = jnp.any(valid)
+    z = jnp.where(valid, inp.z, 0.0)
+    Hm = jnp.where(valid[:, None], H, 0.0)
+    Gm = jnp.eye(n, dtype=dt) if G is None else G
+    GQG = Q if G is None else G @ Q @ G.T
+
+    k = state.k + 1.0
+    x_pred = F @ state.x
+    FPF = F @ state.P @ F.T
+    v = jnp.where(valid, z - Hm @ x_pred, 0.0)
+    ctx = StepContext(k=k, v=v, valid=valid, observed=observed, F=F, H=Hm, G=Gm, Q=Q, R=R,
+                      FPF=FPF, GQG=GQG, R_used=R)
+    GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
+    ctx = ctx._replace(GQG=GQG, R_used=R_used)
+    factor, rule_state = rule.factor(state.rule, ctx)
+    x_pred, P_pred = predict(state.x, state.P, F, GQG, factor)
+    up = update(x_pred, P_pred, z, H, R_used, valid)
+    post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - Hm @ up.x, 0.0), P_pred=P_pred)
+    est_state = est.after(est_state, ctx, post)
+
+    n_bad = jnp.sum(inp.mask & ~finite).astype(jnp.int32)
+    flags = est_flag | jnp.where(n_bad > 0, _status.NONFINITE_MEASUREMENT, 0)
+    flags = flags | jnp.where(observed & ~up.ok, _status.CHOLESKY_FAILED, 0)
+    flags = flags | jnp.where(jnp.all(jnp.isfinite(up.x)) & jnp.all(jnp.isfinite(up.P)), 0,
+                              _status.NONFINITE_STATE)
+    ll = jnp.where(observed & up.ok, up.loglik, 0.0)
+    new = FilterState(
+        x=up.x, P=up.P, k=k, rule=rule_state, est=est_state,
+        status=state.status | flags.astype(jnp.int32), loglik=state.loglik + ll,
+        n_nonfinite=state.n_nonfinite + n_bad,
+        n_skipped=state.n_skipped + (~observed).astype(jnp.int32),
+    )
+    allv = dict(means=up.x, covs=up.P, pred_means=x_pred, pred_covs=P_pred, innovations=up.v,
+                innov_covs=up.S, nis=jnp.where(observed, up.nis, 0.0), logliks=ll,
+                factors=factor, noise=noise_info, valid=jnp.sum(valid).astype(jnp.int32))
+    info = StepInfo(**{name: allv[name] for name in save})
+    return new, info
+
+
+class KalmanResult(NamedTuple):
+    """Result of :func:`kalman_filter`; per-epoch arrays have a leading axis T (None if not saved).
+
+    Attributes:
+      means: (T, n) filtered means X_k.  covs: (T, n, n) P_k.
+      pred_means: (T, n) X_{k,k-1}.  pred_covs: (T, n, n) P_{k,k-1} (after inflation).
+      innovations: (T, m) v_k (0 where invalid).  innov_covs: (T, m, m) H P_{k,k-1} H^T + R.
+      nis: (T,) v^T S^{-1} v.  logliks: (T,) per-epoch log-likelihood.
+      factors: (T,) inflation factor (1, S, S_k or lambda_k).
+      noise: per-epoch estimator output (e.g. VCInfo, SageHusaInfo) or ().
+      valid: (T,) number of valid measurement components.
+      loglik: scalar total innovation log-likelihood.
+      n_nonfinite: int, NaN/inf measurement elements masked.  n_skipped: int, epochs without update.
+      status: int32 flags (see :func:`jaxnav.raise_for_status`).
+      x_final, P_final: the last estimate (always returned).
+    """
+
+    means: Any = None
+    covs: Any = None
+    pred_means: Any = None
+    pred_covs: Any = None
+    innovations: Any = None
+    innov_covs: Any = None
+    nis: Any = None
+    logliks: Any = None
+    factors: Any = None
+    noise: Any = None
+    valid: Any = None
+    loglik: Any = None
+    n_nonfinite: Any = None
+    n_skipped: Any = None
+    status: Any = None
+    x_final: Any = None
+    P_final: Any = None
+
+
+def _check_dtype(dtype, allow_float32):
+    if dtype != jnp.float64 and not allow_float32:
+        raise ValueError(
+            f"kalman_filter computes in {jnp.dtype(dtype).name}; navigation and geodetic filtering "
+            "needs float64: call jaxnav.enable_x64() before creating arrays, or pass "
+            "allow_float32=True to opt in to the float32 path"
+        )
+
+
+@partial(jax.jit, static_argnames=("save", "unroll", "allow_float32"))
+def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimator=None, mask=None,
+                  save=ALL_OUTPUTS, unroll: int = 1, allow_float32: bool = False) -> KalmanResult:
+    """Run the Kalman filter family over a measurement series with ``lax.scan`` (S0 eqs. (4)-(17)).
+
+    Convention: ``x0, P0`` are the estimate at k = 0 and every ``zs[t]`` is used after one
+    prediction, so the first prediction has k = 1 (S_1 = 1). A masked or NaN epoch returns the
+    prediction as its estimate.
+
+    Args:
+      model: :class:`LinearGaussian` with static or (T, ...) time-varying leaves.
+      x0: (n,) initial mean.  P0: (n, n) initial covariance.
+      zs: (T, m) measurements; NaN/inf elements are masked and counted.
+      inflation: None (classic), ``constant(S)``, ``attenuated(b)`` or ``fading(...)``.
+      estimator: None, ``variance_compensation(window)`` or ``sage_husa(b)``.
+      mask: optional (T,) or (T, m) bool, True where a measurement is used.
+      save: tuple of per-epoch outputs to keep (subset of ``ALL_OUTPUTS``); static.
+      unroll: ``lax.scan`` unroll factor; static.
+      allow_float32: opt in to computing in float32; static.
+    Returns:
+      :class:`KalmanResult`.
+    Raises:
+      ValueError: at trace time, for inconsistent shapes (naming them), unknown output names, or
+        a float32 computation without ``allow_float32``.
+    """
+    save = tuple(save)
+    unknown = [s for s in save if s not in ALL_OUTPUTS]
+    if unknown:
+        raise ValueError(f"unknown outputs {unknown}; choose from {ALL_OUTPUTS}")
+    n, m, p, T, tv = check_shapes(model, x0, P0, zs, mask)
+    leaves = [x0, P0, zs] + [a for a in model if a is not None]
+    dtype = jnp.result_type(*leaves)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(float)
+    _check_dtype(dtype, allow_float32)
+    cast = lambda a: None if a is None else jnp.asarray(a, dtype)  # noqa: E731
+    model = LinearGaussian(*[cast(a) for a in model])
+    x0, P0, zs = cast(x0), cast(P0), cast(zs)
+    if mask is None:
+        mask = jnp.ones((T, m), bool)
+    else:
+        mask = jnp.asarray(mask, bool)
+        if mask.ndim == 1:
+            mask = jnp.broadcast_to(mask[:, None], (T, m))
+    rule = NoInflation() if inflation is None else inflation
+    est = NoEstimator() if estimator is None else estimator
+    static = LinearGaussian(*[None if tv[name] else getattr(model, name) for name in LinearGaussian._fields])
+    xs = StepInput(z=zs, mask=mask, **{name: getattr(model, name) for name in tv if tv[name]})
+    params = FilterParams(model=static, inflation=rule, estimator=est)
+    init = FilterState(
+        x=x0, P=P0, k=jnp.zeros((), dtype), rule=rule.init(m, dtype), est=est.init(n, m, p, dtype),
+        status=jnp.zeros((), jnp.int32), loglik=jnp.zeros((), dtype),
+        n_nonfinite=jnp.zeros((), jnp.int32), n_skipped=jnp.zeros((), jnp.int32),
+    )
+
+    def body(state, inp):
+        return filter_step(state, inp, params, save)
+
+    final, info = jax.lax.scan(body, init, xs, unroll=unroll)
+    return KalmanResult(
+        **info._asdict(), loglik=final.loglik, n_nonfinite=final.n_nonfinite,
+        n_skipped=final.n_skipped, status=final.status, x_final=final.x, P_final=final.P,
+    )

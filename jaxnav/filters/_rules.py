@@ -1,0 +1,229 @@
+"""Prior-inflation rules that plug into the one shared predict step.
+
+Every rule returns a scalar factor f_k and the predict step forms
+``P_{k,k-1} = f_k * F P_{k-1} F^T + G Q G^T`` (S0 eqs. (8), (10), (12), (13)). Rules are frozen
+dataclasses registered as pytrees: the tunable numbers (S, b, rho, smoothing temperature) are
+array leaves, so ``jax.vmap`` and ``jax.grad`` reach them; structural choices (window length,
+absolute value or not) are static fields.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+
+from jaxnav._numerics import smooth_max1
+
+
+class StepContext(NamedTuple):
+    """What a rule or estimator may look at when epoch k is predicted (all shapes per sequence).
+
+    Attributes:
+      k: scalar float, the epoch number being predicted (1 for the first measurement).
+      v: (m,) innovation Z_k - H X_{k,k-1} (S0 eq. (17)); zero in invalid components.
+      valid: (m,) bool, which components of Z_k are used.
+      observed: scalar bool, any component valid.
+      F: (n, n) transition into epoch k.
+      H: (m, n) measurement matrix with invalid rows zeroed.
+      G: (n, p) noise input matrix (identity when the model has none).
+      Q: (p, p) the model's process-noise covariance at this epoch.
+      R: (m, m) the model's measurement-noise covariance at this epoch (not masked).
+      FPF: (n, n) F P_{k-1} F^T.
+      GQG: (n, n) process noise used in this prediction (after any noise estimator).
+      R_used: (m, m) measurement noise used in this update (after any noise estimator).
+    """
+
+    k: Any
+    v: Any
+    valid: Any
+    observed: Any
+    F: Any
+    H: Any
+    G: Any
+    Q: Any
+    R: Any
+    FPF: Any
+    GQG: Any
+    R_used: Any
+
+
+def _masked_trace(A, valid):
+    return jnp.sum(jnp.where(valid, jnp.diagonal(A), 0.0))
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class NoInflation:
+    """The classic Kalman filter: factor 1 (S0 eq. (8))."""
+
+    def init(self, m, dtype):
+        return ()
+
+    def factor(self, state, ctx):
+        return jnp.ones((), ctx.FPF.dtype), state
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Constant:
+    """Constant inflation S >= 1 (S0 eq. (10)); equals filterpy's fading ``alpha`` with S = alpha^2.
+
+    Attributes:
+      S: scalar array, the factor applied to F P F^T at every epoch.
+    """
+
+    S: Any
+
+    def init(self, m, dtype):
+        return ()
+
+    def factor(self, state, ctx):
+        return jnp.asarray(self.S, ctx.FPF.dtype), state
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Attenuated:
+    """Attenuated memory S_k = (1 - b^k) / (1 - b), 0 <= b < 1 (S0 eqs. (11)-(12)).
+
+    S_1 = 1 and S_k rises monotonically towards 1 / (1 - b); b = 0 is the classic filter.
+
+    Attributes:
+      b: scalar array in [0, 1), the attenuation factor (S0 used 0.254 chosen by trial and error).
+    """
+
+    b: Any
+
+    def init(self, m, dtype):
+        return ()
+
+    def factor(self, state, ctx):
+        b = jnp.asarray(self.b, ctx.FPF.dtype)
+        return (1.0 - b ** ctx.k) / (1.0 - b), state
+
+
+class FadingState(NamedTuple):
+    """Running innovation statistics of the fading-memory rule."""
+
+    buf: Any  # (window,) v^T v of the last epochs (window estimator), else (0,)
+    filled: Any  # (window,) bool
+    pos: Any  # int32 ring position
+    C: Any  # scalar, recursive estimate of tr E(v v^T)
+    started: Any  # bool, C holds a value
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Fading:
+    """Fading memory lambda_k = max{1, |tr N_k / tr M_k|} (S0 eqs. (13)-(17)).
+
+    N_k = P_vk - H G Q G^T H^T - R_k, M_k = H F P_{k-1} F^T H^T. Only traces enter, so the
+    innovation statistic kept is tr(P_vk) = E(v^T v), estimated in one of three ways:
+
+    * window n (``window=n``): the sample mean of v_i^T v_i over the last n observed epochs,
+      the current one included (the 1/n of eq. (14) read as the mean of eq. (16));
+    * recursive (``rho=``): C_k = (rho C_{k-1} + v_k^T v_k) / (1 + rho), C at the first
+      observed epoch = v^T v;
+    * single epoch (neither given, or ``window=1``): v_k^T v_k.
+
+    Notes:
+      Epochs with no valid measurement get lambda_k = 1 and leave the statistics unchanged; with
+      partially valid measurements the traces run over the valid components. ``absolute=True``
+      follows the printed eq. (14) (|tr N / tr M|); ``absolute=False`` is the Yang & Gao form
+      max{1, tr N / tr M}, which does not inflate when the innovations are *smaller* than
+      expected. ``smooth`` replaces max(1, .) by 1 + tau softplus((x - 1)/tau) so that gradients
+      are continuous; the hard max has gradient 0 where lambda_k = 1.
+
+    Attributes:
+      rho: None or scalar array > 0, the recursive estimator's weight.
+      smooth: None or scalar array tau > 0, temperature of the smooth surrogate.
+      window: static int or None, the window length n.
+      absolute: static bool, take |tr N / tr M| as printed in S0 eq. (14).
+    """
+
+    rho: Any = None
+    smooth: Any = None
+    window: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
+    absolute: bool = dataclasses.field(default=True, metadata=dict(static=True))
+
+    def _n(self):
+        return 1 if self.window is None else int(self.window)
+
+    def init(self, m, dtype):
+        w = self._n() if self.rho is None else 0
+        return FadingState(
+            buf=jnp.zeros((w,), dtype),
+            filled=jnp.zeros((w,), bool),
+            pos=jnp.zeros((), jnp.int32),
+            C=jnp.zeros((), dtype),
+            started=jnp.zeros((), bool),
+        )
+
+    def factor(self, state, ctx):
+        vv = jnp.sum(jnp.where(ctx.valid, ctx.v * ctx.v, 0.0))
+        obs = ctx.observed
+        if self.rho is None:
+            w = self._n()
+            buf = jnp.where(obs, state.buf.at[state.pos].set(vv), state.buf)
+            filled = jnp.where(obs, state.filled.at[state.pos].set(True), state.filled)
+            pos = jnp.where(obs, (state.pos + 1) % w, state.pos)
+            cnt = jnp.maximum(jnp.sum(filled), 1)
+            trPv = jnp.sum(jnp.where(filled, buf, 0.0)) / cnt
+            new = state._replace(buf=buf, filled=filled, pos=pos)
+        else:
+            rho = jnp.asarray(self.rho, ctx.FPF.dtype)
+            C = jnp.where(state.started, (rho * state.C + vv) / (1.0 + rho), vv)
+            C = jnp.where(obs, C, state.C)
+            trPv = C
+            new = state._replace(C=C, started=state.started | obs)
+        trN = (trPv - _masked_trace(ctx.H @ ctx.GQG @ ctx.H.T, ctx.valid)
+               - _masked_trace(ctx.R_used, ctx.valid))
+        trM = _masked_trace(ctx.H @ ctx.FPF @ ctx.H.T, ctx.valid)
+        pos_M = trM > 0
+        ratio = trN / jnp.where(pos_M, trM, 1.0)  # double-where: finite gradient when trM = 0
+        ratio = jnp.abs(ratio) if self.absolute else ratio
+        ratio = jnp.where(pos_M, ratio, 1.0)
+        if self.smooth is None:
+            lam = jnp.maximum(1.0, ratio)
+        else:
+            lam = smooth_max1(ratio, jnp.asarray(self.smooth, ctx.FPF.dtype))
+        lam = jnp.where(obs, lam, 1.0)
+        return lam, new
+
+
+def constant(S) -> Constant:
+    """Constant prior inflation S (S0 eq. (10)); filterpy's ``alpha`` is sqrt(S)."""
+    return Constant(S=jnp.asarray(S))
+
+
+def attenuated(b) -> Attenuated:
+    """Attenuated-memory rule S_k = (1 - b^k) / (1 - b) (S0 eqs. (11)-(12)); b an array leaf."""
+    return Attenuated(b=jnp.asarray(b))
+
+
+def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True) -> Fading:
+    """Fading-memory rule lambda_k (S0 eqs. (13)-(17)); see :class:`Fading`.
+
+    Args:
+      window: static int n >= 1 for the windowed sample mean of the innovations.
+      rho: scalar > 0 for the recursive estimator C_k = (rho C_{k-1} + v v^T)/(1 + rho).
+      smooth: optional temperature tau > 0 of a smooth surrogate of max(1, .).
+      absolute: use |tr N / tr M| as printed (True) or tr N / tr M (False).
+    With neither ``window`` nor ``rho`` the single-epoch estimator (n = 1) is used.
+
+    Raises:
+      ValueError: both window and rho given, or window < 1.
+    """
+    if window is not None and rho is not None:
+        raise ValueError("fading(): give either window=n or rho=..., not both")
+    if window is not None and (int(window) != window or window < 1):
+        raise ValueError(f"fading(): window must be a positive integer, got {window!r}")
+    return Fading(
+        rho=None if rho is None else jnp.asarray(rho),
+        smooth=None if smooth is None else jnp.asarray(smooth),
+        window=None if window is None else int(window),
+        absolute=bool(absolute),
+    )

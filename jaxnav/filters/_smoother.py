@@ -1,0 +1,80 @@
+"""Rauch-Tung-Striebel fixed-interval smoother over the saved filter moments (S3 class 1)."""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from jaxnav import _status
+from jaxnav._numerics import cho_solve, cholesky, symmetrize
+from jaxnav.filters._model import LinearGaussian
+
+
+class SmootherResult(NamedTuple):
+    """RTS output, aligned with the filter's outputs.
+
+    Attributes:
+      means: (T, n) smoothed means.  covs: (T, n, n) smoothed covariances.
+      gains: (T, n, n) smoother gains C_t (zero at the last epoch).
+      status: int32 flags (SMOOTHER_FAILED if a predicted covariance was not PD).
+    """
+
+    means: Any
+    covs: Any
+    gains: Any
+    status: Any
+
+
+@partial(jax.jit, static_argnames=("unroll",))
+def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1) -> SmootherResult:
+    """RTS smoother: C_t = P_t F_{t+1}^T P_{t+1|t}^{-1}, x^s_t = x_t + C_t (x^s_{t+1} - x_{t+1|t}).
+
+    P^s_t = P_t + C_t (P^s_{t+1} - P_{t+1|t}) C_t^T. It uses the filter's *saved* predicted
+    moments, so for an inflated (attenuated or fading) filter it smooths with the inflated priors
+    the filter actually used; for the classic filter it equals the textbook RTS.
+
+    Args:
+      model: the model given to the filter (only F is used; (n, n) or (T, n, n)).
+      filtered: a :class:`KalmanResult` with ``means``, ``covs``, ``pred_means``, ``pred_covs``.
+      unroll: ``lax.scan`` unroll factor.
+    Returns:
+      :class:`SmootherResult`.
+    Raises:
+      ValueError: if the needed outputs were not saved, or F has a wrong shape.
+    """
+    for name in ("means", "covs", "pred_means", "pred_covs"):
+        if getattr(filtered, name, None) is None:
+            raise ValueError(f"rts_smoother needs the filter output '{name}': run kalman_filter with it in save=")
+    xs, Ps, xp, Pp = filtered.means, filtered.covs, filtered.pred_means, filtered.pred_covs
+    T, n = xs.shape
+    F = jnp.asarray(model.F, xs.dtype)
+    if F.shape == (n, n):
+        Fn = jnp.broadcast_to(F, (T - 1, n, n))
+    elif F.shape == (T, n, n):
+        Fn = F[1:]
+    else:
+        raise ValueError(f"model.F has shape {F.shape}; expected {(n, n)} or {(T, n, n)}")
+
+    def body(carry, inp):
+        xs_next, Ps_next, status = carry
+        x, P, x_p, P_p, Fk = inp
+        L = cholesky(P_p)
+        ok = jnp.all(jnp.isfinite(L))
+        L = jnp.where(ok, L, jnp.eye(n, dtype=P.dtype))
+        C = cho_solve(L, Fk @ P).T
+        C = jnp.where(ok, C, 0.0)
+        x_s = x + C @ (xs_next - x_p)
+        P_s = symmetrize(P + C @ (Ps_next - P_p) @ C.T)
+        status = status | jnp.where(ok, 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
+        return (x_s, P_s, status), (x_s, P_s, C)
+
+    init = (xs[-1], Ps[-1], jnp.zeros((), jnp.int32))
+    inp = (xs[:-1], Ps[:-1], xp[1:], Pp[1:], Fn)
+    (_, _, status), (m_s, P_s, C) = jax.lax.scan(body, init, inp, reverse=True, unroll=unroll)
+    means = jnp.concatenate([m_s, xs[-1:]], axis=0)
+    covs = jnp.concatenate([P_s, Ps[-1:]], axis=0)
+    gains = jnp.concatenate([C, jnp.zeros((1, n, n), xs.dtype)], axis=0)
+    return SmootherResult(means=means, covs=covs, gains=gains, status=status)

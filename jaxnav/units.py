@@ -1,0 +1,46 @@
+"""Unit constants and named converters for the edges of the library (configs, CLI, plots).
+
+Inside jaxnav everything is SI (m, s, rad, m/s^2). Multiply a value given in an edge unit by
+the constant to get SI; divide to go back. Example: ``0.1 * DEG_PER_HOUR`` is 0.1 deg/h in rad/s.
+"""
+
+from __future__ import annotations
+
+import math
+
+DEG = math.pi / 180.0  # rad per degree
+ARCMIN = DEG / 60.0  # rad per arc-minute
+ARCSEC = DEG / 3600.0  # rad per arc-second
+HOUR = 3600.0  # s per hour
+DEG_PER_HOUR = DEG / HOUR  # rad/s per deg/h
+DEG_PER_SQRT_HOUR = DEG / math.sqrt(HOUR)  # rad/sqrt(s) per deg/sqrt(h) (angle random walk)
+G0 = 9.80665  # standard gravity, m/s^2 (used only to express mg and ug)
+MG = 1e-3 * G0  # m/s^2 per milli-g
+UG = 1e-6 * G0  # m/s^2 per micro-g
+MM = 1e-3  # m per millimetre
+CM = 1e-2  # m per centimetre
+
+
+def deg_to_rad(x):
+    """Degrees -> radians."""
+    return x * DEG
+
+
+def rad_to_deg(x):
+    """Radians -> degrees."""
+    return x / DEG
+
+
+def arcsec_to_rad(x):
+    """Arc-seconds -> radians."""
+    return x * ARCSEC
+
+
+def deg_per_hour_to_rad_per_s(x):
+    """Gyro drift in deg/h -> rad/s."""
+    return x * DEG_PER_HOUR
+
+
+def mg_to_mps2(x):
+    """Accelerometer bias in milli-g -> m/s^2."""
+    return x * MG
