@@ -7,6 +7,15 @@ import jax.numpy as jnp
 from jax.scipy.linalg import solve_triangular
 
 
+def as_leaf(x):
+    """A tunable number as a strongly typed float array leaf (default float dtype).
+
+    Python floats would be weakly typed and ``np.float64`` strongly typed; normalising both
+    keeps one jit cache entry for every value a user sweeps.
+    """
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
 def symmetrize(P):
     """(P + P^T) / 2 over the last two axes."""
     return 0.5 * (P + jnp.swapaxes(P, -1, -2))

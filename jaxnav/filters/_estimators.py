@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import cho_solve, cholesky, symmetrize
+from jaxnav._numerics import as_leaf, cho_solve, cholesky, symmetrize
 
 
 class PostUpdate(NamedTuple):
@@ -199,8 +199,8 @@ class SageHusa:
 
     def noise(self, state, ctx):
         first = state.count == 0
-        Q = jnp.where(first, ctx.GQG, state.Q) if "Q" in self.estimate else ctx.GQG
-        R = jnp.where(first, ctx.R, state.R) if "R" in self.estimate else ctx.R
+        Q = jnp.where(first, symmetrize(ctx.GQG), state.Q) if "Q" in self.estimate else ctx.GQG
+        R = jnp.where(first, symmetrize(ctx.R), state.R) if "R" in self.estimate else ctx.R
         st = state._replace(Q=Q, R=R)
         return Q, R, st, (SageHusaInfo(Q=Q, R=R), jnp.zeros((), jnp.int32))
 
@@ -242,7 +242,7 @@ def variance_compensation(window: int = 30, *, floor=0.0, floor_rel=1e-4, ridge=
     if min_epochs is not None and (int(min_epochs) != min_epochs or not 1 <= min_epochs <= window):
         raise ValueError(f"variance_compensation(): min_epochs must be in 1..window, got {min_epochs!r}")
     return VarianceCompensation(
-        floor=jnp.asarray(floor), floor_rel=jnp.asarray(floor_rel), ridge=jnp.asarray(ridge),
+        floor=as_leaf(floor), floor_rel=as_leaf(floor_rel), ridge=as_leaf(ridge),
         window=int(window), min_epochs=None if min_epochs is None else int(min_epochs),
     )
 
@@ -260,4 +260,4 @@ def sage_husa(b=0.95, *, estimate: str = "R", eig_floor=0.0) -> SageHusa:
     """
     if estimate not in ("R", "Q", "QR"):
         raise ValueError(f"sage_husa(): estimate must be 'R', 'Q' or 'QR', got {estimate!r}")
-    return SageHusa(b=jnp.asarray(b), eig_floor=jnp.asarray(eig_floor), estimate=estimate)
+    return SageHusa(b=as_leaf(b), eig_floor=as_leaf(eig_floor), estimate=estimate)

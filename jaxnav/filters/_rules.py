@@ -15,7 +15,7 @@ from typing import Any, NamedTuple, Optional
 import jax
 import jax.numpy as jnp
 
-from jaxnav._numerics import smooth_max1
+from jaxnav._numerics import as_leaf, smooth_max1
 
 
 class StepContext(NamedTuple):
@@ -196,12 +196,12 @@ class Fading:
 
 def constant(S) -> Constant:
     """Constant prior inflation S (S0 eq. (10)); filterpy's ``alpha`` is sqrt(S)."""
-    return Constant(S=jnp.asarray(S))
+    return Constant(S=as_leaf(S))
 
 
 def attenuated(b) -> Attenuated:
     """Attenuated-memory rule S_k = (1 - b^k) / (1 - b) (S0 eqs. (11)-(12)); b an array leaf."""
-    return Attenuated(b=jnp.asarray(b))
+    return Attenuated(b=as_leaf(b))
 
 
 def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True) -> Fading:
@@ -222,8 +222,8 @@ def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: boo
     if window is not None and (int(window) != window or window < 1):
         raise ValueError(f"fading(): window must be a positive integer, got {window!r}")
     return Fading(
-        rho=None if rho is None else jnp.asarray(rho),
-        smooth=None if smooth is None else jnp.asarray(smooth),
+        rho=None if rho is None else as_leaf(rho),
+        smooth=None if smooth is None else as_leaf(smooth),
         window=None if window is None else int(window),
         absolute=bool(absolute),
     )
