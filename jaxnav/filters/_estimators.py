@@ -47,13 +47,20 @@ jax.tree_util.register_pytree_node(NoEstimator, lambda s: ((), None), lambda a, 
 
 
 class VCState(NamedTuple):
-    """Window of per-epoch equations E_j = A_j diag(D_Omega) + eta (S1 eqs. (12)-(18))."""
+    """Window of per-epoch equations E_j = A_j diag(D_Omega) + eta (S1 eqs. (12)-(18)).
 
-    E: Any  # (N, m) diag(v v^T) - known part
-    A: Any  # (N, m, p) (H G)^2 element-wise
-    W: Any  # (N, m) weights 1/0 of valid components
+    I = horizon (largest prediction step i), N = window epochs.
+    """
+
+    E: Any  # (N, I, m) diag(V V^T) - known part, per epoch and prediction step i
+    A: Any  # (N, I, m, p) sum_r (B Phi_{k,r} Gamma_r)^2 element-wise
+    W: Any  # (N, I, m) weights 1/0 of usable equations
     pos: Any  # int32 ring position
     count: Any  # int32 epochs stored
+    x_lag: Any  # (I, n) Phi_{k,k-i} X(k-i/k-i), i = 1..I (propagated to the last epoch)
+    P_lag: Any  # (I, n, n) Phi_{k,k-i} D_X(k-i/k-i) Phi_{k,k-i}^T
+    C_lag: Any  # (I, n, p) Phi_{k,r} Gamma_r for r = k, k-1, ..., k-I+1
+    n_lag: Any  # int32, lag slots holding an estimate
 
 
 class VCInfo(NamedTuple):
@@ -68,54 +75,75 @@ class VCInfo(NamedTuple):
 class VarianceCompensation:
     """Variance-compensation adaptive filter: diag(D_Omega) by windowed least squares (S1 eqs. (12)-(19)).
 
-    For every observed epoch j the one-step predicted residual v_j (S1 eq. (12) with i = 1)
-    satisfies E[v_j v_j^T] = H F P_{j-1} F^T H^T + H G D_Omega G^T H^T + R_j. Its diagonal gives
-    m linear equations in the p unknowns q = diag(D_Omega):
-    E_j = diag(v_j v_j^T) - diag(H F P_{j-1} F^T H^T + R_j) = A_j q + eta_j, A_j = (H G)^{o2}.
-    The last ``window`` observed epochs are stacked and solved by least squares,
-    q = (A^T A + ridge I)^{-1} A^T E (eq. (19)), each component floored at
+    At epoch k the i-step predicted residuals V_{k,i} = L_k - B Phi_{k,k-i} X(k-i/k-i),
+    i = 1..I (S1 eq. (12)), have covariance
+    B Phi D_X(k-i/k-i) Phi^T B^T + sum_{r=k-i+1}^{k} B Phi_{k,r} Gamma D_Omega Gamma^T Phi_{k,r}^T B^T + D_Delta
+    (eqs. (13)-(16)). Their diagonals give m equations each in the p unknowns q = diag(D_Omega):
+    E_{k,i} = diag(V V^T) - diag(known part) = A_{k,i} q + eta, A_{k,i} = sum_r (B Phi_{k,r} Gamma_r)^{o2}
+    (eqs. (17)-(18)). The equations of the last ``window`` observed epochs are stacked and solved
+    by least squares, q = (A^T A + ridge I)^{-1} A^T E (eq. (19)), each component floored at
     ``max(floor, floor_rel * diag(Q_model))``, and G diag(q) G^T replaces G Q G^T at epoch k.
 
     Notes:
-      The current epoch's innovation is part of the window (it does not depend on Q). Until
-      ``min_epochs`` epochs are stored, or when the normal matrix is singular, the model's Q is
-      used (a singular system also sets the ESTIMATOR_FALLBACK status flag). The i-step
-      residuals of S1 for i > 1 add no unknowns and are not used. Default floor: 1e-4 of the
-      model's diag(Q), so the estimate never collapses to zero (which would freeze the filter).
+      The current epoch's residuals are part of the window (they do not depend on the Q of
+      epoch k). Longer horizons I make D_Omega far better determined when the process noise is
+      small against the measurement noise (its weight grows like i^3 for constant velocity);
+      ``horizon=1`` is the plain one-step innovation form. The least squares ignore the
+      correlation between overlapping residuals, as eq. (19) does. Until ``min_epochs`` epochs
+      are stored, or when the normal matrix is singular, the model's Q is used (a singular system
+      also sets the ESTIMATOR_FALLBACK status flag). The per-epoch equations are very noisy when
+      D_Omega is small against D_Delta, so the raw least-squares estimate is often negative; the
+      floor max(floor, floor_rel * diag(Q_model)) keeps it positive. Default floor_rel = 1e-2
+      (never below 1 % of the prior, so the filter never freezes); floor_rel = 1 makes the
+      filter only *compensate* missing variance, never remove modelled variance.
 
     Attributes:
       floor: scalar or (p,) absolute lower bound of q.
       floor_rel: scalar, lower bound relative to the model's diag(Q).
       ridge: scalar >= 0 added to the normal matrix (explicit jitter; default 0).
       window: static int N, epochs in the least-squares window.
+      horizon: static int I >= 1, largest prediction step i of the residuals.
       min_epochs: static int, epochs needed before estimating (default: window).
     """
 
     floor: Any = 0.0
-    floor_rel: Any = 1e-4
+    floor_rel: Any = 1e-2
     ridge: Any = 0.0
     window: int = dataclasses.field(default=30, metadata=dict(static=True))
+    horizon: int = dataclasses.field(default=1, metadata=dict(static=True))
     min_epochs: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
 
     def init(self, n, m, p, dtype):
-        N = int(self.window)
+        N, I = int(self.window), int(self.horizon)
         return VCState(
-            E=jnp.zeros((N, m), dtype),
-            A=jnp.zeros((N, m, p), dtype),
-            W=jnp.zeros((N, m), dtype),
+            E=jnp.zeros((N, I, m), dtype),
+            A=jnp.zeros((N, I, m, p), dtype),
+            W=jnp.zeros((N, I, m), dtype),
             pos=jnp.zeros((), jnp.int32),
             count=jnp.zeros((), jnp.int32),
+            x_lag=jnp.zeros((I, n), dtype),
+            P_lag=jnp.zeros((I, n, n), dtype),
+            C_lag=jnp.zeros((I, n, p), dtype),
+            n_lag=jnp.zeros((), jnp.int32),
         )
 
     def noise(self, state, ctx):
         dt = ctx.FPF.dtype
-        N = int(self.window)
+        N, I = int(self.window), int(self.horizon)
         need = N if self.min_epochs is None else int(self.min_epochs)
-        w = ctx.valid.astype(dt)
-        HG = ctx.H @ ctx.G
-        A_k = HG * HG
-        known = jnp.diagonal(ctx.H @ ctx.FPF @ ctx.H.T) + jnp.diagonal(ctx.R_used)
-        E_k = jnp.where(ctx.valid, ctx.v * ctx.v - known, 0.0)
+        F, H = ctx.F, ctx.H
+        # propagate the lagged estimates to epoch k and shift in the one-step prediction
+        x_lag = jnp.concatenate([ctx.x_pred[None], (state.x_lag[:-1] @ F.T)], axis=0)
+        P_lag = jnp.concatenate([ctx.FPF[None], F @ state.P_lag[:-1] @ F.T], axis=0)
+        C_lag = jnp.concatenate([ctx.G[None], F @ state.C_lag[:-1]], axis=0)
+        n_lag = jnp.minimum(state.n_lag + 1, I)
+        HC = jnp.einsum("mn,inp->imp", H, C_lag)
+        A_k = jnp.cumsum(HC * HC, axis=0)  # (I, m, p): sum over r of the first i terms
+        V = ctx.z[None, :] - x_lag @ H.T  # (I, m)
+        known = jnp.diagonal(H @ P_lag @ H.T, axis1=-2, axis2=-1) + jnp.diagonal(ctx.R_used)[None]
+        use = ctx.valid[None, :] & (jnp.arange(I) < n_lag)[:, None]
+        E_k = jnp.where(use, V * V - known, 0.0)
+        w = use.astype(dt)
         obs = ctx.observed
         st = VCState(
             E=jnp.where(obs, state.E.at[state.pos].set(E_k), state.E),
@@ -123,11 +151,12 @@ class VarianceCompensation:
             W=jnp.where(obs, state.W.at[state.pos].set(w), state.W),
             pos=jnp.where(obs, (state.pos + 1) % N, state.pos),
             count=jnp.minimum(state.count + obs.astype(jnp.int32), N),
+            x_lag=x_lag, P_lag=P_lag, C_lag=C_lag, n_lag=n_lag,
         )
-        AW = st.A * st.W[:, :, None]
+        AW = st.A * st.W[..., None]
         p = A_k.shape[-1]
-        Nmat = jnp.einsum("jip,jiq->pq", AW, st.A) + jnp.asarray(self.ridge, dt) * jnp.eye(p, dtype=dt)
-        rhs = jnp.einsum("jip,ji->p", AW, st.E)
+        Nmat = jnp.einsum("jimp,jimq->pq", AW, st.A) + jnp.asarray(self.ridge, dt) * jnp.eye(p, dtype=dt)
+        rhs = jnp.einsum("jimp,jim->p", AW, st.E)
         enough = st.count >= need
         # double-where: factor an identity when not enough data so gradients stay finite
         Nsafe = jnp.where(enough, Nmat, jnp.eye(p, dtype=dt))
@@ -223,14 +252,15 @@ class SageHusa:
         return SageHusaState(Q=Q, R=R, count=jnp.where(obs, c, state.count))
 
 
-def variance_compensation(window: int = 30, *, floor=0.0, floor_rel=1e-4, ridge=0.0,
+def variance_compensation(window: int = 30, *, horizon: int = 1, floor=0.0, floor_rel=1e-2, ridge=0.0,
                           min_epochs: Optional[int] = None) -> VarianceCompensation:
     """Variance-compensation estimator of diag(D_Omega) (S1 eqs. (12)-(19)); see the class.
 
     Args:
       window: static int N >= 1, epochs in the least-squares window.
+      horizon: static int I >= 1, residuals of 1..I-step predictions per epoch (S1 eq. (12)).
       floor: absolute lower bound of each estimated variance (units of Q).
-      floor_rel: lower bound relative to the model's diag(Q) (default 1e-4).
+      floor_rel: lower bound relative to the model's diag(Q) (default 1e-2).
       ridge: explicit ridge added to A^T A (default 0).
       min_epochs: epochs required before the estimate replaces the model Q (default N).
 
@@ -239,11 +269,13 @@ def variance_compensation(window: int = 30, *, floor=0.0, floor_rel=1e-4, ridge=
     """
     if int(window) != window or window < 1:
         raise ValueError(f"variance_compensation(): window must be a positive integer, got {window!r}")
+    if int(horizon) != horizon or horizon < 1:
+        raise ValueError(f"variance_compensation(): horizon must be a positive integer, got {horizon!r}")
     if min_epochs is not None and (int(min_epochs) != min_epochs or not 1 <= min_epochs <= window):
         raise ValueError(f"variance_compensation(): min_epochs must be in 1..window, got {min_epochs!r}")
     return VarianceCompensation(
         floor=as_leaf(floor), floor_rel=as_leaf(floor_rel), ridge=as_leaf(ridge),
-        window=int(window), min_epochs=None if min_epochs is None else int(min_epochs),
+        window=int(window), horizon=int(horizon), min_epochs=None if min_epochs is None else int(min_epochs),
     )
 
 

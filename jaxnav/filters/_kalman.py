@@ -179,7 +179,7 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
     x_pred = F @ state.x
     FPF = F @ state.P @ F.T
     v = jnp.where(valid, z - Hm @ x_pred, 0.0)
-    ctx = StepContext(k=k, v=v, valid=valid, observed=observed, F=F, H=Hm, G=Gm, Q=Q, R=R,
+    ctx = StepContext(k=k, v=v, z=z, x_pred=x_pred, valid=valid, observed=observed, F=F, H=Hm, G=Gm, Q=Q, R=R,
                       FPF=FPF, GQG=GQG, R_used=R)
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
     ctx = ctx._replace(GQG=GQG, R_used=R_used)

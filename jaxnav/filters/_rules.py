@@ -24,6 +24,8 @@ class StepContext(NamedTuple):
     Attributes:
       k: scalar float, the epoch number being predicted (1 for the first measurement).
       v: (m,) innovation Z_k - H X_{k,k-1} (S0 eq. (17)); zero in invalid components.
+      z: (m,) measurement Z_k (zero in invalid components).
+      x_pred: (n,) predicted mean F X_{k-1}.
       valid: (m,) bool, which components of Z_k are used.
       observed: scalar bool, any component valid.
       F: (n, n) transition into epoch k.
@@ -38,6 +40,8 @@ class StepContext(NamedTuple):
 
     k: Any
     v: Any
+    z: Any
+    x_pred: Any
     valid: Any
     observed: Any
     F: Any

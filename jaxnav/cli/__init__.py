@@ -1,0 +1,30 @@
+"""Command line: ``jaxnav demo``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``jaxnav`` command."""
+    parser = argparse.ArgumentParser(prog="jaxnav", description="jaxnav command line")
+    sub = parser.add_subparsers(dest="command", required=True)
+    d = sub.add_parser("demo", help="filter-family demonstration on a constant-velocity series "
+                                    "with a change of dynamics (S1/S2 model)")
+    d.add_argument("--out", default="out/demo", help="output folder (created); default out/demo")
+    d.add_argument("--seeds", type=int, default=64, help="Monte Carlo seeds (vmapped); default 64")
+    d.add_argument("--epochs", type=int, default=1200, help="epochs per series (1 Hz); default 1200")
+    d.add_argument("--b", type=float, default=0.254, help="attenuation factor b; default 0.254 (S0)")
+    d.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    args = parser.parse_args(argv)
+    if args.command == "demo":
+        from jaxnav.cli._demo_filters import run_demo
+
+        run_demo(out=args.out, seeds=args.seeds, epochs=args.epochs, b=args.b,
+                 progress=not args.no_progress)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
