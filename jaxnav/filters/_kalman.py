@@ -41,7 +41,7 @@ class UpdateResult(NamedTuple):
     ok: Any  # bool, S was positive definite (else the prior is returned)
 
 
-def predict(x, P, F, GQG, factor=1.0):
+def predict(x, P, F, GQG, factor=1.0, FPF=None):
     """Prediction X_{k,k-1} = F X_{k-1}, P_{k,k-1} = f_k F P_{k-1} F^T + G Q G^T.
 
     S0 eqs. (4), (8); f_k = S (eq. (10)), S_k (eq. (12)) or lambda_k (eq. (13)).
@@ -49,10 +49,13 @@ def predict(x, P, F, GQG, factor=1.0):
     Args:
       x: (n,) estimate at k-1.  P: (n, n) its covariance.
       F: (n, n) transition.  GQG: (n, n) process noise.  factor: scalar inflation f_k.
+      FPF: optional precomputed F P F^T (n, n).
     Returns:
       (x_pred (n,), P_pred (n, n)).
     """
-    return F @ x, symmetrize(factor * (F @ P @ F.T) + GQG)
+    if FPF is None:
+        FPF = F @ P @ F.T
+    return F @ x, symmetrize(factor * FPF + GQG)
 
 
 def update(x_pred, P_pred, z, H, R, valid=None):
@@ -184,7 +187,7 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
     ctx = ctx._replace(GQG=GQG, R_used=R_used)
     factor, rule_state = rule.factor(state.rule, ctx)
-    x_pred, P_pred = predict(state.x, state.P, F, GQG, factor)
+    x_pred, P_pred = predict(state.x, state.P, F, GQG, factor, FPF=FPF)
     up = update(x_pred, P_pred, z, H, R_used, valid)
     post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - Hm @ up.x, 0.0), P_pred=P_pred)
     est_state = est.after(est_state, ctx, post)
