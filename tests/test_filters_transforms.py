@@ -162,3 +162,18 @@ def test_float32_needs_opt_in_and_is_stable(scen):
     var64 = np.asarray(jnp.diagonal(r64.covs, axis1=1, axis2=2))
     assert np.max(np.abs(var32 / var64 - 1)) < 1e-4
     assert np.all(np.linalg.eigvalsh(np.asarray(r32.covs, float)) > 0)
+
+
+def test_check_grads_loglik_wrt_b_noise_scale_x0(scen):
+    """jax.test_util.check_grads (forward and reverse) through the filter, for every tunable kind."""
+    from jax.test_util import check_grads
+
+    model, x0, P0, sc = scen
+    zs = sc.zs[:30]
+
+    def nll(b, log_r, dx0):
+        m = model._replace(R=model.R * jnp.exp(log_r))
+        r = jf.kalman_filter(m, x0 + dx0, P0, zs, inflation=jf.attenuated(b), save=())
+        return -r.loglik
+
+    check_grads(nll, (0.3, 0.2, jnp.full(6, 1e-3)), order=1, modes=("fwd", "rev"), eps=1e-6, atol=1e-6, rtol=1e-5)
