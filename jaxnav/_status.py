@@ -14,6 +14,7 @@ CHOLESKY_FAILED = 2  # an innovation covariance was not positive definite; updat
 NONFINITE_STATE = 4  # the state or covariance became NaN/inf
 ESTIMATOR_FALLBACK = 8  # a noise estimator had too little data/rank and used the prior noise
 SMOOTHER_FAILED = 16  # a predicted covariance in the smoother was not positive definite
+NONFINITE_UNMASKED = 32  # NaN/inf measurements reached the update (check_finite=False)
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -21,6 +22,7 @@ _MESSAGES = {
     NONFINITE_STATE: "the state or covariance became non-finite",
     ESTIMATOR_FALLBACK: "the noise estimator fell back to the prior noise (too little data or rank)",
     SMOOTHER_FAILED: "a predicted covariance was not positive definite in the smoother",
+    NONFINITE_UNMASKED: "non-finite measurements were used unmasked (check_finite=False): results are invalid",
 }
 
 #: flags that are reported but are not errors by default

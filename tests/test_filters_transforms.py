@@ -177,3 +177,32 @@ def test_check_grads_loglik_wrt_b_noise_scale_x0(scen):
         return -r.loglik
 
     check_grads(nll, (0.3, 0.2, jnp.full(6, 1e-3)), order=1, modes=("fwd", "rev"), eps=1e-6, atol=1e-6, rtol=1e-5)
+
+
+def test_check_finite_false_is_identical_on_clean_data_and_flags_nan(scen):
+    model, x0, P0, sc = scen
+    a = jf.kalman_filter(model, x0, P0, sc.zs)
+    b = jf.kalman_filter(model, x0, P0, sc.zs, check_finite=False)
+    np.testing.assert_array_equal(a.means, b.means)
+    np.testing.assert_array_equal(a.covs, b.covs)
+    assert float(a.loglik) == float(b.loglik) and int(b.status) == 0
+    zs = np.array(sc.zs)
+    zs[7, 0] = np.nan
+    c = jf.kalman_filter(model, x0, P0, zs, check_finite=False)
+    assert int(c.n_nonfinite) == 1
+    assert int(c.status) & jaxnav._status.NONFINITE_UNMASKED
+    with pytest.raises(jaxnav.StatusError, match="check_finite=False"):
+        jaxnav.raise_for_status(c.status)
+
+
+def test_smoother_output_selection(scen):
+    model, x0, P0, sc = scen
+    r = jf.kalman_filter(model, x0, P0, sc.zs, inflation=jf.fading(window=5))
+    full = jf.rts_smoother(model, r)
+    means_only = jf.rts_smoother(model, r, save=("means",))
+    assert means_only.covs is None and means_only.gains is None
+    np.testing.assert_array_equal(full.means, means_only.means)
+    with pytest.raises(ValueError, match="unknown smoother outputs"):
+        jf.rts_smoother(model, r, save=("nope",))
+    with pytest.raises(ValueError, match="needs the filter output 'pred_covs'"):
+        jf.rts_smoother(model, jf.kalman_filter(model, x0, P0, sc.zs, save=("means", "covs", "pred_means")))

@@ -150,7 +150,8 @@ class StepInfo(NamedTuple):
     valid: Any = None
 
 
-def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=ALL_OUTPUTS):
+def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=ALL_OUTPUTS,
+                check_finite: bool = True):
     """One epoch of the Kalman filter family: predict, inflate, update (S0 eqs. (4)-(17)).
 
     Args:
@@ -158,6 +159,7 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
       inp: :class:`StepInput` for epoch k (time-varying leaves given there, else in params).
       params: :class:`FilterParams`.
       save: names of the per-epoch outputs to return (see ``ALL_OUTPUTS``).
+      check_finite: mask NaN/inf measurement elements (default); see :func:`kalman_filter`.
     Returns:
       (state at k, :class:`StepInfo`).
     """
@@ -171,9 +173,9 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
     n = state.x.shape[0]
 
     finite = jnp.isfinite(inp.z)
-    valid = inp.mask & finite
+    valid = inp.mask & finite if check_finite else inp.mask
     observed = jnp.any(valid)
-    z = jnp.where(valid, inp.z, 0.0)
+    z = jnp.where(valid, inp.z, 0.0) if check_finite else inp.z
     Hm = jnp.where(valid[:, None], H, 0.0)
     Gm = jnp.eye(n, dtype=dt) if G is None else G
     GQG = Q if G is None else G @ Q @ G.T
@@ -193,7 +195,8 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
     est_state = est.after(est_state, ctx, post)
 
     n_bad = jnp.sum(inp.mask & ~finite).astype(jnp.int32)
-    flags = est_flag | jnp.where(n_bad > 0, _status.NONFINITE_MEASUREMENT, 0)
+    bad_flag = _status.NONFINITE_MEASUREMENT if check_finite else _status.NONFINITE_UNMASKED
+    flags = est_flag | jnp.where(n_bad > 0, bad_flag, 0)
     flags = flags | jnp.where(observed & ~up.ok, _status.CHOLESKY_FAILED, 0)
     flags = flags | jnp.where(jnp.all(jnp.isfinite(up.x)) & jnp.all(jnp.isfinite(up.P)), 0,
                               _status.NONFINITE_STATE)
@@ -256,9 +259,10 @@ def _check_dtype(dtype, allow_float32):
         )
 
 
-@partial(jax.jit, static_argnames=("save", "unroll", "allow_float32"))
+@partial(jax.jit, static_argnames=("save", "unroll", "allow_float32", "check_finite"))
 def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimator=None, mask=None,
-                  save=ALL_OUTPUTS, unroll: int = 1, allow_float32: bool = False) -> KalmanResult:
+                  save=ALL_OUTPUTS, unroll: int = 1, allow_float32: bool = False,
+                  check_finite: bool = True) -> KalmanResult:
     """Run the Kalman filter family over a measurement series with ``lax.scan`` (S0 eqs. (4)-(17)).
 
     Convention: ``x0, P0`` are the estimate at k = 0 and every ``zs[t]`` is used after one
@@ -275,6 +279,11 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
       save: tuple of per-epoch outputs to keep (subset of ``ALL_OUTPUTS``); static.
       unroll: ``lax.scan`` unroll factor; static.
       allow_float32: opt in to computing in float32; static.
+      check_finite: static. True (default) masks NaN/inf measurement elements and counts them.
+        False trusts the data: NaN/inf are still counted and raise the NONFINITE_UNMASKED error
+        flag, but are not masked. The gain is speed under ``vmap``: without data-dependent
+        masks the covariance recursion of a non-adaptive filter does not depend on the data,
+        so JAX runs it once for the whole batch instead of once per sequence (~10x).
     Returns:
       :class:`KalmanResult`.
     Raises:
@@ -312,7 +321,7 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
     )
 
     def body(state, inp):
-        return filter_step(state, inp, params, save)
+        return filter_step(state, inp, params, save, check_finite)
 
     final, info = jax.lax.scan(body, init, xs, unroll=unroll)
     return KalmanResult(

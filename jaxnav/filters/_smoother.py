@@ -28,8 +28,11 @@ class SmootherResult(NamedTuple):
     status: Any
 
 
-@partial(jax.jit, static_argnames=("unroll",))
-def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1) -> SmootherResult:
+SMOOTHER_OUTPUTS = ("means", "covs", "gains")
+
+
+@partial(jax.jit, static_argnames=("unroll", "save"))
+def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOTHER_OUTPUTS) -> SmootherResult:
     """RTS smoother: C_t = P_t F_{t+1}^T P_{t+1|t}^{-1}, x^s_t = x_t + C_t (x^s_{t+1} - x_{t+1|t}).
 
     P^s_t = P_t + C_t (P^s_{t+1} - P_{t+1|t}) C_t^T. It uses the filter's *saved* predicted
@@ -40,11 +43,18 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1) -> Smoothe
       model: the model given to the filter (only F is used; (n, n) or (T, n, n)).
       filtered: a :class:`KalmanResult` with ``means``, ``covs``, ``pred_means``, ``pred_covs``.
       unroll: ``lax.scan`` unroll factor.
+      save: static subset of ("means", "covs", "gains") to return (others are None). The
+        smoothed-covariance recursion is skipped when "covs" is not requested (the means need
+        only the gains).
     Returns:
       :class:`SmootherResult`.
     Raises:
       ValueError: if the needed outputs were not saved, or F has a wrong shape.
     """
+    save = tuple(save)
+    unknown = [s for s in save if s not in SMOOTHER_OUTPUTS]
+    if unknown:
+        raise ValueError(f"unknown smoother outputs {unknown}; choose from {SMOOTHER_OUTPUTS}")
     for name in ("means", "covs", "pred_means", "pred_covs"):
         if getattr(filtered, name, None) is None:
             raise ValueError(f"rts_smoother needs the filter output '{name}': run kalman_filter with it in save=")
@@ -58,6 +68,8 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1) -> Smoothe
     else:
         raise ValueError(f"model.F has shape {F.shape}; expected {(n, n)} or {(T, n, n)}")
 
+    want_cov = "covs" in save
+
     def body(carry, inp):
         xs_next, Ps_next, status = carry
         x, P, x_p, P_p, Fk = inp
@@ -67,14 +79,16 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1) -> Smoothe
         C = cho_solve(L, Fk @ P).T
         C = jnp.where(ok, C, 0.0)
         x_s = x + C @ (xs_next - x_p)
-        P_s = symmetrize(P + C @ (Ps_next - P_p) @ C.T)
+        P_s = symmetrize(P + C @ (Ps_next - P_p) @ C.T) if want_cov else Ps_next
         status = status | jnp.where(ok, 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
-        return (x_s, P_s, status), (x_s, P_s, C)
+        out = (x_s if "means" in save else None, P_s if "covs" in save else None,
+               C if "gains" in save else None)
+        return (x_s, P_s, status), out
 
-    init = (xs[-1], Ps[-1], jnp.zeros((), jnp.int32))
+    init = (xs[-1], Ps[-1] if want_cov else jnp.zeros((), xs.dtype), jnp.zeros((), jnp.int32))
     inp = (xs[:-1], Ps[:-1], xp[1:], Pp[1:], Fn)
     (_, _, status), (m_s, P_s, C) = jax.lax.scan(body, init, inp, reverse=True, unroll=unroll)
-    means = jnp.concatenate([m_s, xs[-1:]], axis=0)
-    covs = jnp.concatenate([P_s, Ps[-1:]], axis=0)
-    gains = jnp.concatenate([C, jnp.zeros((1, n, n), xs.dtype)], axis=0)
+    means = None if m_s is None else jnp.concatenate([m_s, xs[-1:]], axis=0)
+    covs = None if P_s is None else jnp.concatenate([P_s, Ps[-1:]], axis=0)
+    gains = None if C is None else jnp.concatenate([C, jnp.zeros((1, n, n), xs.dtype)], axis=0)
     return SmootherResult(means=means, covs=covs, gains=gains, status=status)
