@@ -15,6 +15,8 @@ NONFINITE_STATE = 4  # the state or covariance became NaN/inf
 ESTIMATOR_FALLBACK = 8  # a noise estimator had too little data/rank and used the prior noise
 SMOOTHER_FAILED = 16  # a predicted covariance in the smoother was not positive definite
 NONFINITE_UNMASKED = 32  # NaN/inf measurements reached the update (check_finite=False)
+NONFINITE_IMU = 64  # a NaN/inf IMU sample reached the mechanization (it cannot skip samples)
+BAD_IMU_TIME = 128  # non-positive or irregular IMU sample interval
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -23,6 +25,8 @@ _MESSAGES = {
     ESTIMATOR_FALLBACK: "the noise estimator fell back to the prior noise (too little data or rank)",
     SMOOTHER_FAILED: "a predicted covariance was not positive definite in the smoother",
     NONFINITE_UNMASKED: "non-finite measurements were used unmasked (check_finite=False): results are invalid",
+    NONFINITE_IMU: "a NaN/inf IMU sample was mechanized: the navigation solution is invalid from there on",
+    BAD_IMU_TIME: "an IMU sample interval was non-positive or non-finite",
 }
 
 #: flags that are reported but are not errors by default

@@ -1,0 +1,28 @@
+"""Ellipsoids and coordinate conversions: geodetic <-> ECEF <-> local ENU (radians, metres).
+
+Every function takes an ``ellipsoid=`` keyword (default WGS-84) and works under
+``jit``/``vmap``/``grad``. Absolute coordinates must be float64 (a float32 ECEF or geodetic
+input raises ``ValueError`` naming the fix, :func:`jaxnav.enable_x64`).
+"""
+
+from jaxnav.geodesy._ellipsoid import CGCS2000, ELLIPSOIDS, GRS80, KRASSOVSKY, WGS84, Ellipsoid
+from jaxnav.geodesy._frames import (
+    check_float64,
+    ecef_to_enu,
+    ecef_to_enu_vector,
+    ecef_to_geodetic,
+    enu_to_ecef,
+    enu_to_ecef_vector,
+    enu_to_geodetic,
+    geodetic_to_ecef,
+    geodetic_to_enu,
+    meridian_radius,
+    prime_vertical_radius,
+)
+
+__all__ = [
+    "CGCS2000", "ELLIPSOIDS", "Ellipsoid", "GRS80", "KRASSOVSKY", "WGS84", "check_float64",
+    "ecef_to_enu", "ecef_to_enu_vector", "ecef_to_geodetic", "enu_to_ecef", "enu_to_ecef_vector",
+    "enu_to_geodetic", "geodetic_to_ecef", "geodetic_to_enu", "meridian_radius",
+    "prime_vertical_radius",
+]
