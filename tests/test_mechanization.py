@@ -1,0 +1,145 @@
+"""Strapdown mechanization: stationary, Schuler period, reverse-navigation closure, bad input."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxnav
+from jaxnav import ins
+from jaxnav.ins import attitude as A
+
+LAT, LON, H = np.radians(39.0), np.radians(108.0), 205.8795
+POS = jnp.array([LAT, LON, H])
+
+
+def _stationary_imu(att, dt, N):
+    """Ideal increments of an IMU at rest: w_ib^b = C_nb w_ie^n, f^b = -C_nb g^n (exact, constant)."""
+    q = A.euler_to_quat(att)
+    C = A.quat_to_dcm(q)
+    e = ins.earth_params(POS, jnp.zeros(3))
+    return q, jnp.tile(C.T @ e.w_ie_n * dt, (N, 1)), jnp.tile(C.T @ (-e.g_n) * dt, (N, 1))
+
+
+def test_stationary_one_hour_stays_put():
+    att = jnp.array([0.01, -0.02, A.heading_to_yaw(np.radians(30))])
+    q, dth, dv = _stationary_imu(att, 0.01, 360_000)
+    r = ins.mechanize(ins.NavState(q, jnp.zeros(3), POS), dth, dv, 0.01, save_every=1000)
+    assert int(r.status) == 0
+    assert float(jnp.max(jnp.abs(r.nav.v_n))) < 1e-6  # m/s after 1 h
+    dpos = (r.nav.pos - POS) * jnp.array([6.4e6, 6.4e6 * np.cos(LAT), 1.0])
+    assert float(jnp.max(jnp.abs(dpos))) < 1e-3  # m
+    att_err = A.quat_to_euler(r.nav.q_bn) - att
+    assert float(jnp.max(jnp.abs(att_err))) < 1e-9  # rad
+
+
+def _fit_period(t, y, lo, hi):
+    best = None
+    for P in np.linspace(lo, hi, 4001):
+        w = 2 * np.pi / P
+        X = np.c_[np.sin(w * t), np.cos(w * t), np.ones_like(t), t]
+        res = np.sum((X @ np.linalg.lstsq(X, y, rcond=None)[0] - y) ** 2)
+        if best is None or res < best[1]:
+            best = (P, res)
+    return best[0]
+
+
+@pytest.mark.parametrize("kind", ["velocity", "tilt"])
+def test_schuler_period_84_4_min(kind):
+    """2 h at rest with an initial north-velocity or tilt error: horizontal error oscillates at 84.4 min."""
+    dt, N = 0.1, 72_000
+    q, dth, dv = _stationary_imu(jnp.zeros(3), dt, N)
+    if kind == "velocity":
+        nav0 = ins.NavState(q, jnp.array([0.0, 0.1, 0.0]), POS)
+    else:
+        nav0 = ins.NavState(A.euler_to_quat(jnp.array([1e-4, 0.0, 0.0])), jnp.zeros(3), POS)
+    r = ins.mechanize(nav0, dth, dv, dt, save_every=100, hold_height=True)
+    t = np.arange(1, N // 100 + 1) * 10.0
+    period = _fit_period(t, np.asarray(r.nav.v_n[:, 1]), 4000.0, 6000.0)
+    g = float(ins.normal_gravity(LAT, H))
+    R = float(jnp.sqrt(jaxnav.geodesy.meridian_radius(LAT) * jaxnav.geodesy.prime_vertical_radius(LAT)))
+    schuler = 2 * np.pi * np.sqrt(R / g)
+    assert abs(schuler / 60 - 84.4) < 0.1
+    assert abs(period / schuler - 1) < 0.01, (period / 60, schuler / 60)
+
+
+def _manoeuvre(dt, N, key=0):
+    """Smooth synthetic increments: gravity-cancelling specific force plus sinusoidal rates."""
+    t = np.arange(N) * dt
+    w = np.stack([0.02 * np.sin(0.3 * t), 0.03 * np.sin(0.2 * t + 1), 0.05 * np.cos(0.1 * t)], 1)
+    f = np.stack([0.5 * np.sin(0.05 * t), 1.0 * np.cos(0.07 * t), 9.8 + 0.2 * np.sin(0.3 * t)], 1)
+    return jnp.asarray(w * dt), jnp.asarray(f * dt)
+
+
+def test_reverse_navigation_retraces_to_start():
+    dt, N = 0.01, 20_000  # 200 s at 100 Hz
+    dth, dv = _manoeuvre(dt, N)
+    nav0 = ins.NavState(A.euler_to_quat(jnp.array([0.0, 0.0, A.heading_to_yaw(np.radians(30))])),
+                        jnp.array([41.0, 71.0, 0.5]), POS)
+    fwd = ins.mechanize(nav0, dth, dv, dt)
+    bwd = ins.mechanize_backward(fwd.final.nav, dth, dv, dt, a0=fwd.final.a_prev)
+    scale = jnp.array([6.4e6, 6.4e6 * np.cos(LAT), 1.0])
+    closure = np.asarray((bwd.nav.pos[0] - POS) * scale)
+    assert np.max(np.abs(closure)) < 1e-4  # metres after 200 s out and back (measured 2e-6)
+    assert float(jnp.max(jnp.abs(bwd.nav.v_n[0] - nav0.v_n))) < 1e-6
+    assert float(jnp.max(jnp.abs(A.quat_to_rv(A.quat_mul(A.quat_conj(nav0.q_bn), bwd.nav.q_bn[0]))))) < 1e-9
+    # backward rows are aligned with the forward time axis: row i is the state at the start of sample i
+    mid = np.asarray((bwd.nav.pos[N // 2] - fwd.nav.pos[N // 2 - 1]) * scale)
+    assert np.max(np.abs(mid)) < 0.01
+
+
+def test_rates_equal_increments_and_save_every():
+    dt, N = 0.01, 1000
+    dth, dv = _manoeuvre(dt, N)
+    nav0 = ins.NavState(jnp.array([1.0, 0, 0, 0]), jnp.zeros(3), POS)
+    a = ins.mechanize(nav0, dth, dv, dt)
+    b = ins.mechanize(nav0, dth / dt, dv / dt, dt, kind="rates")
+    c = ins.mechanize(nav0, dth, dv, jnp.full(N, dt), save_every=10)
+    np.testing.assert_allclose(a.nav.pos, b.nav.pos, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(a.nav.pos[9::10], c.nav.pos)
+    np.testing.assert_array_equal(a.nav.q_bn[9::10], c.nav.q_bn)
+
+
+def test_bad_imu_input_gives_clear_errors():
+    dt, N = 0.01, 100
+    dth, dv = _manoeuvre(dt, N)
+    nav0 = ins.NavState(jnp.array([1.0, 0, 0, 0]), jnp.zeros(3), POS)
+    t = np.arange(N) * dt
+    bad = np.array(dth)
+    bad[37, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN/inf IMU sample at index 37"):
+        ins.mechanize(nav0, bad, dv, dt)
+    t2 = t.copy()
+    t2[50] = t2[49]
+    with pytest.raises(ValueError, match="not increasing at index 50"):
+        ins.mechanize(nav0, dth, dv, dt, t=t2)
+    t3 = t.copy()
+    t3[60:] += 0.05
+    with pytest.raises(ValueError, match="gap of 0.06 s after index 59"):
+        ins.mechanize(nav0, dth, dv, dt, t=t3)
+    with pytest.raises(ValueError, match=r"dtheta has shape \(100, 2\)"):
+        ins.mechanize(nav0, dth[:, :2], dv, dt)
+    with pytest.raises(ValueError, match=r"dt has shape \(99,\)"):
+        ins.mechanize(nav0, dth, dv, jnp.full(99, dt))
+    with pytest.raises(ValueError, match="enable_x64"):
+        ins.mechanize(nav0._replace(pos=POS.astype(jnp.float32)), dth, dv, dt)
+    with pytest.raises(ValueError, match="save_every=7"):
+        ins.mechanize(nav0, dth, dv, dt, save_every=7)
+    # inside jit/vmap the values cannot be checked on the host: a status flag says it instead
+    r = jax.jit(lambda d: ins.mechanize(nav0, d, dv, dt).status)(jnp.asarray(bad))
+    assert int(r) & jaxnav._status.NONFINITE_IMU
+    with pytest.raises(jaxnav.StatusError, match="NaN/inf IMU sample"):
+        jaxnav.raise_for_status(r)
+
+
+def test_quaternion_update_gradient_finite_at_zero_rotation():
+    dt, N = 0.01, 50
+    dv = jnp.tile(jnp.array([0.0, 0.0, 9.8]) * dt, (N, 1))
+    nav0 = ins.NavState(jnp.array([1.0, 0, 0, 0]), jnp.zeros(3), POS)
+
+    def final_yaw(scale):
+        r = ins.mechanize(nav0, jnp.zeros((N, 3)) * scale, dv, dt, validate=False)
+        return A.quat_to_euler(r.nav.q_bn[-1])[2] + jnp.sum(r.nav.v_n[-1])
+
+    g = jax.grad(final_yaw)(1.0)
+    assert np.isfinite(float(g))
