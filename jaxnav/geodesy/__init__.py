@@ -6,6 +6,13 @@ input raises ``ValueError`` naming the fix, :func:`jaxnav.enable_x64`).
 """
 
 from jaxnav.geodesy._ellipsoid import CGCS2000, ELLIPSOIDS, GRS80, KRASSOVSKY, WGS84, Ellipsoid
+from jaxnav.geodesy._gauss_kruger import (
+    FALSE_EASTING,
+    GaussKrugerExtras,
+    gauss_kruger,
+    gauss_kruger_inverse,
+    zone_central_meridian,
+)
 from jaxnav.geodesy._frames import (
     check_float64,
     ecef_to_enu,
@@ -24,5 +31,6 @@ __all__ = [
     "CGCS2000", "ELLIPSOIDS", "Ellipsoid", "GRS80", "KRASSOVSKY", "WGS84", "check_float64",
     "ecef_to_enu", "ecef_to_enu_vector", "ecef_to_geodetic", "enu_to_ecef", "enu_to_ecef_vector",
     "enu_to_geodetic", "geodetic_to_ecef", "geodetic_to_enu", "meridian_radius",
-    "prime_vertical_radius",
+    "prime_vertical_radius", "FALSE_EASTING", "GaussKrugerExtras", "gauss_kruger",
+    "gauss_kruger_inverse", "zone_central_meridian",
 ]
