@@ -1,0 +1,135 @@
+"""Readers for RTKLIB solution files (.pos), host side (numpy); units converted at this edge."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import pathlib
+from typing import Any, NamedTuple
+
+import numpy as np
+
+GPS_EPOCH = _dt.datetime(1980, 1, 6)
+SECONDS_PER_WEEK = 604800.0
+
+
+class PosSolution(NamedTuple):
+    """An RTKLIB position solution; per-epoch arrays of length N, SI units, ENU order.
+
+    Attributes:
+      path: the file read.
+      t: (N,) GPS time, seconds since the GPS epoch 1980-01-06 (GPST, no leap seconds).
+      lat, lon: (N,) geodetic latitude and longitude, rad (WGS-84 / the solution's datum).
+      h: (N,) ellipsoidal height, m.
+      q: (N,) int solution quality (1 fix, 2 float, 3 sbas, 4 dgps, 5 single, 6 ppp).
+      ns: (N,) int number of satellites.
+      cov_enu: (N, 3, 3) position covariance in east, north, up, m^2 (RTKLIB writes sdne, sdeu,
+        sdun as signed square roots: c = sign(s) s^2).
+      age: (N,) differential age, s (NaN if absent).  ratio: (N,) ambiguity ratio (NaN if absent).
+      v_enu: (N, 3) velocity east, north, up, m/s (NaN if the file has no velocity columns).
+      vcov_enu: (N, 3, 3) velocity covariance, (m/s)^2 (NaN if absent).
+    """
+
+    path: str
+    t: Any
+    lat: Any
+    lon: Any
+    h: Any
+    q: Any
+    ns: Any
+    cov_enu: Any
+    age: Any
+    ratio: Any
+    v_enu: Any
+    vcov_enu: Any
+
+
+def _signed_sq(s):
+    return np.sign(s) * s * s
+
+
+def _cov_enu(sn, se, su, sne, seu, sun):
+    """(N, 3, 3) ENU covariance from RTKLIB's N/E/U standard deviations and signed roots."""
+    c = np.empty(sn.shape + (3, 3))
+    c[:, 0, 0], c[:, 1, 1], c[:, 2, 2] = se**2, sn**2, su**2
+    c[:, 0, 1] = c[:, 1, 0] = _signed_sq(sne)
+    c[:, 0, 2] = c[:, 2, 0] = _signed_sq(seu)
+    c[:, 1, 2] = c[:, 2, 1] = _signed_sq(sun)
+    return c
+
+
+def _parse_time(words, path, lineno):
+    """GPST from 'YYYY/MM/DD HH:MM:SS.sss' or 'WEEK TOW'; returns (seconds, words consumed)."""
+    try:
+        if "/" in words[0]:
+            date = _dt.datetime.strptime(words[0], "%Y/%m/%d")
+            hh, mm, ss = words[1].split(":")
+            sec = (date - GPS_EPOCH).total_seconds() + int(hh) * 3600 + int(mm) * 60 + float(ss)
+            return sec, 2
+        return int(words[0]) * SECONDS_PER_WEEK + float(words[1]), 2
+    except (ValueError, IndexError) as exc:
+        raise ValueError(f"{path}:{lineno}: cannot read the GPST time from {' '.join(words[:2])!r} ({exc})") from None
+
+
+def read_pos(path) -> PosSolution:
+    """Read an RTKLIB ``.pos`` file with geodetic (lat/lon/height) output.
+
+    Handles both time formats (calendar GPST and GPS week + seconds), files with and without
+    the velocity columns, and comment/header lines starting with '%'. Angles are converted to
+    radians, the covariances to ENU matrices.
+
+    Args:
+      path: file path.
+    Returns:
+      :class:`PosSolution`.
+    Raises:
+      ValueError: naming the file and line of any unreadable record, a missing header, or a
+        non-geodetic (e.g. ECEF x/y/z) solution file.
+      FileNotFoundError: if the file does not exist.
+    """
+    path = pathlib.Path(path)
+    header = None
+    rows = []
+    with path.open("r", encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, start=1):
+            s = line.strip()
+            if not s:
+                continue
+            if s.startswith("%"):
+                if "GPST" in s and ("latitude" in s or "x-ecef" in s):
+                    if "x-ecef" in s:
+                        raise ValueError(f"{path}:{lineno}: ECEF (x-ecef) solutions are not supported; "
+                                         "write the solution with lat/lon/height output")
+                    header = s.lstrip("%").split()
+                continue
+            if header is None:
+                raise ValueError(f"{path}:{lineno}: data before the '%  GPST latitude(deg) ...' header line")
+            words = s.split()
+            t, k = _parse_time(words, path, lineno)
+            ncols = len(header) - 1  # 'GPST' is one header word but one or two data words
+            vals = words[k:]
+            if len(vals) != ncols:
+                raise ValueError(f"{path}:{lineno}: expected {ncols} values after the time, found {len(vals)}")
+            try:
+                rows.append([t] + [float(v) for v in vals])
+            except ValueError as exc:
+                raise ValueError(f"{path}:{lineno}: {exc}") from None
+    if header is None:
+        raise ValueError(f"{path}: no '%  GPST latitude(deg) ...' header line found")
+    if not rows:
+        raise ValueError(f"{path}: no solution records")
+    a = np.asarray(rows, dtype=np.float64)
+    col = {name: i for i, name in enumerate(header)}
+
+    def get(name, default=math.nan):
+        return a[:, col[name]] if name in col else np.full(len(a), default)
+
+    cov = _cov_enu(get("sdn(m)"), get("sde(m)"), get("sdu(m)"), get("sdne(m)", 0.0), get("sdeu(m)", 0.0),
+                   get("sdun(m)", 0.0))
+    v = np.stack([get("ve(m/s)"), get("vn(m/s)"), get("vu(m/s)")], axis=1)
+    vcov = _cov_enu(get("sdvn"), get("sdve"), get("sdvu"), get("sdvne"), get("sdveu"), get("sdvun"))
+    return PosSolution(
+        path=str(path), t=a[:, 0], lat=np.radians(get("latitude(deg)")), lon=np.radians(get("longitude(deg)")),
+        h=get("height(m)"), q=get("Q").astype(int), ns=get("ns").astype(int), cov_enu=cov,
+        age=get("age(s)"), ratio=get("ratio"), v_enu=v, vcov_enu=vcov,
+    )
