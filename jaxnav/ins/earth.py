@@ -76,8 +76,7 @@ def earth_params(pos, v_n, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0) ->
     RM = meridian_radius(lat, ellipsoid)
     RN = prime_vertical_radius(lat, ellipsoid)
     wie = earth_rate_sign * earth_rate_n(lat, ellipsoid)
-    ve, vn = v_n[..., 0], v_n[..., 1]
-    wen = jnp.stack([-vn / (RM + h), ve / (RN + h), ve * jnp.tan(lat) / (RN + h)], axis=-1)
+    wen = transport_rate_n(lat, h, v_n, ellipsoid)
     g = normal_gravity(lat, h, ellipsoid)
     g_n = jnp.stack([jnp.zeros_like(g), jnp.zeros_like(g), -g], axis=-1)
     return EarthParams(R_M=RM, R_N=RN, w_ie_n=wie, w_en_n=wen, w_in_n=wie + wen, g_n=g_n)

@@ -1,0 +1,384 @@
+"""INS error-state model in the ENU frame: the 18-state model of S0 eqs. (18)-(19) and its 15-state subset.
+
+Error state (S0 eq. 18), 18 components, in this order::
+
+    X = [phi_E phi_N phi_U,  dV_E dV_N dV_U,  dlat dlon dh,  eps_b (3),  eps_r (3),  nabla (3)]
+
+    phi    attitude error (misalignment) of the computed navigation frame, rad, ENU components
+    dV     velocity error, computed - true, m/s, ENU
+    dpos   position error, computed - true: latitude rad, longitude rad, height m
+    eps_b  gyro random constant (bias), body frame, rad/s
+    eps_r  gyro first-order Gauss-Markov drift, body frame, rad/s
+    nabla  accelerometer random constant (bias), body frame, m/s^2
+
+Process noise (S0 eq. 19), 9 components::
+
+    W = [w_g (3) gyro white noise, rad/s/sqrt(Hz) density;  w_b (3) Markov driving noise;
+         w_a (3) accelerometer white noise]
+
+The 15-state subset drops eps_r (and w_b): X15 = [phi, dV, dpos, eps_b, nabla], W15 = [w_g, w_a].
+
+Conventions (jaxnav-wide): navigation frame n = ENU, body frame b = right-forward-up,
+``C_bn`` = body -> nav DCM, ``pos = [lat rad, lon rad, h m]``.
+
+Attitude-error convention (the "phi-angle" form)::
+
+    C_bn_computed = (I - [phi x]) C_bn_true            (to first order; exactly exp(-[phi x]) C_bn_true)
+
+i.e. phi is the small rotation that takes the true navigation frame to the computed one. With it
+the sensor errors enter as ``phi_dot = ... - C_bn (eps_b + eps_r + w_g)`` and
+``dV_dot = f_n x phi + ... + C_bn (nabla + w_a)``. Sensor errors are defined as
+measured - true (a positive eps_b means the gyro reads too high).
+
+Continuous model: ``X_dot = F X + G W``, ``E[W(t) W(s)^T] = Qc delta(t - s)``; discretised to the
+``Phi_{k,k-1}`` and ``Gamma Q Gamma^T`` of S0 eqs. (1), (8) by :func:`discretize_van_loan` (exact)
+or :func:`discretize_series` (truncated series, stated order).
+
+All functions are pure JAX (jit / vmap / grad), single-point shapes (batch with ``jax.vmap``).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jax.scipy.linalg import expm
+
+from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, meridian_radius, prime_vertical_radius
+from jaxnav.ins.attitude import skew
+
+
+class ErrorStateIndex(NamedTuple):
+    """Slices of the error-state components (``eps_r`` is None in the 15-state model)."""
+
+    phi: slice
+    dv: slice
+    dpos: slice
+    eps_b: slice
+    eps_r: slice | None
+    nabla: slice
+
+
+#: Layout of the 18-state vector (S0 eq. 18).
+IDX18 = ErrorStateIndex(slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15), slice(15, 18))
+#: Layout of the 15-state vector (no Markov drift).
+IDX15 = ErrorStateIndex(slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), None, slice(12, 15))
+
+#: Names of the 18 error states, in order.
+STATE_NAMES18 = ("phi_E", "phi_N", "phi_U", "dV_E", "dV_N", "dV_U", "dlat", "dlon", "dh",
+                 "eps_bx", "eps_by", "eps_bz", "eps_rx", "eps_ry", "eps_rz", "nabla_x", "nabla_y", "nabla_z")
+#: Names of the 15 error states, in order.
+STATE_NAMES15 = STATE_NAMES18[:12] + STATE_NAMES18[15:]
+
+
+def _vec3(x, dtype):
+    """Scalar or (3,) -> (3,) array."""
+    return jnp.broadcast_to(jnp.asarray(x, dtype), (3,))
+
+
+def _normal_gravity_partials(lat, h, ellipsoid: Ellipsoid):
+    """Partial derivatives of normal gravity (:func:`jaxnav.ins.earth.normal_gravity`) w.r.t. lat and h.
+
+    gamma = g0(L) k(L, h), g0 = (a ge c^2 + b gp s^2) / sqrt(a^2 c^2 + b^2 s^2),
+    k = 1 - 2/a (1 + f + m - 2 f s^2) h + 3 h^2 / a^2 (NIMA TR8350.2 eqs. 4-1, 4-3); with
+    d(s^2)/dL = sin 2L:
+      dg0/dL = sin 2L [(b gp - a ge) / D - N (b^2 - a^2) / (2 D^3)],  dk/dL = 4 f h sin 2L / a,
+      dgamma/dh = g0 [-2/a (1 + f + m - 2 f s^2) + 6 h / a^2]  (~ -2 gamma / R).
+
+    Returns:
+      (dgamma/dlat m/s^2/rad, dgamma/dh 1/s^2).
+    """
+    ge, gp = ellipsoid.normal_gravity_constants()
+    a, b, f = ellipsoid.a, ellipsoid.b, ellipsoid.f
+    m = ellipsoid.omega**2 * a * a * b / ellipsoid.GM
+    s2 = jnp.sin(lat) ** 2
+    c2 = 1.0 - s2
+    sin2 = jnp.sin(2.0 * lat)
+    num = a * ge * c2 + b * gp * s2
+    den = jnp.sqrt(a * a * c2 + b * b * s2)
+    g0 = num / den
+    dg0 = sin2 * ((b * gp - a * ge) / den - num * (b * b - a * a) / (2.0 * den**3))
+    k = 1.0 - 2.0 / a * (1.0 + f + m - 2.0 * f * s2) * h + 3.0 * h * h / (a * a)
+    dk_dlat = 4.0 * f * h * sin2 / a
+    dk_dh = -2.0 / a * (1.0 + f + m - 2.0 * f * s2) + 6.0 * h / (a * a)
+    return dg0 * k + g0 * dk_dlat, g0 * dk_dh
+
+
+def nav_error_F(pos, v_n, f_n, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
+    """Navigation-error block (9x9) of the INS error model: rows/cols [phi, dV, dpos] (S0 eq. 18).
+
+    phi_dot  = -w_in x phi + dw_in                                   (w_in = w_ie + w_en)
+    dV_dot   = f_n x phi - (2 w_ie + w_en) x dV + v x (2 dw_ie + dw_en) + dg
+    dpos_dot = d[V_N/(R_M+h), V_E/((R_N+h) cos L), V_U]
+    where dw_ie, dw_en, dg are the first-order changes of the Earth rate, transport rate and normal
+    gravity with the velocity and position errors (the exact partials of
+    :func:`jaxnav.ins.earth.earth_params`, including dR_M/dL, dR_N/dL and the height/latitude
+    dependence of gravity, dgamma/dh ~ -2 gamma / R).
+
+    Args:
+      pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
+      f_n: (3,) specific force in n (= C_bn f_b), m/s^2.
+      ellipsoid: static Earth model.
+      earth_rate_sign: +1, or -1 for reverse navigation (as :func:`jaxnav.ins.earth.earth_params`).
+    Returns:
+      (9, 9) array; units follow the state (rad, m/s, rad/rad/m).
+
+    Notes:
+      Singular at the poles (tan L, sec L), as any latitude/longitude error state.
+      Textbook forms usually treat R_M, R_N as constants in the position partials; the terms kept
+      here are of relative size e^2 ~ 0.7 % and make F the exact Jacobian of the continuous
+      navigation equations. The sensor errors are not part of this block.
+    """
+    check_float64(pos, what="pos (absolute latitude/longitude/height)")
+    pos = jnp.asarray(pos)
+    dtype = pos.dtype
+    v_n = jnp.asarray(v_n, dtype)
+    f_n = jnp.asarray(f_n, dtype)
+    lat, h = pos[0], pos[2]
+    ve, vn = v_n[0], v_n[1]
+    w = earth_rate_sign * ellipsoid.omega
+    e2 = ellipsoid.e2
+    sL, cL = jnp.sin(lat), jnp.cos(lat)
+    tL = sL / cL
+    RM = meridian_radius(lat, ellipsoid)
+    RN = prime_vertical_radius(lat, ellipsoid)
+    W2 = 1.0 - e2 * sL * sL
+    dRM = 3.0 * RM * e2 * sL * cL / W2  # dR_M/dlat, m/rad
+    dRN = RN * e2 * sL * cL / W2  # dR_N/dlat, m/rad
+    RMh, RNh = RM + h, RN + h
+    z = jnp.zeros((), dtype)
+
+    w_ie = jnp.stack([z, w * cL, w * sL])
+    w_en = jnp.stack([-vn / RMh, ve / RNh, ve * tL / RNh])
+    w_in = w_ie + w_en
+
+    # d w_en / d v_n  (= d w_in / d v_n)
+    dwen_dv = jnp.stack([
+        jnp.stack([z, -1.0 / RMh, z]),
+        jnp.stack([1.0 / RNh, z, z]),
+        jnp.stack([tL / RNh, z, z]),
+    ])
+    # d w_ie / d[lat, lon, h]
+    dwie_dp = jnp.stack([
+        jnp.stack([z, z, z]),
+        jnp.stack([-w * sL, z, z]),
+        jnp.stack([w * cL, z, z]),
+    ])
+    # d w_en / d[lat, lon, h]
+    dwen_dp = jnp.stack([
+        jnp.stack([vn * dRM / RMh**2, z, vn / RMh**2]),
+        jnp.stack([-ve * dRN / RNh**2, z, -ve / RNh**2]),
+        jnp.stack([ve / (RNh * cL * cL) - ve * tL * dRN / RNh**2, z, -ve * tL / RNh**2]),
+    ])
+    dg_dlat, dg_dh = _normal_gravity_partials(lat, h, ellipsoid)
+    # g_n = [0, 0, -gamma(lat, h)]
+    dg_dp = jnp.stack([jnp.stack([z, z, z]), jnp.stack([z, z, z]), jnp.stack([-dg_dlat, z, -dg_dh])])
+
+    V = skew(v_n)
+    F_aa = -skew(w_in)
+    F_av = dwen_dv
+    F_ap = dwie_dp + dwen_dp
+    F_va = skew(f_n)
+    F_vv = -skew(2.0 * w_ie + w_en) + V @ dwen_dv
+    F_vp = V @ (2.0 * dwie_dp + dwen_dp) + dg_dp
+    F_pa = jnp.zeros((3, 3), dtype)
+    F_pv = jnp.stack([
+        jnp.stack([z, 1.0 / RMh, z]),
+        jnp.stack([1.0 / (RNh * cL), z, z]),
+        jnp.stack([z, z, jnp.ones((), dtype)]),
+    ])
+    F_pp = jnp.stack([
+        jnp.stack([-vn * dRM / RMh**2, z, -vn / RMh**2]),
+        jnp.stack([ve / (RNh * cL) * (tL - dRN / RNh), z, -ve / (RNh**2 * cL)]),
+        jnp.stack([z, z, z]),
+    ])
+    return jnp.block([[F_aa, F_av, F_ap], [F_va, F_vv, F_vp], [F_pa, F_pv, F_pp]])
+
+
+def error_model_F(pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
+    """Continuous-time system matrix F (18x18) of the 18-state INS error model (S0 eqs. 18-19).
+
+    X_dot = F X + G W with the navigation block of :func:`nav_error_F` and the sensor errors
+    phi_dot += -C_bn (eps_b + eps_r);  dV_dot += C_bn nabla;
+    eps_b_dot = 0;  eps_r_dot = -eps_r / tau;  nabla_dot = 0.
+
+    Args:
+      pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
+      f_n: (3,) specific force in n (= C_bn f_b), m/s^2.  C_bn: (3, 3) body -> nav DCM.
+      tau_markov: scalar or (3,) correlation time of the gyro Markov drift per body axis, s.
+      ellipsoid: static Earth model.  earth_rate_sign: +1, or -1 for reverse navigation.
+    Returns:
+      (18, 18) F; state order :data:`IDX18`.
+    """
+    Fn = nav_error_F(pos, v_n, f_n, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
+    dtype = Fn.dtype
+    C = jnp.asarray(C_bn, dtype)
+    tau = _vec3(tau_markov, dtype)
+    F = jnp.zeros((18, 18), dtype)
+    F = F.at[0:9, 0:9].set(Fn)
+    F = F.at[IDX18.phi, IDX18.eps_b].set(-C)
+    F = F.at[IDX18.phi, IDX18.eps_r].set(-C)
+    F = F.at[IDX18.dv, IDX18.nabla].set(C)
+    F = F.at[IDX18.eps_r, IDX18.eps_r].set(jnp.diag(-1.0 / tau))
+    return F
+
+
+def error_model_G(C_bn):
+    """Noise input matrix G (18x9) of the 18-state model for W = [w_g, w_b, w_a] (S0 eq. 19).
+
+    phi_dot gets -C_bn w_g, eps_r_dot gets w_b (body frame, directly), dV_dot gets C_bn w_a.
+
+    Args:
+      C_bn: (3, 3) body -> nav DCM.
+    Returns:
+      (18, 9) G.
+    """
+    C = jnp.asarray(C_bn)
+    G = jnp.zeros((18, 9), C.dtype)
+    G = G.at[IDX18.phi, 0:3].set(-C)
+    G = G.at[IDX18.eps_r, 3:6].set(jnp.eye(3, dtype=C.dtype))
+    G = G.at[IDX18.dv, 6:9].set(C)
+    return G
+
+
+def error_model_F15(pos, v_n, f_n, C_bn, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
+    """System matrix F (15x15) of the 15-state model [phi, dV, dpos, eps_b, nabla] (S0 eq. 18 without eps_r).
+
+    Equal to :func:`error_model_F` with the eps_r rows and columns deleted.
+
+    Args:
+      pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
+      f_n: (3,) specific force in n, m/s^2.  C_bn: (3, 3) body -> nav DCM.
+      ellipsoid: static Earth model.  earth_rate_sign: +1, or -1 for reverse navigation.
+    Returns:
+      (15, 15) F; state order :data:`IDX15`.
+    """
+    Fn = nav_error_F(pos, v_n, f_n, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
+    dtype = Fn.dtype
+    C = jnp.asarray(C_bn, dtype)
+    F = jnp.zeros((15, 15), dtype)
+    F = F.at[0:9, 0:9].set(Fn)
+    F = F.at[IDX15.phi, IDX15.eps_b].set(-C)
+    F = F.at[IDX15.dv, IDX15.nabla].set(C)
+    return F
+
+
+def error_model_G15(C_bn):
+    """Noise input matrix G (15x6) of the 15-state model for W15 = [w_g, w_a].
+
+    Args:
+      C_bn: (3, 3) body -> nav DCM.
+    Returns:
+      (15, 6) G: phi rows get -C_bn w_g, dV rows get C_bn w_a.
+    """
+    C = jnp.asarray(C_bn)
+    G = jnp.zeros((15, 6), C.dtype)
+    G = G.at[IDX15.phi, 0:3].set(-C)
+    G = G.at[IDX15.dv, 3:6].set(C)
+    return G
+
+
+def markov_psd(sigma, tau):
+    """Driving-noise density of a first-order Gauss-Markov process: q = 2 sigma^2 / tau.
+
+    x_dot = -x / tau + w, E[w(t) w(s)] = q delta(t - s) has stationary variance q tau / 2 = sigma^2.
+
+    Args:
+      sigma: stationary standard deviation (any unit u).  tau: correlation time, s.
+    Returns:
+      q in u^2/s.
+    """
+    return 2.0 * jnp.square(sigma) / tau
+
+
+def error_model_Qc(gyro_arw, markov_sigma, tau_markov, accel_vrw):
+    """Continuous noise density Qc (9x9) of W = [w_g, w_b, w_a] (S0 eq. 19), diagonal.
+
+    Qc = diag(ARW^2 (x3), 2 sigma^2 / tau (x3), VRW^2 (x3)).
+
+    Args:
+      gyro_arw: scalar or (3,) gyro angle random walk, rad/sqrt(s) (= rad/s/sqrt(Hz)).
+      markov_sigma: scalar or (3,) stationary std of the gyro Markov drift, rad/s.
+      tau_markov: scalar or (3,) its correlation time, s.
+      accel_vrw: scalar or (3,) accelerometer velocity random walk, m/s/sqrt(s).
+    Returns:
+      (9, 9) Qc; units (rad/s)^2 s, (rad/s)^2/s, (m/s^2)^2 s.
+    """
+    dtype = jnp.result_type(gyro_arw, markov_sigma, tau_markov, accel_vrw, float)
+    q = jnp.concatenate([
+        jnp.square(_vec3(gyro_arw, dtype)),
+        markov_psd(_vec3(markov_sigma, dtype), _vec3(tau_markov, dtype)),
+        jnp.square(_vec3(accel_vrw, dtype)),
+    ])
+    return jnp.diag(q)
+
+
+def error_model_Qc15(gyro_arw, accel_vrw):
+    """Continuous noise density Qc (6x6) of W15 = [w_g, w_a]: diag(ARW^2 (x3), VRW^2 (x3)).
+
+    Args:
+      gyro_arw: scalar or (3,), rad/sqrt(s).  accel_vrw: scalar or (3,), m/s/sqrt(s).
+    Returns:
+      (6, 6) Qc.
+    """
+    dtype = jnp.result_type(gyro_arw, accel_vrw, float)
+    return jnp.diag(jnp.concatenate([jnp.square(_vec3(gyro_arw, dtype)), jnp.square(_vec3(accel_vrw, dtype))]))
+
+
+def discretize_van_loan(F, G, Qc, dt):
+    """Exact discretisation of X_dot = F X + G W (F, G, Qc constant over dt) by Van Loan's method.
+
+    A = [[-F, G Qc G^T], [0, F^T]] dt,  B = expm(A) = [[., B12], [0, B22]];
+    Phi = B22^T = expm(F dt),  Qd = Phi B12 = int_0^dt expm(F s) G Qc G^T expm(F s)^T ds
+    (C. F. Van Loan, IEEE TAC 23(3), 1978). Qd is the Gamma Q Gamma^T of S0 eq. (8); it is
+    returned symmetrised.
+
+    Args:
+      F: (n, n) continuous system matrix.  G: (n, m) noise input.  Qc: (m, m) noise density.
+      dt: scalar interval, s.
+    Returns:
+      (Phi (n, n), Qd (n, n)).
+    """
+    n = F.shape[-1]
+    GQG = G @ Qc @ G.T
+    top = jnp.concatenate([-F, GQG], axis=1)
+    bot = jnp.concatenate([jnp.zeros_like(F), F.T], axis=1)
+    B = expm(jnp.concatenate([top, bot], axis=0) * dt)
+    Phi = B[n:, n:].T
+    Qd = Phi @ B[:n, n:]
+    return Phi, 0.5 * (Qd + Qd.T)
+
+
+def discretize_series(F, G, Qc, dt, *, order: int = 2):
+    """Truncated-series discretisation: Phi = sum_{k<=order} (F dt)^k / k!, Qd by the trapezoid rule.
+
+    Qd = (Phi G Qc G^T Phi^T + G Qc G^T) dt / 2.
+    Local (one-step) errors: Phi is O(dt^(order+1)); Qd is O(dt^3) for any order >= 1 (the trapezoid
+    rule's error dominates), so the accumulated errors over a fixed horizon are O(dt^order) for Phi
+    and O(dt^2) for Qd. order = 1 is the common Phi = I + F dt; use :func:`discretize_van_loan`
+    where dt |F| is not small.
+
+    Args:
+      F: (n, n).  G: (n, m).  Qc: (m, m).  dt: scalar interval, s.
+      order: static int >= 1, number of series terms after I.
+    Returns:
+      (Phi (n, n), Qd (n, n)), Qd symmetric.
+    """
+    if not isinstance(order, int) or order < 1:
+        raise ValueError(f"order must be an int >= 1, got {order!r}")
+    Fdt = F * dt
+    Phi = jnp.eye(F.shape[-1], dtype=F.dtype)
+    term = Phi
+    for k in range(1, order + 1):
+        term = term @ Fdt / k
+        Phi = Phi + term
+    GQG = G @ Qc @ G.T
+    Qd = 0.5 * dt * (Phi @ GQG @ Phi.T + GQG)
+    return Phi, 0.5 * (Qd + Qd.T)
+
+
+__all__ = [
+    "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "ErrorStateIndex", "discretize_series",
+    "discretize_van_loan", "error_model_F", "error_model_F15", "error_model_G", "error_model_G15",
+    "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",
+]
