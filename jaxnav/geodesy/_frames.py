@@ -44,7 +44,11 @@ def geodetic_to_ecef(lat, lon, h, *, ellipsoid: Ellipsoid = WGS84):
     """Geodetic latitude, longitude (rad) and ellipsoidal height (m) -> ECEF x, y, z (m).
 
     Args broadcast together; any shape. Returns a tuple (x, y, z).
+
+    Raises:
+      ValueError: absolute coordinates in float32.
     """
+    check_float64(lat, lon, h)
     lat, lon, h = _f(lat), _f(lon), _f(h)
     N = prime_vertical_radius(lat, ellipsoid)
     cl = jnp.cos(lat)
@@ -111,13 +115,17 @@ def enu_to_ecef_vector(de, dn, du, lat0, lon0):
 
 def ecef_to_enu(x, y, z, lat0, lon0, h0, *, ellipsoid: Ellipsoid = WGS84):
     """ECEF point (m) -> local east, north, up (m) about the origin (lat0, lon0 rad, h0 m)."""
-    check_float64(x, y, z)
+    check_float64(x, y, z, lat0, lon0, h0)
     x0, y0, z0 = geodetic_to_ecef(lat0, lon0, h0, ellipsoid=ellipsoid)
     return ecef_to_enu_vector(x - x0, y - y0, z - z0, lat0, lon0)
 
 
 def enu_to_ecef(e, n, u, lat0, lon0, h0, *, ellipsoid: Ellipsoid = WGS84):
-    """Local east, north, up (m) about (lat0, lon0 rad, h0 m) -> ECEF point (m)."""
+    """Local east, north, up (m) about (lat0, lon0 rad, h0 m) -> ECEF point (m).
+
+    The offsets may be float32 (local); the origin must be float64.
+    """
+    check_float64(lat0, lon0, h0, what="the ENU origin (absolute coordinates)")
     x0, y0, z0 = geodetic_to_ecef(lat0, lon0, h0, ellipsoid=ellipsoid)
     dx, dy, dz = enu_to_ecef_vector(e, n, u, lat0, lon0)
     return x0 + dx, y0 + dy, z0 + dz

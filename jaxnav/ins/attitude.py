@@ -103,7 +103,8 @@ def euler_to_dcm(att):
 
 def dcm_to_euler(C):
     """C_bn -> [pitch, roll, yaw] (rad); pitch in [-pi/2, pi/2], roll and yaw in (-pi, pi]."""
-    pitch = jnp.arcsin(jnp.clip(C[..., 2, 1], -1.0, 1.0))
+    # atan2 keeps full accuracy near +-90 deg pitch, where arcsin loses ~eps / cos(pitch)
+    pitch = jnp.arctan2(C[..., 2, 1], jnp.hypot(C[..., 2, 0], C[..., 2, 2]))
     roll = jnp.arctan2(-C[..., 2, 0], C[..., 2, 2])
     yaw = jnp.arctan2(-C[..., 0, 1], C[..., 1, 1])
     return jnp.stack([pitch, roll, yaw], axis=-1)
