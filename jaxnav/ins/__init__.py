@@ -4,7 +4,7 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 :mod:`jaxnav.ins.attitude` for the Euler-angle convention.
 """
 
-from jaxnav.ins import attitude, earth, error_model
+from jaxnav.ins import attitude, earth, error_model, integration
 from jaxnav.ins.earth import EarthParams, earth_params, normal_gravity, position_rate
 from jaxnav.ins.error_model import (
     IDX15,
@@ -22,6 +22,18 @@ from jaxnav.ins.error_model import (
     markov_psd,
     nav_error_F,
 )
+from jaxnav.ins.integration import (
+    LC_OUTPUTS,
+    LCEpochs,
+    LCParams,
+    LCResult,
+    PVMeasurements,
+    SensorBiases,
+    loosely_coupled,
+    measurement_model,
+    segment_imu,
+    smooth,
+)
 from jaxnav.ins.mechanization import (
     ImuSample,
     MechParams,
@@ -38,6 +50,8 @@ __all__ = [
     "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "discretize_series", "discretize_van_loan",
     "error_model", "error_model_F", "error_model_F15", "error_model_G", "error_model_G15",
     "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",
+    "LC_OUTPUTS", "LCEpochs", "LCParams", "LCResult", "PVMeasurements", "SensorBiases", "integration",
+    "loosely_coupled", "measurement_model", "segment_imu", "smooth",
     "EarthParams", "ImuSample", "MechParams", "MechResult", "MechState", "NavState", "attitude",
     "check_imu", "earth", "earth_params", "mech_step", "mechanize", "mechanize_backward",
     "normal_gravity", "position_rate",

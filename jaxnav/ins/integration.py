@@ -1,0 +1,429 @@
+"""Loosely coupled INS/GNSS integration with feedback correction (S0 experiment; S3 stop updates).
+
+One nested ``lax.scan``: the outer scan runs over measurement epochs, the inner one over the
+IMU samples between them. Inside, the strapdown step (:func:`jaxnav.ins.mech_step`) integrates
+bias-corrected increments while the error-state system matrix is accumulated; at each epoch the
+interval's transition and process noise are discretised (Van Loan) and **the filter family's
+own** :func:`jaxnav.filters.filter_step` performs the prediction and the update, so every
+prior-inflation rule (constant, attenuated S_k, fading lambda_k) and noise estimator plugs in
+unchanged. The estimate is fed back (attitude, velocity, position reset; sensor-error
+estimates accumulated and applied to the IMU) and the error state restarts at zero.
+
+Measurements are position and velocity in local ENU metres with an antenna lever arm; the same
+structure carries GNSS fixes and pseudo-measurements (ZUPT: velocity 0; known position; known
+height: only the up component), selected per component by a mask. Epochs are matched to the
+IMU by time, not index: an epoch between two IMU samples is compared with the INS state
+extrapolated from the last sample to the epoch time.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxnav import _status
+from jaxnav.filters import LinearGaussian
+from jaxnav.filters._estimators import NoEstimator
+from jaxnav.filters._kalman import FilterParams, FilterState, StepInput, filter_step
+from jaxnav.filters._rules import NoInflation
+from jaxnav.filters._smoother import rts_smoother
+from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, meridian_radius, prime_vertical_radius
+from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_to_dcm, rv_to_quat, skew
+from jaxnav.ins.earth import earth_params, position_rate
+from jaxnav.ins.error_model import (
+    IDX15,
+    IDX18,
+    discretize_van_loan,
+    error_model_F,
+    error_model_F15,
+    error_model_G,
+    error_model_G15,
+)
+from jaxnav.ins.mechanization import ImuSample, MechParams, MechState, NavState, mech_step
+
+#: per-epoch outputs that :func:`loosely_coupled` can save
+LC_OUTPUTS = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs",
+              "nis", "factors", "noise", "valid")
+
+
+class PVMeasurements(NamedTuple):
+    """Position/velocity measurements at M epochs (GNSS fixes or stop pseudo-measurements).
+
+    Attributes:
+      t: (M,) epoch times, s (same time scale as the IMU), strictly increasing.
+      pos: (M, 3) [lat rad, lon rad, h m] of the antenna (or the known point).
+      vel: (M, 3) ENU velocity, m/s (zeros for a ZUPT).
+      R: (M, 6, 6) covariance of [pos E, N, U (m), vel E, N, U (m/s)].
+      mask: (M, 6) bool, which components are used (NaN components are masked automatically).
+      lever: (M, 3) antenna lever arm in the body frame, m (zeros for pseudo-measurements at the IMU).
+    """
+
+    t: Any
+    pos: Any
+    vel: Any
+    R: Any
+    mask: Any
+    lever: Any
+
+
+class LCParams(NamedTuple):
+    """Tunable array parameters of the integration filter (all leaves reach ``vmap``/``grad``).
+
+    Attributes:
+      P0: (n, n) initial error covariance (n = 18 or 15, order of :data:`jaxnav.ins.IDX18`).
+      Qc: (p, p) continuous noise density (9 x 9 from :func:`jaxnav.ins.error_model_Qc`, 6 x 6
+        from :func:`jaxnav.ins.error_model_Qc15`).
+      tau_markov: scalar or (3,) gyro Markov correlation time, s (unused for 15 states).
+      R_scale: scalar multiplying every measurement covariance (assumed-noise mismatch studies).
+    """
+
+    P0: Any
+    Qc: Any
+    tau_markov: Any = 300.0
+    R_scale: Any = 1.0
+
+
+class SensorBiases(NamedTuple):
+    """Accumulated sensor-error corrections applied to the raw IMU (body frame).
+
+    Attributes:
+      gyro: (3,) gyro random constant, rad/s.  markov: (3,) gyro Markov drift (decays with tau), rad/s.
+      accel: (3,) accelerometer random constant, m/s^2.
+    """
+
+    gyro: Any
+    markov: Any
+    accel: Any
+
+
+class LCEpochs(NamedTuple):
+    """Per-epoch outputs (leading axis M; fields not saved are None).
+
+    Attributes:
+      t: (M,) epoch times.  t_nav: (M,) time of the IMU sample the state refers to.
+      nav: :class:`NavState` after feedback, at t_nav.  biases: :class:`SensorBiases` after feedback.
+      covs: (M, n, n) error covariance after the update.  pred_covs: (M, n, n) prior (after inflation).
+      Phi: (M, n, n) transition from the previous epoch.  corrections: (M, n) estimate fed back.
+      innovations, innov_covs, nis, factors, noise, valid: as :class:`jaxnav.filters.KalmanResult`.
+    """
+
+    t: Any = None
+    t_nav: Any = None
+    nav: Any = None
+    biases: Any = None
+    covs: Any = None
+    pred_covs: Any = None
+    Phi: Any = None
+    corrections: Any = None
+    innovations: Any = None
+    innov_covs: Any = None
+    nis: Any = None
+    factors: Any = None
+    noise: Any = None
+    valid: Any = None
+
+
+class LCResult(NamedTuple):
+    """Result of :func:`loosely_coupled`.
+
+    Attributes:
+      epochs: :class:`LCEpochs`.  final_nav: :class:`NavState` at the last IMU sample used.
+      final_biases: :class:`SensorBiases`.  loglik: innovation log-likelihood.
+      n_nonfinite: NaN/inf measurement components masked.  n_skipped: epochs without any update.
+      status: int32 flags.  imu_nav: per-sample :class:`NavState` every ``save_imu_every`` samples, or None.
+    """
+
+    epochs: LCEpochs
+    final_nav: Any
+    final_biases: Any
+    loglik: Any
+    n_nonfinite: Any
+    n_skipped: Any
+    status: Any
+    imu_nav: Any = None
+
+
+class Segments(NamedTuple):
+    """Host-computed map of IMU samples to measurement epochs (static shapes for the nested scan)."""
+
+    idx: Any  # (M, K) int IMU sample indices per epoch interval (padded)
+    use: Any  # (M, K) bool, real samples
+    t_last: Any  # (M,) end time of the last IMU sample before each epoch
+    K: int
+
+
+def segment_imu(t_imu, t_meas, dt_imu) -> Segments:
+    """Assign IMU samples to measurement epochs by time (host side, numpy).
+
+    Sample i covers (t_imu[i] - dt_imu[i], t_imu[i]]; epoch j receives the samples whose end time
+    is in (t_meas[j-1], t_meas[j]] (the first epoch also everything before it).
+
+    Raises:
+      ValueError: if times are not increasing or the IMU and measurement spans do not overlap.
+    """
+    t_imu = np.asarray(t_imu, dtype=float)
+    t_meas = np.asarray(t_meas, dtype=float)
+    if t_imu.ndim != 1 or t_meas.ndim != 1:
+        raise ValueError(f"IMU times {t_imu.shape} and measurement times {t_meas.shape} must be 1-D")
+    if np.any(np.diff(t_imu) <= 0):
+        raise ValueError(f"IMU times are not strictly increasing (index {int(np.argmax(np.diff(t_imu) <= 0)) + 1})")
+    if np.any(np.diff(t_meas) <= 0):
+        raise ValueError(f"measurement times are not strictly increasing (index {int(np.argmax(np.diff(t_meas) <= 0)) + 1})")
+    t_start = t_imu[0] - np.broadcast_to(np.asarray(dt_imu, float), t_imu.shape)[0]
+    if t_meas[0] <= t_start or t_meas[-1] > t_imu[-1] + 1e-9 or t_meas[0] > t_imu[-1]:
+        raise ValueError(
+            f"measurement epochs [{t_meas[0]:.6f}, {t_meas[-1]:.6f}] s are not inside the IMU span "
+            f"({t_start:.6f}, {t_imu[-1]:.6f}] s; trim the measurements to the IMU data")
+    ends = np.searchsorted(t_imu, t_meas + 1e-9, side="right")  # samples with t_imu <= t_meas
+    starts = np.concatenate([[0], ends[:-1]])
+    counts = ends - starts
+    if np.any(counts == 0):
+        j = int(np.argmax(counts == 0))
+        raise ValueError(f"no IMU sample between measurement epochs {j - 1} and {j} (t = {t_meas[j]:.6f} s)")
+    K = int(counts.max())
+    idx = starts[:, None] + np.arange(K)[None, :]
+    use = idx < ends[:, None]
+    idx = np.minimum(idx, len(t_imu) - 1)
+    return Segments(idx=idx, use=use, t_last=t_imu[ends - 1], K=K)
+
+
+def _pos_to_enu_metres(pos, dpos):
+    """[dlat, dlon, dh] at pos -> [dE, dN, dU] metres."""
+    lat, h = pos[0], pos[2]
+    RM, RN = meridian_radius(lat), prime_vertical_radius(lat)
+    return jnp.stack([dpos[1] * (RN + h) * jnp.cos(lat), dpos[0] * (RM + h), dpos[2]])
+
+
+def _enu_metres_to_pos(pos, d_enu):
+    """[dE, dN, dU] metres at pos -> [dlat, dlon, dh]."""
+    lat, h = pos[0], pos[2]
+    RM, RN = meridian_radius(lat), prime_vertical_radius(lat)
+    return jnp.stack([d_enu[1] / (RM + h), d_enu[0] / ((RN + h) * jnp.cos(lat)), d_enu[2]])
+
+
+def measurement_model(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid: Ellipsoid = WGS84):
+    """Predicted antenna position/velocity and H (6 x n) of the PV measurement.
+
+    z = [D (pos_ins_ant - pos_meas) (ENU m), v_ins_ant - v_meas (ENU m/s)] with
+    pos_ant = pos + C_bn l, v_ant = v + C_bn (w_nb^b x l). With the phi-angle convention
+    (C_computed = (I - [phi x]) C_true): dz_pos = D dpos + [(C_bn l) x] phi,
+    dz_vel = dV + [(C_bn (w x l)) x] phi.
+
+    Returns:
+      (pos_ant (3,), v_ant (3,), H (6, n)).
+    """
+    C = quat_to_dcm(nav.q_bn)
+    e = earth_params(nav.pos, nav.v_n, ellipsoid)
+    w_nb_b = w_ib_b - C.T @ e.w_in_n
+    l_n = C @ lever_b
+    lv_n = C @ jnp.cross(w_nb_b, lever_b)
+    pos_ant = nav.pos + _enu_metres_to_pos(nav.pos, l_n)
+    v_ant = nav.v_n + lv_n
+    lat, h = nav.pos[0], nav.pos[2]
+    RM, RN = meridian_radius(lat, ellipsoid), prime_vertical_radius(lat, ellipsoid)
+    # rows E, N, U; columns dlat, dlon, dh
+    D = jnp.array([[0.0, (RN + h) * jnp.cos(lat), 0.0], [RM + h, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    H = jnp.zeros((6, n_states), nav.v_n.dtype)
+    H = H.at[0:3, 0:3].set(skew(l_n)).at[0:3, 6:9].set(D)
+    H = H.at[3:6, 0:3].set(skew(lv_n)).at[3:6, 3:6].set(jnp.eye(3, dtype=H.dtype))
+    return pos_ant, v_ant, H
+
+
+def _apply_correction(nav: NavState, biases: SensorBiases, x, idx):
+    """Feed an error estimate back: q <- rv2q(phi) (x) q, v -= dV, pos -= dpos, biases += estimates."""
+    q = quat_normalize(quat_mul(rv_to_quat(x[idx.phi]), nav.q_bn))
+    nav = NavState(q_bn=q, v_n=nav.v_n - x[idx.dv], pos=nav.pos - x[idx.dpos])
+    markov = biases.markov + (x[idx.eps_r] if idx.eps_r is not None else 0.0)
+    biases = SensorBiases(gyro=biases.gyro + x[idx.eps_b], markov=markov, accel=biases.accel + x[idx.nabla])
+    return nav, biases
+
+
+class _Carry(NamedTuple):
+    mech: MechState
+    biases: SensorBiases
+    kf: FilterState
+
+
+def _where_tree(c, a, b):
+    return jax.tree_util.tree_map(lambda x, y: jnp.where(c, x, y), a, b)
+
+
+@partial(jax.jit, static_argnames=("n_states", "save", "ellipsoid", "hold_height", "check_finite",
+                                   "save_imu_every"))
+def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last, meas, params, inflation,
+             estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every):
+    dtype = nav0.v_n.dtype
+    n = n_states
+    idx = IDX18 if n == 18 else IDX15
+    tau = jnp.broadcast_to(jnp.asarray(params.tau_markov, dtype), (3,))
+    rule = NoInflation() if inflation is None else inflation
+    est = NoEstimator() if estimator is None else estimator
+    fparams = FilterParams(model=LinearGaussian(None, None, None, None, None), inflation=rule, estimator=est)
+    kf0 = FilterState(
+        x=jnp.zeros(n, dtype), P=jnp.asarray(params.P0, dtype), k=jnp.zeros((), dtype),
+        rule=rule.init(6, dtype), est=est.init(n, 6, n, dtype), status=jnp.zeros((), jnp.int32),
+        loglik=jnp.zeros((), dtype), n_nonfinite=jnp.zeros((), jnp.int32), n_skipped=jnp.zeros((), jnp.int32),
+    )
+    z3 = jnp.zeros(3, dtype)
+    mech0 = MechState(nav=nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3, status=jnp.zeros((), jnp.int32))
+    mparams = MechParams(earth_rate_sign=1.0)
+    dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (dtheta.shape[0],))
+
+    def inner(c, i_use):
+        (mech, biases, Fsum, T, w_last), (i, use) = c, i_use
+        dt = dt_all[i]
+        dth = dtheta[i] - (biases.gyro + biases.markov) * dt
+        dvc = dv[i] - biases.accel * dt
+        new_mech, nav = mech_step(mech, ImuSample(dth, dvc, dt), mparams, ellipsoid=ellipsoid,
+                                  hold_height=hold_height)
+        C = quat_to_dcm(nav.q_bn)
+        f_n = C @ (dvc / dt)
+        if n == 18:
+            Fk = error_model_F(nav.pos, nav.v_n, f_n, C, tau, ellipsoid=ellipsoid)
+        else:
+            Fk = error_model_F15(nav.pos, nav.v_n, f_n, C, ellipsoid=ellipsoid)
+        decay = jnp.exp(-dt / tau)
+        new_biases = biases._replace(markov=biases.markov * decay)
+        new = (new_mech, new_biases, Fsum + Fk * dt, T + dt, dth / dt)
+        out = _where_tree(use, new, c)
+        return out, (nav if save_imu_every else None)
+
+    def outer(carry, inp):
+        i_row, use_row, t_meas, t_nav, m = inp
+        zeroF = jnp.zeros((n, n), dtype)
+        (mech, biases, Fsum, T, w_last), navs = jax.lax.scan(
+            inner, (carry.mech, carry.biases, zeroF, jnp.zeros((), dtype), z3), (i_row, use_row))
+        Fbar = Fsum / jnp.maximum(T, 1e-300)
+        C = quat_to_dcm(mech.nav.q_bn)
+        G = error_model_G(C) if n == 18 else error_model_G15(C)
+        Phi, Qd = discretize_van_loan(Fbar, G, jnp.asarray(params.Qc, dtype), T)
+        # INS state extrapolated from the last IMU sample to the epoch time
+        dtx = t_meas - t_nav
+        nav_x = mech.nav._replace(pos=mech.nav.pos + dtx * position_rate(mech.nav.pos, mech.nav.v_n, ellipsoid))
+        pos_ant, v_ant, H = measurement_model(nav_x, w_last, m.lever, n, ellipsoid)
+        dz_pos = _pos_to_enu_metres(nav_x.pos, pos_ant - m.pos)
+        z = jnp.concatenate([dz_pos, v_ant - m.vel])
+        R = jnp.asarray(params.R_scale, dtype) * m.R
+        kf_in = carry.kf._replace(x=jnp.zeros(n, dtype))
+        kf, info = filter_step(kf_in, StepInput(z=z, mask=m.mask, F=Phi, H=H, Q=Qd, R=R), fparams,
+                               save=("means", "covs", "pred_covs", "innovations", "innov_covs", "nis",
+                                     "factors", "noise", "valid"), check_finite=check_finite)
+        xhat = kf.x
+        nav_c, biases_c = _apply_correction(mech.nav, biases, xhat, idx)
+        mech = mech._replace(nav=nav_c)
+        new = _Carry(mech=mech, biases=biases_c, kf=kf._replace(x=jnp.zeros(n, dtype)))
+        allv = dict(nav=nav_c, biases=biases_c, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi, corrections=xhat,
+                    innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
+                    factors=info.factors, noise=info.noise, valid=info.valid)
+        ep = LCEpochs(t=t_meas, t_nav=t_nav, **{k: allv[k] for k in save})
+        if save_imu_every:
+            navs = jax.tree_util.tree_map(lambda a: a[save_imu_every - 1::save_imu_every], navs)
+        return new, (ep, navs)
+
+    carry0 = _Carry(mech=mech0, biases=biases0, kf=kf0)
+    final, (ep, navs) = jax.lax.scan(outer, carry0, (seg_idx, seg_use, meas.t, t_last, meas))
+    status = final.kf.status | final.mech.status
+    return LCResult(epochs=ep, final_nav=final.mech.nav, final_biases=final.biases, loglik=final.kf.loglik,
+                    n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped, status=status,
+                    imu_nav=navs if save_imu_every else None)
+
+
+def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, params: LCParams, *,
+                    dt_imu=None, biases0: Optional[SensorBiases] = None, n_states: int = 18, inflation=None,
+                    estimator=None, save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections",
+                                          "innovations", "nis", "factors", "valid"),
+                    ellipsoid: Ellipsoid = WGS84, hold_height: bool = False, check_finite: bool = True,
+                    max_sigma: float = 1e3, save_imu_every: int = 0) -> LCResult:
+    """Loosely coupled INS/GNSS filter with feedback correction (S0 experiment, eqs. (4)-(19)).
+
+    Args:
+      nav0: initial :class:`NavState` at ``t_imu[0] - dt_imu[0]``.
+      t_imu: (N,) end time of each IMU sample, s (concrete: it shapes the nested scan).
+      dtheta: (N, 3) angular increments, rad.  dv: (N, 3) velocity increments, m/s (body frame).
+      meas: :class:`PVMeasurements` (times concrete); components with a standard deviation above
+        ``max_sigma`` (m or m/s) or NaN are masked and counted.
+      params: :class:`LCParams` (array leaves: P0, Qc, tau, R scale).
+      dt_imu: scalar or (N,) sample intervals (default: from ``t_imu``, the first copied).
+      biases0: initial :class:`SensorBiases` (default zeros).
+      n_states: static 18 (S0) or 15 (no Markov drift).
+      inflation, estimator: plug-ins of :mod:`jaxnav.filters` (classic when None).
+      save: static per-epoch outputs (subset of ``LC_OUTPUTS``).
+      ellipsoid, hold_height: static, as :func:`jaxnav.ins.mechanize`.
+      check_finite: static, as :func:`jaxnav.filters.kalman_filter`.
+      save_imu_every: static; if > 0 also return the navigation state every k-th IMU sample.
+    Returns:
+      :class:`LCResult`.
+    Raises:
+      ValueError: shapes, non-increasing times, IMU/measurement spans that do not overlap.
+    """
+    if n_states not in (15, 18):
+        raise ValueError(f"n_states must be 15 or 18, got {n_states!r}")
+    unknown = [s for s in save if s not in LC_OUTPUTS]
+    if unknown:
+        raise ValueError(f"unknown outputs {unknown}; choose from {LC_OUTPUTS}")
+    N = np.shape(t_imu)[0]
+    if jnp.shape(dtheta) != (N, 3) or jnp.shape(dv) != (N, 3):
+        raise ValueError(f"dtheta {jnp.shape(dtheta)} and dv {jnp.shape(dv)} must be ({N}, 3) to match t_imu")
+    M = np.shape(meas.t)[0]
+    for name, shp in (("pos", (M, 3)), ("vel", (M, 3)), ("R", (M, 6, 6)), ("mask", (M, 6)), ("lever", (M, 3))):
+        if jnp.shape(getattr(meas, name)) != shp:
+            raise ValueError(f"meas.{name} has shape {jnp.shape(getattr(meas, name))}; expected {shp}")
+    p = 9 if n_states == 18 else 6
+    if jnp.shape(params.P0) != (n_states, n_states) or jnp.shape(params.Qc) != (p, p):
+        raise ValueError(f"params.P0 {jnp.shape(params.P0)} / Qc {jnp.shape(params.Qc)} must be "
+                         f"({n_states}, {n_states}) / ({p}, {p}) for n_states={n_states}")
+    check_float64(nav0.pos, meas.pos, what="absolute positions")
+    if isinstance(t_imu, jax.core.Tracer) or isinstance(meas.t, jax.core.Tracer):
+        raise ValueError("t_imu and meas.t must be concrete arrays (they set the scan's shapes); close over "
+                         "them instead of passing them through jit/vmap")
+    t_imu = np.asarray(t_imu, dtype=float)
+    if dt_imu is None:
+        d = np.diff(t_imu)
+        dt_imu = np.concatenate([d[:1], d])
+    seg = segment_imu(t_imu, np.asarray(meas.t, float), dt_imu)
+    sig = jnp.sqrt(jnp.diagonal(meas.R, axis1=1, axis2=2))
+    mask = jnp.asarray(meas.mask, bool) & (sig <= max_sigma)
+    meas = meas._replace(mask=mask, t=jnp.asarray(meas.t, jnp.float64))
+    z3 = jnp.zeros(3, jnp.asarray(nav0.v_n).dtype)
+    biases0 = SensorBiases(z3, z3, z3) if biases0 is None else biases0
+    if save_imu_every and seg.K % save_imu_every:
+        raise ValueError(f"save_imu_every={save_imu_every} must divide the samples per epoch interval ({seg.K})")
+    return _lc_core(nav0, biases0, jnp.asarray(dtheta), jnp.asarray(dv), dt_imu, t_imu, seg.idx, seg.use,
+                    seg.t_last, meas, params, inflation, estimator, n_states, tuple(save), ellipsoid,
+                    hold_height, check_finite, int(save_imu_every))
+
+
+def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBiases, Any]:
+    """RTS smoothing of a feedback filter over its saved epoch moments, applied to the navigation solution.
+
+    Take each epoch's post-feedback state as the reference. There the filtered error mean is
+    0, and the prior mean is -x_{j+1} (the prediction, 0 relative to the pre-update state, seen
+    from the post-feedback state that the correction x_{j+1} moved). The RTS recursion
+    (:func:`jaxnav.filters.rts_smoother` on the saved P, priors and Phi) therefore gives
+    dx^s_j = C_j (dx^s_{j+1} + x_{j+1}), C_j = P_j Phi_{j+1}^T P_{j+1|j}^{-1}, dx^s_M = 0; it is
+    fed back to the epoch's state like a filter correction.
+
+    Args:
+      result: :class:`LCResult` saved with "nav", "biases", "covs", "pred_covs", "Phi", "corrections".
+    Returns:
+      (smoothed :class:`NavState` (M, ...), smoothed :class:`SensorBiases`, smoothed covariances (M, n, n)).
+    """
+    ep = result.epochs
+    for name in ("nav", "biases", "covs", "pred_covs", "Phi", "corrections"):
+        if getattr(ep, name) is None:
+            raise ValueError(f"smooth() needs the per-epoch output '{name}' (add it to save=)")
+    M, n = ep.covs.shape[:2]
+    if n != n_states:
+        raise ValueError(f"the result has {n} states; pass n_states={n}")
+    from jaxnav.filters import KalmanResult
+
+    zeros = jnp.zeros((M, n), ep.covs.dtype)
+    filt = KalmanResult(means=zeros, covs=ep.covs, pred_means=-ep.corrections, pred_covs=ep.pred_covs)
+    sm = rts_smoother(LinearGaussian(F=ep.Phi, H=None, Q=None, R=None), filt)
+    idx = IDX18 if n == 18 else IDX15
+    nav, biases = jax.vmap(lambda nv, b, x: _apply_correction(nv, b, x, idx))(ep.nav, ep.biases, sm.means)
+    return nav, biases, sm.covs
