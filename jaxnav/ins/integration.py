@@ -2,8 +2,9 @@
 
 One nested ``lax.scan``: the outer scan runs over measurement epochs, the inner one over the
 IMU samples between them. Inside, the strapdown step (:func:`jaxnav.ins.mech_step`) integrates
-bias-corrected increments while the error-state system matrix is accumulated; at each epoch the
-interval's transition and process noise are discretised (Van Loan) and **the filter family's
+bias-corrected increments while the time averages of what the error-state system matrix depends
+on (position, velocity, specific force and C_bn) are accumulated; at each epoch F is built from
+them, the interval's transition and process noise are discretised (Van Loan) and **the filter family's
 own** :func:`jaxnav.filters.filter_step` performs the prediction and the update, so every
 prior-inflation rule (constant, attenuated S_k, fading lambda_k) and noise estimator plugs in
 unchanged. The estimate is fed back (attitude, velocity, position reset; sensor-error
@@ -273,31 +274,34 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
     mparams = MechParams(earth_rate_sign=1.0)
     dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (dtheta.shape[0],))
 
-    def inner(c, i_use):
-        (mech, biases, Fsum, T, w_last), (i, use) = c, i_use
-        dt = dt_all[i]
-        dth = dtheta[i] - (biases.gyro + biases.markov) * dt
-        dvc = dv[i] - biases.accel * dt
+    def inner(c, x):
+        (mech, biases, acc, T, w_last), (dth_raw, dv_raw, dt, use) = c, x
+        dth = dth_raw - (biases.gyro + biases.markov) * dt
+        dvc = dv_raw - biases.accel * dt
         new_mech, nav = mech_step(mech, ImuSample(dth, dvc, dt), mparams, ellipsoid=ellipsoid,
                                   hold_height=hold_height)
         C = quat_to_dcm(nav.q_bn)
-        f_n = C @ (dvc / dt)
-        if n == 18:
-            Fk = error_model_F(nav.pos, nav.v_n, f_n, C, tau, ellipsoid=ellipsoid)
-        else:
-            Fk = error_model_F15(nav.pos, nav.v_n, f_n, C, ellipsoid=ellipsoid)
+        # F is linear in f_n and C_bn and varies slowly with pos and v: accumulate their time
+        # averages and build F once per epoch (equal to the average of F up to O(dt_epoch^2)
+        # in the slowly varying position/velocity terms)
+        acc = (acc[0] + nav.pos * dt, acc[1] + nav.v_n * dt, acc[2] + C @ dvc, acc[3] + C * dt)
         decay = jnp.exp(-dt / tau)
         new_biases = biases._replace(markov=biases.markov * decay)
-        new = (new_mech, new_biases, Fsum + Fk * dt, T + dt, dth / dt)
+        new = (new_mech, new_biases, acc, T + dt, dth / dt)
         out = _where_tree(use, new, c)
         return out, (nav if save_imu_every else None)
 
     def outer(carry, inp):
-        i_row, use_row, t_meas, t_nav, m = inp
-        zeroF = jnp.zeros((n, n), dtype)
-        (mech, biases, Fsum, T, w_last), navs = jax.lax.scan(
-            inner, (carry.mech, carry.biases, zeroF, jnp.zeros((), dtype), z3), (i_row, use_row))
-        Fbar = Fsum / jnp.maximum(T, 1e-300)
+        dth_row, dv_row, dt_row, use_row, t_meas, t_nav, m = inp
+        acc0 = (z3, z3, z3, jnp.zeros((3, 3), dtype))
+        (mech, biases, acc, T, w_last), navs = jax.lax.scan(
+            inner, (carry.mech, carry.biases, acc0, jnp.zeros((), dtype), z3), (dth_row, dv_row, dt_row, use_row))
+        Tsafe = jnp.maximum(T, 1e-300)
+        pos_m, v_m, f_m, C_m = (a / Tsafe for a in acc)
+        if n == 18:
+            Fbar = error_model_F(pos_m, v_m, f_m, C_m, tau, ellipsoid=ellipsoid)
+        else:
+            Fbar = error_model_F15(pos_m, v_m, f_m, C_m, ellipsoid=ellipsoid)
         C = quat_to_dcm(mech.nav.q_bn)
         G = error_model_G(C) if n == 18 else error_model_G15(C)
         Phi, Qd = discretize_van_loan(Fbar, G, jnp.asarray(params.Qc, dtype), T)
@@ -325,7 +329,11 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
         return new, (ep, navs)
 
     carry0 = _Carry(mech=mech0, biases=biases0, kf=kf0)
-    final, (ep, navs) = jax.lax.scan(outer, carry0, (seg_idx, seg_use, meas.t, t_last, meas))
+    # gather the IMU samples of every epoch interval once: (M, K, 3), padded samples get dt = 1
+    # and are skipped by the ``use`` mask (no dynamic indexing inside the scan)
+    dt_seg = jnp.where(seg_use, dt_all[seg_idx], 1.0)
+    xs = (dtheta[seg_idx], dv[seg_idx], dt_seg, seg_use, meas.t, t_last, meas)
+    final, (ep, navs) = jax.lax.scan(outer, carry0, xs)
     status = final.kf.status | final.mech.status
     return LCResult(epochs=ep, final_nav=final.mech.nav, final_biases=final.biases, loglik=final.kf.loglik,
                     n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped, status=status,
