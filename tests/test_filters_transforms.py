@@ -206,3 +206,22 @@ def test_smoother_output_selection(scen):
         jf.rts_smoother(model, r, save=("nope",))
     with pytest.raises(ValueError, match="needs the filter output 'pred_covs'"):
         jf.rts_smoother(model, jf.kalman_filter(model, x0, P0, sc.zs, save=("means", "covs", "pred_means")))
+
+
+def test_inflation_restricted_to_states(scen):
+    """states=all equals the scalar rule; a subset scales that block by f, cross terms by sqrt(f)."""
+    model, x0, P0, sc = scen
+    full = jf.kalman_filter(model, x0, P0, sc.zs, inflation=jf.attenuated(0.4))
+    all_states = jf.kalman_filter(model, x0, P0, sc.zs, inflation=jf.attenuated(0.4, states=range(6)))
+    np.testing.assert_allclose(all_states.means, full.means, rtol=0, atol=1e-14)
+    part = jf.kalman_filter(model, x0, P0, sc.zs, inflation=jf.attenuated(0.4, states=slice(0, 3)))
+    k, S = 5, (1 - 0.4**6) / (1 - 0.4)  # output index 5 is epoch k = 6
+    F, G, Q = (np.asarray(a) for a in (model.F, model.G, model.Q))
+    FPF = F @ np.asarray(part.covs[k - 1]) @ F.T
+    d = np.r_[[np.sqrt(S)] * 3, [1.0] * 3]
+    np.testing.assert_allclose(part.pred_covs[k], d[:, None] * FPF * d[None, :] + G @ Q @ G.T, rtol=1e-12, atol=1e-20)
+    np.testing.assert_allclose(part.factors[k], S, rtol=1e-14)
+    r = jf.kalman_filter(model, x0, P0, sc.zs, inflation=jf.fading(window=5, states=(0, 1, 2)))
+    assert np.all(np.isfinite(r.means)) and float(jnp.max(r.factors)) >= 1.0
+    with pytest.raises(ValueError, match="states"):
+        jf.fading(states=[])

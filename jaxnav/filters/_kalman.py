@@ -17,7 +17,7 @@ from jaxnav import _status
 from jaxnav._numerics import cho_solve, cholesky, symmetrize, whiten
 from jaxnav.filters._estimators import NoEstimator, PostUpdate
 from jaxnav.filters._model import LinearGaussian, check_shapes
-from jaxnav.filters._rules import NoInflation, StepContext
+from jaxnav.filters._rules import NoInflation, StepContext, inflation_scale
 
 LOG_2PI = math.log(2.0 * math.pi)
 
@@ -189,7 +189,12 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
     ctx = ctx._replace(GQG=GQG, R_used=R_used)
     factor, rule_state = rule.factor(state.rule, ctx)
-    x_pred, P_pred = predict(state.x, state.P, F, GQG, factor, FPF=FPF)
+    states = getattr(rule, "states", None)
+    if states is None:
+        x_pred, P_pred = predict(state.x, state.P, F, GQG, factor, FPF=FPF)
+    else:
+        d = inflation_scale(factor, n, states)
+        x_pred, P_pred = predict(state.x, state.P, F, GQG, 1.0, FPF=d[:, None] * FPF * d[None, :])
     up = update(x_pred, P_pred, z, H, R_used, valid)
     post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - Hm @ up.x, 0.0), P_pred=P_pred)
     est_state = est.after(est_state, ctx, post)

@@ -54,6 +54,31 @@ class StepContext(NamedTuple):
     R_used: Any
 
 
+def state_mask(n, states):
+    """(n,) bool mask of the inflated states (all when ``states`` is None)."""
+    if states is None:
+        return jnp.ones((n,), bool)
+    return jnp.zeros((n,), bool).at[jnp.asarray(states)].set(True)
+
+
+def inflated_part(FPF, states):
+    """The part of F P F^T that a rule restricted to ``states`` scales fully (both indices inside)."""
+    if states is None:
+        return FPF
+    m = state_mask(FPF.shape[-1], states)
+    return jnp.where(m[:, None] & m[None, :], FPF, 0.0)
+
+
+def inflation_scale(factor, n, states):
+    """Per-state square-root scale d with P_pred = (d d^T) o F P F^T + G Q G^T.
+
+    d_i = sqrt(factor) for inflated states and 1 otherwise, so the inflated block is multiplied
+    by the factor, cross terms by its square root, and the rest is untouched (a partial fading
+    memory; with ``states=None`` it is the scalar inflation of S0 eqs. (12), (13)).
+    """
+    return jnp.where(state_mask(n, states), jnp.sqrt(factor), 1.0)
+
+
 def _masked_trace(A, valid):
     return jnp.sum(jnp.where(valid, jnp.diagonal(A), 0.0))
 
@@ -80,6 +105,7 @@ class Constant:
     """
 
     S: Any
+    states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
 
     def init(self, m, dtype):
         return ()
@@ -100,6 +126,7 @@ class Attenuated:
     """
 
     b: Any
+    states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
 
     def init(self, m, dtype):
         return ()
@@ -152,6 +179,7 @@ class Fading:
     smooth: Any = None
     window: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
     absolute: bool = dataclasses.field(default=True, metadata=dict(static=True))
+    states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
 
     def _n(self):
         return 1 if self.window is None else int(self.window)
@@ -185,7 +213,7 @@ class Fading:
             new = state._replace(C=C, started=state.started | obs)
         trN = (trPv - _masked_trace(ctx.H @ ctx.GQG @ ctx.H.T, ctx.valid)
                - _masked_trace(ctx.R_used, ctx.valid))
-        trM = _masked_trace(ctx.H @ ctx.FPF @ ctx.H.T, ctx.valid)
+        trM = _masked_trace(ctx.H @ inflated_part(ctx.FPF, self.states) @ ctx.H.T, ctx.valid)
         pos_M = trM > 0
         ratio = trN / jnp.where(pos_M, trM, 1.0)  # double-where: finite gradient when trM = 0
         ratio = jnp.abs(ratio) if self.absolute else ratio
@@ -198,17 +226,39 @@ class Fading:
         return lam, new
 
 
-def constant(S) -> Constant:
-    """Constant prior inflation S (S0 eq. (10)); filterpy's ``alpha`` is sqrt(S)."""
-    return Constant(S=as_leaf(S))
+def _states(states):
+    if states is None:
+        return None
+    if isinstance(states, slice):
+        if states.stop is None:
+            raise ValueError("states=slice(...) needs an explicit stop")
+        states = range(*states.indices(states.stop))
+    out = tuple(int(i) for i in states)
+    if not out or min(out) < 0:
+        raise ValueError(f"states must be non-empty non-negative indices, got {states!r}")
+    return out
 
 
-def attenuated(b) -> Attenuated:
-    """Attenuated-memory rule S_k = (1 - b^k) / (1 - b) (S0 eqs. (11)-(12)); b an array leaf."""
-    return Attenuated(b=as_leaf(b))
+def constant(S, *, states=None) -> Constant:
+    """Constant prior inflation S (S0 eq. (10)); filterpy's ``alpha`` is sqrt(S).
+
+    ``states``: optional indices (or a slice) of the states to inflate (default all).
+    """
+    return Constant(S=as_leaf(S), states=_states(states))
 
 
-def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True) -> Fading:
+def attenuated(b, *, states=None) -> Attenuated:
+    """Attenuated-memory rule S_k = (1 - b^k) / (1 - b) (S0 eqs. (11)-(12)); b an array leaf.
+
+    ``states``: optional indices (or a slice) of the states to inflate (default all). Inflating
+    states that have no process noise and are weakly observable (sensor random constants in
+    INS/GNSS) makes their variance grow like S^k: restrict the rule to the navigation states there.
+    """
+    return Attenuated(b=as_leaf(b), states=_states(states))
+
+
+def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True,
+           states=None) -> Fading:
     """Fading-memory rule lambda_k (S0 eqs. (13)-(17)); see :class:`Fading`.
 
     Args:
@@ -216,6 +266,8 @@ def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: boo
       rho: scalar > 0 for the recursive estimator C_k = (rho C_{k-1} + v v^T)/(1 + rho).
       smooth: optional temperature tau > 0 of a smooth surrogate of max(1, .).
       absolute: use |tr N / tr M| as printed (True) or tr N / tr M (False).
+      states: optional indices (or a slice) of the states to inflate (default all); M_k is then
+        taken over the inflated block of F P F^T.
     With neither ``window`` nor ``rho`` the single-epoch estimator (n = 1) is used.
 
     Raises:
@@ -230,4 +282,5 @@ def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: boo
         smooth=None if smooth is None else as_leaf(smooth),
         window=None if window is None else int(window),
         absolute=bool(absolute),
+        states=_states(states),
     )
