@@ -1,6 +1,9 @@
 """The demonstration runs end to end on small sizes and writes its table, JSON and figure."""
 
 import json
+import pathlib
+
+import pytest
 
 import jax
 import numpy as np
@@ -11,7 +14,7 @@ from jaxnav.cli import main
 
 def test_demo_writes_results_and_figure(tmp_path, capsys):
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--seeds", "5", "--epochs", "300", "--no-progress"]) == 0
+    assert main(["demo-filters", "--out", str(out), "--seeds", "5", "--epochs", "300", "--no-progress"]) == 0
     res = json.loads((out / "results.json").read_text())
     assert set(res["table"]) == {"classic", "attenuated", "fading", "variance_compensation"}
     assert res["settings"]["seeds"] == 5 and res["settings"]["b"] == 0.254
@@ -31,3 +34,33 @@ def test_run_chunked_pads_last_chunk_and_matches_vmap():
     ref = jax.vmap(f)(keys)
     np.testing.assert_array_equal(got["a"], ref["a"])
     np.testing.assert_array_equal(got["b"], ref["b"])
+
+
+def test_s0_demo_writes_table_json_and_figures(tmp_path, capsys):
+    """The S0 reproduction on 2 seeds and a 2-point b sweep (the full run is ``make demo``)."""
+    out = tmp_path / "s0"
+    assert main(["demo", "--out", str(out), "--seeds", "2", "--sweep-points", "2", "--no-progress"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert set(res["filters"]) == {"classic", "attenuated", "fading"}
+    for name, f in res["filters"].items():
+        assert len(f["per_seed"]["pos_rms_m"]) == 2 and len(f["mean"]["vel_rms_mps"]) == 3
+        assert len(f["published"]["pos_rms_m"]) == 3
+    # the unmodelled sudden velocity changes hurt the classic filter; fading suppresses it
+    assert res["filters"]["fading"]["mean_pos_rms_m"] < res["filters"]["classic"]["mean_pos_rms_m"]
+    assert 0.254 in res["sweep"]["b"]
+    for f in res["figures"]:
+        assert pathlib.Path(f).stat().st_size > 10_000
+    printed = capsys.readouterr().out
+    assert "published" in printed and "b sweep" in printed
+
+
+def test_experiment_file_errors_name_the_key(tmp_path):
+    from jaxnav.cli._demo_s0 import EXPERIMENT, load_experiment
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text(EXPERIMENT.read_text().replace("q_scale = 1.0", "q_scal = 1.0"))
+    with pytest.raises(ValueError, match="unknown key filter.q_scal"):
+        load_experiment(bad)
+    bad.write_text(EXPERIMENT.read_text().replace("seeds = 32", 'seeds = "many"'))
+    with pytest.raises(ValueError, match="monte_carlo.seeds must be int"):
+        load_experiment(bad)

@@ -1,5 +1,6 @@
 """Figures (matplotlib, Agg backend); every function saves a file and returns the figure."""
 
 from jaxnav.plot._filters import plot_filter_family
+from jaxnav.plot._s0 import plot_s0
 
-__all__ = ["plot_filter_family"]
+__all__ = ["plot_filter_family", "plot_s0"]
