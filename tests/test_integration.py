@@ -285,3 +285,28 @@ def test_epochs_between_imu_samples_are_handled_by_time(outage_run):
     m3 = jax.tree_util.tree_map(lambda a: a[:-1], meas._replace(pos=meas.pos + dpos))
     res3 = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, m3, params, dt_imu=dt, save=("nav",))
     assert _pos_err_m(res3.epochs.nav.pos, base.epochs.nav.pos[:-1]).max() > 5 * d.max()
+
+
+def test_zupt_and_known_position_pseudo_measurements(outage_run):
+    """Stop updates use the same PV structure: ZUPT (velocity 0) and a known point, masked per component."""
+    cfg, truth, r, params, t_imu, base = outage_run
+    gidx = np.asarray(r.gnss.index)
+    M = len(gidx)
+    # replace the fixes by perfect knowledge of the true velocity (a "ZUPT" against the truth's
+    # velocity) and, every 20 s, of the true height only
+    vel_true = np.asarray(truth.v_n[gidx])
+    pos_true = np.asarray(truth.pos[gidx])
+    mask = np.zeros((M, 6), bool)
+    mask[:, 3:] = True
+    mask[::20, 2] = True
+    R = np.broadcast_to(np.diag([1.0, 1.0, 0.01**2, 1e-4, 1e-4, 1e-4]), (M, 6, 6))
+    meas = PVMeasurements(t=np.asarray(r.gnss.t), pos=pos_true, vel=vel_true, R=R, mask=mask,
+                          lever=np.zeros((M, 3)))
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt,
+                          save=("nav", "valid", "covs"))
+    v = np.asarray(res.epochs.valid)
+    assert v[0] == 4 and v[1] == 3  # height + 3 velocities, then velocities only
+    dv = np.asarray(res.epochs.nav.v_n) - vel_true
+    assert np.sqrt(np.mean(dv[50:] ** 2)) < 0.02  # m/s
+    dh = np.asarray(res.epochs.nav.pos[:, 2]) - pos_true[:, 2]
+    assert np.max(np.abs(dh[::20][3:])) < 0.05  # the known heights hold the vertical channel
