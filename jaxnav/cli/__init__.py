@@ -17,6 +17,11 @@ def main(argv=None) -> int:
     s0.add_argument("--config", default=None, help="experiment TOML (default: the shipped s0_experiment.toml)")
     s0.add_argument("--sweep-points", type=int, default=None, help="use only the first n b values of the sweep")
     s0.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    w = sub.add_parser("walk", help="the real IMU + RTK walk set: 15-state LC filter and RTS with simulated "
+                                    "15 s GNSS outages, scored against the withheld RTK-fixed positions")
+    w.add_argument("--data", default=None, help="folder of the rtklibexplorer-gnss-imu set "
+                                                "(default ../shared/data/rtklibexplorer-gnss-imu)")
+    w.add_argument("--out", default="out/walk", help="output folder; default out/walk")
     d = sub.add_parser("demo-filters", help="filter-family demonstration on a constant-velocity series "
                                             "with a change of dynamics (S1/S2 model)")
     d.add_argument("--out", default="out/demo", help="output folder (created); default out/demo")
@@ -25,11 +30,32 @@ def main(argv=None) -> int:
     d.add_argument("--b", type=float, default=0.254, help="attenuation factor b; default 0.254 (S0)")
     d.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     args = parser.parse_args(argv)
+    import jaxnav
+
+    jaxnav.enable_x64()  # navigation states and absolute coordinates are float64
     if args.command == "demo":
         from jaxnav.cli._demo_s0 import run_s0_demo
 
         run_s0_demo(out=args.out, seeds=args.seeds, config=args.config, sweep_points=args.sweep_points,
                     progress=not args.no_progress)
+    elif args.command == "walk":
+        import json
+        import pathlib
+
+        from jaxnav.cli._walk import run_walk
+
+        data = args.data or str(pathlib.Path.cwd().parent / "shared" / "data" / "rtklibexplorer-gnss-imu")
+        out = pathlib.Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        scores, _ = run_walk(data, out_dir=out)
+        (out / "scores.json").write_text(json.dumps(scores._asdict(), indent=1, default=lambda a: a.tolist()))
+        print(f"walk set, {len(scores.windows)} simulated GNSS outages of 15 s scored against withheld RTK-fixed fixes")
+        for k, (w, n) in enumerate(zip(scores.windows, scores.n_ref)):
+            print(f"  outage {k + 1} [{w[0]:.1f}, {w[1]:.1f}] s, {int(n)} fixed epochs: max horizontal error "
+                  f"forward {scores.fwd_max[k]:.2f} m, smoothed {scores.sm_max[k]:.2f} m")
+        print(f"  RMS over outages: forward {scores.fwd_rms_all:.2f} m, smoothed {scores.sm_rms_all:.2f} m; "
+              f"forward outside outages {scores.fwd_rms_outside:.3f} m")
+        print(f"wrote {out / 'scores.json'} and {scores.figure}")
     elif args.command == "demo-filters":
         from jaxnav.cli._demo_filters import run_demo
 
