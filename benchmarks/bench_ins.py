@@ -42,18 +42,18 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-import importlib.metadata as _md
 import os
 import platform
 import random
 import statistics
-import subprocess
 import sys
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+from _harness import cpu_model, git_revision, loadavg, write_section
+from _harness import package_version as _version
 
 import jax
 
@@ -185,31 +185,11 @@ def pyins_pos(lla):
 
 
 # --------------------------------------------------------------------------------------- machine
-def _version(dist):
-    try:
-        return _md.version(dist)
-    except _md.PackageNotFoundError:
-        return "not installed"
 
 
 def machine_info():
-    cpu = "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        root = HERE.parent
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
-                             timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jaxnav"], cwd=root, capture_output=True,
-                               text=True, timeout=10).stdout.strip()
-        rev = (rev or "unknown") + (" + uncommitted changes in jaxnav/" if dirty else "")
-    except Exception:
-        rev = "unknown"
+    cpu = cpu_model()
+    rev = git_revision()
     return {
         "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()} {platform.machine()}",
@@ -222,11 +202,6 @@ def machine_info():
     }
 
 
-def loadavg():
-    try:
-        return os.getloadavg()
-    except OSError:
-        return (float("nan"),) * 3
 
 
 # --------------------------------------------------------------------------------------- report
@@ -291,18 +266,7 @@ def build_report(args, cases, info, load0, load1, wall, checks):
 
 
 def write_results(path, report):
-    path = Path(path)
-    block = f"{BEGIN}\n\n{report}\n\n{END}"
-    if path.exists():
-        text = path.read_text()
-        if BEGIN in text and END in text:
-            pre, rest = text.split(BEGIN, 1)
-            post = rest.split(END, 1)[1]
-            path.write_text(pre + block + post)
-            return
-        path.write_text(text.rstrip() + "\n\n" + block + "\n")
-        return
-    path.write_text("# Benchmark results\n\n" + block + "\n")
+    write_section(path, report, BEGIN, END)
 
 
 # --------------------------------------------------------------------------------------- main
