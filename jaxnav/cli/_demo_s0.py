@@ -22,13 +22,14 @@ from jaxnav import filters as jf
 from jaxnav import ins, sim
 from jaxnav._montecarlo import run_chunked
 from jaxnav.geodesy import meridian_radius, prime_vertical_radius
+from jaxnav.ins.attitude import quat_conj, quat_mul, quat_to_rv
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled
 
 FILTERS = ("classic", "attenuated", "fading")
 EXPERIMENT = pathlib.Path(__file__).with_name("s0_experiment.toml")
 _SCHEMA = {
     "scenario": {"unsensed_velocity_steps": bool},
-    "filter": {"n_states": int, "q_scale": float, "r_scale": float, "inflate_states": int, "b": float,
+    "filter": {"n_states": int, "q_scale": float, "r_scale": float, "inflate_states": list, "b": float,
                "fading_window": int},
     "monte_carlo": {"seeds": int, "chunk": int},
     "sweep": {"b": list, "seeds": int},
@@ -55,6 +56,8 @@ def load_experiment(path=EXPERIMENT) -> dict:
                 v[k] = val
             if not isinstance(val, typ):
                 raise ValueError(f"{path}: {sec}.{k} must be {typ.__name__}, got {val!r}")
+            if typ is list and k == "inflate_states" and not all(isinstance(i, int) and i >= 0 for i in val):
+                raise ValueError(f"{path}: {sec}.{k} must be a list of non-negative state indices, got {val!r}")
     for sec in _SCHEMA:
         if sec not in d:
             raise ValueError(f"{path}: missing section [{sec}]")
@@ -91,10 +94,15 @@ def filter_params(cfg, exp: dict) -> LCParams:
                     tau_markov=jnp.asarray(v3(g.markov_tau)), R_scale=exp["filter"]["r_scale"])
 
 
+def inflated_states(exp: dict):
+    """The state indices the attenuated and fading rules inflate (None = all)."""
+    return tuple(exp["filter"]["inflate_states"]) or None
+
+
 def rules(exp: dict, b=None) -> dict:
     """The three filters' inflation rules (attenuated with ``b`` if given)."""
     f = exp["filter"]
-    states = slice(0, f["inflate_states"]) if f["inflate_states"] else None
+    states = inflated_states(exp)
     return {"classic": None,
             "attenuated": jf.attenuated(f["b"] if b is None else b, states=states),
             "fading": jf.fading(window=f["fading_window"], states=states)}
@@ -131,9 +139,18 @@ class _Setup:
         pe = jnp.stack([d[:, 1] * self.RN * jnp.cos(self.lat), d[:, 0] * self.RM, d[:, 2]], -1)
         return pe, res.epochs.nav.v_n - self.truth.v_n[self.gidx]
 
+    def attitude_errors(self, res):
+        """(M, 3) attitude error rotation vectors (ENU, rad): C_est C_true^T = exp([phi x])."""
+        dq = jax.vmap(quat_mul)(res.epochs.nav.q_bn, jax.vmap(quat_conj)(self.truth.q_bn[self.gidx]))
+        return jax.vmap(quat_to_rv)(dq)
+
     def rms(self, key, inflation):
-        pe, ve = self.errors(self.run(key, inflation))
-        return jnp.concatenate([jnp.sqrt(jnp.mean(pe**2, 0)), jnp.sqrt(jnp.mean(ve**2, 0))])
+        """(9,) per-run RMS: position E, N, U (m), velocity E, N, U (m/s), attitude E, N, U (rad)."""
+        res = self.run(key, inflation)
+        pe, ve = self.errors(res)
+        ae = self.attitude_errors(res)
+        return jnp.concatenate([jnp.sqrt(jnp.mean(pe**2, 0)), jnp.sqrt(jnp.mean(ve**2, 0)),
+                                jnp.sqrt(jnp.mean(ae**2, 0))])
 
 
 def run_s0_demo(out="out/demo", *, seeds=None, config=None, sweep_points=None, progress=True) -> dict:
@@ -169,14 +186,14 @@ def run_s0_demo(out="out/demo", *, seeds=None, config=None, sweep_points=None, p
         bs = np.sort(np.append(bs, exp["filter"]["b"]))
     skeys = keys[: exp["sweep"]["seeds"]]
     t0 = time.perf_counter()
-    states = slice(0, exp["filter"]["inflate_states"]) if exp["filter"]["inflate_states"] else None
+    states = inflated_states(exp)
     sweep_fn = jax.jit(jax.vmap(lambda b: jax.vmap(lambda k: S.rms(k, jf.attenuated(b, states=states)))(skeys)))
     from tqdm.auto import tqdm
 
     sweep = []
     for b in tqdm(bs, desc="b sweep", disable=not progress):
         sweep.append(np.asarray(sweep_fn(jnp.asarray([b]))[0]))
-    sweep = np.stack(sweep)  # (B, seeds, 6)
+    sweep = np.stack(sweep)  # (B, seeds, 9)
     timing["sweep"] = time.perf_counter() - t0
 
     # one seed in detail for the figures
@@ -196,18 +213,21 @@ def run_s0_demo(out="out/demo", *, seeds=None, config=None, sweep_points=None, p
     for name in FILTERS:
         r = rms[name]
         table[name] = dict(
-            per_seed=dict(pos_rms_m=r[:, :3].tolist(), vel_rms_mps=r[:, 3:].tolist()),
-            mean=dict(pos_rms_m=r[:, :3].mean(0).tolist(), vel_rms_mps=r[:, 3:].mean(0).tolist()),
-            std=dict(pos_rms_m=r[:, :3].std(0).tolist(), vel_rms_mps=r[:, 3:].std(0).tolist()),
+            per_seed=dict(pos_rms_m=r[:, :3].tolist(), vel_rms_mps=r[:, 3:6].tolist(), att_rms_rad=r[:, 6:].tolist()),
+            mean=dict(pos_rms_m=r[:, :3].mean(0).tolist(), vel_rms_mps=r[:, 3:6].mean(0).tolist(),
+                      att_rms_rad=r[:, 6:].mean(0).tolist()),
+            std=dict(pos_rms_m=r[:, :3].std(0).tolist(), vel_rms_mps=r[:, 3:6].std(0).tolist(),
+                     att_rms_rad=r[:, 6:].std(0).tolist()),
             mean_pos_rms_m=float(r[:, :3].mean()),
             published=dict(pos_rms_m=pub[name][:3], vel_rms_mps=pub[name][3:]),
         )
     lines = [f"S0 INS/GPS, 2000 s, IMU 100 Hz, GPS 1 Hz, {seeds} seeds (mean +- std of the per-run RMS; "
              f"published = Table 1, one run)",
              f"{'filter':<12}{'':<10}" + "".join(f"{h:>16}" for h in ("pos E m", "pos N m", "pos U m", "vel E m/s",
-                                                                         "vel N m/s", "vel U m/s"))]
+                                                                         "vel N m/s", "vel U m/s", "att E deg",
+                                                                         "att N deg", "att U deg"))]
     for name in FILTERS:
-        r = rms[name]
+        r = np.concatenate([rms[name][:, :6], np.degrees(rms[name][:, 6:])], axis=1)
         lines.append(f"{name:<12}{'jaxnav':<10}" + "".join(f"{m:>9.3f} +-{s:<5.3f}" for m, s in zip(r.mean(0), r.std(0))))
         lines.append(f"{'':<12}{'published':<10}" + "".join(f"{v:>16.3f}" for v in pub[name]))
     best = int(np.argmin(sweep[:, :, :3].mean(axis=(1, 2))))
