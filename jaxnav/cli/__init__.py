@@ -14,7 +14,7 @@ def main(argv=None) -> int:
                                      "INS/GPS integration over Monte Carlo seeds")
     s0.add_argument("--out", default="out/demo", help="output folder (created); default out/demo")
     s0.add_argument("--seeds", type=int, default=None, help="Monte Carlo seeds (vmapped); default 32")
-    s0.add_argument("--config", default=None, help="experiment TOML (default: the shipped s0_experiment.toml)")
+    s0.add_argument("--config", default=None, help="experiment TOML (default: the shipped jaxnav/tune/s0_experiment.toml)")
     s0.add_argument("--sweep-points", type=int, default=None, help="use only the first n b values of the sweep")
     s0.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     w = sub.add_parser("walk", help="the real IMU + RTK walk set: 15-state LC filter and RTS with simulated "
@@ -29,6 +29,12 @@ def main(argv=None) -> int:
     d.add_argument("--epochs", type=int, default=1200, help="epochs per series (1 Hz); default 1200")
     d.add_argument("--b", type=float, default=0.254, help="attenuation factor b; default 0.254 (S0)")
     d.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    for name, what in (("sweep", "vmap a parameter grid x Monte Carlo runs (chunked, sharded over devices)"),
+                       ("tune", "tune filter parameters by gradient descent (optax inside lax.scan)")):
+        t = sub.add_parser(name, help=f"{what}; CONFIG is a TOML file or a shipped name (s0_b, cv_noise)")
+        t.add_argument("config", help="sweep/tune TOML, or the name of a shipped one: s0_b, cv_noise")
+        t.add_argument("--out", default=f"out/{name}", help=f"output folder; default out/{name}")
+        t.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     args = parser.parse_args(argv)
     import jaxnav
 
@@ -56,6 +62,10 @@ def main(argv=None) -> int:
         print(f"  RMS over outages: forward {scores.fwd_rms_all:.2f} m, smoothed {scores.sm_rms_all:.2f} m; "
               f"forward outside outages {scores.fwd_rms_outside:.3f} m")
         print(f"wrote {out / 'scores.json'} and {scores.figure}")
+    elif args.command in ("sweep", "tune"):
+        from jaxnav.cli._tune import run_sweep, run_tune
+
+        (run_sweep if args.command == "sweep" else run_tune)(args.config, args.out, progress=not args.no_progress)
     elif args.command == "demo-filters":
         from jaxnav.cli._demo_filters import run_demo
 

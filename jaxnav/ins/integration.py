@@ -254,9 +254,9 @@ def _where_tree(c, a, b):
 
 
 @partial(jax.jit, static_argnames=("n_states", "save", "ellipsoid", "hold_height", "check_finite",
-                                   "save_imu_every"))
+                                   "save_imu_every", "remat"))
 def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last, meas, params, inflation,
-             estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every):
+             estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False):
     dtype = nav0.v_n.dtype
     n = n_states
     idx = IDX18 if n == 18 else IDX15
@@ -329,6 +329,10 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
         return new, (ep, navs)
 
     carry0 = _Carry(mech=mech0, biases=biases0, kf=kf0)
+    if remat:
+        # reverse mode keeps only the per-epoch carries and recomputes each epoch's IMU samples
+        # on the way back: tape memory O(epochs) instead of O(IMU samples)
+        outer = jax.checkpoint(outer)
     # gather the IMU samples of every epoch interval once: (M, K, 3), padded samples get dt = 1
     # and are skipped by the ``use`` mask (no dynamic indexing inside the scan)
     dt_seg = jnp.where(seg_use, dt_all[seg_idx], 1.0)
@@ -345,7 +349,7 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
                     estimator=None, save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections",
                                           "innovations", "nis", "factors", "valid"),
                     ellipsoid: Ellipsoid = WGS84, hold_height: bool = False, check_finite: bool = True,
-                    max_sigma: float = 1e3, save_imu_every: int = 0) -> LCResult:
+                    max_sigma: float = 1e3, save_imu_every: int = 0, remat: bool = False) -> LCResult:
     """Loosely coupled INS/GNSS filter with feedback correction (S0 experiment, eqs. (4)-(19)).
 
     Args:
@@ -363,6 +367,9 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
       ellipsoid, hold_height: static, as :func:`jaxnav.ins.mechanize`.
       check_finite: static, as :func:`jaxnav.filters.kalman_filter`.
       save_imu_every: static; if > 0 also return the navigation state every k-th IMU sample.
+      remat: static; wrap each GNSS epoch in ``jax.checkpoint`` so that reverse-mode gradients
+        (``jax.grad`` w.r.t. b, rho, noise scales) store one carry per epoch instead of every
+        IMU sample's intermediates (the forward result is identical).
     Returns:
       :class:`LCResult`.
     Raises:
@@ -402,7 +409,7 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
         raise ValueError(f"save_imu_every={save_imu_every} must divide the samples per epoch interval ({seg.K})")
     return _lc_core(nav0, biases0, jnp.asarray(dtheta), jnp.asarray(dv), dt_imu, t_imu, seg.idx, seg.use,
                     seg.t_last, meas, params, inflation, estimator, n_states, tuple(save), ellipsoid,
-                    hold_height, check_finite, int(save_imu_every))
+                    hold_height, check_finite, int(save_imu_every), bool(remat))
 
 
 def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBiases, Any]:

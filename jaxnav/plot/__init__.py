@@ -2,5 +2,6 @@
 
 from jaxnav.plot._filters import plot_filter_family
 from jaxnav.plot._s0 import plot_s0
+from jaxnav.plot._tune import plot_sweep, plot_tune
 
-__all__ = ["plot_filter_family", "plot_s0"]
+__all__ = ["plot_sweep", "plot_tune", "plot_filter_family", "plot_s0"]

@@ -1,0 +1,31 @@
+"""Sweeps, Monte Carlo and gradient tuning of filter parameters (b, rho, noise scales).
+
+S0 chose its attenuation factor b = 0.254 by trial and error. Here the same question is a
+function of array leaves:
+
+* losses (:func:`rms`, :func:`innovation_nll`, :func:`nis_consistency`, :func:`nees_consistency`)
+  that accept the result of any filter variant of :mod:`jaxnav.filters` or
+  :func:`jaxnav.ins.loosely_coupled`;
+* bijectors (:func:`unit` for b, :func:`positive`/:func:`log` for scales) and a :class:`Space`
+  of named parameters with a trainable mask;
+* :func:`minimize`: an optax loop inside one jitted ``lax.scan``, gradients in forward mode for
+  a few scalars (no tape) or reverse mode (with ``remat=True`` of the INS/GNSS run);
+* :func:`sweep`: ``vmap`` over a parameter :func:`grid` x Monte Carlo keys, chunked with a
+  progress bar, sharded over all devices (``jax.sharding``), with :func:`table` for tidy rows;
+* :class:`S0Setup` and friends: the S0 experiment as a reusable problem (also used by
+  ``jaxnav demo``), and :func:`s0_metrics` / :func:`cv_nll` as ready-made tuning targets.
+"""
+
+from jaxnav.tune._bijectors import Bijector, Space, bijector, interval, log, positive, real, unit
+from jaxnav.tune._losses import innovation_nll, nees, nees_consistency, nis_consistency, rms
+from jaxnav.tune._optimize import TuneResult, forward_gradient, minimize, value_and_grad
+from jaxnav.tune._problems import cv_nll, s0_metrics, simulate_cv_batch
+from jaxnav.tune._s0 import EXPERIMENT, S0Setup, load_experiment
+from jaxnav.tune._sweep import SweepResult, grid, sweep, table
+
+__all__ = [
+    "Bijector", "EXPERIMENT", "S0Setup", "Space", "SweepResult", "TuneResult", "bijector", "cv_nll", "forward_gradient", "grid",
+    "innovation_nll", "interval", "load_experiment", "log", "minimize", "nees", "nees_consistency",
+    "nis_consistency", "positive", "real", "rms", "s0_metrics", "simulate_cv_batch", "sweep", "table", "unit",
+    "value_and_grad",
+]
