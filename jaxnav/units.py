@@ -19,6 +19,9 @@ MG = 1e-3 * G0  # m/s^2 per milli-g
 UG = 1e-6 * G0  # m/s^2 per micro-g
 MM = 1e-3  # m per millimetre
 CM = 1e-2  # m per centimetre
+DAY = 86400.0  # s per day
+YEAR = 365.25 * DAY  # s per Julian year (daily-series velocities)
+MM_PER_YEAR = MM / YEAR  # m/s per mm/yr
 
 
 def deg_to_rad(x):
@@ -44,3 +47,8 @@ def deg_per_hour_to_rad_per_s(x):
 def mg_to_mps2(x):
     """Accelerometer bias in milli-g -> m/s^2."""
     return x * MG
+
+
+def mps_to_mm_per_year(x):
+    """Velocity in m/s -> mm/yr (Julian year)."""
+    return x / MM_PER_YEAR

@@ -80,3 +80,44 @@ def test_round_trip_zone_prefix_and_extras():
 def test_float32_plane_coordinates_rejected():
     with pytest.raises(ValueError, match="enable_x64"):
         g.gauss_kruger_inverse(jnp.float32(4e6), jnp.float32(5e5), lon0=0.0)
+
+
+# --- against pyproj at 1000 random points (issue 6) -------------------------------------------
+
+pyproj = pytest.importorskip("pyproj")
+
+
+def _pyproj_tmerc(ellipsoid, lon0_deg):
+    # PROJ's exact (Poder/Engsager) transverse Mercator on the same ellipsoid; x east, y north
+    crs = (f"+proj=tmerc +algo=poder_engsager +lat_0=0 +lon_0={lon0_deg!r} +k=1 +x_0=500000 +y_0=0 "
+           f"+a={ellipsoid.a!r} +rf={1.0 / ellipsoid.f!r} +units=m +no_defs")
+    return pyproj.Transformer.from_pipeline(
+        f"+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad +step {crs}")
+
+
+@pytest.mark.parametrize("zone_width", [3, 6])
+@pytest.mark.parametrize("ell", [g.CGCS2000, g.KRASSOVSKY, g.WGS84], ids=lambda e: e.name)
+def test_against_pyproj_1000_random_points(zone_width, ell):
+    rng = np.random.default_rng(zone_width * 7 + len(ell.name))
+    n = 1000
+    lat = rng.uniform(18.0, 54.0, n)
+    zone = rng.integers(25 if zone_width == 3 else 13, 45 if zone_width == 3 else 23, n)  # China's zones
+    cm = 3.0 * zone if zone_width == 3 else 6.0 * zone - 3.0
+    lon = cm + rng.uniform(-zone_width / 2, zone_width / 2, n)
+    x, y = g.gauss_kruger(jnp.radians(lat), jnp.radians(lon), lon0=jnp.radians(cm), ellipsoid=ell, zone=zone)
+    x, y = np.asarray(x), np.asarray(y)
+    E, N = np.empty(n), np.empty(n)
+    for c in np.unique(cm):  # one PROJ pipeline per central meridian
+        k = cm == c
+        E[k], N[k] = _pyproj_tmerc(ell, float(c)).transform(lon[k], lat[k])
+    assert np.max(np.abs(x - N)) <= 1e-4  # 0.1 mm
+    assert np.max(np.abs(y - zone * 1e6 - E)) <= 1e-4
+    la, lo = g.gauss_kruger_inverse(jnp.asarray(x), jnp.asarray(y), lon0=jnp.radians(cm), ellipsoid=ell, zone=zone)
+    lo_p, la_p = np.empty(n), np.empty(n)
+    for c in np.unique(cm):
+        k = cm == c
+        lo_p[k], la_p[k] = _pyproj_tmerc(ell, float(c)).transform(E[k], N[k], direction="INVERSE")
+    assert np.max(np.abs(np.degrees(np.asarray(la)) - la_p)) <= 1e-9
+    assert np.max(np.abs(np.degrees(np.asarray(lo)) - lo_p)) <= 1e-9
+    # and both return to the generating coordinates
+    assert np.max(np.abs(la_p - lat)) <= 1e-9 and np.max(np.abs(lo_p - lon)) <= 1e-9

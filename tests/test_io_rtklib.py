@@ -71,3 +71,31 @@ def test_bad_files_name_file_and_line(tmp_path):
         read_pos(f)
     with pytest.raises(FileNotFoundError):
         read_pos(tmp_path / "missing.pos")
+
+
+def test_non_increasing_time_and_missing_columns_name_the_line(tmp_path):
+    f = tmp_path / "t.pos"
+    good = "2023/07/11 06:04:32.000   35.1   136.8   41.4   1  19   0.0045 0.0045 0.0097 0.0027 0.0011 -0.0030 0.03 5.9\n"
+    f.write_text(HEADER + good + good.replace("32.000", "33.000") + good.replace("32.000", "32.500"))
+    with pytest.raises(ValueError, match=r"t.pos:4: time 2023/07/11 06:04:32.500 is not after the previous record's "
+                                         r"\(line 3\)"):
+        read_pos(f)
+    f.write_text(HEADER + good + good)
+    with pytest.raises(ValueError, match=r"t.pos:3: time .* is not after"):
+        read_pos(f)
+    f.write_text(HEADER.replace("height(m)", "hgt") + good)
+    with pytest.raises(ValueError, match=r"t.pos:1: the header line lacks the column\(s\) \['height\(m\)'\]"):
+        read_pos(f)
+
+
+def test_signed_square_root_covariances_of_a_real_file():
+    """The off-diagonal columns sdne/sdeu/sdun of the MatRTKLIB static file are signed roots."""
+    path = DATA / "rtk_pos_matrtklib" / "static" / "rover_rtk.pos"
+    s = read_pos(path)
+    line = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("%")][0].split()
+    sdn, sde, sdu, sdne, sdeu, sdun = (float(v) for v in line[7:13])
+    c = s.cov_enu[0]
+    np.testing.assert_allclose([c[1, 1], c[0, 0], c[2, 2]], [sdn**2, sde**2, sdu**2], rtol=1e-12)
+    np.testing.assert_allclose([c[0, 1], c[0, 2], c[1, 2]],
+                               [np.sign(sdne) * sdne**2, np.sign(sdeu) * sdeu**2, np.sign(sdun) * sdun**2], rtol=1e-12)
+    assert np.all(np.linalg.eigvalsh(s.cov_enu) > 0)  # every epoch's covariance is positive definite

@@ -29,6 +29,37 @@ def main(argv=None) -> int:
     d.add_argument("--epochs", type=int, default=1200, help="epochs per series (1 Hz); default 1200")
     d.add_argument("--b", type=float, default=0.254, help="attenuation factor b; default 0.254 (S0)")
     d.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    r = sub.add_parser("rtk", help="S2: Kalman filtering of RTK point series (epoch-log CSV or static .pos files) "
+                                   "-> per-point results CSV + JSON + figure")
+    r.add_argument("files", nargs="*", help="RTKLIB .pos files (static) and/or CSV epoch logs")
+    r.add_argument("--out", default="out/rtk", help="output folder; default out/rtk")
+    r.add_argument("--control", default=None, help="control-point CSV (point,B,L,H,x,y,h) of the connection survey")
+    r.add_argument("--levelling", default=None, help="levelling CSV (point,height) for the Table 3 comparison")
+    r.add_argument("--lon0", type=float, default=None, help="central meridian, deg (default: zone of the data)")
+    r.add_argument("--zone-width", type=int, default=3, choices=(3, 6), help="zone width for the default lon0")
+    r.add_argument("--step", type=float, default=2.0, help=".pos files: thinning interval, s (default 2)")
+    r.add_argument("--window", type=int, default=60, help=".pos files: epochs per occupation (default 60)")
+    r.add_argument("--min-epochs", type=int, default=30, help=".pos files: shortest occupation kept (default 30)")
+    r.add_argument("--all-epochs", action="store_true", help=".pos files: also use float (Q != 1) epochs")
+    r.add_argument("--smoother", action="store_true", help="add an RTS pass after the forward filter")
+    r.add_argument("--surface", default="auto", choices=("auto", "plane", "quadratic"),
+                   help="height-anomaly surface (auto: quadratic with >= 7 control points)")
+    r.add_argument("--simulate", type=int, default=None, metavar="SEED",
+                   help="write the simulated 45-point S2 survey (epoch log, control, levelling) into --out "
+                        "and process it together with FILES")
+    mon = sub.add_parser("monitor", help="S1 deformation monitoring: daily station files (.tenv3, .neu, .col) -> "
+                                         "velocities, standard vs adaptive forecasts, S1 statistics; or --simulate")
+    mon.add_argument("files", nargs="*", help="daily station series, one station per file")
+    mon.add_argument("--out", default="out/monitor", help="output folder; default out/monitor")
+    mon.add_argument("--simulate", action="store_true", help="the S1 experiment on simulated 1 Hz stations")
+    mon.add_argument("--period", type=int, default=365, help="epochs per statistics period for files; default 365")
+    mon.add_argument("--robust", action="store_true", help="add the robust filters (IGG-III, Yang)")
+    mon.add_argument("--periods", type=int, default=60, help="simulated periods; default 60")
+    mon.add_argument("--stations", type=int, default=2, help="simulated stations; default 2")
+    mon.add_argument("--epochs", type=int, default=3600, help="epochs per simulated period; default 3600 (1 h)")
+    mon.add_argument("--gross", type=float, default=0.0, help="share of 10-sigma gross errors (simulation)")
+    mon.add_argument("--seed", type=int, default=2017, help="PRNG seed of the simulation")
+    mon.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     for name, what in (("sweep", "vmap a parameter grid x Monte Carlo runs (chunked, sharded over devices)"),
                        ("tune", "tune filter parameters by gradient descent (optax inside lax.scan)")):
         t = sub.add_parser(name, help=f"{what}; CONFIG is a TOML file or a shipped name (s0_b, cv_noise)")
@@ -62,6 +93,28 @@ def main(argv=None) -> int:
         print(f"  RMS over outages: forward {scores.fwd_rms_all:.2f} m, smoothed {scores.sm_rms_all:.2f} m; "
               f"forward outside outages {scores.fwd_rms_outside:.3f} m")
         print(f"wrote {out / 'scores.json'} and {scores.figure}")
+    elif args.command == "rtk":
+        from jaxnav.cli._rtk import run_rtk, write_simulated_survey
+
+        files, control, levelling = list(args.files), args.control, args.levelling
+        if args.simulate is not None:
+            f_ep, f_cp, f_lv, _ = write_simulated_survey(args.out, seed=args.simulate)
+            files.append(f_ep)
+            control = control or f_cp
+            levelling = levelling or f_lv
+        if not files:
+            parser.error("rtk: give FILES or --simulate SEED")
+        run_rtk(files, args.out, control=control, levelling=levelling, lon0_deg=args.lon0,
+                zone_width=args.zone_width, step=args.step, window=args.window, min_epochs=args.min_epochs,
+                fixed_only=not args.all_epochs, smoother=args.smoother, surface=args.surface)
+    elif args.command == "monitor":
+        from jaxnav.cli._monitor import run_monitor
+
+        if not args.simulate and not args.files:
+            parser.error("monitor: give daily series files (.tenv3, .neu, .col) or --simulate")
+        run_monitor(args.files, args.out, simulate=args.simulate, period=args.period, robust=args.robust,
+                    periods=args.periods, stations=args.stations, epochs=args.epochs, gross=args.gross,
+                    seed=args.seed, progress=not args.no_progress)
     elif args.command in ("sweep", "tune"):
         from jaxnav.cli._tune import run_sweep, run_tune
 

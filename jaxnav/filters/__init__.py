@@ -31,6 +31,19 @@ from jaxnav.filters._kalman import (
 )
 from jaxnav.filters._model import LinearGaussian, check_shapes, validate_model
 from jaxnav.filters._models import constant_velocity
+from jaxnav.filters._robust import (
+    IGG3,
+    IGG3State,
+    Chain,
+    ChainInfo,
+    RobustInfo,
+    YangFactor,
+    chain,
+    igg3,
+    igg3_weight,
+    yang_alpha,
+    yang_factor,
+)
 from jaxnav.filters._rules import Attenuated, Constant, Fading, StepContext, attenuated, constant, fading
 from jaxnav.filters._smoother import SmootherResult, rts_smoother
 
@@ -40,4 +53,6 @@ __all__ = [
     "StepInfo", "StepInput", "UpdateResult", "VCInfo", "VarianceCompensation", "attenuated",
     "check_shapes", "constant", "constant_velocity", "fading", "filter_step", "kalman_filter",
     "predict", "rts_smoother", "sage_husa", "update", "validate_model", "variance_compensation",
+    "IGG3", "IGG3State", "Chain", "ChainInfo", "RobustInfo", "YangFactor", "chain", "igg3", "igg3_weight", "yang_alpha",
+    "yang_factor",
 ]

@@ -13,6 +13,27 @@ from jaxnav.geodesy._gauss_kruger import (
     gauss_kruger_inverse,
     zone_central_meridian,
 )
+from jaxnav.geodesy._height import (
+    HeightAnomalyModel,
+    choose_surface,
+    fit_height_anomaly,
+    height_anomaly,
+    height_anomaly_std,
+    normal_height,
+)
+from jaxnav.geodesy._helmert import (
+    CONVENTIONS,
+    Helmert7,
+    HelmertFit,
+    Similarity2D,
+    estimate_helmert7,
+    estimate_similarity2d,
+    helmert7,
+    helmert7_inverse,
+    rotation_matrix,
+    similarity2d,
+    similarity2d_inverse,
+)
 from jaxnav.geodesy._frames import (
     check_float64,
     ecef_to_enu,
@@ -33,4 +54,8 @@ __all__ = [
     "enu_to_geodetic", "geodetic_to_ecef", "geodetic_to_enu", "meridian_radius",
     "prime_vertical_radius", "FALSE_EASTING", "GaussKrugerExtras", "gauss_kruger",
     "gauss_kruger_inverse", "zone_central_meridian",
+    "CONVENTIONS", "Helmert7", "HelmertFit", "Similarity2D", "estimate_helmert7", "estimate_similarity2d",
+    "helmert7", "helmert7_inverse", "rotation_matrix", "similarity2d", "similarity2d_inverse",
+    "HeightAnomalyModel", "choose_surface", "fit_height_anomaly", "height_anomaly", "height_anomaly_std",
+    "normal_height",
 ]

@@ -83,13 +83,14 @@ def read_pos(path) -> PosSolution:
     Returns:
       :class:`PosSolution`.
     Raises:
-      ValueError: naming the file and line of any unreadable record, a missing header, or a
-        non-geodetic (e.g. ECEF x/y/z) solution file.
+      ValueError: naming the file and line of any unreadable record, a record whose time is not
+        after the previous one, a missing header or header column, or a non-geodetic (e.g.
+        ECEF x/y/z) solution file.
       FileNotFoundError: if the file does not exist.
     """
     path = pathlib.Path(path)
     header = None
-    rows = []
+    rows, linenos = [], []
     with path.open("r", encoding="utf-8", errors="replace") as fh:
         for lineno, line in enumerate(fh, start=1):
             s = line.strip()
@@ -101,6 +102,9 @@ def read_pos(path) -> PosSolution:
                         raise ValueError(f"{path}:{lineno}: ECEF (x-ecef) solutions are not supported; "
                                          "write the solution with lat/lon/height output")
                     header = s.lstrip("%").split()
+                    missing = [c for c in ("latitude(deg)", "longitude(deg)", "height(m)", "Q") if c not in header]
+                    if missing:
+                        raise ValueError(f"{path}:{lineno}: the header line lacks the column(s) {missing}")
                 continue
             if header is None:
                 raise ValueError(f"{path}:{lineno}: data before the '%  GPST latitude(deg) ...' header line")
@@ -114,6 +118,10 @@ def read_pos(path) -> PosSolution:
                 rows.append([t] + [float(v) for v in vals])
             except ValueError as exc:
                 raise ValueError(f"{path}:{lineno}: {exc}") from None
+            if len(rows) > 1 and not t > rows[-2][0]:
+                raise ValueError(f"{path}:{lineno}: time {' '.join(words[:2])} is not after the previous "
+                                 f"record's (line {linenos[-1]}); epochs must increase")
+            linenos.append(lineno)
     if header is None:
         raise ValueError(f"{path}: no '%  GPST latitude(deg) ...' header line found")
     if not rows:

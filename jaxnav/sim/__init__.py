@@ -25,7 +25,15 @@ from jaxnav.sim._imu import (
     lowpass,
     markov_ar1,
 )
+from jaxnav.sim._rtk_points import RtkPointsConfig, RtkPointsSim, simulate_rtk_points, true_height_anomaly
 from jaxnav.sim._linear import CVScenario, simulate_cv_scenario, simulate_linear
+from jaxnav.sim._subsidence import (
+    SubsidenceConfig,
+    SubsidenceSim,
+    knothe,
+    simulate_subsidence,
+    subsidence_config,
+)
 from jaxnav.sim._scenario import (
     ImuData,
     InitialErrorConfig,
@@ -58,6 +66,7 @@ from jaxnav.sim._trajectory import (
 from jaxnav.sim.allan import allan_deviation, allan_variance
 
 __all__ = [
+    "RtkPointsConfig", "RtkPointsSim", "simulate_rtk_points", "true_height_anomaly",
     "CVScenario", "GnssConfig", "GnssData", "GnssEpochs", "ImuData", "InitialErrorConfig",
     "InitialErrorDraw", "Kinematics", "SEGMENT_KINDS", "ScenarioConfig", "ScenarioError", "Segment",
     "SegmentTable", "SensorDraw", "SensorErrorModel", "SensorErrors", "SimResult", "Trajectory",
@@ -67,4 +76,5 @@ __all__ = [
     "make_trajectory", "markov_ar1", "perturb_nav", "s0_scenario", "scenario_from_dict",
     "scenario_to_dict", "segment_table", "simulate", "simulate_cv_scenario", "simulate_gnss",
     "simulate_linear",
+    "SubsidenceConfig", "SubsidenceSim", "knothe", "simulate_subsidence", "subsidence_config",
 ]

@@ -1,0 +1,281 @@
+"""Readers for daily GNSS station position series (host side): NGL tenv3, SIO .neu, .col tables.
+
+Every reader returns a :class:`DailySeries` in SI units (m, s) with the local east, north, up
+components in that order, whatever the file's order. Errors name the file and the line.
+"""
+
+from __future__ import annotations
+
+import pathlib
+import re
+from typing import Any, NamedTuple, Optional
+
+import numpy as np
+
+from jaxnav.units import CM, DEG, YEAR
+
+#: decimal year of the time origin used for ``DailySeries.t`` (J2000.0 in Julian years)
+T0_YEAR = 2000.0
+_MJD_J2000 = 51544.5  # MJD of 2000-01-01 12:00
+
+
+class DailySeries(NamedTuple):
+    """A daily station position series; per-epoch arrays of length N.
+
+    Attributes:
+      station: station name (from the file or the file name).
+      path: the file read.  fmt: "tenv3", "neu" or "col".
+      t: (N,) s since J2000.0 (strictly increasing).
+      year: (N,) decimal year, as in the file (or from the MJD for tenv3).
+      enu: (N, 3) east, north, up offsets, m. For tenv3 they are relative to ``origin``.
+      cov: (N, 3, 3) covariance of ``enu``, m^2 (correlations where the file gives them).
+      origin: (3,) what was subtracted from the file's east/north/up (tenv3: the first epoch's
+        easting from the reference meridian, northing from the equator, height), m; else zeros.
+      llh: (N, 3) latitude rad, longitude rad (in [-pi, pi)), ellipsoidal height m; NaN if absent.
+      reference_velocity: (3,) east, north, up velocity published in the file header, m/s
+        (SIO .neu "slope" lines), else None.
+      reference_velocity_sigma: (3,) its standard deviation, m/s, else None.
+    """
+
+    station: str
+    path: str
+    fmt: str
+    t: Any
+    year: Any
+    enu: Any
+    cov: Any
+    origin: Any
+    llh: Any
+    reference_velocity: Optional[Any] = None
+    reference_velocity_sigma: Optional[Any] = None
+
+
+def year_to_seconds(year):
+    """Decimal year -> s since J2000.0 (Julian years of 365.25 days)."""
+    return (np.asarray(year, dtype=np.float64) - T0_YEAR) * YEAR
+
+
+def _err(path, lineno, msg):
+    return ValueError(f"{path}:{lineno}: {msg}")
+
+
+def _floats(words, path, lineno, what):
+    try:
+        return [float(w) for w in words]
+    except ValueError as exc:
+        raise _err(path, lineno, f"cannot read {what}: {exc}") from None
+
+
+def _check_increasing(t, lines, path):
+    d = np.diff(t)
+    bad = np.flatnonzero(~(d > 0))
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise _err(path, lines[i], f"time {t[i]!r} does not increase (previous epoch {t[i - 1]!r}, line "
+                                   f"{lines[i - 1]})")
+
+
+def _check_sigmas(sig, lines, path):
+    bad = np.flatnonzero(~np.all(np.isfinite(sig) & (sig > 0), axis=1))
+    if bad.size:
+        i = int(bad[0])
+        raise _err(path, lines[i], f"sigmas must be positive and finite, got {sig[i].tolist()}")
+
+
+def _cov(sig, corr=None):
+    """(N, 3, 3) covariance from (N, 3) sigmas and optional (N, 3) correlations en, eu, nu."""
+    c = np.zeros(sig.shape[:1] + (3, 3))
+    for i in range(3):
+        c[:, i, i] = sig[:, i] ** 2
+    if corr is not None:
+        for (i, j), r in zip(((0, 1), (0, 2), (1, 2)), corr.T):
+            c[:, i, j] = c[:, j, i] = r * sig[:, i] * sig[:, j]
+    return c
+
+
+def _data_lines(path):
+    """(lineno, words) of the non-empty, non-comment lines."""
+    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, start=1):
+            s = line.strip()
+            if s and not s.startswith("#"):
+                yield lineno, s.split()
+
+
+def read_tenv3(path) -> DailySeries:
+    """Read a Nevada Geodetic Laboratory ``.tenv3`` daily series (east/north/up in metres).
+
+    Columns: site, date, decimal year, MJD, GPS week, day, reference longitude, east integer and
+    fraction, north integer and fraction, up integer and fraction, antenna height, sig_e, sig_n,
+    sig_u, corr_en, corr_eu, corr_nu, latitude, longitude, height. Positions are integer +
+    fraction (the integer part may be re-initialised after a jump; the sum is what counts). Time
+    is taken from the MJD (exact days); longitudes such as -268.9 are wrapped to [-180, 180).
+
+    Args:
+      path: file path.
+    Returns:
+      :class:`DailySeries` (fmt "tenv3").
+    Raises:
+      ValueError: naming file and line of a record with too few columns, a non-numeric field, a
+        non-positive sigma, a correlation outside [-1, 1], or time not increasing; or no records.
+    """
+    path = pathlib.Path(path)
+    rows, lines, station = [], [], None
+    for lineno, w in _data_lines(path):
+        if w[0] == "site" or w[0].startswith("site"):
+            continue  # header line
+        if len(w) < 20:
+            raise _err(path, lineno, f"expected at least 20 columns (site ... corr_nu), found {len(w)}")
+        station = station or w[0]
+        rows.append(_floats(w[2:4] + w[7:20] + (w[20:23] if len(w) >= 23 else ["nan"] * 3), path, lineno,
+                            "the numeric columns"))
+        lines.append(lineno)
+    if not rows:
+        raise ValueError(f"{path}: no data records")
+    a = np.asarray(rows)
+    year, mjd = a[:, 0], a[:, 1]
+    t = (mjd - _MJD_J2000) * 86400.0
+    _check_increasing(t, lines, path)
+    e, n, u = a[:, 2] + a[:, 3], a[:, 4] + a[:, 5], a[:, 6] + a[:, 7]
+    sig = a[:, 9:12]
+    _check_sigmas(sig, lines, path)
+    corr = a[:, 12:15]
+    bad = np.flatnonzero(~np.all(np.abs(corr) <= 1.0, axis=1))
+    if bad.size:
+        raise _err(path, lines[int(bad[0])], f"correlations must lie in [-1, 1], got {corr[bad[0]].tolist()}")
+    enu = np.stack([e, n, u], axis=1)
+    origin = enu[0].copy()
+    lon = (a[:, 16] + 180.0) % 360.0 - 180.0
+    llh = np.stack([a[:, 15] * DEG, lon * DEG, a[:, 17]], axis=1)
+    return DailySeries(station=station, path=str(path), fmt="tenv3", t=t, year=year, enu=enu - origin,
+                       cov=_cov(sig, corr), origin=origin, llh=llh)
+
+
+_SLOPE = re.compile(r"slope\s*1:\s*([-+0-9.eE]+)\s*\+/-\s*([-+0-9.eE]+)\s*m/yr")
+_COMP = re.compile(r"^#\s*([neu])\s+component")
+
+
+def read_neu(path) -> DailySeries:
+    """Read a SIO (Scripps) cleaned ``.neu`` series: decimal year, year, day, dN, dE, dU, sN, sE, sU (m).
+
+    ``#`` header lines are comments; the "slope 1: v +/- s m/yr" lines under the "n/e/u component"
+    headings become :attr:`DailySeries.reference_velocity` (reordered to east, north, up; m/s).
+
+    Args:
+      path: file path.
+    Returns:
+      :class:`DailySeries` (fmt "neu"); the station name is the file name up to the first
+      non-letter (``bjfsCleanUnf.neu`` -> "BJFS").
+    Raises:
+      ValueError: naming file and line of a record without 9 numeric columns, a non-positive
+        sigma, or time not increasing; or no records.
+    """
+    path = pathlib.Path(path)
+    rows, lines = [], []
+    slopes, comp = {}, None
+    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, start=1):
+            s = line.strip()
+            if not s:
+                continue
+            if s.startswith("#"):
+                m = _COMP.match(s)
+                if m:
+                    comp = m.group(1)
+                m = _SLOPE.search(s)
+                if m and comp is not None:
+                    slopes[comp] = (float(m.group(1)), float(m.group(2)))
+                continue
+            w = s.split()
+            if len(w) < 9:
+                raise _err(path, lineno,
+                           f"expected 9 columns (year, yyyy, doy, dN, dE, dU, sN, sE, sU), found {len(w)}")
+            rows.append(_floats(w[:9], path, lineno, "the numeric columns"))
+            lines.append(lineno)
+    if not rows:
+        raise ValueError(f"{path}: no data records")
+    a = np.asarray(rows)
+    year = a[:, 0]
+    t = year_to_seconds(year)
+    _check_increasing(t, lines, path)
+    enu = a[:, [4, 3, 5]]
+    sig = a[:, [7, 6, 8]]
+    _check_sigmas(sig, lines, path)
+    ref = ref_s = None
+    if set(slopes) == {"n", "e", "u"}:
+        ref = np.array([slopes[c][0] for c in "enu"]) / YEAR
+        ref_s = np.array([slopes[c][1] for c in "enu"]) / YEAR
+    station = re.match(r"[A-Za-z0-9]{4}", path.name)
+    return DailySeries(station=(station.group(0) if station else path.stem).upper(), path=str(path), fmt="neu",
+                       t=t, year=year, enu=enu, cov=_cov(sig), origin=np.zeros(3),
+                       llh=np.full((len(t), 3), np.nan), reference_velocity=ref, reference_velocity_sigma=ref_s)
+
+
+_COL_NAMES = {"ns": 1, "ew": 0, "ud": 2}
+
+
+def read_col(path) -> DailySeries:
+    """Read a column table with a header naming the columns, e.g. the Houston GOM20 ``.col`` files.
+
+    Header: ``Decimal-Year NS(cm) EW(cm) UD(cm) sigma-NS(cm) sigma-EW(cm) sigma-UD(cm)`` (any
+    order; units ``(m)``, ``(cm)`` or ``(mm)`` in each name). Converted to metres here.
+
+    Args:
+      path: file path.
+    Returns:
+      :class:`DailySeries` (fmt "col"); the station is the file name before the first "_".
+    Raises:
+      ValueError: naming file and line of a missing header or column, a record with the wrong
+        number of columns, a non-numeric field, a non-positive sigma or time not increasing.
+    """
+    path = pathlib.Path(path)
+    header, rows, lines = None, [], []
+    units = {"m": 1.0, "cm": CM, "mm": 1e-3}
+    for lineno, w in _data_lines(path):
+        if header is None:
+            if not re.match(r"[A-Za-z]", w[0]):
+                raise _err(path, lineno, "expected a header line naming the columns (Decimal-Year NS(cm) ...)")
+            header, hline = [h.lower() for h in w], lineno
+            idx, scale = {}, {}
+            for i, h in enumerate(header):
+                m = re.match(r"(sigma-)?(ns|ew|ud)\((m|cm|mm)\)$", h)
+                if m:
+                    key = ("s" if m.group(1) else "") + m.group(2)
+                    idx[key], scale[key] = i, units[m.group(3)]
+                elif "year" in h:
+                    idx["year"] = i
+            need = ["year", "ns", "ew", "ud", "sns", "sew", "sud"]
+            missing = [k for k in need if k not in idx]
+            if missing:
+                names = {"year": "Decimal-Year", "ns": "NS(unit)", "ew": "EW(unit)", "ud": "UD(unit)",
+                         "sns": "sigma-NS(unit)", "sew": "sigma-EW(unit)", "sud": "sigma-UD(unit)"}
+                raise _err(path, hline, f"header lacks the column(s) {[names[k] for k in missing]}")
+            continue
+        if len(w) != len(header):
+            raise _err(path, lineno, f"expected {len(header)} columns as in the header (line {hline}), found {len(w)}")
+        rows.append(_floats(w, path, lineno, "the numeric columns"))
+        lines.append(lineno)
+    if header is None or not rows:
+        raise ValueError(f"{path}: no header or no data records")
+    a = np.asarray(rows)
+    year = a[:, idx["year"]]
+    t = year_to_seconds(year)
+    _check_increasing(t, lines, path)
+    enu = np.stack([a[:, idx[k]] * scale[k] for k in ("ew", "ns", "ud")], axis=1)
+    sig = np.stack([a[:, idx[k]] * scale[k] for k in ("sew", "sns", "sud")], axis=1)
+    _check_sigmas(sig, lines, path)
+    return DailySeries(station=path.name.split("_")[0].split(".")[0].upper(), path=str(path), fmt="col", t=t,
+                       year=year, enu=enu, cov=_cov(sig), origin=np.zeros(3), llh=np.full((len(t), 3), np.nan))
+
+
+def read_daily(path) -> DailySeries:
+    """Read a daily series, choosing the reader by suffix: ``.tenv3``, ``.neu``, ``.col``.
+
+    Raises:
+      ValueError: unknown suffix (naming the file), or any reader error.
+    """
+    path = pathlib.Path(path)
+    readers = {".tenv3": read_tenv3, ".neu": read_neu, ".col": read_col}
+    if path.suffix.lower() not in readers:
+        raise ValueError(f"{path}: unknown daily-series format {path.suffix!r}; expected one of {sorted(readers)}")
+    return readers[path.suffix.lower()](path)

@@ -1,0 +1,138 @@
+"""Figures of S1 deformation monitoring: a forecast period, per-period statistics, daily velocities."""
+
+from __future__ import annotations
+
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from jaxnav.units import MM, MM_PER_YEAR, YEAR  # noqa: E402
+
+COLORS = {"standard": "tab:gray", "adaptive": "tab:green", "standard_robust": "tab:red",
+          "adaptive_robust": "tab:blue", "yang_robust": "tab:purple"}
+AXES = ("east", "north", "up")
+
+
+def _save(fig, path):
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return fig
+
+
+def plot_s1_period(series: dict, path, *, station: int = 0, skip: int = 60):
+    """One simulated period: truth, measurements and forecasts (up), forecast errors per axis.
+
+    Args:
+      series: one entry of ``run_s1_simulation(...)["series"]`` ({"filters": {name: {"forecast",
+        "error", ...}}, "pos", "zs", "episode"}), numpy, SI.
+      path: PNG file.  station: which station.  skip: start-up epochs not drawn.
+    Returns:
+      The figure (closed after saving).
+    """
+    fig, ax = plt.subplots(4, 1, figsize=(11, 12), sharex=True)
+    t = np.arange(series["pos"].shape[0])[skip:]
+    ep = series["episode"][skip:, station]
+    for a in ax:
+        if ep.any():
+            a.axvspan(t[ep][0], t[ep][-1], color="orange", alpha=0.12, lw=0)
+    ax[0].plot(t, series["zs"][skip:, station, 2] / MM, ".", ms=1, color="0.7", label="measured")
+    ax[0].plot(t, series["pos"][skip:, station, 2] / MM, "k-", lw=1, label="truth")
+    for name, o in series["filters"].items():
+        c = COLORS.get(name)
+        ax[0].plot(t, o["forecast"][skip:, station, 2] / MM, lw=0.8, color=c, label=f"{name} forecast")
+        for i in range(3):
+            ax[i + 1].plot(t, o["error"][skip:, station, i] / MM, lw=0.6, color=c, label=name)
+    ax[0].set_ylabel("up, mm")
+    ax[0].legend(fontsize=7, loc="lower left", ncol=3)
+    for i, name in enumerate(AXES):
+        ax[i + 1].set_ylabel(f"{name} forecast - truth, mm")
+    ax[1].legend(fontsize=7, loc="upper right", ncol=3)
+    ax[-1].set_xlabel("epoch (1 Hz)")
+    ax[0].set_title("S1 on a simulated station: Knothe subsidence episode (shaded), one-step forecasts X(k/k-1)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_s1_statistics(result: dict, path):
+    """Per-period plane and height forecast RMS (m_P, m_H) of every filter (S1 Tables 1-2 as a figure).
+
+    Args:
+      result: output of :func:`jaxnav.monitoring.run_s1_simulation`.
+      path: PNG file.
+    Returns:
+      The figure.
+    """
+    fig, ax = plt.subplots(3, 1, figsize=(10, 10))
+    for name, st in result["stats"].items():
+        c = COLORS.get(name)
+        mP = np.asarray(st.m_P).reshape(-1) / MM
+        mH = np.asarray(st.m_H).reshape(-1) / MM
+        k = np.arange(1, mP.size + 1)
+        ax[0].plot(k, mP, "o-", ms=3, lw=0.8, color=c, label=name)
+        ax[1].plot(k, mH, "o-", ms=3, lw=0.8, color=c, label=name)
+        fr = np.asarray(result["forecast_rms"][name]).reshape(-1) / MM
+        ax[2].plot(k, fr, "o-", ms=3, lw=0.8, color=c, label=name)
+    ax[0].set_ylabel("m_P plane, mm")
+    ax[1].set_ylabel("m_H height, mm")
+    ax[2].set_ylabel("forecast - truth RMS, mm")
+    ax[2].set_xlabel("period x station")
+    for a in ax:
+        a.set_yscale("log")
+        a.legend(fontsize=7, ncol=3)
+    ax[0].set_title("Forecast precision per period (forecast - measurement), and against the simulated truth")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_daily_velocity(series, velocity, path, *, forecasts=None):
+    """A daily series: positions with the constant-velocity fit, smoothed velocity with +-2 sigma bands.
+
+    Args:
+      series: :class:`jaxnav.io.DailySeries`.  velocity: :class:`jaxnav.monitoring.StationVelocity`.
+      path: PNG file.  forecasts: optional {name: Forecast} of one-day forecasts (drawn as lines).
+    Returns:
+      The figure.
+    """
+    fig, ax = plt.subplots(3, 2, figsize=(13, 9), sharex=True)
+    yr = series.year
+    for i, name in enumerate(AXES):
+        a = ax[i, 0]
+        a.plot(yr, series.enu[:, i] / MM, ".", ms=1.5, color="0.6", label="daily position")
+        fit = series.enu[:, i] - velocity.residuals[:, i]
+        a.plot(yr, fit / MM, "k-", lw=1,
+               label=f"CV filter: {velocity.velocity[i] / MM_PER_YEAR:+.2f} +- "
+                     f"{velocity.sigma_ar1[i] / MM_PER_YEAR:.2f} mm/yr")
+        if forecasts:
+            for fname, f in forecasts.items():
+                a.plot(yr, np.asarray(f.forecast)[:, 0, i] / MM, lw=0.6, color=COLORS.get(fname),
+                       label=f"{fname} forecast")
+        a.set_ylabel(f"{name}, mm")
+        a.legend(fontsize=7, loc="best")
+        b = ax[i, 1]
+        b.set_ylabel(f"{name} velocity, mm/yr")
+        if velocity.smoothed_velocity is None:  # long-term velocity only: residuals instead
+            b.plot(yr, velocity.residuals[:, i] / MM, ".", ms=1.5, color="0.5", label="residual to the CV fit")
+            b.set_ylabel(f"{name} residual, mm")
+            b.legend(fontsize=7, loc="best")
+            continue
+        v = velocity.smoothed_velocity[:, i] / MM_PER_YEAR
+        s = velocity.smoothed_sigma[:, i] / MM_PER_YEAR
+        b.fill_between(yr, v - 2 * s, v + 2 * s, color="tab:blue", alpha=0.2, lw=0)
+        rw = np.sqrt(velocity.accel_psd[i] * YEAR) / MM_PER_YEAR
+        b.plot(yr, v, color="tab:blue", lw=1, label=f"RTS velocity, ML random walk {rw:.2g} mm/yr/sqrt(yr)")
+        b.axhline(velocity.velocity[i] / MM_PER_YEAR, color="k", lw=1, ls="--", label="constant-velocity estimate")
+        if velocity.reference_velocity is not None:
+            b.axhline(velocity.reference_velocity[i] / MM_PER_YEAR, color="tab:red", lw=1, ls=":",
+                      label="published (file header)")
+        b.legend(fontsize=7, loc="best")
+    ax[-1, 0].set_xlabel("year")
+    ax[-1, 1].set_xlabel("year")
+    fig.suptitle(f"{series.station}: daily positions ({series.fmt}), velocity estimates")
+    fig.tight_layout()
+    return _save(fig, path)
