@@ -47,6 +47,18 @@ def main(argv=None) -> int:
     r.add_argument("--simulate", type=int, default=None, metavar="SEED",
                    help="write the simulated 45-point S2 survey (epoch log, control, levelling) into --out "
                         "and process it together with FILES")
+    cad = sub.add_parser("cadastral", help="S3: cadastral-survey IMU post-processing (preprocessing, stops, "
+                                           "KF/RTS at stops, strapdown, reverse navigation) over Monte Carlo seeds")
+    cad.add_argument("--out", required=True, help="output folder (results.json and figures)")
+    cad.add_argument("--config", default=None, help="cadastral TOML (default: jaxnav/sim/scenarios/cadastral.toml)")
+    cad.add_argument("--seeds", type=int, default=64, help="Monte Carlo seeds per IMU grade (vmapped); default 64")
+    cad.add_argument("--grade", action="append", default=None,
+                     help="IMU grade(s) of the config to run (repeatable); default all")
+    cad.add_argument("--stops", default=None, help="stop-list CSV replacing the simulated one (checked against the data)")
+    cad.add_argument("--legs", type=int, default=None, help="use only the first n legs (short run)")
+    cad.add_argument("--chunk", type=int, default=8, help="seeds per compiled batch; default 8")
+    cad.add_argument("--data", default=None, help="rtklibexplorer-gnss-imu folder for the real-walk stop detection")
+    cad.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     mon = sub.add_parser("monitor", help="S1 deformation monitoring: daily station files (.tenv3, .neu, .col) -> "
                                          "velocities, standard vs adaptive forecasts, S1 statistics; or --simulate")
     mon.add_argument("files", nargs="*", help="daily station series, one station per file")
@@ -107,6 +119,13 @@ def main(argv=None) -> int:
         run_rtk(files, args.out, control=control, levelling=levelling, lon0_deg=args.lon0,
                 zone_width=args.zone_width, step=args.step, window=args.window, min_epochs=args.min_epochs,
                 fixed_only=not args.all_epochs, smoother=args.smoother, surface=args.surface)
+    elif args.command == "cadastral":
+        from jaxnav.cli._cadastral import print_summary, run_cadastral
+
+        res = run_cadastral(args.out, config=args.config, seeds=args.seeds, grades=args.grade, stops=args.stops,
+                            chunk=args.chunk, progress=not args.no_progress, n_legs=args.legs, walk_dir=args.data)
+        print_summary(res)
+        print(f"wrote {args.out}/results.json and figures")
     elif args.command == "monitor":
         from jaxnav.cli._monitor import run_monitor
 

@@ -14,6 +14,21 @@ Typical use::
 """
 
 from jaxnav.sim import allan
+from jaxnav.sim._cadastral import (
+    CadastralRun,
+    CadastralScenario,
+    CalibrationRecord,
+    ImuGrade,
+    Leg,
+    SurveyTruth,
+    cadastral_from_dict,
+    cadastral_scenarios,
+    calibration_record,
+    load_cadastral,
+    short_survey,
+    simulate_cadastral,
+    survey_truth,
+)
 from jaxnav.sim._gnss import GnssConfig, GnssData, GnssEpochs, gnss_epochs, simulate_gnss
 from jaxnav.sim._imu import (
     SensorDraw,
@@ -77,4 +92,8 @@ __all__ = [
     "scenario_to_dict", "segment_table", "simulate", "simulate_cv_scenario", "simulate_gnss",
     "simulate_linear",
     "SubsidenceConfig", "SubsidenceSim", "knothe", "simulate_subsidence", "subsidence_config",
+    # S3 cadastral survey
+    "CadastralRun", "CadastralScenario", "CalibrationRecord", "ImuGrade", "Leg", "SurveyTruth",
+    "cadastral_from_dict", "cadastral_scenarios", "calibration_record", "load_cadastral", "short_survey",
+    "simulate_cadastral", "survey_truth",
 ]

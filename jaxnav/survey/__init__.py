@@ -14,3 +14,59 @@ from jaxnav.survey.rtk import (  # noqa: E402
     process_points,
     windows_from_pos,
 )
+
+# S3 cadastral survey (issue 7)
+from jaxnav.survey import cadastral  # noqa: E402
+from jaxnav.survey._ar import (  # noqa: E402
+    ARFit,
+    ARKalmanResult,
+    OrderSelection,
+    ar_kalman,
+    ar_state_space,
+    autocovariance,
+    fit_ar,
+    select_ar_order,
+    simulate_ar,
+    white_noise_variance,
+)
+from jaxnav.survey._preprocess import (  # noqa: E402
+    OutlierResult,
+    PreprocessParams,
+    PreprocessResult,
+    SeriesStats,
+    butter2_lowpass,
+    preprocess_imu,
+    reject_outliers,
+    running_median,
+    series_stats,
+    zero_phase_lowpass,
+)
+from jaxnav.survey._stops import (  # noqa: E402
+    STOP_KINDS,
+    DataClasses,
+    DetectionResult,
+    DetectorParams,
+    MatchScore,
+    StopList,
+    classify,
+    detect_stops,
+    make_stop_list,
+    match_stops,
+    read_stop_list,
+    stance_statistic,
+    static_spans,
+    validate_stops,
+    write_stop_list,
+)
+from jaxnav.survey.cadastral import (  # noqa: E402
+    STAGES,
+    CadastralParams,
+    SurveyOutput,
+    SurveyPlan,
+    cadastral_params,
+    plan_survey,
+    process_survey,
+    strapdown_with_resets,
+    summarize_errors,
+    target_errors,
+)

@@ -1,0 +1,458 @@
+"""Simulated cadastral survey (S3): a surveyor's cart walks between stops with a strapdown IMU.
+
+The route is a sequence of legs: accelerate to walking speed, walk (optionally on a slope,
+with a turn half-way), decelerate, stop at a point of one of the five S3 kinds. The trajectory
+and the ideal IMU come from :func:`jaxnav.sim.generate_trajectory` (``rest`` segments are exact
+stops), sensor errors from :func:`jaxnav.sim.corrupt_increments`; on top, isolated wild values
+(spikes) are injected so that the S3 preprocessing has something to reject. Known points carry
+a surveying error drawn per run with the stop list's sigmas.
+
+Config file: ``jaxnav/sim/scenarios/cadastral.toml`` (edge units in the field names).
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.resources
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxnav import units
+from jaxnav.sim._imu import SensorErrorModel
+from jaxnav.sim._scenario import (
+    _ACCEL,
+    _GYRO,
+    _INIT,
+    InitialErrorConfig,
+    ScenarioConfig,
+    _read,
+    make_trajectory,
+    simulate,
+)
+from jaxnav.sim._trajectory import ScenarioError, Segment, TrajectorySpec
+
+_KINDS = ("known_coordinate", "known_position", "levelling", "zupt", "target")
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One leg of the survey: walk, then stop.
+
+    Attributes:
+      walk: s of motion (acceleration, walk, turn, deceleration included).
+      turn: rad, heading change (clockwise positive) made half-way.
+      slope: rad, pitch while walking (climb/descent); 0 for level ground.
+      kind: stop kind (one of the five S3 kinds).  stop: s standing at the point.  name: point name.
+    """
+
+    walk: float
+    kind: str
+    stop: float
+    turn: float = 0.0
+    slope: float = 0.0
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class ImuGrade:
+    """A sensor grade: gyro and accelerometer error models, initial alignment errors."""
+
+    name: str
+    gyro: SensorErrorModel
+    accel: SensorErrorModel
+    initial_errors: InitialErrorConfig = field(default_factory=InitialErrorConfig)
+
+
+@dataclass(frozen=True)
+class CadastralScenario:
+    """A simulated cadastral survey (SI; hashable, a static argument).
+
+    Attributes:
+      lat, lon, h, heading: start point (rad, m) and initial heading (rad, clockwise from north).
+      speed: walking speed, m/s.  accel_time, turn_time, pitch_time: s per manoeuvre.
+      first_stop: s at the first (known-coordinate) point, where the survey starts; first_name.
+      legs: tuple of :class:`Leg`.  imu_rate_hz: Hz.  grade: :class:`ImuGrade`.
+      wild_prob: probability of a wild value per sample and axis; wild_gyro rad/s, wild_accel m/s^2
+        magnitudes (random sign).
+      sigma_known: (3,) E/N/U std of known-coordinate points, m; sigma_position: horizontal std of
+        known-position points, m; sigma_levelling: height std of levelling points, m.
+      gait_hz, gait_pitch: the cart's pitching while it moves (frequency, Hz; peak-to-peak, rad), made
+        of constant-rate trajectory pieces so that truth and IMU agree. Without it a cart at constant
+        velocity is, for an IMU, indistinguishable from a stop.
+    """
+
+    lat: float
+    lon: float
+    h: float
+    heading: float
+    legs: tuple
+    grade: ImuGrade
+    speed: float = 1.2
+    accel_time: float = 2.0
+    turn_time: float = 4.0
+    pitch_time: float = 1.0
+    first_stop: float = 40.0
+    first_name: str = "K0"
+    imu_rate_hz: float = 100.0
+    wild_prob: float = 0.0
+    wild_gyro: float = 0.0
+    wild_accel: float = 0.0
+    sigma_known: tuple = (0.005, 0.005, 0.005)
+    sigma_position: float = 0.02
+    sigma_levelling: float = 0.005
+    gait_hz: float = 0.0
+    gait_pitch: float = 0.0
+
+    def __post_init__(self):
+        if self.first_stop <= 0 or not self.legs:
+            raise ScenarioError("a cadastral survey needs first_stop > 0 and at least one leg")
+        for i, leg in enumerate(self.legs):
+            if leg.kind not in _KINDS:
+                raise ScenarioError(f"legs[{i}].stop_kind must be one of {_KINDS}, got {leg.kind!r}")
+            need = 2 * self.accel_time + (self.turn_time if leg.turn else 0.0) + (2 * self.pitch_time if leg.slope else 0.0)
+            if leg.walk < need + 1.0:
+                raise ScenarioError(f"legs[{i}].walk_s = {leg.walk} s is too short for its manoeuvres ({need} s + 1 s)")
+            if leg.stop <= 0:
+                raise ScenarioError(f"legs[{i}].stop_s must be > 0")
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.imu_rate_hz
+
+    def _gait(self, duration, dspeed=0.0):
+        """A moving piece with the gait: pitch oscillating +-gait_pitch/2 at gait_hz (constant-rate
+        sub-pieces, so truth and IMU stay consistent); the speed change is spread over it."""
+        dur = round(duration * self.imu_rate_hz) / self.imu_rate_hz
+        if not (self.gait_hz > 0 and self.gait_pitch > 0) or dur < 1.0 / self.gait_hz:
+            kind = "accelerate" if dspeed else "cruise"
+            return [Segment(kind=kind, duration=dur, dspeed=dspeed)]
+        half = round(0.5 / self.gait_hz * self.imu_rate_hz) / self.imu_rate_hz
+        q = round(half / 2 * self.imu_rate_hz) / self.imu_rate_hz
+        n = int((dur - 2 * q) // half)
+        n -= n % 2
+        rest = round((dur - 2 * q - n * half) * self.imu_rate_hz) / self.imu_rate_hz
+        parts = [(q, 0.5)] + [(half, -1.0 if i % 2 == 0 else 1.0) for i in range(n)] + [(q, -0.5)]
+        total = sum(p[0] for p in parts)
+        segs = [Segment(kind="general", duration=d, dpitch=sgn * self.gait_pitch, dspeed=dspeed * d / total)
+                for d, sgn in parts]
+        if rest > 0:
+            segs.append(Segment(kind="cruise", duration=rest))
+        return segs
+
+    def _segments(self):
+        segs = [Segment(kind="rest", duration=self.first_stop, label=self.first_name)]
+        for leg in self.legs:
+            cruise = leg.walk - 2 * self.accel_time - (self.turn_time if leg.turn else 0.0) - \
+                (2 * self.pitch_time if leg.slope else 0.0)
+            c1 = round(cruise / 2 * self.imu_rate_hz) / self.imu_rate_hz
+            segs += self._gait(self.accel_time, self.speed)
+            if leg.slope:
+                segs.append(Segment(kind="pitch", duration=self.pitch_time, dpitch=leg.slope))
+            segs += self._gait(c1)
+            if leg.turn:
+                segs.append(Segment(kind="turn", duration=self.turn_time, dheading=leg.turn))
+            segs += self._gait(round((cruise - c1) * self.imu_rate_hz) / self.imu_rate_hz)
+            if leg.slope:
+                segs.append(Segment(kind="pitch", duration=self.pitch_time, dpitch=-leg.slope))
+            segs += self._gait(self.accel_time, -self.speed)
+            segs.append(Segment(kind="rest", duration=leg.stop, label=leg.name))
+        return tuple(segs)
+
+    @property
+    def duration(self) -> float:
+        return self.first_stop + sum(leg.walk + leg.stop for leg in self.legs)
+
+    def scenario_config(self) -> ScenarioConfig:
+        """The equivalent :class:`jaxnav.sim.ScenarioConfig` (trajectory + IMU; GNSS unused)."""
+        spec = TrajectorySpec(lat=self.lat, lon=self.lon, h=self.h, heading=self.heading, segments=self._segments())
+        return ScenarioConfig(trajectory=spec, duration=self.duration, imu_rate_hz=self.imu_rate_hz,
+                              gyro=self.grade.gyro, accel=self.grade.accel, initial_errors=self.grade.initial_errors,
+                              name="cadastral", description=f"S3 cadastral survey, {self.grade.name} IMU")
+
+
+class SurveyTruth(NamedTuple):
+    """Host-side truth of a survey.
+
+    Attributes:
+      stops: :class:`jaxnav.survey.StopList` with the *true* stop coordinates (exact).
+      t_imu: (N,) sample end times, s.  pos: (N+1, 3) true positions at the state times.
+      stop_pos: (K, 3) true [lat, lon, h] of each stop.  targets: (T,) stop indices of targets.
+    """
+
+    stops: Any
+    t_imu: Any
+    pos: Any
+    stop_pos: Any
+    targets: Any
+
+
+def survey_truth(scn: CadastralScenario) -> SurveyTruth:
+    """Stops (spans, kinds, true coordinates) and the true trajectory of a scenario (host side)."""
+    from jaxnav.survey._stops import make_stop_list
+
+    cfg = scn.scenario_config()
+    tr = make_trajectory(cfg)
+    t = np.asarray(tr.t)
+    dt = scn.dt
+    spans, kinds, names = [], [], []
+    t0 = 0.0
+    spans.append((0.0, scn.first_stop))
+    kinds.append("known_coordinate")
+    names.append(scn.first_name)
+    t0 = scn.first_stop
+    for i, leg in enumerate(scn.legs):
+        a = t0 + leg.walk
+        spans.append((a, a + leg.stop))
+        kinds.append(leg.kind)
+        names.append(leg.name or f"P{i + 1}")
+        t0 = a + leg.stop
+    spans = np.round(np.array(spans) / dt) * dt
+    pos = np.asarray(tr.pos)
+    idx = np.round(spans[:, 0] / dt).astype(int)
+    stop_pos = pos[idx]
+    sig = []
+    for k in kinds:
+        if k == "known_coordinate":
+            sig.append(scn.sigma_known)
+        elif k == "known_position":
+            sig.append((scn.sigma_position, scn.sigma_position, 1.0))
+        elif k == "levelling":
+            sig.append((1.0, 1.0, scn.sigma_levelling))
+        else:
+            sig.append((1.0, 1.0, 1.0))
+    known_pos = stop_pos.copy()
+    code = np.array([_KINDS.index(k) for k in kinds])
+    known_pos[code == 1, 2] = np.nan
+    known_pos[code == 2, :2] = np.nan
+    known_pos[code >= 3] = np.nan
+    stops = make_stop_list(spans[:, 0], spans[:, 1], code, known_pos, np.array(sig, float), names)
+    return SurveyTruth(stops=stops, t_imu=t[1:], pos=pos, stop_pos=stop_pos, targets=np.flatnonzero(code == 4))
+
+
+class CadastralRun(NamedTuple):
+    """One simulated survey (what a vmapped Monte Carlo needs).
+
+    Attributes:
+      dtheta, dv: (N, 3) measured increments (sensor errors and wild values), rad, m/s.
+      nav0: :class:`jaxnav.ins.NavState` at t = 0 with the grade's initial alignment errors.
+      known_pos: (K, 3) surveyed coordinates of the stops (true + surveying error; NaN unknown).
+      n_wild: number of wild values injected.
+      gyro_bias, accel_bias: (3,) the run's sensor random constants (rad/s, m/s^2).
+    """
+
+    dtheta: Any
+    dv: Any
+    nav0: Any
+    known_pos: Any
+    n_wild: Any
+    gyro_bias: Any
+    accel_bias: Any
+
+
+def simulate_cadastral(scn: CadastralScenario, key, truth: SurveyTruth | None = None) -> CadastralRun:
+    """Draw one run of a cadastral survey (jit/vmap over keys).
+
+    Args:
+      scn: :class:`CadastralScenario` (static).  key: PRNG key (split: sensors, wild values,
+        known-point errors).  truth: :func:`survey_truth` output (computed if None).
+    Returns:
+      :class:`CadastralRun`.
+    """
+    truth = survey_truth(scn) if truth is None else truth
+    cfg = scn.scenario_config()
+    k_sim, k_wild, k_known = jax.random.split(key, 3)
+    run = simulate(cfg, k_sim)
+    dth, dv = run.imu.dtheta, run.imu.dv
+    N = dth.shape[0]
+    kw = jax.random.split(k_wild, 4)
+    dtype = dth.dtype
+
+    def spikes(k1, k2, mag):
+        hit = jax.random.bernoulli(k1, scn.wild_prob, (N, 3))
+        sgn = jnp.where(jax.random.bernoulli(k2, 0.5, (N, 3)), 1.0, -1.0)
+        return jnp.where(hit, sgn * mag * scn.dt, 0.0).astype(dtype), jnp.sum(hit)
+
+    sg, ng = spikes(kw[0], kw[1], scn.wild_gyro)
+    sa, na = spikes(kw[2], kw[3], scn.wild_accel)
+    kp = jnp.asarray(truth.stops.pos)
+    sig = jnp.asarray(truth.stops.sigma)
+    e = sig * jax.random.normal(k_known, sig.shape, dtype)
+    lat, h = jnp.asarray(truth.stop_pos)[:, 0], jnp.asarray(truth.stop_pos)[:, 2]
+    from jaxnav.geodesy import meridian_radius, prime_vertical_radius
+
+    d = jnp.stack([e[:, 1] / (meridian_radius(lat) + h), e[:, 0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)),
+                   e[:, 2]], 1)
+    return CadastralRun(dtheta=dth + sg, dv=dv + sa, nav0=run.nav0, known_pos=kp + d, n_wild=ng + na,
+                        gyro_bias=run.errors.gyro_bias, accel_bias=run.errors.accel_bias)
+
+
+# ------------------------------------------------------------------------------------------
+# TOML
+
+_SURVEY = [("lat_deg", units.DEG), ("lon_deg", units.DEG), ("height_m", 1.0), ("heading_deg", units.DEG),
+           ("speed_mps", 1.0), ("accel_s", 1.0), ("turn_s", 1.0), ("pitch_s", 1.0), ("first_stop_s", 1.0),
+           ("imu_rate_hz", 1.0), ("gait_hz", 1.0), ("gait_pitch_deg", units.DEG)]
+_SURVEY_ATTR = {"lat_deg": "lat", "lon_deg": "lon", "height_m": "h", "heading_deg": "heading", "speed_mps": "speed",
+                "accel_s": "accel_time", "turn_s": "turn_time", "pitch_s": "pitch_time", "first_stop_s": "first_stop",
+                "imu_rate_hz": "imu_rate_hz", "gait_hz": "gait_hz", "gait_pitch_deg": "gait_pitch"}
+_LEG = {"walk_s": ("walk", 1.0), "turn_deg": ("turn", units.DEG), "slope_deg": ("slope", units.DEG),
+        "stop_kind": ("kind", None), "stop_s": ("stop", 1.0), "name": ("name", None)}
+_WILD = {"prob": ("wild_prob", 1.0), "gyro_deg_per_s": ("wild_gyro", units.DEG), "accel_g": ("wild_accel", units.G0)}
+_KNOWN = {"known_coordinate_sigma_m": ("sigma_known", 1.0), "known_position_sigma_m": ("sigma_position", 1.0),
+          "levelling_sigma_m": ("sigma_levelling", 1.0)}
+
+
+def _num(v, path):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ScenarioError(f"{path} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
+    """Build the scenarios (one per IMU grade) and the pipeline settings from a TOML dict.
+
+    Returns:
+      (dict grade name -> :class:`CadastralScenario`, dict of [pipeline] settings (edge units)).
+    Raises:
+      ScenarioError: naming the offending field.
+    """
+    allowed = {"name", "description", "survey", "legs", "imu", "wild", "known_points", "pipeline"}
+    for k in d:
+        if k not in allowed:
+            raise ScenarioError(f"{k}: unknown top-level field (expected one of {sorted(allowed)})")
+    sv = d.get("survey")
+    if not isinstance(sv, dict):
+        raise ScenarioError("[survey] section is required")
+    kw = {}
+    for k, v in sv.items():
+        if k == "first_name":
+            kw["first_name"] = str(v)
+            continue
+        if k not in _SURVEY_ATTR:
+            raise ScenarioError(f"survey.{k}: unknown field (expected one of {sorted(_SURVEY_ATTR)} or first_name)")
+        kw[_SURVEY_ATTR[k]] = _num(v, f"survey.{k}") * dict(_SURVEY)[k]
+    for req in ("lat", "lon", "h"):
+        if req not in kw:
+            raise ScenarioError(f"survey.{[k for k, a in _SURVEY_ATTR.items() if a == req][0]} is required")
+    kw.setdefault("heading", 0.0)
+    legs = []
+    for i, ld in enumerate(d.get("legs", [])):
+        lk = {}
+        for k, v in ld.items():
+            if k not in _LEG:
+                raise ScenarioError(f"legs[{i}].{k}: unknown field (expected one of {sorted(_LEG)})")
+            attr, fac = _LEG[k]
+            lk[attr] = str(v) if fac is None else _num(v, f"legs[{i}].{k}") * fac
+        for req in ("walk", "kind", "stop"):
+            if req not in lk:
+                raise ScenarioError(f"legs[{i}] needs {[k for k, a in _LEG.items() if a[0] == req][0]}")
+        legs.append(Leg(**lk))
+    kw["legs"] = tuple(legs)
+    for sec, table in (("wild", _WILD), ("known_points", _KNOWN)):
+        for k, v in d.get(sec, {}).items():
+            if k not in table:
+                raise ScenarioError(f"{sec}.{k}: unknown field (expected one of {sorted(table)})")
+            attr, fac = table[k]
+            if attr == "sigma_known":
+                vv = v if isinstance(v, list) else [v] * 3
+                kw[attr] = tuple(_num(a, f"{sec}.{k}") for a in vv)
+            else:
+                kw[attr] = _num(v, f"{sec}.{k}") * fac
+    imu = d.get("imu")
+    if not isinstance(imu, dict) or not imu:
+        raise ScenarioError("[imu.<grade>] sections are required (e.g. [imu.tactical.gyro])")
+    out = {}
+    for gname, gd in imu.items():
+        for k in gd:
+            if k not in ("gyro", "accel", "initial_errors"):
+                raise ScenarioError(f"imu.{gname}.{k}: unknown section (gyro, accel, initial_errors)")
+        g = _read(gd.get("gyro", {}), f"imu.{gname}.gyro", _GYRO)
+        a = _read(gd.get("accel", {}), f"imu.{gname}.accel", _ACCEL)
+        ie = _read(gd.get("initial_errors", {}), f"imu.{gname}.initial_errors", _INIT)
+        grade = ImuGrade(name=gname, gyro=SensorErrorModel(**g), accel=SensorErrorModel(**a),
+                         initial_errors=InitialErrorConfig(**ie))
+        out[gname] = CadastralScenario(grade=grade, **kw)
+    return out, dict(d.get("pipeline", {}))
+
+
+def load_cadastral(path: str | os.PathLike | None = None) -> tuple[dict, dict]:
+    """Read a cadastral TOML (default: the shipped ``scenarios/cadastral.toml``); see :func:`cadastral_from_dict`."""
+    if path is None:
+        text = importlib.resources.files("jaxnav.sim").joinpath("scenarios/cadastral.toml").read_text(encoding="utf-8")
+        src = "cadastral.toml"
+    else:
+        with open(path, "rb") as f:
+            text = f.read().decode("utf-8")
+        src = os.fspath(path)
+    try:
+        return cadastral_from_dict(tomllib.loads(text))
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{src}: invalid TOML: {e}") from None
+    except ScenarioError as e:
+        raise ScenarioError(f"{src}: {e}") from None
+
+
+def short_survey(scn: CadastralScenario, n_legs: int = 4) -> CadastralScenario:
+    """The first ``n_legs`` legs of a scenario, with the last stop turned into a known-coordinate point."""
+    import dataclasses
+
+    legs = list(scn.legs[:n_legs])
+    legs[-1] = dataclasses.replace(legs[-1], kind="known_coordinate")
+    return dataclasses.replace(scn, legs=tuple(legs))
+
+
+@functools.lru_cache(maxsize=1)
+def cadastral_scenarios():
+    """The shipped scenarios (dict grade -> :class:`CadastralScenario`) and pipeline settings."""
+    return load_cadastral(None)
+
+
+class CalibrationRecord(NamedTuple):
+    """A static IMU error record (the ideal output is constant, so only the errors vary).
+
+    Attributes:
+      gyro, accel: (N, 3) measured rate (rad/s) and specific-force (m/s^2) errors, wild values included.
+      gyro_coloured, accel_coloured: (N, 3) bias + Gauss-Markov part (no white noise, no wild values).
+      n_wild: wild values injected.
+    """
+
+    gyro: Any
+    accel: Any
+    gyro_coloured: Any
+    accel_coloured: Any
+    n_wild: Any
+
+
+@functools.partial(jax.jit, static_argnames=("scn", "n"))
+def calibration_record(scn: CadastralScenario, key, n: int) -> CalibrationRecord:
+    """Simulate n samples of the grade's sensor errors at rest (for S3 step-1 identification).
+
+    Uses :func:`jaxnav.sim.draw_sensor_errors` on a zero ideal signal, plus the scenario's wild values.
+    """
+    from jaxnav.sim._imu import apply_sensor_errors, draw_sensor_errors
+
+    dt = scn.dt
+    kg, ka, kw = jax.random.split(key, 3)
+    z = jnp.zeros((n, 3))
+    out = []
+    for k, model in ((kg, scn.grade.gyro), (ka, scn.grade.accel)):
+        d = draw_sensor_errors(k, model, n, dt)
+        meas = apply_sensor_errors(z, dt, model, d) / dt
+        col = d.bias + (d.markov if d.markov is not None else 0.0)
+        out.append((meas, jnp.broadcast_to(col, (n, 3))))
+    k1, k2, k3, k4 = jax.random.split(kw, 4)
+    hit_g = jax.random.bernoulli(k1, scn.wild_prob, (n, 3))
+    hit_a = jax.random.bernoulli(k3, scn.wild_prob, (n, 3))
+    sg = jnp.where(jax.random.bernoulli(k2, 0.5, (n, 3)), 1.0, -1.0)
+    sa = jnp.where(jax.random.bernoulli(k4, 0.5, (n, 3)), 1.0, -1.0)
+    return CalibrationRecord(gyro=out[0][0] + jnp.where(hit_g, sg * scn.wild_gyro, 0.0),
+                             accel=out[1][0] + jnp.where(hit_a, sa * scn.wild_accel, 0.0),
+                             gyro_coloured=out[0][1], accel_coloured=out[1][1],
+                             n_wild=jnp.sum(hit_g) + jnp.sum(hit_a))

@@ -1,0 +1,360 @@
+"""Stops of a cadastral survey (S3 step 2): the five stop kinds, the user stop list (file I/O
+and checks), the three data classes, and a static/dynamic detector.
+
+Stop kinds (S3): known-coordinate point (control point: E, N, U known), known-position point
+(horizontal position known), levelling-correction point (height known), zero-velocity-update
+point, target (unknown) point. Every stop is static, so every stop also gives a zero-velocity
+observation.
+
+Data classes (S3 step 2): class 1 = the static data at any stop; class 2 = the dynamic data
+between stops; class 3 = a target stop whose previous stop is a known-coordinate point.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from functools import partial
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxnav import units
+
+KNOWN_COORDINATE, KNOWN_POSITION, LEVELLING, ZUPT, TARGET = range(5)
+#: stop kind names, index = code
+STOP_KINDS = ("known_coordinate", "known_position", "levelling", "zupt", "target")
+#: data classes (per sample): 0 before the first / after the last stop, 1 static, 2 dynamic
+CLASS_STATIC, CLASS_DYNAMIC = 1, 2
+
+
+class StopList(NamedTuple):
+    """A survey's stops (host-side numpy), K rows in time order.
+
+    Attributes:
+      t_start, t_end: (K,) stop span, s (IMU time scale).
+      kind: (K,) int codes into :data:`STOP_KINDS`.
+      pos: (K, 3) known [lat rad, lon rad, h m] (NaN where not known for that kind).
+      sigma: (K, 3) standard deviation of the known E, N, U coordinates, m.
+      name: tuple of K point names.
+    """
+
+    t_start: Any
+    t_end: Any
+    kind: Any
+    pos: Any
+    sigma: Any
+    name: tuple
+
+
+def make_stop_list(t_start, t_end, kind, pos=None, sigma=None, name=None) -> StopList:
+    """Build and shape-check a :class:`StopList` (kinds as codes or names)."""
+    t_start = np.asarray(t_start, float).reshape(-1)
+    t_end = np.asarray(t_end, float).reshape(-1)
+    K = t_start.shape[0]
+    kind = np.array([STOP_KINDS.index(k) if isinstance(k, str) else int(k) for k in np.atleast_1d(kind)], np.int64)
+    pos = np.full((K, 3), np.nan) if pos is None else np.asarray(pos, float)
+    sigma = np.full((K, 3), 0.01) if sigma is None else np.asarray(sigma, float)
+    name = tuple(f"P{i}" for i in range(K)) if name is None else tuple(name)
+    for nm, a, shp in (("t_end", t_end, (K,)), ("kind", kind, (K,)), ("pos", np.asarray(pos), (K, 3)),
+                       ("sigma", sigma, (K, 3))):
+        if np.shape(a) != shp:
+            raise ValueError(f"stop list: {nm} has shape {np.shape(a)}; expected {shp} for {K} stops")
+    if len(name) != K:
+        raise ValueError(f"stop list: {len(name)} names for {K} stops")
+    return StopList(t_start=t_start, t_end=t_end, kind=kind, pos=np.asarray(pos, float), sigma=sigma, name=name)
+
+
+_HEADER = "# name, kind, t_start_s, t_end_s, lat_deg, lon_deg, h_m, sigma_e_m, sigma_n_m, sigma_u_m"
+
+
+def write_stop_list(path, stops: StopList) -> None:
+    """Write a stop list as CSV (degrees at the edge; ``nan`` for unknown coordinates)."""
+    lines = [_HEADER, f"# kinds: {', '.join(STOP_KINDS)}"]
+    for i in range(len(stops.t_start)):
+        lat, lon, h = stops.pos[i]
+        s = stops.sigma[i]
+        lines.append(f"{stops.name[i]}, {STOP_KINDS[stops.kind[i]]}, {stops.t_start[i]:.4f}, {stops.t_end[i]:.4f}, "
+                     f"{units.rad_to_deg(lat):.11f}, {units.rad_to_deg(lon):.11f}, {h:.4f}, "
+                     f"{s[0]:.4f}, {s[1]:.4f}, {s[2]:.4f}")
+    with open(path, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+def read_stop_list(path) -> StopList:
+    """Read a stop-list CSV (see :func:`write_stop_list`); ``#`` starts a comment.
+
+    Columns: name, kind, t_start_s, t_end_s [, lat_deg, lon_deg, h_m [, sigma_e_m, sigma_n_m, sigma_u_m]].
+    Known-coordinate points need lat, lon and h; known-position points lat and lon; levelling
+    points h.
+
+    Raises:
+      ValueError: naming the file and line for an unreadable line, an unknown kind, a missing
+        coordinate, or t_end <= t_start.
+    """
+    rows = []
+    p = os.fspath(path)
+    with open(p, encoding="utf-8") as f:
+        for lineno, line in enumerate(f, 1):
+            s = line.split("#", 1)[0].strip()
+            if not s:
+                continue
+            cols = [c.strip() for c in s.split(",")]
+            if len(cols) not in (4, 7, 10):
+                raise ValueError(f"{p}, line {lineno}: expected 4, 7 or 10 comma-separated columns, got {len(cols)}")
+            name, kind = cols[0], cols[1].lower()
+            if kind not in STOP_KINDS:
+                raise ValueError(f"{p}, line {lineno}: unknown stop kind {cols[1]!r} (expected one of {STOP_KINDS})")
+            try:
+                nums = [float(c) for c in cols[2:]]
+            except ValueError:
+                raise ValueError(f"{p}, line {lineno}: non-numeric value in {cols[2:]}") from None
+            t0, t1 = nums[0], nums[1]
+            if not (math.isfinite(t0) and math.isfinite(t1) and t1 > t0):
+                raise ValueError(f"{p}, line {lineno}: stop {name!r} needs finite t_end > t_start, got {t0}, {t1}")
+            lat, lon, h = (nums[2:5] if len(nums) >= 5 else [math.nan] * 3)
+            sig = nums[5:8] if len(nums) == 8 else [0.01, 0.01, 0.01]
+            need = {"known_coordinate": (lat, lon, h), "known_position": (lat, lon), "levelling": (h,)}.get(kind, ())
+            if any(not math.isfinite(v) for v in need):
+                raise ValueError(f"{p}, line {lineno}: a {kind} stop needs its known coordinates "
+                                 f"(lat_deg, lon_deg, h_m), got {cols[4:7] if len(cols) > 4 else 'none'}")
+            rows.append((name, STOP_KINDS.index(kind), t0, t1, units.deg_to_rad(lat), units.deg_to_rad(lon), h, *sig))
+    if not rows:
+        raise ValueError(f"{p}: no stops in the file")
+    name = tuple(r[0] for r in rows)
+    a = np.array([r[1:] for r in rows], float)
+    return make_stop_list(a[:, 1], a[:, 2], a[:, 0].astype(int), a[:, 3:6], a[:, 6:9], name)
+
+
+def validate_stops(stops: StopList, t_first: float, t_last: float) -> None:
+    """Check a stop list against the IMU data's time span and the S3 processing rules.
+
+    Raises:
+      ValueError: if the stops are not in time order or overlap, a stop lies outside
+        [t_first, t_last] (the data's span: the stop list does not belong to this data), or a
+        target point has no known-coordinate point before it (forward navigation starts at one).
+    """
+    K = len(stops.t_start)
+    if K == 0:
+        raise ValueError("the stop list is empty")
+    lo, hi = float(np.min(stops.t_start)), float(np.max(stops.t_end))
+    if lo < t_first - 1e-9 or hi > t_last + 1e-9:
+        raise ValueError(f"the stop list spans [{lo:.3f}, {hi:.3f}] s but the IMU data spans [{t_first:.3f}, "
+                         f"{t_last:.3f}] s: the stop list does not match this data (time scale or file?)")
+    if np.any(np.diff(stops.t_start) <= 0) or np.any(stops.t_start[1:] < stops.t_end[:-1]):
+        i = int(np.argmax((np.diff(stops.t_start) <= 0) | (stops.t_start[1:] < stops.t_end[:-1])))
+        raise ValueError(f"stops {stops.name[i]!r} and {stops.name[i + 1]!r} are not in time order or overlap")
+    seen_known = False
+    for i in range(K):
+        if stops.kind[i] == KNOWN_COORDINATE:
+            seen_known = True
+        elif stops.kind[i] == TARGET and not seen_known:
+            raise ValueError(f"target point {stops.name[i]!r} (t = {stops.t_start[i]:.3f} s) has no known-coordinate "
+                             "point before it: forward navigation to a target starts at a known-coordinate point")
+
+
+class DataClasses(NamedTuple):
+    """Output of :func:`classify`.
+
+    Attributes:
+      sample_class: (N,) int8, 1 static (class 1), 2 dynamic between stops (class 2), 0 outside.
+      stop_of_sample: (N,) int, index of the stop a static sample belongs to (-1 otherwise).
+      class3: (K,) bool, target stops whose previous stop is a known-coordinate point (class 3).
+      prev_known: (K,) int, last known-coordinate stop before each stop (-1 if none).
+      next_known: (K,) int, first known-coordinate stop after each stop (-1 if none).
+    """
+
+    sample_class: Any
+    stop_of_sample: Any
+    class3: Any
+    prev_known: Any
+    next_known: Any
+
+
+def classify(stops: StopList, t_imu) -> DataClasses:
+    """Split the IMU samples into the three S3 data classes (host side).
+
+    A sample (ending at t_imu[i]) is static when t_start < t_imu[i] <= t_end of a stop.
+    """
+    t = np.asarray(t_imu, float)
+    K = len(stops.t_start)
+    j = np.searchsorted(stops.t_start, t, side="left") - 1  # last stop starting before t
+    jj = np.clip(j, 0, K - 1)
+    static = (j >= 0) & (t <= stops.t_end[jj])
+    stop_of = np.where(static, jj, -1)
+    inside = (t > stops.t_start[0]) & (t <= stops.t_end[-1])
+    cls = np.where(static, CLASS_STATIC, np.where(inside, CLASS_DYNAMIC, 0)).astype(np.int8)
+    known = stops.kind == KNOWN_COORDINATE
+    prev_known = np.full(K, -1)
+    next_known = np.full(K, -1)
+    last = -1
+    for i in range(K):
+        prev_known[i] = last
+        if known[i]:
+            last = i
+    nxt = -1
+    for i in range(K - 1, -1, -1):
+        next_known[i] = nxt
+        if known[i]:
+            nxt = i
+    class3 = np.zeros(K, bool)
+    class3[1:] = (stops.kind[1:] == TARGET) & known[:-1]
+    return DataClasses(sample_class=cls, stop_of_sample=stop_of, class3=class3, prev_known=prev_known,
+                       next_known=next_known)
+
+
+# ------------------------------------------------------------------------------------------
+# static/dynamic detector
+
+
+class DetectorParams(NamedTuple):
+    """Tunable detector parameters (array leaves).
+
+    Attributes:
+      sigma_a: accelerometer noise std per sample, m/s^2.  sigma_g: gyro noise std, rad/s.
+      threshold: test threshold on the statistic (dimensionless; ~1 when static).
+      gravity: local gravity magnitude, m/s^2; NaN (default): unknown, replaced by its maximum-
+        likelihood estimate |mean f| over the window (then an accelerometer bias along gravity
+        does not count as motion).
+    """
+
+    sigma_a: Any = 0.02
+    sigma_g: Any = 2e-3
+    threshold: Any = 3.0
+    gravity: Any = float("nan")
+
+
+def _window_sum(x, W):
+    """Centered moving sum over W samples (clamped edges), via cumulative sums; x (N, ...)."""
+    N = x.shape[0]
+    c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)
+    lo = np.clip(np.arange(N) - W // 2, 0, N)
+    hi = np.clip(lo + W, 0, N)
+    lo = np.clip(hi - W, 0, N)
+    return c[hi] - c[lo], (hi - lo).astype(float)
+
+
+@partial(jax.jit, static_argnames=("window",))
+def stance_statistic(f_b, w_b, params: DetectorParams = DetectorParams(), *, window: int = 50):
+    """Generalized-likelihood-ratio static test statistic (stance hypothesis, "SHOE" detector).
+
+    T_k = 1/W sum_{i in window} ( |f_i - g u_k|^2 / sigma_a^2 + |w_i|^2 / sigma_g^2 ),
+    u_k = mean(f) / |mean(f)| over the window: the negative log-likelihood ratio of "static"
+    (specific force along a fixed direction with magnitude g, zero rate) against "moving",
+    computed for every sample with cumulative sums. With g unknown its ML estimate |mean f|
+    turns the accelerometer term into the moving variance sum |f_i - mean f|^2.
+
+    Args:
+      f_b: (N, 3) specific force, m/s^2.  w_b: (N, 3) angular rate, rad/s.
+      params: :class:`DetectorParams`.  window: static window length, samples.
+    Returns:
+      (N,) statistic T_k (static where below the threshold).
+    """
+    if jnp.shape(f_b) != jnp.shape(w_b) or jnp.ndim(f_b) != 2 or jnp.shape(f_b)[1] != 3:
+        raise ValueError(f"f_b {jnp.shape(f_b)} and w_b {jnp.shape(w_b)} must both be (N, 3)")
+    sf, n = _window_sum(f_b, window)
+    sff, _ = _window_sum(jnp.sum(f_b**2, 1), window)
+    sww, _ = _window_sum(jnp.sum(w_b**2, 1), window)
+    n = jnp.asarray(n, f_b.dtype)
+    u = sf / jnp.maximum(jnp.linalg.norm(sf, axis=1, keepdims=True), 1e-12)
+    g = jnp.asarray(params.gravity, f_b.dtype)
+    g = jnp.where(jnp.isfinite(g), g, jnp.linalg.norm(sf, axis=1) / n)
+    acc = jnp.maximum(sff - 2.0 * g * jnp.sum(u * sf, 1) + n * g * g, 0.0)
+    return (acc / params.sigma_a**2 + sww / params.sigma_g**2) / n
+
+
+def static_spans(static, t, *, min_duration: float = 2.0, min_gap: float = 0.5):
+    """Runs of a boolean static mask as (K, 2) [t_start, t_end] spans (host side).
+
+    Gaps shorter than ``min_gap`` inside a stop are closed first, then static runs shorter
+    than ``min_duration`` are dropped. A span covers the samples' intervals (t[i-1], t[i]].
+    """
+    s = np.asarray(static, bool).copy()
+    t = np.asarray(t, float)
+    dt0 = t[1] - t[0] if t.size > 1 else 0.0
+    t_prev = np.concatenate([[t[0] - dt0], t[:-1]])
+
+    def runs(mask):
+        d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+        return np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+
+    a, b = runs(~s)
+    for i0, i1 in zip(a, b):
+        if i0 > 0 and i1 < len(s) - 1 and t[i1] - t_prev[i0] < min_gap:
+            s[i0:i1 + 1] = True
+    a, b = runs(s)
+    spans = [(t_prev[i0], t[i1]) for i0, i1 in zip(a, b) if t[i1] - t_prev[i0] >= min_duration]
+    return np.array(spans, float).reshape(-1, 2)
+
+
+class DetectionResult(NamedTuple):
+    """Output of :func:`detect_stops`: statistic (N,), static mask (N,), spans (K, 2) s."""
+
+    statistic: Any
+    static: Any
+    spans: Any
+
+
+def detect_stops(t, f_b, w_b, params: DetectorParams = DetectorParams(), *, window: int = 50,
+                 min_duration: float = 2.0, min_gap: float = 0.5) -> DetectionResult:
+    """Static/dynamic segmentation: GLRT statistic, threshold, then span clean-up (S3 step 2).
+
+    Args:
+      t: (N,) sample times, s.  f_b, w_b: (N, 3) specific force (m/s^2) and rate (rad/s).
+      params: :class:`DetectorParams`.  window: static, samples.
+      min_duration: shortest stop kept, s.  min_gap: motion gaps shorter than this are closed, s.
+    Returns:
+      :class:`DetectionResult`.
+    """
+    T = stance_statistic(jnp.asarray(f_b), jnp.asarray(w_b), params, window=window)
+    static = np.asarray(T < params.threshold)
+    return DetectionResult(statistic=np.asarray(T), static=static,
+                           spans=static_spans(static, t, min_duration=min_duration, min_gap=min_gap))
+
+
+class MatchScore(NamedTuple):
+    """Stop-detection scores: precision = matched detections / detections, recall = matched true
+    stops / true stops (a match overlaps by at least ``min_overlap`` of the true stop and each
+    span matches at most once); sample_precision/sample_recall on the per-sample labels;
+    start_error/end_error: (n_matched,) detected minus true boundary times, s."""
+
+    precision: float
+    recall: float
+    n_true: int
+    n_detected: int
+    n_matched: int
+    sample_precision: float
+    sample_recall: float
+    start_error: Any
+    end_error: Any
+
+
+def match_stops(detected, true, *, min_overlap: float = 0.5, t=None, static=None) -> MatchScore:
+    """Score detected stop spans against the true ones (host side)."""
+    det = np.asarray(detected, float).reshape(-1, 2)
+    tru = np.asarray(true, float).reshape(-1, 2)
+    used = np.zeros(len(det), bool)
+    se, ee = [], []
+    for a, b in tru:
+        ov = np.minimum(det[:, 1], b) - np.maximum(det[:, 0], a)
+        ov = np.where(used, -np.inf, ov)
+        if len(det) and ov.max() >= min_overlap * (b - a):
+            k = int(np.argmax(ov))
+            used[k] = True
+            se.append(det[k, 0] - a)
+            ee.append(det[k, 1] - b)
+    nm = int(used.sum())
+    sp = sr = float("nan")
+    if t is not None and static is not None:
+        t = np.asarray(t, float)
+        truth = np.zeros(t.shape, bool)
+        for a, b in tru:
+            truth |= (t > a) & (t <= b)
+        st = np.asarray(static, bool)
+        sp = float((st & truth).sum() / max(st.sum(), 1))
+        sr = float((st & truth).sum() / max(truth.sum(), 1))
+    return MatchScore(precision=nm / max(len(det), 1), recall=nm / max(len(tru), 1), n_true=len(tru),
+                      n_detected=len(det), n_matched=nm, sample_precision=sp, sample_recall=sr,
+                      start_error=np.array(se), end_error=np.array(ee))
