@@ -207,6 +207,8 @@ class SageHusa:
 
     * R_k = (1 - d_k) R_{k-1} + d_k (eps eps^T + H P_k H^T), eps = Z_k - H x_k the post-fit
       residual. Both terms are PSD, so R stays PSD; the term is unbiased for an optimal filter.
+      An epoch with only some components valid updates their block only and then projects R
+      onto the PSD cone (the old cross terms could otherwise make it indefinite).
     * Q_k = (1 - d_k) Q_{k-1} + d_k [K v v^T K^T + P_k - (P_{k,k-1} - Q_{k-1})]_+, the classic
       unbiased increment projected onto the PSD cone (eigenvalues clipped at ``eig_floor``).
 
@@ -244,6 +246,10 @@ class SageHusa:
             Rinc = jnp.outer(post.eps, post.eps) + ctx.H @ post.P @ ctx.H.T
             both = ctx.valid[:, None] & ctx.valid[None, :]
             R = jnp.where(both & obs, symmetrize((1.0 - d) * R + d * Rinc), R)
+            # a partially observed epoch updates only the valid block; with the old cross terms
+            # the whole R can turn indefinite, so project it back onto the PSD cone then
+            partial = obs & ~jnp.all(ctx.valid)
+            R = jnp.where(partial, _psd_clip(R, jnp.zeros((), dt)), R)
         if "Q" in self.estimate:
             Kv = post.K @ ctx.v
             Qinc = jnp.outer(Kv, Kv) + post.P - (post.P_pred - state.Q)
