@@ -381,6 +381,53 @@ def run_benchmarks(args, zs_batch, log):
         rows.append(Row("d", "dynamax", first, runs, means=np.asarray(out[0]), jax_impl=True,
                         note=f"jit(vmap) over (zs, initial cov), B={B}"))
 
+    # ---------------- (e), (f): value_and_grad of the innovation log-likelihood ----------------
+    # theta = (log q, log sigma); the forward pass (log-likelihood only) is the reference row
+    # "jaxnav", so the ratio column of value_and_grad reads "times the forward pass".
+    log("gradients (e) single, (f) batch")
+    Qunit = jnp.asarray(model_matrices(q=1.0)[2])
+    theta0 = jnp.array([np.log(Q_PSD), np.log(SIGMA)])
+
+    def jx_nll(theta, z, check_finite=True):
+        mod = jf.constant_velocity(DT, sigma=jnp.exp(theta[1]), q=jnp.exp(theta[0]))
+        return -jf.kalman_filter(mod, jx0, jP0, z, save=(), check_finite=check_finite).loglik
+
+    def batch(fn, **kw):
+        return lambda theta, zB: jnp.sum(jax.vmap(lambda z: fn(theta, z, **kw))(zB))
+
+    grad_cases = [("e", jz1, lambda f, **kw: f, reps, ""),
+                  ("f", jzB, batch, max(3, reps // 2), f" over B={B} (sum of log-likelihoods)")]
+    for case, data, wrap, rr, sfx in grad_cases:
+        for label, kw in (("", {}), (" (check_finite=False)", dict(check_finite=False))):
+            if case == "e" and kw:
+                continue
+            fwd = jax.jit(wrap(jx_nll, **kw))
+            first, runs, _ = jit_time(fwd, (theta0, data), rr)
+            rows.append(Row(case, "jaxnav" + label, first, runs, jax_impl=True,
+                            note="forward: negative log-likelihood only" + sfx))
+            vg = jax.jit(jax.value_and_grad(wrap(jx_nll, **kw)))
+            first, runs, _ = jit_time(vg, (theta0, data), rr)
+            rows.append(Row(case, "jaxnav value_and_grad" + label, first, runs, jax_impl=True,
+                            note="d(-loglik)/d(log q, log sigma)" + sfx))
+    try:
+        from dynamax.linear_gaussian_ssm import lgssm_filter as _dlf
+        from dynamax.linear_gaussian_ssm.inference import make_lgssm_params as _dmp
+    except Exception as e:  # pragma: no cover
+        log(f"dynamax unavailable for gradients: {e!r}")
+    else:
+        def dx_nll(theta, z):
+            Qt, Rt = jnp.exp(theta[0]) * Qunit, jnp.exp(2 * theta[1]) * jnp.eye(N_OBS)
+            prm = _dmp(jF @ jx0, jF @ jP0 @ jF.T + Qt, jF, Qt, jH, Rt)
+            return -_dlf(prm, z).marginal_loglik
+        for case, data, wrap, rr, sfx in grad_cases:
+            fwd = jax.jit(wrap(dx_nll))
+            first, runs, _ = jit_time(fwd, (theta0, data), rr)
+            rows.append(Row(case, "dynamax", first, runs, jax_impl=True, note="forward" + sfx))
+            vg = jax.jit(jax.value_and_grad(wrap(dx_nll)))
+            first, runs, _ = jit_time(vg, (theta0, data), rr)
+            rows.append(Row(case, "dynamax value_and_grad", first, runs, jax_impl=True,
+                            note="d(-loglik)/d(log q, log sigma)" + sfx))
+
     # ---------------- filterpy ----------------
     try:
         from filterpy.kalman import KalmanFilter as FPKalman
@@ -596,7 +643,11 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
     titles = {"a": f"(a) single sequence, filter only, T = {T}",
               "b": f"(b) single sequence, filter + RTS smoother, T = {T}",
               "c": f"(c) batch of B = {B} sequences, filter only, T = {T}",
-              "d": f"(d) batch of B = {B} sequences with per-sequence P0, filter only, T = {T}"}
+              "d": f"(d) batch of B = {B} sequences with per-sequence P0, filter only, T = {T}",
+              "e": f"(e) value_and_grad of the innovation log-likelihood, single sequence, T = {T} "
+                   "(ratio column: times jaxnav's forward pass)",
+              "f": f"(f) value_and_grad of the innovation log-likelihood, batch of B = {B}, T = {T} "
+                   "(ratio column: times jaxnav's default forward pass)"}
     out = []
     v = info["versions"]
     cmd = " ".join(["benchmarks/bench_filters.py"] + sys.argv[1:])
@@ -616,7 +667,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                f"{max(2, args.repeats // 3)} (NumPy peers, their batch loops included); repeats run round-robin in shuffled order |")
     out.append(f"| total wall time | {wall:.0f} s |")
     out.append("")
-    for case in "abcd":
+    for case in "abcdef":
         crow = [r for r in rows if r.case == case]
         if not crow:
             continue
@@ -629,7 +680,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                    "max abs Δ smoothed vs jaxnav | vs filterpy | notes |")
         out.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for r in crow:
-            steps = T * (B if case in "cd" else 1)
+            steps = T * (B if case in "cdf" else 1)
             ratio = "1.00" if r is ref else (f"{r.tmin / ref.tmin:.2f}" if ref and r.tmin == r.tmin else "n/a")
             per = "n/a" if r.tmin != r.tmin else (
                 f"{r.tmin / steps * 1e9:.0f} ns" if r.tmin / steps < 1e-6 else f"{r.tmin / steps * 1e6:.2f} µs")

@@ -111,3 +111,77 @@ def smooth_max1(x, tau):
     Tends to max(1, x) as tau -> 0 and has a continuous gradient everywhere (S0 eq. (14) kink).
     """
     return 1.0 + tau * jax.nn.softplus((x - 1.0) / tau)
+
+
+def mm(A, B):
+    """Matrix product over the last two axes (leading axes broadcast), fusable for small sizes.
+
+    For inner dimensions up to :data:`SMALL` the product is written as an elementwise
+    multiply and a sum, which XLA fuses with its neighbours; on CPU each ``dot`` of tiny
+    matrices is a separate kernel costing ~0.5 us, several times the arithmetic, so this
+    halves a single-sequence filter step (6x6: 12 -> 6 ms for T = 3600, measured in
+    ``benchmarks/bench_filters.py``). Under ``vmap`` with one matrix per sequence it is
+    about as fast as the batched ``dot``; for wide batched operands prefer ``jnp.matmul``
+    (the parallel filter does). A 1-D ``B`` is a vector: ``mm(A, v) = A v``.
+    """
+    if B.ndim == 1:
+        if A.shape[-1] <= SMALL:
+            return jnp.sum(A * B, axis=-1)
+        return A @ B
+    if A.shape[-1] <= SMALL:
+        return jnp.sum(A[..., :, :, None] * B[..., None, :, :], axis=-2)
+    return A @ B
+
+
+def mT(A):
+    """Swap the last two axes."""
+    return jnp.swapaxes(A, -1, -2)
+
+
+def solve_small(A, B):
+    """Solve A X = B for a general (non-symmetric) small A by Gauss-Jordan with partial pivoting.
+
+    Elementwise operations in a ``lax.fori_loop`` over the n columns (no LAPACK call), for
+    matrices up to a few dozen rows with leading batch axes. Used in the associative-scan
+    combine of the parallel filter, where ``jnp.linalg.solve`` (LU through LAPACK) hung
+    intermittently on this machine (see DESIGN.md, pitfalls); the loop keeps the compiled
+    program small where the combine is inlined many times. A singular A gives inf/NaN.
+
+    Args:
+      A: (..., n, n).  B: (..., n, k) or (..., n).
+    Returns:
+      X with the shape of B.
+    """
+    vec = B.ndim == A.ndim - 1
+    if vec:
+        B = B[..., None]
+    n = A.shape[-1]
+    rows = jnp.arange(n)
+    batch = jnp.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+    A = jnp.broadcast_to(A, batch + A.shape[-2:])
+    B = jnp.broadcast_to(B, batch + B.shape[-2:])
+
+    def row(M, i):
+        return jax.lax.dynamic_index_in_dim(M, i, axis=M.ndim - 2, keepdims=False)
+
+    def col(M, j):
+        return jax.lax.dynamic_index_in_dim(M, j, axis=M.ndim - 1, keepdims=False)
+
+    def body(j, AB):
+        A, B = AB
+        c = jnp.where(rows >= j, jnp.abs(col(A, j)), -1.0)
+        p = jnp.argmax(c, axis=-1)
+        onehot = (rows == p[..., None]).astype(A.dtype)
+        d = ((rows == j).astype(A.dtype) - onehot)[..., :, None]
+        rowA_p = jnp.sum(onehot[..., :, None] * A, axis=-2)
+        rowB_p = jnp.sum(onehot[..., :, None] * B, axis=-2)
+        A = A + d * (rowA_p - row(A, j))[..., None, :]  # swap rows j and p
+        B = B + d * (rowB_p - row(B, j))[..., None, :]
+        rj = row(A, j)
+        f = col(A, j) / col(rj, j)[..., None]
+        f = jnp.where(rows == j, 0.0, f)[..., :, None]
+        return A - f * rj[..., None, :], B - f * row(B, j)[..., None, :]
+
+    A, B = jax.lax.fori_loop(0, n, body, (A, B))
+    X = B / jnp.diagonal(A, axis1=-2, axis2=-1)[..., :, None]
+    return X[..., 0] if vec else X

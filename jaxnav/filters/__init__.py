@@ -46,6 +46,7 @@ from jaxnav.filters._robust import (
 )
 from jaxnav.filters._rules import Attenuated, Constant, Fading, StepContext, attenuated, constant, fading
 from jaxnav.filters._smoother import SmootherResult, rts_smoother
+from jaxnav.filters._parallel import parallel_filter, parallel_smoother
 
 __all__ = [
     "ALL_OUTPUTS", "Attenuated", "Constant", "Fading", "FilterParams", "FilterState",
@@ -55,4 +56,5 @@ __all__ = [
     "predict", "rts_smoother", "sage_husa", "update", "validate_model", "variance_compensation",
     "IGG3", "IGG3State", "Chain", "ChainInfo", "RobustInfo", "YangFactor", "chain", "igg3", "igg3_weight", "yang_alpha",
     "yang_factor",
+    "parallel_filter", "parallel_smoother",
 ]

@@ -9,7 +9,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import cho_solve, cholesky, symmetrize
+from jaxnav._numerics import cho_solve, cholesky, mm, symmetrize
+from jaxnav.filters._kalman import resolve_products
 from jaxnav.filters._model import LinearGaussian
 
 
@@ -31,8 +32,8 @@ class SmootherResult(NamedTuple):
 SMOOTHER_OUTPUTS = ("means", "covs", "gains")
 
 
-@partial(jax.jit, static_argnames=("unroll", "save"))
-def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOTHER_OUTPUTS) -> SmootherResult:
+def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOTHER_OUTPUTS,
+                 products: str = "auto") -> SmootherResult:
     """RTS smoother: C_t = P_t F_{t+1}^T P_{t+1|t}^{-1}, x^s_t = x_t + C_t (x^s_{t+1} - x_{t+1|t}).
 
     P^s_t = P_t + C_t (P^s_{t+1} - P_{t+1|t}) C_t^T. It uses the filter's *saved* predicted
@@ -46,11 +47,28 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
       save: static subset of ("means", "covs", "gains") to return (others are None). The
         smoothed-covariance recursion is skipped when "covs" is not requested (the means need
         only the gains).
+      products: static; "auto", "fused" or "dot" small-product kernels, as in
+        :func:`~jaxnav.filters.kalman_filter` (see ``jaxnav.filters._kalman.resolve_products``).
     Returns:
       :class:`SmootherResult`.
     Raises:
       ValueError: if the needed outputs were not saved, or F has a wrong shape.
     """
+    products = resolve_products(products, model, filtered)
+    return _rts_smoother(model, filtered, unroll=unroll, save=tuple(save), products=products)
+
+
+def _lower(model, filtered, *, unroll=1, save=SMOOTHER_OUTPUTS, products="auto"):
+    products = resolve_products(products, model, filtered)
+    return _rts_smoother.lower(model, filtered, unroll=unroll, save=tuple(save), products=products)
+
+
+rts_smoother.lower = _lower  # ahead-of-time compilation, as on a jitted function
+
+
+@partial(jax.jit, static_argnames=("unroll", "save", "products"))
+def _rts_smoother(model, filtered, *, unroll, save, products) -> SmootherResult:
+    prod = mm if products == "fused" else jnp.matmul
     save = tuple(save)
     unknown = [s for s in save if s not in SMOOTHER_OUTPUTS]
     if unknown:
@@ -76,10 +94,10 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
         L = cholesky(P_p)
         ok = jnp.all(jnp.isfinite(L))
         L = jnp.where(ok, L, jnp.eye(n, dtype=P.dtype))
-        C = cho_solve(L, Fk @ P).T
+        C = cho_solve(L, prod(Fk, P)).T
         C = jnp.where(ok, C, 0.0)
-        x_s = x + C @ (xs_next - x_p)
-        P_s = symmetrize(P + C @ (Ps_next - P_p) @ C.T) if want_cov else Ps_next
+        x_s = x + prod(C, xs_next - x_p)
+        P_s = symmetrize(P + prod(prod(C, Ps_next - P_p), C.T)) if want_cov else Ps_next
         status = status | jnp.where(ok, 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
         out = (x_s if "means" in save else None, P_s if "covs" in save else None,
                C if "gains" in save else None)
