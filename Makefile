@@ -28,7 +28,7 @@ demo: $(VENV)/.base
 	$(VENV)/bin/jaxnav demo --out $(OUT)
 
 test: $(VENV)/.test
-	$(PY) -m pytest -q -n 2 --dist loadgroup
+	$(PY) -m pytest -q -n 2 --dist loadscope --no-loadscope-reorder
 
 bench: $(BVENV)/.bench
 	$(BVENV)/bin/python benchmarks/bench_filters.py

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import pathlib
+import re
 import sys
 
 import jax
@@ -92,11 +93,20 @@ def test_notebook_stored_stripped(path):
     assert nb.metadata.get("kernelspec", {}).get("name", KERNEL) == KERNEL
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
-def test_notebook_executes(path, kernel_env, tmp_path):
-    """Run the notebook top to bottom (short horizons); any cell error fails the test."""
-    nb = nbformat.read(path, as_version=4)
-    _execute(nb, tmp_path)
-    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if o.output_type == "error"]
-    assert not errors
+def _executes(path):
+    @pytest.mark.slow
+    def test_executes(self, kernel_env, tmp_path):
+        """Run the notebook top to bottom (short horizons); any cell error fails the test."""
+        nb = nbformat.read(path, as_version=4)
+        _execute(nb, tmp_path)
+        errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
+                  if o.output_type == "error"]
+        assert not errors
+
+    return test_executes
+
+
+# one class per notebook, so that `pytest --dist loadscope` gives each notebook its own scope
+for _path in NOTEBOOKS:
+    _name = "TestNotebook" + re.sub(r"\W", "_", _path.stem)
+    globals()[_name] = type(_name, (), {"test_executes": _executes(_path), "path": _path})

@@ -133,31 +133,47 @@ def minimize(loss: Callable, params0: Mapping, space: Space, *, optimizer: Optio
     f = forward_gradient(f0) if _resolve_mode(mode, u0) == "forward" else f0
     vg = jax.value_and_grad(f)
     extra = isinstance(opt, optax.GradientTransformationExtraArgs)
+    stored = _stores_value_and_grad(opt.init(u0))
+
+    def masked(g):
+        return jax.tree_util.tree_map(lambda gi, m: gi * m, g, mask)
 
     @jax.jit
     def run(u0):
         def step(carry, _):
-            u, s = carry
-            val, g = vg(u)
-            g = jax.tree_util.tree_map(lambda gi, m: gi * m, g, mask)
+            u, s, val, g = carry
             if extra:
                 upd, s = opt.update(g, s, u, value=val, grad=g, value_fn=f)
             else:
                 upd, s = opt.update(g, s, u)
             upd = jax.tree_util.tree_map(lambda x, m: x * m, upd, mask)
             new = optax.apply_updates(u, upd)
+            if stored:  # a line search evaluated value and gradient at the accepted point: reuse them
+                new_val, new_g = optax.tree.get(s, "value"), optax.tree.get(s, "grad")
+            else:
+                new_val, new_g = vg(new)
             gn = jnp.sqrt(sum(jnp.sum(x**2) for x in jax.tree_util.tree_leaves(g)))
-            return (new, s), (val, space.constrain(u), gn, _linesearch_evals(s))
+            return (new, s, new_val, masked(new_g)), (val, space.constrain(u), gn, _linesearch_evals(s))
 
-        (u, s), (losses, path, gn, n_ls) = jax.lax.scan(step, (u0, opt.init(u0)), None, length=steps)
-        return space.constrain(u), f(u), losses, path, gn, jnp.sum(n_ls)
+        val0, g0 = vg(u0)
+        (u, s, val, _), (losses, path, gn, n_ls) = jax.lax.scan(step, (u0, opt.init(u0), val0, masked(g0)), None,
+                                                              length=steps)
+        return space.constrain(u), val, losses, path, gn, jnp.sum(n_ls)
 
     compiled = run.lower(u0).compile()
     t_compile = time.perf_counter() - t0
     params, final, losses, path, gn, n_ls = jax.block_until_ready(compiled(u0))
-    return TuneResult(params=params, loss=final, losses=losses, path=path, grad_norm=gn,
-                      n_evals=steps + 1 + int(n_ls), wall_time_s=time.perf_counter() - t0,
-                      compile_time_s=t_compile)
+    n_evals = 1 + int(n_ls) + (0 if stored else steps)
+    return TuneResult(params=params, loss=final, losses=losses, path=path, grad_norm=gn, n_evals=n_evals,
+                      wall_time_s=time.perf_counter() - t0, compile_time_s=t_compile)
+
+
+def _stores_value_and_grad(state) -> bool:
+    """Whether an optax state keeps the value and gradient of its last accepted point (line searches)."""
+    try:
+        return optax.tree.get(state, "value") is not None and optax.tree.get(state, "grad") is not None
+    except (KeyError, ValueError):
+        return False
 
 
 def _linesearch_evals(state):
