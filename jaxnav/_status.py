@@ -17,6 +17,7 @@ SMOOTHER_FAILED = 16  # a predicted covariance in the smoother was not positive 
 NONFINITE_UNMASKED = 32  # NaN/inf measurements reached the update (check_finite=False)
 NONFINITE_IMU = 64  # a NaN/inf IMU sample reached the mechanization (it cannot skip samples)
 BAD_IMU_TIME = 128  # non-positive or irregular IMU sample interval
+DISCRETIZATION_INACCURATE = 256  # a truncated Taylor discretisation had not converged (use more terms or Van Loan)
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -27,6 +28,8 @@ _MESSAGES = {
     NONFINITE_UNMASKED: "non-finite measurements were used unmasked (check_finite=False): results are invalid",
     NONFINITE_IMU: "a NaN/inf IMU sample was mechanized: the navigation solution is invalid from there on",
     BAD_IMU_TIME: "an IMU sample interval was non-positive or non-finite",
+    DISCRETIZATION_INACCURATE: "the Taylor discretisation of the error model had not converged (last term above "
+                               "1e-10 of Phi): raise taylor_order or use discretization='van_loan'",
 }
 
 #: flags that are reported but are not errors by default

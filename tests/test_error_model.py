@@ -207,6 +207,33 @@ def test_series_rejects_bad_order(model):
         em.discretize_series(F, G, Qc, 1.0, order=0)
 
 
+@pytest.mark.parametrize("dt", [0.01, 1.0, 2.0])
+def test_taylor_equals_van_loan_to_rounding(model, dt):
+    """Order 8 reproduces the exact discretisation at GPS-epoch intervals (the INS chain is nilpotent)."""
+    F, G, Qc = model
+    Phi_x, Qd_x = em.discretize_van_loan(F, G, Qc, dt)
+    Phi_t, Qd_t, err = jax.jit(em.discretize_taylor)(F, G, Qc, dt)
+    assert np.linalg.norm(Phi_t - Phi_x) / np.linalg.norm(Phi_x) < 1e-13
+    assert _scaled_err(Qd_t, Qd_x, Qd_x) < 1e-11
+    np.testing.assert_array_equal(Qd_t, Qd_t.T)
+    assert float(err) < 1e-10
+
+
+def test_taylor_error_estimate_tracks_the_truncation_error(model):
+    """Few terms over a long interval: the reported last-term size bounds the Phi error and is large."""
+    F, G, Qc = model
+    Phi_x, _ = em.discretize_van_loan(F, G, Qc, 20.0)
+    errs, ests = [], []
+    for order in (2, 4, 6):
+        Phi_t, _, est = em.discretize_taylor(F, G, Qc, 20.0, order=order)
+        errs.append(float(jnp.max(jnp.abs(Phi_t - Phi_x)) / jnp.max(jnp.abs(Phi_x))))
+        ests.append(float(est))
+    assert errs[0] > errs[1] > errs[2] and ests[0] > ests[1] > ests[2]
+    assert all(e <= 10 * t for e, t in zip(errs, ests)) and ests[0] > 1e-10
+    with pytest.raises(ValueError, match="order"):
+        em.discretize_taylor(F, G, Qc, 1.0, order=0)
+
+
 # ----------------------------------------------------------------------------- 3. 15-state subset
 def test_15_state_is_18_state_without_markov():
     pos, v, C, _, f_b = _points()

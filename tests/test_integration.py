@@ -264,6 +264,24 @@ def test_bad_measurements_are_skipped_and_counted_and_time_ranges_checked(outage
         loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas._replace(R=R[:, :3, :3]), params)
 
 
+def test_taylor_discretization_equals_van_loan_and_flags_truncation(outage_run):
+    """The default per-epoch Taylor discretisation gives Van Loan's filter to rounding; too few terms are flagged."""
+    from jaxnav import _status
+
+    cfg, truth, r, params, t_imu, base = outage_run
+    meas = _meas(cfg, r.gnss)
+    run = lambda **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
+                                       dt_imu=cfg.dt, save=("nav", "covs"), **kw)
+    vl = run(discretization="van_loan")
+    dlat = np.abs(np.asarray(vl.epochs.nav.pos) - np.asarray(base.epochs.nav.pos))[:, :2].max() * 6.4e6
+    assert dlat < 1e-6  # m
+    np.testing.assert_allclose(np.asarray(base.epochs.covs), np.asarray(vl.epochs.covs), rtol=1e-8, atol=1e-20)
+    assert not int(base.status) & _status.DISCRETIZATION_INACCURATE
+    assert int(run(taylor_order=1).status) & _status.DISCRETIZATION_INACCURATE
+    with pytest.raises(ValueError, match="discretization must be"):
+        run(discretization="expm")
+
+
 def test_epochs_between_imu_samples_are_handled_by_time(outage_run):
     """Shift the fixes by a third of an IMU interval: the INS state is extrapolated to the epoch time."""
     cfg, truth, r, params, t_imu, base = outage_run

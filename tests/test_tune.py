@@ -83,6 +83,29 @@ def test_minimize_finds_constrained_optimum_and_freezes_untrainable(opt):
         assert res.n_evals > 31  # the line search's evaluations are counted
 
 
+@pytest.mark.parametrize("mode", ["forward", "reverse"])
+def test_minimize_lbfgs_traces_the_loss_once_and_converges(mode):
+    """The single-site L-BFGS: Rosenbrock's minimum, the frozen mask, one trace of the loss, the stop."""
+    traces = []
+
+    def loss(p):
+        traces.append(1)
+        return (1.0 - p["x"]) ** 2 + 100.0 * (p["y"] - p["x"] ** 2) ** 2 + (p["c"] - 1.0) ** 2
+
+    sp = tune.Space({"x": "real", "y": "real", "c": "positive"}, trainable=("x", "y"))
+    res = tune.minimize_lbfgs(loss, {"x": -1.2, "y": 1.0, "c": 3.0}, sp, max_evals=80, ftol=1e-14, mode=mode)
+    assert len(traces) == 1  # optax.lbfgs in tune.minimize traces (and compiles) it three times
+    assert float(res.params["x"]) == pytest.approx(1.0, abs=1e-6)
+    assert float(res.params["y"]) == pytest.approx(1.0, abs=1e-6)
+    assert float(res.params["c"]) == pytest.approx(3.0, rel=1e-14)
+    assert float(res.loss) == pytest.approx(4.0, abs=1e-10)
+    assert 20 < res.n_evals < 80  # stopped before the budget
+    assert np.all(np.isinf(np.asarray(res.losses)[res.n_evals:]))
+    assert np.all(np.isfinite(np.asarray(res.losses)[: res.n_evals]))
+    with pytest.raises(ValueError, match="c1 < c2"):
+        tune.minimize_lbfgs(loss, {"x": 0.0, "y": 0.0, "c": 1.0}, sp, c1=0.5, c2=0.1)
+
+
 def test_ml_noise_scales_recovered_on_cv_batch():
     """Maximum likelihood recovers process and measurement noise scales (64 series x 500 epochs)."""
     zs = tune.simulate_cv_batch(jax.random.PRNGKey(11), 64, 500, sigma=0.003, q=1e-8)

@@ -108,12 +108,14 @@ r_scale = { start = 0.5, stop = 2.0, num = 2, log = true }
 [tune]
 steps = 60
 """
+        if kind == "cv_wolfe":
+            text = text.replace("steps = 60", 'optimizer = "lbfgs_wolfe"\nsteps = 25')
     p = tmp_path / f"{kind}.toml"
     p.write_text(text)
     return p
 
 
-@pytest.mark.parametrize("kind", ["s0", "cv"])
+@pytest.mark.parametrize("kind", ["s0", "cv", "cv_wolfe"])
 def test_sweep_and_tune_cli_write_results_and_figures(tmp_path, kind, capsys):
     """Both commands on the CV problem; the sweep on a 150 s S0 problem (its tune path is the same
     code with the S0 loss, exercised by notebook 05 and benchmarks/bench_tune.py)."""
@@ -133,6 +135,7 @@ def test_sweep_and_tune_cli_write_results_and_figures(tmp_path, kind, capsys):
         assert tu["loss_final"] < tu["loss_init"]
         assert set(tu["tuned"]) == set(tu["init"]) and tu["wall_time_s"]["tune"] > 0
         assert np.asarray(tu["loss_per_run"]["tuned"]).shape == (8,)
+        assert np.all(np.isfinite(np.asarray(tu["losses"]))) and tu["loss_evaluations"] >= len(tu["losses"])
         figures += tu["figures"]
         assert "tune:" in capsys.readouterr().out
     for f in figures:

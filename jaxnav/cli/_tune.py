@@ -29,7 +29,7 @@ CONFIGS = pathlib.Path(tune.__file__).with_name("configs")
 _PROBLEM = {"kind": str, "filter": str, "loss": str, "seeds": int, "seed": int, "duration": float,
             "experiment": str, "series": int, "epochs": int, "sigma": float, "q": float}
 _TUNE = {"optimizer": str, "learning_rate": float, "steps": int, "mode": str, "landscape": int}
-_OPTIMIZERS = ("adam", "sgd", "lbfgs")
+_OPTIMIZERS = ("adam", "sgd", "lbfgs", "lbfgs_wolfe")
 
 
 def _err(path, msg):
@@ -240,7 +240,13 @@ def run_tune(config, out, *, progress=True) -> dict:
     cfg = load_config(config)
     P = Problem(cfg)
     tn = cfg["tune"]
-    res = tune.minimize(P.loss, P.init, P.space, optimizer=_optimizer(tn), steps=tn["steps"], mode=tn["mode"])
+    if tn["optimizer"] == "lbfgs_wolfe":  # steps = evaluation budget; the loss is compiled once
+        res = tune.minimize_lbfgs(P.loss, P.init, P.space, max_evals=tn["steps"], mode=tn["mode"])
+        done = np.isfinite(np.asarray(res.losses))
+        res = res._replace(losses=np.asarray(res.losses)[done], grad_norm=np.asarray(res.grad_norm)[done],
+                           path={k: np.asarray(v)[done] for k, v in res.path.items()})
+    else:
+        res = tune.minimize(P.loss, P.init, P.space, optimizer=_optimizer(tn), steps=tn["steps"], mode=tn["mode"])
     t_tune = time.perf_counter() - t0
     final = {k: float(v) for k, v in res.params.items()}
     landscape = None

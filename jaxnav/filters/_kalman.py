@@ -378,8 +378,15 @@ kalman_filter.lower = _lower  # ahead-of-time compilation, as on a jitted functi
 kalman_filter._cache_size = lambda: _kalman_filter._cache_size()
 
 
-def _kalman_filter_traced(model, x0, P0, zs, inflation, estimator, mask, save, unroll, allow_float32,
-                          check_finite) -> KalmanResult:
+def prepare_inputs(model, x0, P0, zs, mask, save, allow_float32):
+    """Validate and cast a filter call's inputs (trace time), shared by the sequential and parallel filters.
+
+    Returns:
+      (model, x0, P0, zs, mask (T, m) bool, save tuple, (n, m, p, T), tv dict, dtype), the arrays
+      cast to the common floating dtype.
+    Raises:
+      ValueError: unknown outputs, inconsistent shapes (named), float32 without ``allow_float32``.
+    """
     save = tuple(save)
     unknown = [s for s in save if s not in ALL_OUTPUTS]
     if unknown:
@@ -399,6 +406,13 @@ def _kalman_filter_traced(model, x0, P0, zs, inflation, estimator, mask, save, u
         mask = jnp.asarray(mask, bool)
         if mask.ndim == 1:
             mask = jnp.broadcast_to(mask[:, None], (T, m))
+    return model, x0, P0, zs, mask, save, (n, m, p, T), tv, dtype
+
+
+def _kalman_filter_traced(model, x0, P0, zs, inflation, estimator, mask, save, unroll, allow_float32,
+                          check_finite) -> KalmanResult:
+    model, x0, P0, zs, mask, save, (n, m, p, T), tv, dtype = prepare_inputs(model, x0, P0, zs, mask, save,
+                                                                             allow_float32)
     rule = NoInflation() if inflation is None else inflation
     est = NoEstimator() if estimator is None else estimator
     static = LinearGaussian(*[None if tv[name] else getattr(model, name) for name in LinearGaussian._fields])

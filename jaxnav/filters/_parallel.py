@@ -22,9 +22,9 @@ import jax.numpy as jnp
 
 from jaxnav import _status
 from jaxnav._numerics import cho_solve, cholesky, mT, solve_small, symmetrize, whiten
-from jaxnav.filters._kalman import ALL_OUTPUTS, LOG_2PI, KalmanResult, _check_dtype
-from jaxnav.filters._model import LinearGaussian, check_shapes
-from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult
+from jaxnav.filters._kalman import ALL_OUTPUTS, LOG_2PI, KalmanResult, prepare_inputs
+from jaxnav.filters._model import LinearGaussian
+from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoother_inputs
 
 
 def mm(A, B):
@@ -179,28 +179,12 @@ def parallel_filter(model: LinearGaussian, x0, P0, zs, *, mask=None, save=ALL_OU
       ValueError: at trace time for inconsistent shapes, unknown outputs or float32 without
         ``allow_float32``.
     """
-    save = tuple(save)
-    unknown = [s for s in save if s not in ALL_OUTPUTS]
-    if unknown:
-        raise ValueError(f"unknown outputs {unknown}; choose from {ALL_OUTPUTS}")
-    n, m, p, T, tv = check_shapes(model, x0, P0, zs, mask)
-    leaves = [x0, P0, zs] + [a for a in model if a is not None]
-    dtype = jnp.result_type(*leaves)
-    if not jnp.issubdtype(dtype, jnp.floating):
-        dtype = jnp.result_type(float)
-    _check_dtype(dtype, allow_float32)
-    cast = lambda a: None if a is None else jnp.asarray(a, dtype)  # noqa: E731
-    F, H, Q, R, G = (cast(a) for a in model)
-    x0, P0, zs = cast(x0), cast(P0), cast(zs)
+    model, x0, P0, zs, mask, save, (n, m, p, T), tv, dtype = prepare_inputs(model, x0, P0, zs, mask, save,
+                                                                             allow_float32)
+    F, H, Q, R, G = model
     # a model closed over by the caller's jit is constant: without the barrier XLA would
     # constant-fold the (T, n, n) element arrays built from it (minutes for T = 86 400)
     F, H, Q, R, G, x0, P0 = jax.lax.optimization_barrier((F, H, Q, R, G, x0, P0))
-    if mask is None:
-        mask = jnp.ones((T, m), bool)
-    else:
-        mask = jnp.asarray(mask, bool)
-        if mask.ndim == 1:
-            mask = jnp.broadcast_to(mask[:, None], (T, m))
     F, H, R = _tv(F, T, 2), _tv(H, T, 2), _tv(R, T, 2)
     if G is None:
         GQG = _tv(Q, T, 2)
@@ -295,22 +279,9 @@ def parallel_smoother(model: LinearGaussian, filtered, *, save=SMOOTHER_OUTPUTS,
     Raises:
       ValueError: if the needed outputs were not saved, or F has a wrong shape.
     """
-    save = tuple(save)
-    unknown = [s for s in save if s not in SMOOTHER_OUTPUTS]
-    if unknown:
-        raise ValueError(f"unknown smoother outputs {unknown}; choose from {SMOOTHER_OUTPUTS}")
-    for name in ("means", "covs", "pred_means", "pred_covs"):
-        if getattr(filtered, name, None) is None:
-            raise ValueError(f"parallel_smoother needs the filter output '{name}': run the filter with it in save=")
+    save, Fn = smoother_inputs(model, filtered, save, "parallel_smoother")
     xs, Ps, xp, Pp = filtered.means, filtered.covs, filtered.pred_means, filtered.pred_covs
     T, n = xs.shape
-    F = jnp.asarray(model.F, xs.dtype)
-    if F.shape == (n, n):
-        Fn = F
-    elif F.shape == (T, n, n):
-        Fn = F[1:]
-    else:
-        raise ValueError(f"model.F has shape {F.shape}; expected {(n, n)} or {(T, n, n)}")
     L = cholesky(Pp[1:])
     ok = jnp.all(jnp.isfinite(L), axis=(-2, -1))
     L = jnp.where(ok[:, None, None], L, jnp.eye(n, dtype=xs.dtype))

@@ -58,6 +58,30 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
     return _rts_smoother(model, filtered, unroll=unroll, save=tuple(save), products=products)
 
 
+def smoother_inputs(model, filtered, save, who):
+    """Check a smoother call (trace time): the outputs asked for, the filter outputs it needs, F's shape.
+
+    Returns:
+      (save tuple, F for steps 1..T-1: (n, n) if time-invariant, else (T-1, n, n)).
+    Raises:
+      ValueError: naming the missing filter output or F's shape against the expected ones.
+    """
+    save = tuple(save)
+    unknown = [s for s in save if s not in SMOOTHER_OUTPUTS]
+    if unknown:
+        raise ValueError(f"unknown smoother outputs {unknown}; choose from {SMOOTHER_OUTPUTS}")
+    for name in ("means", "covs", "pred_means", "pred_covs"):
+        if getattr(filtered, name, None) is None:
+            raise ValueError(f"{who} needs the filter output '{name}': run the filter with it in save=")
+    T, n = filtered.means.shape
+    F = jnp.asarray(model.F, filtered.means.dtype)
+    if F.shape == (n, n):
+        return save, F
+    if F.shape == (T, n, n):
+        return save, F[1:]
+    raise ValueError(f"model.F has shape {F.shape}; expected {(n, n)} or {(T, n, n)}")
+
+
 def _lower(model, filtered, *, unroll=1, save=SMOOTHER_OUTPUTS, products="auto"):
     products = resolve_products(products, model, filtered)
     return _rts_smoother.lower(model, filtered, unroll=unroll, save=tuple(save), products=products)
@@ -69,22 +93,11 @@ rts_smoother.lower = _lower  # ahead-of-time compilation, as on a jitted functio
 @partial(jax.jit, static_argnames=("unroll", "save", "products"))
 def _rts_smoother(model, filtered, *, unroll, save, products) -> SmootherResult:
     prod = mm if products == "fused" else jnp.matmul
-    save = tuple(save)
-    unknown = [s for s in save if s not in SMOOTHER_OUTPUTS]
-    if unknown:
-        raise ValueError(f"unknown smoother outputs {unknown}; choose from {SMOOTHER_OUTPUTS}")
-    for name in ("means", "covs", "pred_means", "pred_covs"):
-        if getattr(filtered, name, None) is None:
-            raise ValueError(f"rts_smoother needs the filter output '{name}': run kalman_filter with it in save=")
+    save, Fn = smoother_inputs(model, filtered, save, "rts_smoother")
     xs, Ps, xp, Pp = filtered.means, filtered.covs, filtered.pred_means, filtered.pred_covs
     T, n = xs.shape
-    F = jnp.asarray(model.F, xs.dtype)
-    if F.shape == (n, n):
-        Fn = jnp.broadcast_to(F, (T - 1, n, n))
-    elif F.shape == (T, n, n):
-        Fn = F[1:]
-    else:
-        raise ValueError(f"model.F has shape {F.shape}; expected {(n, n)} or {(T, n, n)}")
+    if Fn.ndim == 2:
+        Fn = jnp.broadcast_to(Fn, (T - 1, n, n))
 
     want_cov = "covs" in save
 

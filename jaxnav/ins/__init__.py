@@ -12,6 +12,7 @@ from jaxnav.ins.error_model import (
     STATE_NAMES15,
     STATE_NAMES18,
     discretize_series,
+    discretize_taylor,
     discretize_van_loan,
     error_model_F,
     error_model_F15,
@@ -47,7 +48,7 @@ from jaxnav.ins.mechanization import (
 )
 
 __all__ = [
-    "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "discretize_series", "discretize_van_loan",
+    "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "discretize_series", "discretize_taylor", "discretize_van_loan",
     "error_model", "error_model_F", "error_model_F15", "error_model_G", "error_model_G15",
     "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",
     "LC_OUTPUTS", "LCEpochs", "LCParams", "LCResult", "PVMeasurements", "SensorBiases", "integration",

