@@ -77,7 +77,8 @@ from pyins import filters as pfilters  # noqa: E402
 from pyins import inertial_sensor, measurements, strapdown, transform  # noqa: E402
 
 from jaxnav import sim  # noqa: E402
-from jaxnav.cli._demo_s0 import _measurements, _Setup, load_experiment  # noqa: E402
+from jaxnav.tune._s0 import S0Setup as _Setup  # noqa: E402
+from jaxnav.tune._s0 import _measurements, load_experiment  # noqa: E402
 from jaxnav.ins import attitude as att  # noqa: E402
 from jaxnav.ins.integration import loosely_coupled  # noqa: E402
 
