@@ -120,10 +120,9 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
         return _State(u=x, f=f, g=g, d=d, slope=slope, ls=ls, lbfgs=lbs, steps=s.steps + 1,
                       done=s.done | conv)
 
-    def trial(s, f, dg):
+    def trial(s, f, dg, armijo):
         ls = s.ls
         a = ls.alpha
-        armijo = jnp.isfinite(f) & (f <= s.f + c1 * a * s.slope)
         high = ~armijo | (f >= ls.f_lo)
         # high: [lo, a] brackets a minimum.  else: a is the new lo; if the slope turned
         # non-negative the old lo (or, bracketed, the end on the slope's side) becomes hi
@@ -142,9 +141,9 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
         x = s.u + s.ls.alpha * s.d
         f, g = jax.lax.cond(s.done, lambda x: (inf, jnp.full_like(x, jnp.nan)), vg, x)
         dg = jnp.dot(g, s.d)
-        first = ~jnp.isfinite(s.f)
-        ok = first | (jnp.isfinite(f) & (f <= s.f + c1 * s.ls.alpha * s.slope) & (jnp.abs(dg) <= c2 * jnp.abs(s.slope)))
-        new = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), accept(s, x, f, g), trial(s, f, dg))
+        armijo = jnp.isfinite(f) & (f <= s.f + c1 * s.ls.alpha * s.slope)
+        ok = ~jnp.isfinite(s.f) | (armijo & (jnp.abs(dg) <= c2 * jnp.abs(s.slope)))  # first point, or strong Wolfe
+        new = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), accept(s, x, f, g), trial(s, f, dg, armijo))
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(s.done, a, b), s, new)
         return new, (f, jnp.where(s.done, jnp.nan, x), jnp.sqrt(jnp.dot(g, g)), ~s.done)
 
