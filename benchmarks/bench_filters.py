@@ -44,6 +44,7 @@ jaxnav.enable_x64()
 jax.config.update("jax_enable_compilation_cache", False)
 
 from jaxnav import filters as jf  # noqa: E402
+from jaxnav import tune as jtune  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 BEGIN = "<!-- BEGIN bench_filters results (generated; rerun the script to refresh) -->"
@@ -313,12 +314,23 @@ def run_benchmarks(args, zs_batch, log):
     fb = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",))))
     first, runs, out = jit_time(fb, (jzB,), max(3, reps // 2))
     rows.append(Row("c", "jaxnav", first, runs, means=np.asarray(out.means), jax_impl=True,
-                    note=f"jit(vmap) over B={B}; NaN masking makes P per-sequence"))
+                    note=f"jit(vmap) over B={B}, defaults (NaN masking on): the batch is clean, so one "
+                         "shared P recursion"))
+    jzN = jzB.at[B // 2, T // 2, 0].set(jnp.nan)
+    first, runs, out = jit_time(fb, (jzN,), max(3, reps // 2))
+    rows.append(Row("c", "jaxnav (one NaN in the batch)", first, runs, jax_impl=True,
+                    note="the same call; one masked element makes every sequence run its own P recursion"))
     fb = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",),
                                                      check_finite=False)))
     first, runs, out = jit_time(fb, (jzB,), max(3, reps // 2))
     rows.append(Row("c", "jaxnav (check_finite=False)", first, runs, means=np.asarray(out.means),
                     jax_impl=True, note="data trusted (NaN flagged, not masked): one shared P recursion"))
+
+    floor = jax.jit(lambda z: jnp.concatenate([z, z], axis=-1) * 2.0)
+    first, runs, out = jit_time(floor, (jzB,), max(3, reps // 2))
+    rows.append(Row("c", "memory floor (no filtering)", first, runs, jax_impl=True,
+                    note=f"reads the (B, T, 3) data and writes a fresh (B, T, 6) array: what any filter "
+                         "returning the means pays"))
 
     # (d): the same batch with P0 given per sequence (B identical copies), so that no
     # implementation can share one covariance recursion between the sequences.
@@ -409,6 +421,12 @@ def run_benchmarks(args, zs_batch, log):
             first, runs, _ = jit_time(vg, (theta0, data), rr)
             rows.append(Row(case, "jaxnav value_and_grad" + label, first, runs, jax_impl=True,
                             note="d(-loglik)/d(log q, log sigma)" + sfx))
+            if not kw:
+                # two parameters: forward mode (one tangent each, no tape) is the cheaper gradient
+                vg = jax.jit(lambda th, d: jtune.value_and_grad(lambda t: wrap(jx_nll)(t, d), mode="forward")(th))
+                first, runs, _ = jit_time(vg, (theta0, data), rr)
+                rows.append(Row(case, "jaxnav value_and_grad, forward mode", first, runs, jax_impl=True,
+                                note="the same gradient by jaxnav.tune.value_and_grad(mode='forward')" + sfx))
     try:
         from dynamax.linear_gaussian_ssm import lgssm_filter as _dlf
         from dynamax.linear_gaussian_ssm.inference import make_lgssm_params as _dmp
@@ -570,7 +588,7 @@ def matmul_rates(n=1024, repeats=10):
     return np_rate, flops / best / 1e9
 
 
-def loop_body_profile(fn, *args, batch=None):
+def loop_body_profile(fn, *args, batch=None, split=False):
     """Count the ops XLA runs per scan iteration: (fusions, custom-calls, all instructions).
 
     Reads the optimized HLO of the compiled function and counts instructions inside the
@@ -590,20 +608,32 @@ def loop_body_profile(fn, *args, batch=None):
             continue
         if cur is not None and "=" in line:
             cur.append(line)
-    lines = [ln for b in bodies for ln in comps.get(b, comps.get(b.lstrip("%"), []))]
-    ops = [ln for ln in lines if not re.search(r"= \S+ (parameter|get-tuple-element|tuple|constant)\(", ln)]
-    fus = sum(1 for ln in ops if " fusion(" in ln)
-    cc = sum(1 for ln in ops if "custom-call(" in ln)
-    calls = sum(1 for ln in ops if re.search(r" (call|while|conditional)\(", ln))
-    factor = []
-    for ln in ops:
-        m = re.search(r'= \(?(f64\[[\d,]*\]).*custom_call_target="lapack_d(\w+?)_ffi"', ln)
-        if m and m.group(2) in ("potrf", "getrf", "geqrf", "syevd"):
-            factor.append(f"{m.group(2)} {m.group(1)}")
-    pat = f"f64[{batch},{N_STATE},{N_STATE}]"
-    per_seq = "—" if batch is None else ("yes" if any(pat in ln for ln in lines) else "no (shared)")
-    return {"fusions": fus, "custom_calls": cc, "calls": calls, "ops": len(ops),
-            "factor": ", ".join(factor) or "none (closed form)", "per_seq": per_seq}
+    def stats(lines):
+        ops = [ln for ln in lines if not re.search(r"= \S+ (parameter|get-tuple-element|tuple|constant)\(", ln)]
+        factor = []
+        for ln in ops:
+            m = re.search(r'= \(?(f64\[[\d,]*\]).*custom_call_target="lapack_d(\w+?)_ffi"', ln)
+            if m and m.group(2) in ("potrf", "getrf", "geqrf", "syevd"):
+                factor.append(f"{m.group(2)} {m.group(1)}")
+        pat = f"f64[{batch},{N_STATE},{N_STATE}]"
+        return {"fusions": sum(1 for ln in ops if " fusion(" in ln),
+                "custom_calls": sum(1 for ln in ops if "custom-call(" in ln),
+                "calls": sum(1 for ln in ops if re.search(r" (call|while|conditional)\(", ln)), "ops": len(ops),
+                "factor": ", ".join(factor) or "none (closed form)",
+                "per_seq": "—" if batch is None else ("yes" if any(pat in ln for ln in lines) else "no (shared)")}
+
+    # split=True: a program with alternative time loops (jaxnav's batch-level switch compiles a
+    # shared-covariance loop and a per-sequence one) reports each, joined by " / ", shared first
+    groups = [comps.get(b, comps.get(b.lstrip("%"), [])) for b in sorted(bodies)]
+    if not split:
+        groups = [[ln for g in groups for ln in g]]
+    per_loop = [stats(g) for g in groups]
+    per_loop = [st for st in per_loop if st["fusions"] > 2] or per_loop
+    per_loop.sort(key=lambda st: st["per_seq"] == "yes")
+    for st in per_loop:
+        st["other"] = st["ops"] - st["fusions"] - st["custom_calls"]
+    return {k: " / ".join(dict.fromkeys(str(st[k]) for st in per_loop)) if k == "factor"
+            else " / ".join(str(st[k]) for st in per_loop) for k in per_loop[0]}
 
 
 # --------------------------------------------------------------------------------------
@@ -724,7 +754,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                    "| (B, 6, 6) covariance in the loop |")
         out.append("|---|---|---|---|---|---|")
         for k, p in profile.items():
-            out.append(f"| {k} | {p['fusions']} | {p['custom_calls']} | {p['ops'] - p['fusions'] - p['custom_calls']} "
+            out.append(f"| {k} | {p['fusions']} | {p['custom_calls']} | {p['other']} "
                        f"| {p['factor']} | {p['per_seq']} |")
         out.append("")
     return "\n".join(out)
@@ -811,8 +841,11 @@ def main(argv=None):
         for batched in (False, True):
             for name, fn in impls.items():
                 key = f"{name} (c) vmap, B={len(zB)}" if batched else f"{name} (a) single"
+                if batched and name == "jaxnav":
+                    key += " (clean batch / NaN in the batch)"
                 try:  # profiling is best effort
-                    profile[key] = (loop_body_profile(jax.vmap(fn), zB, batch=len(zB)) if batched
+                    profile[key] = (loop_body_profile(jax.vmap(fn), zB, batch=len(zB), split=name == "jaxnav")
+                                    if batched
                                     else loop_body_profile(fn, z1))
                 except Exception as e:
                     log(f"profile of {key} skipped: {e!r}")

@@ -11,7 +11,7 @@ An estimator is a frozen dataclass pytree with three methods:
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Optional
+from typing import Any, ClassVar, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -32,6 +32,9 @@ class PostUpdate(NamedTuple):
 
 class NoEstimator:
     """Keep the model's Q and R (the default)."""
+
+    #: Q and R do not depend on the measurements (see filters._kalman._batched_filter)
+    data_independent: ClassVar[bool] = True
 
     def init(self, n, m, p, dtype):
         return ()

@@ -61,6 +61,21 @@ def _under_vmap(*trees) -> bool:
     return any(batched(leaf) for leaf in jax.tree_util.tree_leaves(trees))
 
 
+def _vmap_innermost() -> bool:
+    """Whether the innermost transformation active at this call is ``vmap`` (not jvp/grad/jit).
+
+    Then a ``custom_vmap`` rule runs right away in the batching trace, and any autodiff outside
+    differentiates the ordinary operations the rule emits; under ``vmap(grad(f))`` it would not
+    (``custom_vmap`` has no reverse mode), so that case keeps the plain filter.
+    """
+    try:
+        from jax._src import core
+        from jax._src.interpreters.batching import BatchTrace
+        return isinstance(core.trace_ctx.trace, BatchTrace)
+    except Exception:  # pragma: no cover - private location changed: keep the plain filter
+        return False
+
+
 def resolve_products(products: str, *trees) -> str:
     """Resolve ``products="auto"``: "dot" when called under ``vmap``, else "fused".
 
@@ -345,18 +360,77 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
         called under ``vmap``; see :func:`resolve_products`. Results agree to rounding.
       check_finite: static. True (default) masks NaN/inf measurement elements and counts them.
         False trusts the data: NaN/inf are still counted and raise the NONFINITE_UNMASKED error
-        flag, but are not masked. The gain is speed under ``vmap``: without data-dependent
-        masks the covariance recursion of a non-adaptive filter does not depend on the data,
-        so JAX runs it once for the whole batch instead of once per sequence (~10x).
+        flag, but are not masked. Under ``vmap`` the default needs no such choice for speed:
+        when the model, P0, mask and rule (classic, constant, attenuated) are shared by the
+        batch, the batch is checked once and, if nothing would be masked, one covariance
+        recursion serves every sequence (~10-20x faster than one per sequence; see
+        :func:`_batched_filter`). NaN anywhere in the batch, or a data-dependent rule or
+        estimator, runs one masked recursion per sequence.
     Returns:
       :class:`KalmanResult`.
     Raises:
       ValueError: at trace time, for inconsistent shapes (naming them), unknown output names, or
         a float32 computation without ``allow_float32``.
     """
-    products = resolve_products(products, model, x0, P0, zs, mask, inflation, estimator)
-    return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask, save=tuple(save),
-                          unroll=unroll, allow_float32=allow_float32, check_finite=check_finite, products=products)
+    trees = (model, x0, P0, zs, mask, inflation, estimator)
+    batched = _under_vmap(*trees)
+    products = resolve_products(products, *trees)
+    static = dict(save=tuple(save), unroll=unroll, allow_float32=allow_float32, products=products)
+    if (batched and check_finite and _vmap_innermost()
+            and _data_independent(inflation) and _data_independent(estimator)):
+        return _batched_filter(*trees, **static)
+    return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
+                          check_finite=check_finite, **static)
+
+
+def _data_independent(plugin) -> bool:
+    """Whether a rule/estimator leaves the covariance recursion independent of the measurements."""
+    return plugin is None or bool(getattr(plugin, "data_independent", False))
+
+
+def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
+    """:func:`kalman_filter` under ``vmap``: one covariance recursion for the batch when no data is masked.
+
+    With ``check_finite=True`` the NaN masks make every sequence's covariance recursion its own,
+    so ``vmap`` runs B of them. When the model, P0, the user mask and the plug-ins are shared and
+    data-independent, the recursion differs between sequences only if some measurement is
+    NaN/inf. This batching rule (``jax.custom_batching.custom_vmap``) looks at the whole batch
+    once: if every used element is finite it runs the ``check_finite=False`` filter, whose
+    covariance recursion ``vmap`` shares (identical results: nothing would have been masked),
+    else the per-sequence masked filter. Both are compiled; ``lax.cond`` runs one.
+    Taken only when ``vmap`` is the innermost transformation (see :func:`_vmap_innermost`):
+    ``grad(vmap(f))`` gets it, ``vmap(grad(f))`` and ``vmap(jit(f))`` keep the per-sequence filter.
+    """
+    def call(check_finite, *a):
+        m, x, P, z, mk, inf, est = a
+        return _kalman_filter(m, x, P, z, inflation=inf, estimator=est, mask=mk, check_finite=check_finite,
+                              **static)
+
+    @jax.custom_batching.custom_vmap
+    def f(*a):
+        return call(True, *a)
+
+    @f.def_vmap
+    def rule(axis_size, in_batched, *a):
+        del axis_size
+        axes = tuple(jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched))
+        def run(check_finite):
+            return jax.vmap(partial(call, check_finite), in_axes=axes)(*a)
+        shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (0, 2, 4, 5, 6)]))
+        if shared:
+            z, mk = jnp.asarray(a[3]), a[4]
+            # the barrier keeps XLA from constant-folding this reduction when the data is a
+            # jit constant (seconds of compile time for a 256 x 3600 batch)
+            used = ~jnp.isfinite(jax.lax.optimization_barrier(z))
+            if mk is not None:
+                mk = jnp.asarray(mk, bool)
+                used = used & (mk if mk.ndim == 2 else mk[:, None])
+            out = jax.lax.cond(jnp.any(used), lambda: run(True), lambda: run(False))
+        else:
+            out = run(True)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return f(model, x0, P0, zs, mask, inflation, estimator)
 
 
 @partial(jax.jit, static_argnames=("save", "unroll", "allow_float32", "check_finite", "products"))

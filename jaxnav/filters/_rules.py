@@ -10,7 +10,7 @@ absolute value or not) are static fields.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Optional
+from typing import Any, ClassVar, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -88,6 +88,9 @@ def _masked_trace(A, valid):
 class NoInflation:
     """The classic Kalman filter: factor 1 (S0 eq. (8))."""
 
+    #: the factor does not depend on the measurements (see filters._kalman._batched_filter)
+    data_independent: ClassVar[bool] = True
+
     def init(self, m, dtype):
         return ()
 
@@ -103,6 +106,9 @@ class Constant:
     Attributes:
       S: scalar array, the factor applied to F P F^T at every epoch.
     """
+
+    #: the factor does not depend on the measurements (see filters._kalman._batched_filter)
+    data_independent: ClassVar[bool] = True
 
     S: Any
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
@@ -124,6 +130,9 @@ class Attenuated:
     Attributes:
       b: scalar array in [0, 1), the attenuation factor (S0 used 0.254 chosen by trial and error).
     """
+
+    #: the factor does not depend on the measurements (see filters._kalman._batched_filter)
+    data_independent: ClassVar[bool] = True
 
     b: Any
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
