@@ -10,9 +10,9 @@ The workload is what ``make demo`` computes for its table: the experiment of
 ``jaxnav/tune/s0_experiment.toml`` (IMU 100 Hz, GPS 1 Hz, 18 states, the experiment's model
 mismatch), the classic (b = 0), attenuated (b = 0.254) and fading filters, per-epoch navigation
 state, covariances and fading factors saved, the per-run RMS and error series reduced on the
-device. Two compiled programs (the attenuated one serves the classic filter with b = 0), each a
-``jaxnav.tune.sweep`` over the seeds in chunks; compile time is the sweep's AOT compilation, run
-time is the rest. Compared with the Van Loan discretisation (``--discretization van_loan``) the
+device. One compiled program (``jaxnav.filters.switch`` picks the rule by an array index; the
+attenuated rule with b = 0 is the classic filter), a ``jaxnav.tune.sweep`` over the three filters x
+the seeds in chunks; compile time is the sweep's AOT compilation, run time is the rest. Compared with the Van Loan discretisation (``--discretization van_loan``) the
 per-epoch Taylor series (default) is what makes the difference; both are measured in one run.
 """
 
@@ -67,13 +67,14 @@ def study(exp, seeds, chunk, discretization):
         return dict(rms=jnp.sqrt(jnp.mean(pe**2, 0)), pos_err=pe, vel_err=ve,
                     sig=jnp.sqrt(jnp.diagonal(cov, axis1=1, axis2=2)), factors=res.epochs.factors)
 
-    att = tune.sweep(lambda p, k: summary(run(k, jf.attenuated(p["b"], states=states))),
-                     {"b": np.asarray([0.0, exp["filter"]["b"]])}, keys, chunk=chunk, progress=False)
-    fad = tune.sweep(lambda p, k: summary(run(k, rules(exp)["fading"])), {"b": np.asarray([0.0])}, keys,
-                     chunk=chunk, progress=False)
-    rms = {"classic": att.values["rms"][0], "attenuated": att.values["rms"][1], "fading": fad.values["rms"][0]}
-    t = dict(compile=att.compile_time_s + fad.compile_time_s,
-             run=att.wall_time_s + fad.wall_time_s - att.compile_time_s - fad.compile_time_s)
+    def one(p, k):  # rule 0: attenuated (b = 0: classic), 1: fading; one program for all three
+        rule = jf.switch(p["rule"], [jf.attenuated(p["b"], states=states), rules(exp)["fading"]])
+        return summary(run(k, rule))
+
+    sw = tune.sweep(one, {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])},
+                    keys, chunk=chunk, progress=False)
+    rms = {"classic": sw.values["rms"][0], "attenuated": sw.values["rms"][1], "fading": sw.values["rms"][2]}
+    t = dict(compile=sw.compile_time_s, run=sw.wall_time_s - sw.compile_time_s)
     return {k: float(np.mean(v)) for k, v in rms.items()}, t
 
 
@@ -105,7 +106,8 @@ def main(argv=None):
         "",
         f"Three filters (classic, attenuated b = {exp['filter']['b']}, fading) x {a.seeds} seeds x 2000 s "
         f"(200 000 IMU samples, 2000 GPS fixes each), per-epoch navigation, covariances and factors saved; "
-        f"two compiled programs, chunks of {a.chunk} runs. Targets: run < 60 s, compile < 15 s.",
+        f"one compiled program (`jaxnav.filters.switch` picks the rule), chunks of {a.chunk} runs. "
+        "Targets: run < 60 s, compile < 15 s.",
         "",
         "| per-epoch discretisation | compile | run | runs per second | mean position RMS classic / attenuated "
         "/ fading (m) |",

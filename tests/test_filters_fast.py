@@ -184,3 +184,29 @@ def test_batched_dispatch_under_autodiff(problem, nan):
     np.testing.assert_allclose(float(jv), float(g_ref @ np.asarray(d)), rtol=1e-9)
     nested = jax.vmap(jax.vmap(lambda z: nll(th, z)))(batch.reshape((2, 2) + batch.shape[1:]))
     np.testing.assert_allclose(float(nested.sum()), v_ref, rtol=1e-12)
+
+
+def test_switch_equals_each_rule_in_one_program(problem):
+    """switch(i, [classic, attenuated, fading]) gives each rule's filter exactly, also vmapped over i."""
+    model, x0, P0, zs, mask = problem
+    parts = [None, jf.attenuated(0.3), jf.fading(window=5)]
+    alone = [jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=r) for r in parts]
+    for i in range(3):
+        _assert_same(jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.switch(i, parts)), alone[i],
+                     rtol=1e-13, atol=1e-13)
+    run = lambda i: jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.switch(i, parts), save=("means",))  # noqa: E731
+    batched = jax.jit(jax.vmap(run))(jnp.arange(3.0))  # vmapped: "dot" products, rounding-level differences
+    for i in range(3):
+        np.testing.assert_allclose(np.asarray(batched.means[i]), np.asarray(alone[i].means), rtol=1e-9, atol=1e-9)
+
+    def ll(b, rule):
+        r = jf.switch(rule, [jf.attenuated(b), jf.fading(window=5)])
+        return jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=r, save=()).loglik
+
+    g = jax.grad(ll)(0.3, 0)
+    g_alone = jax.grad(lambda b: jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.attenuated(b),
+                                                  save=()).loglik)(0.3)
+    np.testing.assert_allclose(float(g), float(g_alone), rtol=1e-12)
+    assert float(jax.grad(ll)(0.3, 1)) == 0.0  # the fading filter does not depend on b
+    with pytest.raises(ValueError, match="different states"):
+        jf.switch(0, [jf.attenuated(0.3, states=range(2)), jf.fading(window=5)])

@@ -66,24 +66,21 @@ def run_s0_demo(out="out/demo", *, seeds=None, config=None, sweep_points=None, p
 
     save = ("nav", "covs", "factors")
 
-    def attenuated_run(p, key):  # b = 0 is the classic filter exactly (S_k = 1, S0 eq. (11))
-        return summary(S.run(key, jf.attenuated(p["b"], states=states), save=save))
+    def s0_run(p, key):
+        """One run of the filter ``p["rule"]``: 0 attenuated with ``p["b"]`` (b = 0 is the classic filter
+        exactly: S_k = 1, S0 eq. (11)), 1 fading. One compiled program serves all three filters and the
+        b sweep (``jf.switch``)."""
+        rule = jf.switch(p["rule"], [jf.attenuated(p["b"], states=states), rules(exp)["fading"]])
+        return summary(S.run(key, rule, save=save))
 
-    def fading_run(p, key):
-        return summary(S.run(key, rules(exp)["fading"], save=save))
-
-    # classic (b = 0) and attenuated in one compiled function; the b sweep reuses it
     timing = {}
     t0 = time.perf_counter()
-    ca = tune.sweep(attenuated_run, {"b": np.asarray([0.0, exp["filter"]["b"]])}, keys, chunk=chunk,
-                    desc="S0 classic + attenuated", progress=progress)
-    timing["classic+attenuated"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    fa = tune.sweep(fading_run, {"b": np.asarray([0.0])}, keys, chunk=chunk, desc="S0 fading", progress=progress)
-    timing["fading"] = time.perf_counter() - t0
-    runs = {"classic": {k: v[0] for k, v in ca.values.items()},
-            "attenuated": {k: v[1] for k, v in ca.values.items()},
-            "fading": {k: v[0] for k, v in fa.values.items()}}
+    three = tune.sweep(s0_run, {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])},
+                       keys, chunk=chunk, desc="S0 classic, attenuated, fading", progress=progress)
+    timing["filters"] = time.perf_counter() - t0
+    timing["compile"] = three.compile_time_s
+    runs = {name: {k: v[i] for k, v in three.values.items()} for i, name in enumerate(("classic", "attenuated",
+                                                                                       "fading"))}
     rms = {name: runs[name]["rms"] for name in FILTERS}
 
     # b sweep: the same compiled function over the b grid and a few seeds
@@ -94,7 +91,7 @@ def run_s0_demo(out="out/demo", *, seeds=None, config=None, sweep_points=None, p
         bs = np.sort(np.append(bs, exp["filter"]["b"]))
     skeys = keys[: exp["sweep"]["seeds"]]
     t0 = time.perf_counter()
-    sweep = tune.sweep(attenuated_run, {"b": bs}, skeys, chunk=chunk, desc="b sweep",
+    sweep = tune.sweep(s0_run, {"b": bs, "rule": np.zeros_like(bs)}, skeys, chunk=chunk, desc="b sweep",
                        progress=progress).values["rms"]  # (B, seeds, 9)
     timing["sweep"] = time.perf_counter() - t0
 

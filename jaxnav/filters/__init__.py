@@ -2,7 +2,8 @@
 
 * :class:`LinearGaussian` model with static or time-varying leaves, :func:`validate_model`.
 * :func:`kalman_filter`: classic KF with Cholesky solves and Joseph update, plus plug-ins:
-  prior-inflation rules :func:`constant`, :func:`attenuated`, :func:`fading` and noise
+  prior-inflation rules :func:`constant`, :func:`attenuated`, :func:`fading` (and
+  :func:`switch` to pick one by an array index in one compiled program) and noise
   estimators :func:`variance_compensation`, :func:`sage_husa`.
 * :func:`rts_smoother`: fixed-interval smoothing over the saved filter moments.
 * :func:`predict`, :func:`update`, :func:`filter_step`: the pure pieces, for custom scans.
@@ -44,7 +45,17 @@ from jaxnav.filters._robust import (
     yang_alpha,
     yang_factor,
 )
-from jaxnav.filters._rules import Attenuated, Constant, Fading, StepContext, attenuated, constant, fading
+from jaxnav.filters._rules import (
+    Attenuated,
+    Constant,
+    Fading,
+    StepContext,
+    Switch,
+    attenuated,
+    constant,
+    fading,
+    switch,
+)
 from jaxnav.filters._smoother import SmootherResult, rts_smoother
 from jaxnav.filters._parallel import parallel_filter, parallel_smoother
 
@@ -56,5 +67,5 @@ __all__ = [
     "predict", "rts_smoother", "sage_husa", "update", "validate_model", "variance_compensation",
     "IGG3", "IGG3State", "Chain", "ChainInfo", "RobustInfo", "YangFactor", "chain", "igg3", "igg3_weight", "yang_alpha",
     "yang_factor",
-    "parallel_filter", "parallel_smoother",
+    "parallel_filter", "parallel_smoother", "Switch", "switch",
 ]
