@@ -320,6 +320,10 @@ def run_benchmarks(args, zs_batch, log):
     first, runs, out = jit_time(fb, (jzN,), max(3, reps // 2))
     rows.append(Row("c", "jaxnav (one NaN in the batch)", first, runs, jax_impl=True,
                     note="the same call; one masked element makes every sequence run its own P recursion"))
+    jzG = jzB.at[:, T // 3: T // 3 + 60, :].set(jnp.nan)
+    first, runs, out = jit_time(fb, (jzG,), max(3, reps // 2))
+    rows.append(Row("c", "jaxnav (common gap)", first, runs, jax_impl=True,
+                    note="the same call; a 60 s outage in every sequence: masked for all, P recursion shared"))
     fb = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",),
                                                      check_finite=False)))
     first, runs, out = jit_time(fb, (jzB,), max(3, reps // 2))

@@ -119,24 +119,33 @@ def _shares(fn, *args):
 
 
 def test_vmap_shares_the_covariance_recursion_when_nothing_is_masked(problem):
-    """Under vmap, clean data runs one covariance recursion (check_finite=False filter), NaN data the masked one.
+    """Under vmap, clean data or gaps common to the batch run one covariance recursion, other NaN the masked one.
 
-    Both give exactly what the per-sequence filter gives, for every output, with the user mask,
+    All give exactly what the per-sequence filter gives, for every output, with the user mask,
     a time-varying model and the attenuated rule; NaN/inf are still counted and flagged.
     """
     model, x0, P0, zs, mask = problem
     clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
     batch = jnp.stack([clean, 0.5 * clean, clean + 1.0])
     dirty = batch.at[1].set(zs)  # one sequence carries the NaN/inf of the fixture
+    bad = ~jnp.isfinite(zs)
+    common = jnp.where(bad[None], zs[None], batch)  # every sequence has the fixture's gaps
     run = lambda z: jf.kalman_filter(model, x0, P0, z, mask=mask, inflation=jf.attenuated(0.3))  # noqa: E731
     assert _shares(jax.vmap(run), batch)  # the batch-level switch is there
-    for data in (batch, dirty):
+    for data in (batch, dirty, common):
         got = jax.jit(jax.vmap(run))(data)
         for i in range(3):
             _assert_same(jax.tree_util.tree_map(lambda a: a[i], got), run(data[i]), rtol=1e-12, atol=1e-12)
     got = jax.vmap(run)(dirty)
     assert [int(c) for c in got.n_nonfinite] == [0, 6, 0]
     assert [bool(int(s) & _status.NONFINITE_MEASUREMENT) for s in got.status] == [False, True, False]
+    got = jax.vmap(run)(common)
+    assert [int(c) for c in got.n_nonfinite] == [6, 6, 6] and [int(c) for c in got.n_skipped] == [6, 6, 6]
+    assert all(int(s) & _status.NONFINITE_MEASUREMENT for s in got.status)
+    assert not any(int(s) & _status.NONFINITE_UNMASKED for s in got.status)
+    one_mask = lambda z: jf.kalman_filter(model, x0, P0, z, mask=mask[:, 0]).means  # noqa: E731  (T,) mask
+    np.testing.assert_allclose(np.asarray(jax.vmap(one_mask)(common)[2]), np.asarray(one_mask(common[2])),
+                               rtol=1e-12, atol=1e-12)
 
 
 def test_vmap_dispatch_keeps_the_per_sequence_filter_where_it_must(problem):
@@ -158,14 +167,16 @@ def test_vmap_dispatch_keeps_the_per_sequence_filter_where_it_must(problem):
                                rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize("nan", [False, True])
+@pytest.mark.parametrize("nan", ["none", "one sequence", "common"])
 def test_batched_dispatch_under_autodiff(problem, nan):
     """grad(vmap), vmap(grad), jvp(vmap) and vmap(vmap) all equal the per-sequence results."""
     model, x0, P0, zs, mask = problem
     clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
     batch = jnp.stack([clean, 0.5 * clean, clean + 1.0, clean - 1.0])
-    if nan:
+    if nan == "one sequence":
         batch = batch.at[2, 7, 0].set(jnp.nan)
+    elif nan == "common":
+        batch = batch.at[:, 7, 0].set(jnp.nan).at[:, 30].set(jnp.inf)
 
     def nll(th, z):
         mod = model._replace(Q=model.Q * jnp.exp(th[0]), R=model.R * jnp.exp(th[1]))

@@ -395,9 +395,11 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
     so ``vmap`` runs B of them. When the model, P0, the user mask and the plug-ins are shared and
     data-independent, the recursion differs between sequences only if some measurement is
     NaN/inf. This batching rule (``jax.custom_batching.custom_vmap``) looks at the whole batch
-    once: if every used element is finite it runs the ``check_finite=False`` filter, whose
-    covariance recursion ``vmap`` shares (identical results: nothing would have been masked),
-    else the per-sequence masked filter. Both are compiled; ``lax.cond`` runs one.
+    once: if every sequence has the same non-finite elements (none at all, or common gaps such as
+    the outages of a Monte Carlo study), it masks those for all and runs the
+    ``check_finite=False`` filter, whose covariance recursion ``vmap`` shares (identical results,
+    counts and flags included); else the per-sequence masked filter. Both are compiled;
+    ``lax.cond`` runs one.
     Taken only when ``vmap`` is the innermost transformation (see :func:`_vmap_innermost`):
     ``grad(vmap(f))`` gets it, ``vmap(grad(f))`` and ``vmap(jit(f))`` keep the per-sequence filter.
     """
@@ -421,14 +423,27 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
             z, mk = jnp.asarray(a[3]), a[4]
             # the barrier keeps XLA from constant-folding this reduction when the data is a
             # jit constant (seconds of compile time for a 256 x 3600 batch)
-            used = ~jnp.isfinite(jax.lax.optimization_barrier(z))
-            if mk is not None:
-                mk = jnp.asarray(mk, bool)
-                used = used & (mk if mk.ndim == 2 else mk[:, None])
+            fin = jnp.isfinite(jax.lax.optimization_barrier(z))
+            fin0 = fin[0] if axes[3] == 0 else fin
+            user = jnp.ones(fin0.shape, bool) if mk is None else jnp.broadcast_to(
+                jnp.asarray(mk, bool).reshape(fin0.shape[:1] + (-1,)), fin0.shape)
+            same = jnp.all(fin == fin0) if axes[3] == 0 else jnp.asarray(True)
+
+            def common_gaps():
+                # every sequence has the same non-finite elements (none, or e.g. the outages of a
+                # Monte Carlo study): mask them for all, share the recursion, count them as the
+                # masked filter does
+                b = list(a)
+                b[4] = user & fin0
+                res = jax.vmap(partial(call, False), in_axes=axes)(*b)
+                n = jnp.sum(user & ~fin0).astype(jnp.int32)
+                return res._replace(n_nonfinite=res.n_nonfinite + n,
+                                    status=res.status | jnp.where(n > 0, _status.NONFINITE_MEASUREMENT, 0))
+
             # the masked branch is rematerialised: under reverse-mode AD lax.cond keeps every
             # branch's residuals, and this one's are B covariance sequences (zeros when not taken)
             masked = jax.checkpoint(lambda *b: jax.vmap(partial(call, True), in_axes=axes)(*b))
-            out = jax.lax.cond(jnp.any(used), lambda: masked(*a), lambda: run(False))
+            out = jax.lax.cond(same, common_gaps, lambda: masked(*a))
         else:
             out = run(True)
         return out, jax.tree_util.tree_map(lambda _: True, out)
