@@ -37,10 +37,11 @@ def _losses(setup, theta, remat=False):
     """
     b, rho, q, r = theta
     key = jax.random.PRNGKey(4)
-    att = s0_metrics(setup, {"b": b, "q_scale": q, "r_scale": r}, key, filter="attenuated", remat=remat)
-    fad = s0_metrics(setup, {"rho": rho, "tau": 0.05, "q_scale": q, "r_scale": r}, key, filter="fading",
-                     remat=remat)
-    return jnp.stack([att["loss"], fad["loss"], att["nll"]])
+    # both filters in one program (jf.switch): index 0 attenuated, 1 fading
+    m = jax.vmap(lambda i: s0_metrics(setup, {"b": b, "rho": rho, "tau": 0.05, "q_scale": q, "r_scale": r,
+                                              "filter_index": i}, key, filter=("attenuated", "fading"),
+                                      remat=remat))(jnp.arange(2))
+    return jnp.stack([m["loss"][0], m["loss"][1], m["nll"][0]])
 
 
 @pytest.fixture(scope="module")

@@ -17,14 +17,17 @@ S0_LOSSES = ("rms", "nll", "nis")
 S0_PARAMS = {"classic": (), "constant": ("S",), "attenuated": ("b",), "fading": ("rho",)}
 
 
-def s0_rule(setup: S0Setup, filter: str, params: Mapping):
+def s0_rule(setup: S0Setup, filter, params: Mapping):
     """The inflation rule of ``filter`` with its parameter taken from ``params``.
 
     classic: none.  constant: ``S`` (S0 eq. (10)).  attenuated: ``b`` (eqs. (11)-(12)).
     fading: ``rho`` (recursive innovation estimator) if given, else the experiment's window;
     ``tau`` (optional) is the temperature of the smooth max(1, .) (finite-difference-friendly).
-    All rules inflate the experiment's ``inflate_states``.
+    All rules inflate the experiment's ``inflate_states``. A tuple of names gives
+    ``jf.switch(params["filter_index"], rules)``: several filters in one compiled program.
     """
+    if isinstance(filter, tuple):
+        return jf.switch(params.get("filter_index", 0), [s0_rule(setup, f, params) for f in filter])
     st = inflated_states(setup.exp)
     if filter == "classic":
         return None
@@ -40,7 +43,7 @@ def s0_rule(setup: S0Setup, filter: str, params: Mapping):
     raise ValueError(f"unknown S0 filter {filter!r}; expected one of {S0_FILTERS}")
 
 
-def s0_metrics(setup: S0Setup, params: Mapping, key, *, filter: str = "attenuated", loss: str = "rms",
+def s0_metrics(setup: S0Setup, params: Mapping, key, *, filter="attenuated", loss: str = "rms",
                remat: bool = False) -> dict:
     """One Monte Carlo run of the S0 experiment scored for tuning (pure in params and key).
 
@@ -49,7 +52,9 @@ def s0_metrics(setup: S0Setup, params: Mapping, key, *, filter: str = "attenuate
       params: dict of scalars: the rule's parameter (see :func:`s0_rule`) and optionally
         ``q_scale`` / ``r_scale`` (factors on the assumed Qc and R).
       key: PRNG key of the run.
-      filter: "classic", "constant", "attenuated" or "fading" (static).
+      filter: "classic", "constant", "attenuated" or "fading" (static); or a tuple of them, with
+        ``params["filter_index"]`` choosing one at run time (one program for all, ``vmap`` over
+        the index; see :func:`jaxnav.filters.switch`).
       loss: which metric is ``loss``: "rms" (mean 3-D position RMS against the truth, m — the
         criterion of S0's Table 1), "nll" (innovation negative log-likelihood per component,
         no truth needed) or "nis" (NIS consistency).
