@@ -362,10 +362,11 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
         False trusts the data: NaN/inf are still counted and raise the NONFINITE_UNMASKED error
         flag, but are not masked. Under ``vmap`` the default needs no such choice for speed:
         when the model, P0, mask and rule (classic, constant, attenuated) are shared by the
-        batch, the batch is checked once and, if nothing would be masked, one covariance
-        recursion serves every sequence (~10-20x faster than one per sequence; see
-        :func:`_batched_filter`). NaN anywhere in the batch, or a data-dependent rule or
-        estimator, runs one masked recursion per sequence.
+        batch, the batch is checked once and, if every sequence has the same non-finite
+        elements (none, or common gaps), one covariance recursion serves every sequence
+        (~10-20x faster than one per sequence; see :func:`_batched_filter`). NaN patterns that
+        differ between sequences, or a data-dependent rule or estimator, run one masked
+        recursion per sequence.
     Returns:
       :class:`KalmanResult`.
     Raises:
@@ -389,7 +390,7 @@ def _data_independent(plugin) -> bool:
 
 
 def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
-    """:func:`kalman_filter` under ``vmap``: one covariance recursion for the batch when no data is masked.
+    """:func:`kalman_filter` under ``vmap``: one covariance recursion when all sequences have the same gaps.
 
     With ``check_finite=True`` the NaN masks make every sequence's covariance recursion its own,
     so ``vmap`` runs B of them. When the model, P0, the user mask and the plug-ins are shared and
@@ -416,8 +417,10 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
     def rule(axis_size, in_batched, *a):
         del axis_size
         axes = tuple(jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched))
-        def run(check_finite):
-            return jax.vmap(partial(call, check_finite), in_axes=axes)(*a)
+
+        def run(check_finite, *b):
+            return jax.vmap(partial(call, check_finite), in_axes=axes)(*b)
+
         shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (0, 2, 4, 5, 6)]))
         if shared:
             z, mk = jnp.asarray(a[3]), a[4]
@@ -435,17 +438,17 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
                 # masked filter does
                 b = list(a)
                 b[4] = user & fin0
-                res = jax.vmap(partial(call, False), in_axes=axes)(*b)
+                res = run(False, *b)
                 n = jnp.sum(user & ~fin0).astype(jnp.int32)
                 return res._replace(n_nonfinite=res.n_nonfinite + n,
                                     status=res.status | jnp.where(n > 0, _status.NONFINITE_MEASUREMENT, 0))
 
             # the masked branch is rematerialised: under reverse-mode AD lax.cond keeps every
             # branch's residuals, and this one's are B covariance sequences (zeros when not taken)
-            masked = jax.checkpoint(lambda *b: jax.vmap(partial(call, True), in_axes=axes)(*b))
+            masked = jax.checkpoint(partial(run, True))
             out = jax.lax.cond(same, common_gaps, lambda: masked(*a))
         else:
-            out = run(True)
+            out = run(True, *a)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return f(model, x0, P0, zs, mask, inflation, estimator)
