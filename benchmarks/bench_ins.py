@@ -23,6 +23,10 @@ Cases:
 Implementations:
   jaxnav           ``jaxnav.ins.mechanize`` as a user calls it (host-side input validation included;
                    the coning/sculling corrections are inside its step). Batches: ``jax.jit(jax.vmap(...))``.
+  jaxnav nav_every=K  the same call with ``nav_every=K`` (default 10): the two-speed mechanization, whose
+                   navigation-frame terms (Earth and transport rate, gravity, Coriolis) are evaluated
+                   once per K samples while attitude and velocity increments stay per sample; the
+                   body-frame work runs as array operations, only N / K steps are sequential.
   pyins            what a pyins user calls: ``strapdown.compute_increments_from_imu`` (its coning and
                    sculling) + ``strapdown.Integrator(pva).integrate`` (numba loop, then a pandas
                    DataFrame with Euler angles).
@@ -41,6 +45,7 @@ The ratio column is row time / jaxnav time (min): for the pyins rows, > 1 means 
 from __future__ import annotations
 
 import argparse
+from functools import partial
 import datetime as _dt
 import os
 import platform
@@ -250,16 +255,19 @@ def build_report(args, cases, info, load0, load1, wall, checks):
             out.append(f"| {r.name} | {first} | {comp} | {_fmt_t(r.tmin)} | {_fmt_t(r.tmed)} | "
                        f"{per * 1e9:.0f} ns | {_fmt_rate(r.steps / r.tmin)} | {ratio} | {r.note} |")
         out.append("")
-    out.append("**Summary** (aggregate IMU steps per second, run min; ratio = pyins time / jaxnav time):")
+    two = next(r.name for r in cases[0][1] if r.name.startswith("jaxnav nav_every"))
+    out.append("**Summary** (aggregate IMU steps per second, run min; ratio = pyins time / jaxnav time; "
+               f"two-speed = `{two.split()[1]}`):")
     out.append("")
-    out.append("| case | jaxnav steps/s | pyins steps/s | pyins kernel steps/s | pyins / jaxnav | pyins kernel / jaxnav |")
-    out.append("|---|---|---|---|---|---|")
+    out.append("| case | jaxnav steps/s | jaxnav two-speed steps/s | pyins steps/s | pyins kernel steps/s | "
+               "pyins / jaxnav | pyins / two-speed | pyins kernel / two-speed |")
+    out.append("|---|---|---|---|---|---|---|---|")
     for title, rows in cases:
         by = {r.name: r for r in rows}
-        j, a, k = by["jaxnav"], by["pyins"], by["pyins kernel"]
+        j, t, a, k = by["jaxnav"], by[two], by["pyins"], by["pyins kernel"]
         out.append(f"| {title.split(',')[0]}{', ' + title.split(',')[1].strip() if title.startswith(('(b)', '(c)')) else ''} | "
-                   f"{_fmt_rate(j.steps / j.tmin)} | {_fmt_rate(a.steps / a.tmin)} | {_fmt_rate(k.steps / k.tmin)} | "
-                   f"{a.tmin / j.tmin:.2f} | {k.tmin / j.tmin:.2f} |")
+                   f"{_fmt_rate(j.steps / j.tmin)} | {_fmt_rate(t.steps / t.tmin)} | {_fmt_rate(a.steps / a.tmin)} | "
+                   f"{_fmt_rate(k.steps / k.tmin)} | {a.tmin / j.tmin:.2f} | {a.tmin / t.tmin:.2f} | {k.tmin / t.tmin:.2f} |")
     out.append("")
     out.append("Checks (same run): " + "; ".join(checks) + ".")
     return "\n".join(out)
@@ -279,6 +287,8 @@ def main(argv=None):
     p.add_argument("--save-every", type=int, default=100, help="keep every k-th state in the batches (default 100)")
     p.add_argument("--repeats", type=int, default=5,
                    help="timed calls per row after the first (default 5; twice that in the single case)")
+    p.add_argument("--nav-every", type=int, default=10,
+                   help="samples per navigation-frame update in the two-speed rows (default 10: 0.1 s)")
     p.add_argument("--extrapolate", type=int, default=8, help="trajectories timed for the pyins batch loops (default 8)")
     p.add_argument("--quick", action="store_true", help="N=20000, N_batch=5000, B=16, 2 repeats, writes nothing")
     p.add_argument("--results", default=str(HERE / "RESULTS.md"), help="results file (default benchmarks/RESULTS.md)")
@@ -316,12 +326,17 @@ def main(argv=None):
     th_a = np.ascontiguousarray(inc_all[THETA].to_numpy()[:N])
     dvc_a = np.ascontiguousarray(inc_all[DVC].to_numpy()[:N])
     dts_a = np.ascontiguousarray(inc_all.dt.to_numpy()[:N])
+    K = args.nav_every
+    TWO = f"jaxnav nav_every={K}"
     log(f"(a) single trajectory, N = {N}")
     rows_a = [
         Row("a", "jaxnav", lambda: mechanize(nav0, dth, dv, DT, hold_height=True).nav, N,
             note="`mechanize(..., hold_height=True)`, all states saved, host validation included"),
         Row("a", "pyins", lambda: pyins_api(imu_a, pva0), N,
             note="`compute_increments_from_imu` + `Integrator.integrate` (numba loop + DataFrame, Euler angles)"),
+        Row("a", TWO, lambda: mechanize(nav0, dth, dv, DT, hold_height=True, nav_every=K).nav, N,
+            note=f"two-speed: nav-frame terms once per {K} samples ({K * DT:g} s), all states saved, "
+                 "host validation included"),
         Row("a", "jaxnav (validate=False)", lambda: mechanize(nav0, dth, dv, DT, hold_height=True, validate=False).nav,
             N, note="the same without the host-side NaN/time checks of the inputs", warm=True),
         Row("a", "pyins kernel", lambda: pyins_kernel_run(dts_a, th_a, dvc_a, pva0), N,
@@ -330,7 +345,9 @@ def main(argv=None):
     run_rows(rows_a, 2 * args.repeats, log)
     cases.append((f"(a) single trajectory, N = {N} samples ({N * DT:.0f} s at 100 Hz)", rows_a))
     res_a = rows_a[0].out
-    lla_k = rows_a[3].out[0][1:]
+    lla_k = rows_a[4].out[0][1:]
+    checks.append(f"(a) max horizontal |jaxnav nav_every={K} - jaxnav| over {N * DT:.0f} s = "
+                  f"{horiz_diff_m(np.asarray(rows_a[2].out.pos), np.asarray(res_a.pos)) * 1e3:.3f} mm")
     checks.append(f"(a) max horizontal |jaxnav - pyins| over {N * DT:.0f} s = "
                   f"{horiz_diff_m(np.asarray(res_a.pos), pyins_pos(lla_k)) * 1e3:.2f} mm "
                   f"(first-order start-of-interval terms in pyins, see tests/test_pyins.py)")
@@ -346,11 +363,14 @@ def main(argv=None):
     dts_b = np.ascontiguousarray(inc_all.dt.to_numpy()[:Nb])
     inc_b0 = inc_all.iloc[:Nb]
 
-    def mech_b(n0, a, b):
-        return mechanize(n0, a, b, DT, save_every=S, hold_height=True).nav
+    def mech_b(n0, a, b, nav_every=1):
+        return mechanize(n0, a, b, DT, save_every=S, hold_height=True, nav_every=nav_every).nav
 
     f_shared = jax.jit(jax.vmap(mech_b, in_axes=(0, None, None)))
     f_own = jax.jit(jax.vmap(mech_b, in_axes=(0, 0, 0)))
+    mech_k = partial(mech_b, nav_every=K)
+    f_shared_k = jax.jit(jax.vmap(mech_k, in_axes=(0, None, None)))
+    f_own_k = jax.jit(jax.vmap(mech_k, in_axes=(0, 0, 0)))
     for B in batches:
         E = min(args.extrapolate, B)
         # initial states: 0.1 m/s velocity and 1 mrad attitude errors (trajectory 0 unperturbed)
@@ -364,6 +384,8 @@ def main(argv=None):
         rows_b = [
             Row("b", "jaxnav", lambda: f_shared(navB, dth_b0, dv_b0), B * Nb,
                 note=f"`jit(vmap(mechanize))` over the initial state, save_every={S}"),
+            Row("b", TWO, lambda: f_shared_k(navB, dth_b0, dv_b0), B * Nb,
+                note=f"the same with `nav_every={K}` (the body-frame work is shared by the batch)"),
             Row("b", "pyins", lambda: [strapdown.Integrator(pv, with_altitude=False).integrate(inc_b0) for pv in pvas],
                 B * Nb, scale=B / E, note=f"increments corrected once; Integrator loop, {E} of {B} timed, x{B / E:g}",
                 warm=True),
@@ -377,6 +399,8 @@ def main(argv=None):
         if ref is not None:
             checks.append(f"(b) B={B}: vmap trajectory 0 = single run: max |Δpos| "
                           f"{np.abs(np.asarray(nb.pos[0]) - ref).max():.1e} (rad, rad, m)")
+        checks.append(f"(b) B={B}: max horizontal |nav_every={K} - per sample| over the batch "
+                      f"{max(horiz_diff_m(np.asarray(rows_b[1].out.pos[i]), np.asarray(nb.pos[i])) for i in range(B)) * 1e3:.3f} mm")
         # (c) own record per trajectory: the record plus per-trajectory constant biases
         bg = rng.normal(0.0, 1e-6, (B, 1, 3))  # rad/s (~0.2 deg/h)
         ba = rng.normal(0.0, 1e-3, (B, 1, 3))  # m/s^2 (~0.1 mg)
@@ -394,6 +418,7 @@ def main(argv=None):
         rows_c = [
             Row("c", "jaxnav", lambda: f_own(navB, dthB, dvB), B * Nb,
                 note=f"`jit(vmap(mechanize))` over initial state and record, save_every={S}"),
+            Row("c", TWO, lambda: f_own_k(navB, dthB, dvB), B * Nb, note=f"the same with `nav_every={K}`"),
             Row("c", "pyins", lambda: [pyins_api(im, pv) for im, pv in zip(imus, pvas)], B * Nb, scale=B / E,
                 note=f"per record: `compute_increments_from_imu` + `Integrator`, {E} of {B} timed, x{B / E:g}",
                 warm=True),
@@ -403,7 +428,7 @@ def main(argv=None):
         run_rows(rows_c, args.repeats, log)
         cases.append((f"(c) B = {B} trajectories, each with its own IMU record, N = {Nb} samples each", rows_c))
         nc = rows_c[0].out
-        lla_c = rows_c[2].out[-1][0][S: Nb + 1: S]  # last timed trajectory, E - 1
+        lla_c = rows_c[3].out[-1][0][S: Nb + 1: S]  # last timed trajectory, E - 1
         checks.append(f"(c) B={B}: max horizontal |jaxnav - pyins kernel| (trajectory {E - 1}, {Nb * DT:.0f} s) "
                       f"{horiz_diff_m(np.asarray(nc.pos[E - 1]), pyins_pos(lla_c)) * 1e3:.2f} mm")
         del dthB, dvB, nb, nc

@@ -26,16 +26,19 @@ def skew(v):
     return jnp.stack([jnp.stack([o, -z, y], -1), jnp.stack([z, o, -x], -1), jnp.stack([-y, x, o], -1)], -2)
 
 
+def quat_mul_c(p, q):
+    """Hamilton product on component tuples (w, x, y, z) of same-shape arrays (structure of arrays)."""
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
+
+
 def quat_mul(p, q):
     """Hamilton product p (x) q of (..., 4) quaternions."""
-    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return jnp.stack([
-        pw * qw - px * qx - py * qy - pz * qz,
-        pw * qx + px * qw + py * qz - pz * qy,
-        pw * qy - px * qz + py * qw + pz * qx,
-        pw * qz + px * qy - py * qx + pz * qw,
-    ], axis=-1)
+    return jnp.stack(quat_mul_c(jnp.unstack(p, axis=-1), jnp.unstack(q, axis=-1)), axis=-1)
 
 
 def quat_conj(q):
@@ -46,6 +49,19 @@ def quat_conj(q):
 def quat_normalize(q):
     """q / |q|."""
     return q / jnp.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def cross_c(a, b):
+    """Cross product on component tuples (x, y, z) of same-shape arrays."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def quat_rotate_c(q, v):
+    """:func:`quat_rotate` on component tuples: q = (w, x, y, z), v = (x, y, z)."""
+    u = q[1:]
+    t = tuple(2.0 * c for c in cross_c(u, v))
+    ut = cross_c(u, t)
+    return tuple(v[i] + q[0] * t[i] + ut[i] for i in range(3))
 
 
 def quat_rotate(q, v):
@@ -130,19 +146,23 @@ def yaw_to_heading(yaw):
     return jnp.mod(-yaw, 2.0 * jnp.pi)
 
 
+def rv_to_quat_c(x, y, z):
+    """:func:`rv_to_quat` on components of same-shape arrays -> (w, x, y, z) tuple."""
+    t2 = x * x + y * y + z * z
+    small = t2 < 1e-8
+    t = jnp.sqrt(jnp.where(small, 1.0, t2))
+    c = jnp.where(small, 1.0 - t2 / 8.0 + t2 * t2 / 384.0, jnp.cos(0.5 * t))
+    s = jnp.where(small, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, jnp.sin(0.5 * t) / t)
+    return (c, s * x, s * y, s * z)
+
+
 def rv_to_quat(phi):
     """Rotation vector (..., 3) rad -> unit quaternion [cos(|phi|/2), sin(|phi|/2) phi/|phi|].
 
     Uses the Taylor series near zero (double-where), so values and gradients are finite and
     exact to float64 at phi = 0.
     """
-    t2 = jnp.sum(phi * phi, axis=-1, keepdims=True)
-    small = t2 < 1e-8
-    t2s = jnp.where(small, 1.0, t2)
-    t = jnp.sqrt(t2s)
-    c = jnp.where(small, 1.0 - t2 / 8.0 + t2 * t2 / 384.0, jnp.cos(0.5 * t))
-    s = jnp.where(small, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0, jnp.sin(0.5 * t) / t)
-    return jnp.concatenate([c, s * phi], axis=-1)
+    return jnp.stack(rv_to_quat_c(*jnp.unstack(phi, axis=-1)), axis=-1)
 
 
 def quat_to_rv(q):
