@@ -408,6 +408,10 @@ def run_benchmarks(args, zs_batch, log):
         mod = jf.constant_velocity(DT, sigma=jnp.exp(theta[1]), q=jnp.exp(theta[0]))
         return -jf.kalman_filter(mod, jx0, jP0, z, save=(), check_finite=check_finite).loglik
 
+    def jx_ll(theta, z):
+        mod = jf.constant_velocity(DT, sigma=jnp.exp(theta[1]), q=jnp.exp(theta[0]))
+        return -jf.log_likelihood(mod, jx0, jP0, z)
+
     def batch(fn, **kw):
         return lambda theta, zB: jnp.sum(jax.vmap(lambda z: fn(theta, z, **kw))(zB))
 
@@ -426,11 +430,19 @@ def run_benchmarks(args, zs_batch, log):
             rows.append(Row(case, "jaxnav value_and_grad" + label, first, runs, jax_impl=True,
                             note="d(-loglik)/d(log q, log sigma)" + sfx))
             if not kw:
+                g_auto = np.asarray(vg(theta0, data)[1])
                 # two parameters: forward mode (one tangent each, no tape) is the cheaper gradient
                 vg = jax.jit(lambda th, d: jtune.value_and_grad(lambda t: wrap(jx_nll)(t, d), mode="forward")(th))
                 first, runs, _ = jit_time(vg, (theta0, data), rr)
                 rows.append(Row(case, "jaxnav value_and_grad, forward mode", first, runs, jax_impl=True,
                                 note="the same gradient by jaxnav.tune.value_and_grad(mode='forward')" + sfx))
+                # the gradient from one RTS pass (jaxnav.filters.log_likelihood), no tape of the filter
+                vg = jax.jit(jax.value_and_grad(wrap(jx_ll)))
+                first, runs, out = jit_time(vg, (theta0, data), rr)
+                rel = float(np.max(np.abs(np.asarray(out[1]) - g_auto) / np.abs(g_auto)))
+                rows.append(Row(case, "jaxnav log_likelihood value_and_grad", first, runs, jax_impl=True,
+                                note="the same gradient from one RTS pass (`jf.log_likelihood`); max rel. "
+                                     f"difference to autodiff {rel:.1e}" + sfx))
     try:
         from dynamax.linear_gaussian_ssm import lgssm_filter as _dlf
         from dynamax.linear_gaussian_ssm.inference import make_lgssm_params as _dmp

@@ -6,6 +6,8 @@
   :func:`switch` to pick one by an array index in one compiled program) and noise
   estimators :func:`variance_compensation`, :func:`sage_husa`.
 * :func:`rts_smoother`: fixed-interval smoothing over the saved filter moments.
+* :func:`log_likelihood`: the classic filter's innovation log-likelihood with exact gradients
+  from one RTS pass (no tape through the filter).
 * :func:`predict`, :func:`update`, :func:`filter_step`: the pure pieces, for custom scans.
 """
 
@@ -31,6 +33,7 @@ from jaxnav.filters._kalman import (
     update,
 )
 from jaxnav.filters._model import LinearGaussian, check_shapes, validate_model
+from jaxnav.filters._loglik import LoglikGradients, log_likelihood, loglik_and_gradients
 from jaxnav.filters._models import constant_velocity
 from jaxnav.filters._robust import (
     IGG3,
@@ -68,4 +71,5 @@ __all__ = [
     "IGG3", "IGG3State", "Chain", "ChainInfo", "RobustInfo", "YangFactor", "chain", "igg3", "igg3_weight", "yang_alpha",
     "yang_factor",
     "parallel_filter", "parallel_smoother", "Switch", "switch",
+    "LoglikGradients", "log_likelihood", "loglik_and_gradients",
 ]
