@@ -444,7 +444,9 @@ def mechanize(nav0: NavState, dtheta, dv, dt, *, t=None, kind: str = "increments
       dt: scalar or (N,) sample intervals, s.
       t: optional (N,) sample times, s, checked for increasing order and gaps.
       kind: static, "increments" or "rates" (rates are multiplied by dt: rectangular integration).
-      a0: optional (3,) nav acceleration at the start (for the first mid-interval extrapolation).
+      a0: optional (3,) nav acceleration at the start (for the first mid-interval extrapolation;
+        with ``nav_every > 1`` each block predicts its mean velocity from its own increments
+        and a0 is not needed).
       ellipsoid: static Earth model.  save_every: static, keep every k-th state (memory).
       coning: static, two-sample coning/sculling corrections.
       hold_height: static, hold h and V_U = 0 (see :func:`mech_step`).
