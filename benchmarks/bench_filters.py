@@ -436,12 +436,12 @@ def run_benchmarks(args, zs_batch, log):
                 first, runs, _ = jit_time(vg, (theta0, data), rr)
                 rows.append(Row(case, "jaxnav value_and_grad, forward mode", first, runs, jax_impl=True,
                                 note="the same gradient by jaxnav.tune.value_and_grad(mode='forward')" + sfx))
-                # the gradient from one RTS pass (jaxnav.filters.log_likelihood), no tape of the filter
+                # the gradient from one backward smoothing pass (jaxnav.filters.log_likelihood), no tape
                 vg = jax.jit(jax.value_and_grad(wrap(jx_ll)))
                 first, runs, out = jit_time(vg, (theta0, data), rr)
                 rel = float(np.max(np.abs(np.asarray(out[1]) - g_auto) / np.abs(g_auto)))
                 rows.append(Row(case, "jaxnav log_likelihood value_and_grad", first, runs, jax_impl=True,
-                                note="the same gradient from one RTS pass (`jf.log_likelihood`); max rel. "
+                                note="the same gradient from one backward smoothing pass (`jf.log_likelihood`); max rel. "
                                      f"difference to autodiff {rel:.1e}" + sfx))
     try:
         from dynamax.linear_gaussian_ssm import lgssm_filter as _dlf

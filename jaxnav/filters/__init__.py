@@ -7,7 +7,7 @@
   estimators :func:`variance_compensation`, :func:`sage_husa`.
 * :func:`rts_smoother`: fixed-interval smoothing over the saved filter moments.
 * :func:`log_likelihood`: the classic filter's innovation log-likelihood with exact gradients
-  from one RTS pass (no tape through the filter).
+  from one backward smoothing pass (no tape through the filter).
 * :func:`predict`, :func:`update`, :func:`filter_step`: the pure pieces, for custom scans.
 """
 

@@ -1,19 +1,23 @@
-"""Innovation log-likelihood of the classic Kalman filter with its exact gradient from one RTS pass.
+"""Innovation log-likelihood of the classic Kalman filter with its exact gradient from one backward pass.
 
 The derivative of log p(z_1..z_T) with respect to anything that enters the model at epoch t
 only through the prior N(x_t; m_t|t-1, P_t|t-1) or the measurement density N(z_t; H_t x_t, R_t)
 is the expectation of that density's own derivative under the *smoothing* distribution
-N(x_t; m^s_t, P^s_t) (Fisher's identity applied one epoch at a time; Segal & Weinstein 1989):
+N(x_t; m^s_t, P^s_t) (Fisher's identity applied one epoch at a time; Segal & Weinstein 1989).
+In the backward (modified Bryson-Frazier) form of the smoother, m^s_t = m_t|t-1 + P_t|t-1 b_t
+and P^s_t = P_t|t-1 - P_t|t-1 L_t P_t|t-1, and the derivatives read
 
-  d/dm_t|t-1 = P_t|t-1^-1 d_t,  d/dP_t|t-1 = 1/2 P_t|t-1^-1 (P^s_t + d_t d_t^T) P_t|t-1^-1 - 1/2 P_t|t-1^-1,
+  d/dm_t|t-1 = b_t,  d/dP_t|t-1 = (b_t b_t^T - L_t) / 2,
   d/dR_t = 1/2 R^-1 (e_t e_t^T + H P^s_t H^T) R^-1 - 1/2 R^-1,  d/dH_t = R^-1 (e_t m^s_t^T - H P^s_t),
-  d/dz_t = -R^-1 e_t,  with d_t = m^s_t - m_t|t-1 and e_t = z_t - H m^s_t,
+  d/dz_t = -R^-1 e_t,  with e_t = z_t - H m^s_t,
+  b_t = H^T S_t^-1 v_t + W_t b_t+1,  L_t = H^T S_t^-1 H + W_t L_t+1 W_t^T,  W_t = (I - K_t H)^T F_t+1^T
 
-and m_t|t-1 = F m_t-1, P_t|t-1 = F P_t-1 F^T + G Q G^T carry these to F, G, Q, x0 and P0.
-So one filter pass plus one RTS pass (both over all epochs at once where possible) give the
-value and the exact gradient; no tape of the filter is kept. :func:`log_likelihood` wraps that
-in a ``jax.custom_jvp``, so ``grad``, ``value_and_grad``, ``jvp`` (forward mode) and ``vmap``
-all use it, through any parameterisation of the model.
+(v_t, S_t, K_t the filter's innovation, its covariance and gain). m_t|t-1 = F m_t-1 and
+P_t|t-1 = F P_t-1 F^T + G Q G^T carry them to F, G, Q, x0 and P0. So one filter pass and one
+backward pass give the value and the exact gradient, with no tape of the filter and no inverse
+of a predicted covariance (singular ones, e.g. an exactly known x0, are fine). :func:`log_likelihood`
+wraps that in a ``jax.custom_jvp``, so ``grad``, ``value_and_grad``, ``jvp`` (forward mode) and
+``vmap`` all use it, through any parameterisation of the model.
 """
 
 from __future__ import annotations
@@ -23,10 +27,9 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxnav._numerics import cho_solve, cholesky
-from jaxnav.filters._kalman import kalman_filter, prepare_inputs
+from jaxnav._numerics import cho_solve, cholesky, mm
+from jaxnav.filters._kalman import kalman_filter, prepare_inputs, resolve_products
 from jaxnav.filters._model import LinearGaussian
-from jaxnav.filters._smoother import rts_smoother
 
 _FILTER_SAVE = ("means", "covs", "pred_means", "pred_covs")
 
@@ -35,9 +38,11 @@ def log_likelihood(model: LinearGaussian, x0, P0, zs, *, mask=None):
     """Innovation log-likelihood of the classic Kalman filter (S0 eqs. (4)-(9)), with exact derivatives.
 
     The value equals ``kalman_filter(model, x0, P0, zs, mask=mask).loglik`` (NaN/inf measurement
-    elements masked). Derivatives (reverse or forward mode) come from the RTS smoother instead of
-    differentiating through the filter (module docstring): about one filter plus one smoother pass,
-    exact to rounding, where autodiff through the scan costs ~4x the forward pass.
+    elements masked). Derivatives (reverse or forward mode) come from one backward smoothing pass
+    instead of differentiating through the filter (module docstring): exact to rounding, 2.3-2.6x
+    the forward pass for one sequence where autodiff through the scan costs ~4x. Under ``vmap``
+    it is memory-bound (each sequence writes and rereads its means): for a batch and a few
+    parameters ``jaxnav.tune.value_and_grad(mode="forward")`` is faster (benchmarks/RESULTS.md).
 
     Args:
       model: :class:`~jaxnav.filters.LinearGaussian`, static or (T, ...) time-varying leaves.
@@ -51,8 +56,8 @@ def log_likelihood(model: LinearGaussian, x0, P0, zs, *, mask=None):
 
     Only the classic filter: the prior-inflation rules and noise estimators change the filter
     away from the exact posterior, so their log-likelihood is differentiated through the filter
-    (``kalman_filter(...).loglik``). The identity needs invertible predicted covariances and
-    innovation covariances (the filter's status stays 0).
+    (``kalman_filter(...).loglik``). The innovation covariances must be positive definite (the
+    filter's status stays 0).
     """
     model, x0, P0, zs, mask, _, _, _, _ = prepare_inputs(model, x0, P0, zs, mask, (), False)
     return _loglik(model, x0, P0, zs, mask)
@@ -110,7 +115,7 @@ class LoglikGradients(NamedTuple):
 
 
 def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
-    """(log-likelihood, :class:`LoglikGradients`) from one filter and one RTS pass (module docstring).
+    """(log-likelihood, :class:`LoglikGradients`) from one filter and one backward pass (module docstring).
 
     Inputs as prepared by ``prepare_inputs``; ``valid`` (T, m) bool marks the measurement
     elements used, and must exclude the non-finite ones. Terms that depend on the covariances
@@ -121,7 +126,6 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     n = x0.shape[0]
     dtype = zs.dtype
     f = kalman_filter(model, x0, P0, zs, mask=valid, save=_FILTER_SAVE, check_finite=False)
-    s = rts_smoother(model, f, save=("means", "covs"))
     tv = {name: leaf is not None and leaf.ndim == 3 for name, leaf in zip(LinearGaussian._fields, model)}
 
     def fold(expr, *ops, leaf):
@@ -132,17 +136,46 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     def at(name):  # a model leaf with explicit epoch axis index letters: "t.." if time-varying
         return "t" if tv[name] else ""
 
-    # prior sensitivities: b_t = d/dm_t|t-1, A_t = d/dP_t|t-1
+    # Backward (modified Bryson-Frazier) recursion for b_t = d/dm_t|t-1 and Lambda_t, where
+    # A_t = d/dP_t|t-1 = (b_t b_t^T - Lambda_t) / 2, m^s_t = m_t|t-1 + P_t|t-1 b_t and
+    # P^s_t = P_t|t-1 - P_t|t-1 Lambda_t P_t|t-1 (the RTS moments): with W_t = (I - K_t H)^T F_t+1^T,
+    # b_t = H^T S_t^-1 v_t + W_t b_t+1,  Lambda_t = H^T S_t^-1 H + W_t Lambda_t+1 W_t^T.
+    # Only innovation covariances are inverted, so a singular P_t|t-1 (exactly known x0, a
+    # rank-deficient G Q G^T) is fine.
+    H, R = model.H, model.R
+    Hm = jnp.where(valid[:, :, None], H, 0.0)
+    vm = jnp.where(valid, zs - jnp.sum(Hm * f.pred_means[:, None, :], axis=-1), 0.0)
+    both = valid[:, :, None] & valid[:, None, :]
+    S = jnp.where(both, Hm @ f.pred_covs @ jnp.swapaxes(Hm, -1, -2) + R, 0.0) + jax.vmap(jnp.diag)(
+        jnp.where(valid, 0.0, 1.0).astype(dtype))
+    SiH = cho_solve(cholesky(S), Hm)  # S^-1 H (T, m, n), zero rows where invalid
+    u = jnp.sum(SiH * vm[:, :, None], axis=1)  # H^T S^-1 v (T, n)
+    K = f.pred_covs @ jnp.swapaxes(SiH, -1, -2)
     eye_n = jnp.eye(n, dtype=dtype)
-    Lp = cholesky(f.pred_covs)
-    Pp_inv = cho_solve(Lp, jnp.broadcast_to(eye_n, (T, n, n)))
-    # per-sequence products as elementwise ops against the shared matrices: under vmap they
-    # broadcast instead of becoming T small batched dots
-    b = cho_solve(Lp, (s.means - f.pred_means)[..., None])[..., 0]
-    A_cov = 0.5 * (Pp_inv @ s.covs @ Pp_inv - Pp_inv)  # A_t = A_cov + b b^T / 2
+    F = model.F
+    F_next = jnp.concatenate([F[1:], jnp.zeros((1, n, n), dtype)]) if tv["F"] else jnp.concatenate(
+        [jnp.broadcast_to(F, (T - 1, n, n)), jnp.zeros((1, n, n), dtype)])
+    W = jnp.swapaxes(F_next @ (eye_n - K @ Hm), -1, -2)
+    HtSiH = jnp.swapaxes(Hm, -1, -2) @ SiH
+
+    # small products: fused for one sequence, batched dots where vmap batches them (the means
+    # always; the covariances only when the batch does not share them)
+    prod_b = mm if resolve_products("auto", zs) == "fused" else jnp.matmul
+    prod_L = mm if resolve_products("auto", W) == "fused" else jnp.matmul
+
+    def back(carry, inp):
+        b_next, Lam_next = carry
+        u_t, HSH_t, W_t = inp
+        b_t = u_t + prod_b(W_t, b_next)
+        Lam_t = HSH_t + prod_L(prod_L(W_t, Lam_next), W_t.T)
+        return (b_t, Lam_t), (b_t, Lam_t)
+
+    _, (b, Lam) = jax.lax.scan(back, (jnp.zeros(n, dtype), jnp.zeros((n, n), dtype)), (u, HtSiH, W), reverse=True)
+    sm_means = f.pred_means + jnp.sum(f.pred_covs * b[:, None, :], axis=-1)
+    sm_covs = f.pred_covs - f.pred_covs @ Lam @ f.pred_covs
+    A_cov = -0.5 * Lam  # A_t = A_cov + b b^T / 2
     m_prev = jnp.concatenate([x0[None], f.means[:-1]], axis=0)
     P_prev = jnp.concatenate([P0[None], f.covs[:-1]], axis=0)
-    F = model.F
     Fi = at("F")
     bF = jnp.einsum(f"tj,{Fi}jk->tk", b, F)
     bFP = jnp.sum(bF[:, :, None] * P_prev, axis=1)  # (b^T F P_t-1)_t
@@ -164,17 +197,14 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
               + fold("ti,tl->il", b, jnp.einsum(f"tk,{Qi}kl->tl", bG, Q), leaf="G"))
 
     # measurement sensitivities over the valid components (R^-1 of the valid block, zero elsewhere)
-    H, R = model.H, model.R
-    both = valid[:, :, None] & valid[:, None, :]
     Rm = jnp.where(both, R, 0.0) + jax.vmap(jnp.diag)(jnp.where(valid, 0.0, 1.0).astype(dtype))
     Ri = jnp.where(both, cho_solve(cholesky(Rm), jnp.broadcast_to(jnp.eye(m, dtype=dtype), (T, m, m))), 0.0)
-    Hm = jnp.where(valid[:, :, None], H, 0.0)
-    e = jnp.where(valid, zs - jnp.sum(Hm * s.means[:, None, :], axis=-1), 0.0)
+    e = jnp.where(valid, zs - jnp.sum(Hm * sm_means[:, None, :], axis=-1), 0.0)
     Rie = jnp.sum(Ri * e[:, None, :], axis=-1)
     RiH = Ri @ Hm
-    gR = 0.5 * (fold("ti,tj->ij", Rie, Rie, leaf="R") + fold("tij,tjk,tlk->il", RiH, s.covs, RiH, leaf="R")
+    gR = 0.5 * (fold("ti,tj->ij", Rie, Rie, leaf="R") + fold("tij,tjk,tlk->il", RiH, sm_covs, RiH, leaf="R")
                 - (Ri if tv["R"] else jnp.sum(Ri, axis=0)))
-    gH = fold("ti,tj->ij", Rie, s.means, leaf="H") - fold("tij,tjk->ik", RiH, s.covs, leaf="H")
+    gH = fold("ti,tj->ij", Rie, sm_means, leaf="H") - fold("tij,tjk->ik", RiH, sm_covs, leaf="H")
     gz = -Rie
 
     gmodel = LinearGaussian(F=gF, H=gH, Q=gQ, R=gR, G=gG)
