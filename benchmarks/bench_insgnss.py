@@ -265,6 +265,8 @@ def main(argv=None):
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--batches", default="8,32,64", help="vmapped seed counts (default 8,32,64; ~3.3 min in all "
                    "on the idle 2-core machine, several times that under load: use 4,8 then)")
+    p.add_argument("--nav-every", type=int, default=10,
+                   help="samples per navigation-frame update in the two-speed rows (default 10)")
     p.add_argument("--repeats", type=int, default=2,
                    help="timed calls per batched row after the first (default 2; jaxnav single: 3x that)")
     p.add_argument("--pyins-repeats", type=int, default=1,
@@ -298,10 +300,12 @@ def main(argv=None):
     n_states = S.exp["filter"]["n_states"]
     t_imu, t_g = S.t_imu, S.t_gnss
 
-    def lc(dth, dv, gpos, gvel, valid, nav0):
+    def lc(dth, dv, gpos, gvel, valid, nav0, nav_every=1):
         meas = _measurements(S.cfg, SimpleNamespace(pos=gpos, vel=gvel, valid=valid), t_g)
         return loosely_coupled(nav0, t_imu, dth, dv, meas, S.params, dt_imu=S.cfg.dt, n_states=n_states,
-                               inflation=None, save=("nav",))
+                               inflation=None, save=("nav",), nav_every=nav_every)
+
+    K = args.nav_every
 
     d0 = take(data, 0)
 
@@ -317,14 +321,17 @@ def main(argv=None):
     rows1 = [Row("jaxnav", lc_checked, 1,
                  note="`loosely_coupled(...)` user call (host validation + segmentation), per-epoch nav saved"),
              Row("pyins", lambda: pc[0].run(), 1,
-                 note="`compute_increments_from_imu` + `run_feedback_filter(time_step=1.0)`, Position + NedVelocity")]
+                 note="`compute_increments_from_imu` + `run_feedback_filter(time_step=1.0)`, Position + NedVelocity"),
+             Row(f"jaxnav nav_every={K}", lambda: lc(*d0, nav_every=K).epochs.nav, 1,
+                 note=f"the same call with `nav_every={K}`: two-speed mechanization between the fixes")]
     # numba compile of pyins's strapdown loop, on its own (so pyins's first timed call is warm)
     t0 = time.perf_counter()
     strapdown.Integrator(pc[0].pva0).integrate(strapdown.compute_increments_from_imu(pc[0].imu.iloc[:11], "increment"))
     t_numba = time.perf_counter() - t0
     log(f"  numba warm-up (pyins strapdown loop compile) {t_numba:.2f} s")
     jax.clear_caches()
-    run_rows(rows1, {"jaxnav": 3 * args.repeats, "pyins": args.pyins_repeats}, log)
+    run_rows(rows1, {"jaxnav": 3 * args.repeats, "pyins": args.pyins_repeats,
+                     f"jaxnav nav_every={K}": 3 * args.repeats}, log)
     rows1[1].compile_fixed = t_numba
     res0 = checks[0]
     assert int(res0.status) == 0, int(res0.status)
@@ -332,17 +339,20 @@ def main(argv=None):
 
     # ---- batches
     f_b = jax.jit(jax.vmap(lambda *a: lc(*a).epochs.nav))
+    f_bk = jax.jit(jax.vmap(lambda *a: lc(*a, nav_every=K).epochs.nav))
     rowsB = []
     for B in batches:
         dB = jax.tree_util.tree_map(lambda a, B=B: a[:B], data)
         rowsB.append(Row(f"jaxnav B={B}", lambda dB=dB: f_b(*dB), B,
                          note="`jit(vmap(loosely_coupled))` over IMU record, fixes, initial state"))
+        rowsB.append(Row(f"jaxnav nav_every={K} B={B}", lambda dB=dB: f_bk(*dB), B,
+                         note=f"the same with `nav_every={K}`"))
     log(f"vmapped seeds, B = {batches}")
     run_rows(rowsB, args.repeats, log)
 
     # ---- agreement (pyins on pyins-seeds seeds; jaxnav batch for the same seeds)
     log(f"agreement on {args.pyins_seeds} seeds")
-    nav_all = rowsB[-1].out if rowsB[-1].n >= args.pyins_seeds else f_b(*jax.tree_util.tree_map(
+    nav_all = rowsB[-2].out if rowsB[-2].n >= args.pyins_seeds else f_b(*jax.tree_util.tree_map(
         lambda a: a[:args.pyins_seeds], data))
     truth_g = np.asarray(S.truth.pos)[S.gidx]
     agree = []
@@ -361,18 +371,22 @@ def main(argv=None):
             f"pyins {np.round(agree[-1]['vp'], 4)}")
     # the same jaxnav single result equals the batch row (vmap does not change the numbers)
     single_vs_batch = float(np.max(np.abs(np.asarray(rows1[0].out.pos) - np.asarray(nav_all.pos[0]))))
+    # two-speed against the per-sample loop, same seed (m, ENU)
+    two_vs_one = float(np.max(np.abs(enu_err(S, np.asarray(rows1[2].out.pos), np.asarray(rows1[0].out.pos)))))
+    two_err = rms(enu_err(S, np.asarray(rows1[2].out.pos), truth_g)[:-1])
 
     load1 = loadavg()
     wall = time.perf_counter() - wall0
-    report = build_report(args, info, load0, load1, wall, N, M, rows1, rowsB, agree, single_vs_batch, t_sim, Bmax)
+    report = build_report(args, info, load0, load1, wall, N, M, rows1, rowsB, agree, single_vs_batch, t_sim, Bmax,
+                          (two_vs_one, two_err))
     print("\n" + report)
     if not args.no_write:
         write_results(args.results, report)
         log(f"wrote {args.results}")
 
 
-def build_report(args, info, load0, load1, wall, N, M, rows1, rowsB, agree, single_vs_batch, t_sim, Bmax):
-    j1, p1 = rows1
+def build_report(args, info, load0, load1, wall, N, M, rows1, rowsB, agree, single_vs_batch, t_sim, Bmax, two):
+    j1, p1, k1 = rows1
     out = [f"Generated by `benchmarks/bench_insgnss.py` on {info['date']} (main `.venv`).", "",
            "| | |", "|---|---|"]
     for k in ("machine", "python", "jax devices", "jaxnav source", "versions"):
@@ -398,7 +412,7 @@ def build_report(args, info, load0, load1, wall, N, M, rows1, rowsB, agree, sing
                "per IMU step (per run) | IMU steps/s (aggregate) | pyins / jaxnav per run | notes |")
     out.append("|---|---|---|---|---|---|---|---|---|---|---|")
     p_per = p1.tmin
-    rows = [(j1, 1), (p1, 1)] + [(r, r.n) for r in rowsB]
+    rows = [(j1, 1), (p1, 1), (k1, 1)] + [(r, r.n) for r in rowsB]
     for r, n in rows:
         per = r.tmin / n
         comp = _fmt_t(r.compile_s) + ("" if r.name.startswith("jaxnav") else " (numba)")
@@ -406,9 +420,11 @@ def build_report(args, info, load0, load1, wall, N, M, rows1, rowsB, agree, sing
         out.append(f"| {r.name.split(' B=')[0]} | {n} | {_fmt_t(r.first)} | {comp} | {_fmt_t(r.tmin)} | "
                    f"{_fmt_t(r.tmed)} | {_fmt_t(per)} | {per / N * 1e6:.1f} µs | {_fmt_rate(n * N / r.tmin)} | {ratio} | {r.note} |")
     out.append("")
-    out.append(f"pyins over B seeds is a Python loop: B x {_fmt_t(p_per)} (e.g. {_fmt_t(p_per * rowsB[-1].n)} for "
-               f"B = {rowsB[-1].n}, against {_fmt_t(rowsB[-1].tmin)} for jaxnav's vmapped batch). "
-               f"The ratio column is pyins's single-run min over the row's per-run min (> 1: jaxnav faster).")
+    out.append(f"pyins over B seeds is a Python loop: B x {_fmt_t(p_per)} (e.g. {_fmt_t(p_per * rowsB[-2].n)} for "
+               f"B = {rowsB[-2].n}, against {_fmt_t(rowsB[-2].tmin)} for jaxnav's vmapped batch). "
+               f"The ratio column is pyins's single-run min over the row's per-run min (> 1: jaxnav faster). "
+               f"{k1.name.split()[1]} against the per-sample loop, seed 0: max |Δ| {two[0] * 1e3:.3f} mm over the "
+               f"fixes; its position RMS against the truth E / N / U {' / '.join(f'{x:.3f}' for x in two[1])} m.")
     out.append("")
     out.append("### Agreement with the truth (same seeds, per-run RMS over the fixes)")
     out.append("")

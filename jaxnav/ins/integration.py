@@ -33,7 +33,7 @@ from jaxnav.filters._kalman import FilterParams, FilterState, StepInput, filter_
 from jaxnav.filters._rules import NoInflation
 from jaxnav.filters._smoother import rts_smoother
 from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, meridian_radius, prime_vertical_radius
-from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_to_dcm, rv_to_quat, skew
+from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat, skew
 from jaxnav.ins.earth import earth_params, position_rate
 from jaxnav.ins.error_model import (
     IDX15,
@@ -45,7 +45,15 @@ from jaxnav.ins.error_model import (
     error_model_G,
     error_model_G15,
 )
-from jaxnav.ins.mechanization import ImuSample, MechParams, MechState, NavState, mech_step
+from jaxnav.ins.mechanization import (
+    ImuSample,
+    MechParams,
+    MechState,
+    NavState,
+    _body_blocks,
+    _nav_update,
+    mech_step,
+)
 
 #: per-epoch outputs that :func:`loosely_coupled` can save
 LC_OUTPUTS = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs",
@@ -248,6 +256,60 @@ class _Carry(NamedTuple):
     mech: MechState
     biases: SensorBiases
     kf: FilterState
+    G_prev: Any = None  # two-speed mechanization: the last block's gravity minus Coriolis (else None)
+
+
+def _epoch_two_speed(mech: MechState, biases: SensorBiases, G_prev, dth_raw, dv_raw, dt, use, tau, M: int,
+                     ellipsoid, hold_height):
+    """The IMU samples of one epoch interval by the two-speed mechanization (:func:`jaxnav.ins.mechanize`'s
+    ``nav_every``), with the sensor-error correction and the time averages that F needs.
+
+    Bias-corrected increments, coning/sculling and the in-block attitude increments are array
+    operations over the epoch's K samples; one navigation-frame update per M samples is a scan.
+    The Markov drift decays sample by sample exactly as in the per-sample loop. The averages of
+    pos and v use each block's mid-point position and mean velocity, those of f_n and C_bn the
+    block's body-frame sums rotated by its start attitude (the nav frame turns < 1e-5 rad in a block).
+
+    Args: (K, 3) raw increments, (K,) dt and use (padded samples at the end are unused).
+    Returns: (mech, biases, (sum pos dt, sum v dt, sum f_n, sum C dt), T, w_last, G_prev).
+    """
+    dtype = dt.dtype
+    K = dt.shape[0]
+    dtu = jnp.where(use, dt, 0.0)
+    decay_before = jnp.exp(-(jnp.cumsum(dtu) - dtu)[:, None] / tau)  # Markov factor at each sample
+    dth = jnp.where(use[:, None], dth_raw - (biases.gyro + biases.markov * decay_before) * dtu[:, None], 0.0)
+    dvc = jnp.where(use[:, None], dv_raw - biases.accel * dtu[:, None], 0.0)
+    nb = -(-K // M)
+    padn = nb * M - K
+    pad = lambda a: jnp.concatenate([a, jnp.zeros((padn,) + a.shape[1:], dtype)]) if padn else a  # noqa: E731
+    blk, pre = _body_blocks(pad(dth), pad(dvc), pad(dtu), mech.dtheta_prev, mech.dv_prev, M, True, prefix=True)
+    Bq = jnp.stack(pre.B, axis=-1)  # (nb, M, 4) body rotation to the end of each sample
+    f_b = jnp.sum(quat_rotate(Bq, pad(dvc).reshape(nb, M, 3)), axis=1)  # (nb, 3)
+    C_b = jnp.sum(quat_to_dcm(Bq) * pad(dtu).reshape(nb, M)[..., None, None], axis=1)  # (nb, 3, 3)
+    z3 = jnp.zeros(3, dtype)
+    acc0 = (z3, z3, z3, jnp.zeros((3, 3), dtype))
+
+    def update(c, x):
+        nav, a_prev, Gp, acc = c
+        b, fb, Cb = x
+        ok = b.T > 0  # a block of padding only leaves the state as it is
+        b = b._replace(T=jnp.where(ok, b.T, 1.0))
+        new, a_new, fr = _nav_update(nav, a_prev, b, 1.0, ellipsoid, hold_height, Gp)
+        C0 = quat_to_dcm(nav.q_bn)
+        T = jnp.where(ok, b.T, 0.0)
+        acc_new = (acc[0] + fr.pos_mid * T, acc[1] + fr.v_mid * T, acc[2] + C0 @ fb, acc[3] + C0 @ Cb)
+        out = (new, a_new, fr.G, acc_new)
+        return jax.tree_util.tree_map(lambda x_, y_: jnp.where(ok, x_, y_), out, c), None
+
+    (nav, a_end, G_end, acc), _ = jax.lax.scan(update, (mech.nav, mech.a_prev, G_prev, acc0), (blk, f_b, C_b))
+    last = jnp.maximum(jnp.sum(use) - 1, 0)
+    bad_in = ~(jnp.all(jnp.isfinite(dth)) & jnp.all(jnp.isfinite(dvc)))
+    bad_dt = ~jnp.all(jnp.where(use, jnp.isfinite(dt) & (dt > 0), True))
+    flags = (jnp.where(bad_in, _status.NONFINITE_IMU, 0) | jnp.where(bad_dt, _status.BAD_IMU_TIME, 0)).astype(jnp.int32)
+    new_mech = MechState(nav=nav, dtheta_prev=dth[last], dv_prev=dvc[last], a_prev=a_end, status=mech.status | flags)
+    T = jnp.sum(dtu)
+    new_biases = biases._replace(markov=biases.markov * jnp.exp(-T / tau))
+    return new_mech, new_biases, acc, T, dth[last] / dt[last], G_end
 
 
 def _where_tree(c, a, b):
@@ -255,10 +317,10 @@ def _where_tree(c, a, b):
 
 
 @partial(jax.jit, static_argnames=("n_states", "save", "ellipsoid", "hold_height", "check_finite",
-                                   "save_imu_every", "remat", "discretization", "taylor_order"))
+                                   "save_imu_every", "remat", "discretization", "taylor_order", "nav_every"))
 def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last, meas, params, inflation,
              estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False,
-             discretization="taylor", taylor_order=8):
+             discretization="taylor", taylor_order=8, nav_every=1):
     dtype = nav0.v_n.dtype
     n = n_states
     idx = IDX18 if n == 18 else IDX15
@@ -295,9 +357,16 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
 
     def outer(carry, inp):
         dth_row, dv_row, dt_row, use_row, t_meas, t_nav, m = inp
-        acc0 = (z3, z3, z3, jnp.zeros((3, 3), dtype))
-        (mech, biases, acc, T, w_last), navs = jax.lax.scan(
-            inner, (carry.mech, carry.biases, acc0, jnp.zeros((), dtype), z3), (dth_row, dv_row, dt_row, use_row))
+        if nav_every > 1:
+            mech, biases, acc, T, w_last, G_prev = _epoch_two_speed(
+                carry.mech, carry.biases, carry.G_prev, dth_row, dv_row, dt_row, use_row, tau, nav_every,
+                ellipsoid, hold_height)
+            navs = None
+        else:
+            acc0 = (z3, z3, z3, jnp.zeros((3, 3), dtype))
+            (mech, biases, acc, T, w_last), navs = jax.lax.scan(
+                inner, (carry.mech, carry.biases, acc0, jnp.zeros((), dtype), z3), (dth_row, dv_row, dt_row, use_row))
+            G_prev = None
         Tsafe = jnp.maximum(T, 1e-300)
         pos_m, v_m, f_m, C_m = (a / Tsafe for a in acc)
         if n == 18:
@@ -326,7 +395,8 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
         xhat = kf.x
         nav_c, biases_c = _apply_correction(mech.nav, biases, xhat, idx)
         mech = mech._replace(nav=nav_c)
-        new = _Carry(mech=mech, biases=biases_c, kf=kf._replace(x=jnp.zeros(n, dtype), status=kf.status | disc_flag))
+        new = _Carry(mech=mech, biases=biases_c, kf=kf._replace(x=jnp.zeros(n, dtype), status=kf.status | disc_flag),
+                     G_prev=G_prev)
         allv = dict(nav=nav_c, biases=biases_c, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi, corrections=xhat,
                     innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
                     factors=info.factors, noise=info.noise, valid=info.valid)
@@ -335,7 +405,11 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
             navs = jax.tree_util.tree_map(lambda a: a[save_imu_every - 1::save_imu_every], navs)
         return new, (ep, navs)
 
-    carry0 = _Carry(mech=mech0, biases=biases0, kf=kf0)
+    G0 = None
+    if nav_every > 1:
+        e0 = earth_params(nav0.pos, nav0.v_n, ellipsoid)
+        G0 = e0.g_n - jnp.cross(2.0 * e0.w_ie_n + e0.w_en_n, nav0.v_n)
+    carry0 = _Carry(mech=mech0, biases=biases0, kf=kf0, G_prev=G0)
     if remat:
         # reverse mode keeps only the per-epoch carries and recomputes each epoch's IMU samples
         # on the way back: tape memory O(epochs) instead of O(IMU samples)
@@ -357,7 +431,7 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
                                           "innovations", "nis", "factors", "valid"),
                     ellipsoid: Ellipsoid = WGS84, hold_height: bool = False, check_finite: bool = True,
                     max_sigma: float = 1e3, save_imu_every: int = 0, remat: bool = False,
-                    discretization: str = "taylor", taylor_order: int = 8) -> LCResult:
+                    discretization: str = "taylor", taylor_order: int = 8, nav_every: int = 1) -> LCResult:
     """Loosely coupled INS/GNSS filter with feedback correction (S0 experiment, eqs. (4)-(19)).
 
     Args:
@@ -384,6 +458,11 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
         matrix exponential of :func:`~jaxnav.ins.discretize_van_loan`. For S0 (1 s epochs) both
         agree to ~1e-15; the series is 2.4x faster per run and 3x faster under ``jax.jvp``.
       taylor_order: static number of series terms (default 8).
+      nav_every: static; > 1 mechanizes the samples between fixes by the two-speed algorithm of
+        :func:`jaxnav.ins.mechanize` (navigation-frame terms once per ``nav_every`` samples,
+        the body-frame work as array operations), and takes the time averages that F needs from
+        the blocks (mid-block position, mean velocity, block sums of f_n and C_bn). 1 (default):
+        the per-sample :func:`jaxnav.ins.mech_step` loop. Not combined with ``save_imu_every``.
     Returns:
       :class:`LCResult`.
     Raises:
@@ -421,11 +500,16 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     meas = meas._replace(mask=mask, t=jnp.asarray(meas.t, jnp.float64))
     z3 = jnp.zeros(3, jnp.asarray(nav0.v_n).dtype)
     biases0 = SensorBiases(z3, z3, z3) if biases0 is None else biases0
+    if not isinstance(nav_every, (int, np.integer)) or nav_every < 1:
+        raise ValueError(f"nav_every={nav_every!r} must be an integer >= 1")
+    if nav_every > 1 and save_imu_every:
+        raise ValueError("save_imu_every needs the per-sample loop: use nav_every=1")
     if save_imu_every and seg.K % save_imu_every:
         raise ValueError(f"save_imu_every={save_imu_every} must divide the samples per epoch interval ({seg.K})")
     return _lc_core(nav0, biases0, jnp.asarray(dtheta), jnp.asarray(dv), dt_imu, t_imu, seg.idx, seg.use,
                     seg.t_last, meas, params, inflation, estimator, n_states, tuple(save), ellipsoid,
-                    hold_height, check_finite, int(save_imu_every), bool(remat), discretization, int(taylor_order))
+                    hold_height, check_finite, int(save_imu_every), bool(remat), discretization, int(taylor_order),
+                    int(nav_every))
 
 
 def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBiases, Any]:

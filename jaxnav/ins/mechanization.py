@@ -115,6 +115,7 @@ class _NavFrame(NamedTuple):
     w_in: Any  # (3,) w_ie + w_en, rad/s
     G: Any  # (3,) g - (2 w_ie + w_en) x v_mid, m/s^2
     pos_mid: Any  # (3,) extrapolated mid-block position (where the radii are taken)
+    v_mid: Any  # (3,) the velocity at which w_en and Coriolis are taken, m/s
 
 
 def _nav_update(nav: NavState, a_prev, blk: _Block, earth_rate_sign, ellipsoid, hold_height, G_prev=None):
@@ -155,7 +156,8 @@ def _nav_update(nav: NavState, a_prev, blk: _Block, earth_rate_sign, ellipsoid, 
     if hold_height:
         pos_new = pos_new.at[2].set(nav.pos[2])
     q_new = quat_normalize(quat_mul(rv_to_quat(-T * e.w_in_n), quat_mul(nav.q_bn, blk.dq)))
-    return NavState(q_bn=q_new, v_n=v_new, pos=pos_new), (v_new - nav.v_n) / T, _NavFrame(e.w_in_n, G, pos_mid)
+    frame = _NavFrame(e.w_in_n, G, pos_mid, v_mid)
+    return NavState(q_bn=q_new, v_n=v_new, pos=pos_new), (v_new - nav.v_n) / T, frame
 
 
 def _imu_flags(dth, dv, dt):
