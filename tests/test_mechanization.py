@@ -175,12 +175,13 @@ def test_reverse_navigation_on_s0_ideal_imu_retraces_truth(s0_window):
 # two-speed mechanization (nav_every > 1)
 
 
-@pytest.mark.parametrize("M, tol_m, tol_v", [(10, 1e-5, 2e-6), (100, 1e-3, 2e-4)])
-def test_two_speed_follows_truth_and_per_sample(s0_window, M, tol_m, tol_v):
+def test_two_speed_follows_truth_and_per_sample(s0_window):
     """Navigation-frame terms once per M samples on the manoeuvring S0 window, against the truth
     and the per-sample scan. Measured (200 s): M = 10 (0.1 s) 1.7e-6 m, 4.9e-7 m/s from the
     truth, 6.5e-11 in q from the per-sample run; M = 100 (1 s) 1.7e-4 m, 4.9e-5 m/s. The
-    per-sample run itself is 5e-7 m, 2.3e-8 m/s from the truth. The error grows as (M dt)^2."""
+    per-sample run itself is 5e-7 m, 2.3e-8 m/s from the truth. The error grows as (M dt)^2
+    (M = 100 is measured, not run here, to keep the suite short)."""
+    M, tol_m, tol_v = 10, 1e-5, 2e-6
     dth, dv, q, v, p, scale = s0_window
     n0 = ins.NavState(q[0], v[0], p[0])
     ref = ins.mechanize(n0, dth, dv, 0.01)
@@ -190,8 +191,6 @@ def test_two_speed_follows_truth_and_per_sample(s0_window, M, tol_m, tol_v):
     assert float(jnp.max(jnp.abs(r.nav.v_n - v[1:]))) < tol_v
     assert np.max(np.abs(np.asarray(r.nav.pos - ref.nav.pos) * scale)) < tol_m
     assert float(jnp.max(jnp.abs(r.nav.q_bn - ref.nav.q_bn))) < 1e-4 * tol_m
-    if M != 10:
-        return
     # the states kept at block ends (one scan), nested chunks, and every 5th sample are the same rows
     for se in (M, 2 * M, 5):
         r2 = ins.mechanize(n0, dth, dv, 0.01, nav_every=M, save_every=se)

@@ -10,6 +10,10 @@ prior-inflation rule (constant, attenuated S_k, fading lambda_k) and noise estim
 unchanged. The estimate is fed back (attitude, velocity, position reset; sensor-error
 estimates accumulated and applied to the IMU) and the error state restarts at zero.
 
+With ``nav_every > 1`` the inner loop is replaced by the two-speed mechanization of
+:func:`jaxnav.ins.mechanize` (array operations over the epoch's samples, one navigation-frame
+update per ``nav_every`` samples, F's averages from the blocks): ~3x faster per run.
+
 Measurements are position and velocity in local ENU metres with an antenna lever arm; the same
 structure carries GNSS fixes and pseudo-measurements (ZUPT: velocity 0; known position; known
 height: only the up component), selected per component by a mask. Epochs are matched to the
