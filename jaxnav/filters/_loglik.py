@@ -39,7 +39,7 @@ def log_likelihood(model: LinearGaussian, x0, P0, zs, *, mask=None):
 
     The value equals ``kalman_filter(model, x0, P0, zs, mask=mask).loglik`` (NaN/inf measurement
     elements masked). Derivatives (reverse or forward mode) come from one backward smoothing pass
-    instead of differentiating through the filter (module docstring): exact to rounding, 2.3-2.6x
+    instead of differentiating through the filter (module docstring): exact to rounding, 2.1-2.3x
     the forward pass for one sequence where autodiff through the scan costs ~4x. Under ``vmap``
     it is memory-bound (each sequence writes and rereads its means): for a batch and a few
     parameters ``jaxnav.tune.value_and_grad(mode="forward")`` is faster (benchmarks/RESULTS.md).

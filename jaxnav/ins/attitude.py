@@ -66,9 +66,7 @@ def quat_rotate_c(q, v):
 
 def quat_rotate(q, v):
     """Rotate (..., 3) vectors by unit quaternions: q (x) v (x) q*  (= dcm(q) @ v)."""
-    w, u = q[..., :1], q[..., 1:]
-    t = 2.0 * jnp.cross(u, v)
-    return v + w * t + jnp.cross(u, t)
+    return jnp.stack(quat_rotate_c(jnp.unstack(q, axis=-1), jnp.unstack(v, axis=-1)), axis=-1)
 
 
 def quat_to_dcm(q):
