@@ -167,6 +167,32 @@ def test_vmap_dispatch_keeps_the_per_sequence_filter_where_it_must(problem):
                                rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("T_", [13, 5])
+def test_blocked_batch_filter_equals_per_sequence(problem, T_):
+    """The shared-recursion batch runs its means in blocks of epochs (filters._blocked); every output equals
+    the per-sequence filter: T not a multiple of the block (13) and shorter than one (5), x0 per
+    sequence, a time-varying model with G, a user mask, a gap common to the batch, and one
+    sequence starting from an infinite state (its own NONFINITE_STATE flag, the others clean)."""
+    model, x0, P0, zs, mask = problem
+    mod = jf.LinearGaussian(*[None if a is None else (a[:T_] if a.ndim == 3 else a) for a in model])
+    clean = jnp.where(jnp.isfinite(zs[:T_]), zs[:T_], 0.0)
+    batch = jnp.stack([clean, 0.5 * clean, clean + 1.0, clean - 2.0]).at[:, 2, 1].set(jnp.nan)
+    x0s = jnp.stack([x0, x0 + 1.0, x0 - 0.5, x0.at[0].set(jnp.inf)])
+    mk = mask[:T_].at[3, 0].set(False)
+    run = lambda z, x: jf.kalman_filter(mod, x, P0, z, mask=mk, inflation=jf.attenuated(0.3))  # noqa: E731
+    assert _shares(jax.vmap(run), batch, x0s)
+    with np.errstate(all="ignore"):
+        got = jax.jit(jax.vmap(run))(batch, x0s)
+        for i in range(3):
+            _assert_same(jax.tree_util.tree_map(lambda a: a[i], got), run(batch[i], x0s[i]), rtol=1e-11,
+                         atol=1e-12)
+        ref = run(batch[3], x0s[3])
+    assert int(ref.status) & _status.NONFINITE_STATE
+    assert [bool(int(s) & _status.NONFINITE_STATE) for s in got.status] == [False, False, False, True]
+    assert int(got.status[3]) == int(ref.status) and int(got.n_nonfinite[0]) == 1
+    np.testing.assert_array_equal(np.isfinite(np.asarray(got.means[3])), np.isfinite(np.asarray(ref.means)))
+
+
 @pytest.mark.parametrize("nan", ["none", "one sequence", "common"])
 def test_batched_dispatch_under_autodiff(problem, nan):
     """grad(vmap), vmap(grad), jvp(vmap) and vmap(vmap) all equal the per-sequence results."""
