@@ -612,6 +612,7 @@ def loop_body_profile(fn, *args, batch=None, split=False):
     """
     text = jax.jit(fn).lower(*args).compile().as_text()
     bodies = set(re.findall(r"body=(%?[\w.\-]+)", text))
+    trips = dict(re.findall(r'body=(%?[\w.\-]+)[^\n]*?"known_trip_count":\{"n":"(\d+)"', text))
     comps, cur, name = {}, None, None
     for line in text.splitlines():
         m = re.match(r"^(?:ENTRY )?(%?[\w.\-]+) .*\{\s*$", line)
@@ -640,14 +641,20 @@ def loop_body_profile(fn, *args, batch=None, split=False):
 
     # split=True: a program with alternative time loops (jaxnav's batch-level switch compiles a
     # shared-covariance loop and a per-sequence one) reports each, joined by " / ", shared first
-    groups = [comps.get(b, comps.get(b.lstrip("%"), [])) for b in sorted(bodies)]
+    names = sorted(bodies)
+    groups = [comps.get(b, comps.get(b.lstrip("%"), [])) for b in names]
     if not split:
         groups = [[ln for g in groups for ln in g]]
     per_loop = [stats(g) for g in groups]
+    if split:  # each loop's fusion count with its trip count, e.g. "17 x15"
+        for st, b in zip(per_loop, names):
+            st["trips"] = trips.get(b, "?")
     per_loop = [st for st in per_loop if st["fusions"] > 2] or per_loop
     per_loop.sort(key=lambda st: st["per_seq"] == "yes")
     for st in per_loop:
         st["other"] = st["ops"] - st["fusions"] - st["custom_calls"]
+        if "trips" in st:
+            st["fusions"] = f"{st['fusions']} x{st.pop('trips')}"
     return {k: " / ".join(dict.fromkeys(str(st[k]) for st in per_loop)) if k == "factor"
             else " / ".join(str(st[k]) for st in per_loop) for k in per_loop[0]}
 
@@ -858,7 +865,9 @@ def main(argv=None):
             for name, fn in impls.items():
                 key = f"{name} (c) vmap, B={len(zB)}" if batched else f"{name} (a) single"
                 if batched and name == "jaxnav":
-                    key += " (clean batch / NaN in the batch)"
+                    key += (" (every loop, fusions x trips; shared-recursion branch: the covariance pass x T, "
+                            "the block maps x 8 (x 4 for the tail), the blocks x T/8; NaN branch: the "
+                            "per-sequence scan x T)")
                 try:  # profiling is best effort
                     profile[key] = (loop_body_profile(jax.vmap(fn), zB, batch=len(zB), split=name == "jaxnav")
                                     if batched
