@@ -193,6 +193,18 @@ def test_blocked_batch_filter_equals_per_sequence(problem, T_):
     np.testing.assert_array_equal(np.isfinite(np.asarray(got.means[3])), np.isfinite(np.asarray(ref.means)))
 
 
+def test_blocking_is_kept_for_batches_whose_maps_stay_small():
+    """The block maps grow with T, not B: a long series with few sequences keeps the per-sequence scan."""
+    from jaxnav.filters._blocked import worth_blocking
+    assert worth_blocking(256, 3600, 6, 3, ("means",)) and worth_blocking(2, 3600, 6, 3, ())
+    assert worth_blocking(256, 86_400, 6, 3, ("means",))  # maps ~0.6 GB < the 1.4 GB of outputs
+    assert not worth_blocking(2, 86_400, 6, 3, ("means",))  # ~0.6 GB of maps for 11 MB of means
+    model = jf.constant_velocity(1.0, sigma=0.1, q=0.01)
+    zs = jnp.asarray(np.random.default_rng(3).standard_normal((2, 40, 3)))
+    run = lambda z: jf.kalman_filter(model, jnp.zeros(6), jnp.eye(6), z, save=("means",)).means  # noqa: E731
+    np.testing.assert_allclose(np.asarray(jax.vmap(run)(zs)[1]), np.asarray(run(zs[1])), rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.parametrize("nan", ["none", "one sequence", "common"])
 def test_batched_dispatch_under_autodiff(problem, nan):
     """grad(vmap), vmap(grad), jvp(vmap) and vmap(vmap) all equal the per-sequence results."""

@@ -44,6 +44,26 @@ BLOCK = 8
 _PER_SEQUENCE = ("means", "pred_means", "innovations", "nis", "logliks")
 
 
+def _groups(save, n, m, block):
+    """The column groups of the block maps for ``save`` and their total width R (static)."""
+    want = tuple(g for g in ("means", "pred_means", "innovations") if g in save)
+    groups = want + ("w",) + (() if "means" in save else ("end",))
+    width = dict(means=n, pred_means=n, innovations=m, w=m, end=n)
+    return groups, width, sum(width[g] * (1 if g == "end" else block) for g in groups)
+
+
+def worth_blocking(B, T, n, m, save, itemsize=8, block=BLOCK, floor_bytes=256 * 2**20) -> bool:
+    """Whether the block maps (T / L blocks of (n + L m) x R, a few copies while built) stay small
+    next to what the batch writes anyway: below ``floor_bytes`` or below the batch's per-epoch
+    outputs. A long series with few sequences (e.g. B = 2, T = 86 400: ~0.5 GB of maps for 11 MB
+    of means) keeps the per-sequence scan."""
+    L = max(1, min(block, T))
+    _, width, R = _groups(save, n, m, L)
+    maps = 3 * -(-T // L) * (n + L * m) * R * itemsize
+    out = B * T * (2 + sum(width[g] for g in ("means", "pred_means", "innovations") if g in save)) * itemsize
+    return maps <= max(floor_bytes, out)
+
+
 def _block_maps(F, Hm, K, Linv, valid, groups):
     """The linear maps from (state before the block, block measurements) to each output group.
 
@@ -134,10 +154,9 @@ def blocked_batch_filter(model, x0s, P0, zs, mask, inflation, estimator, *, save
     c_ll = allv["logliks"]  # -(log det S + m log 2 pi) / 2 where observed and S factored, else 0
     okf, obsf = (observed & ok).astype(dtype), observed.astype(dtype)
 
-    want = [g for g in ("means", "pred_means", "innovations") if g in save]
-    groups = tuple(want) + ("w",) + (() if "means" in save else ("end",))
-    width = dict(means=n, pred_means=n, innovations=m, w=m, end=n)
     Lb = max(1, min(block, T))
+    groups, width, _ = _groups(save, n, m, Lb)
+    want = [g for g in groups if g in save]
     nb, tail = divmod(T, Lb)
 
     zs = jnp.asarray(zs, dtype)

@@ -430,8 +430,12 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
         def blocked(m, x, P, z, mk, inf, est):
             # the shared recursion with the means of the whole batch in blocks of epochs as
             # dense products (._blocked); equal to run(False, ...) to rounding
-            from jaxnav.filters._blocked import blocked_batch_filter
+            from jaxnav.filters._blocked import blocked_batch_filter, worth_blocking
 
+            zshape = jnp.shape(z)[1:] if axes[3] == 0 else jnp.shape(z)
+            if len(zshape) != 2 or not worth_blocking(axis_size, zshape[0], jnp.shape(x)[-1], zshape[1],
+                                                      static["save"], jnp.dtype(jnp.result_type(z)).itemsize):
+                return run(False, m, x, P, z, mk, inf, est)
             batch = lambda v, ax: jnp.broadcast_to(v, (axis_size,) + jnp.shape(v)) if ax is None else v  # noqa: E731
             return blocked_batch_filter(m, batch(jnp.asarray(x), axes[1]), P, batch(jnp.asarray(z), axes[3]), mk,
                                         inf, est, save=static["save"], unroll=static["unroll"],
