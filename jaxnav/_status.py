@@ -18,6 +18,7 @@ NONFINITE_UNMASKED = 32  # NaN/inf measurements reached the update (check_finite
 NONFINITE_IMU = 64  # a NaN/inf IMU sample reached the mechanization (it cannot skip samples)
 BAD_IMU_TIME = 128  # non-positive or irregular IMU sample interval
 DISCRETIZATION_INACCURATE = 256  # a truncated Taylor discretisation had not converged (use more terms or Van Loan)
+COVARIANCE_INDEFINITE = 512  # an adaptive filter's covariance lost positive semi-definiteness (diverged)
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -30,6 +31,9 @@ _MESSAGES = {
     BAD_IMU_TIME: "an IMU sample interval was non-positive or non-finite",
     DISCRETIZATION_INACCURATE: "the Taylor discretisation of the error model had not converged (last term above "
                                "1e-10 of Phi): raise taylor_order or use discretization='van_loan'",
+    COVARIANCE_INDEFINITE: "a filtered or predicted covariance of an adaptive filter lost positive "
+                           "semi-definiteness (eigenvalue below -1e-10 of its largest variance): the "
+                           "inflation or noise estimate diverged and the results are unreliable",
 }
 
 #: flags that are reported but are not errors by default

@@ -172,6 +172,13 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     return UpdateResult(x=x, P=P, v=v, S=S, K=jnp.where(ok, K, 0.0), nis=nis, loglik=loglik, ok=ok)
 
 
+def _near_psd(P, rel=1e-10):
+    """Whether symmetric P has no eigenvalue below -rel * max(diag P): the Cholesky of the shifted P exists."""
+    d = jnp.max(jnp.diagonal(P))
+    shift = rel * jnp.abs(d) + jnp.finfo(P.dtype).tiny
+    return jnp.all(jnp.isfinite(cholesky(P + shift * jnp.eye(P.shape[-1], dtype=P.dtype))))
+
+
 class FilterState(NamedTuple):
     """Carry of the filter scan."""
 
@@ -281,8 +288,14 @@ def _filter_step(state: FilterState, inp: StepInput, params: FilterParams, check
     bad_flag = _status.NONFINITE_MEASUREMENT if check_finite else _status.NONFINITE_UNMASKED
     flags = est_flag | jnp.where(n_bad > 0, bad_flag, 0)
     flags = flags | jnp.where(observed & ~up.ok, _status.CHOLESKY_FAILED, 0)
-    flags = flags | jnp.where(jnp.all(jnp.isfinite(up.x)) & jnp.all(jnp.isfinite(up.P)), 0,
-                              _status.NONFINITE_STATE)
+    finite = jnp.all(jnp.isfinite(up.x)) & jnp.all(jnp.isfinite(up.P))
+    flags = flags | jnp.where(finite, 0, _status.NONFINITE_STATE)
+    if not (_data_independent(rule) and _data_independent(est)):
+        # adaptive inflation or noise estimates can diverge (S0 eq. (14) with variance compensation
+        # drives lambda_k and Q to 1e7-1e12), and the Joseph form then loses PSD to rounding
+        # without S failing: say so (only here: the fixed rules keep P bounded)
+        psd = _near_psd(up.P) & _near_psd(P_pred)
+        flags = flags | jnp.where(finite & ~psd, _status.COVARIANCE_INDEFINITE, 0)
     ll = jnp.where(observed & up.ok, up.loglik, 0.0)
     new = FilterState(
         x=up.x, P=up.P, k=k, rule=rule_state, est=est_state,
