@@ -23,6 +23,22 @@ def _pin_xdist_worker():
 
 _pin_xdist_worker()
 
+
+def _fast_compiles():
+    """Compile the tests' programs with XLA's LLVM backend at -O0, before jax starts.
+
+    The suite checks numbers, not speed, and is compile-bound: -O0 cut cold module times by
+    10-15 % (measured: test_filters_fast 67 -> 57 s, test_demo + test_sim 98 -> 88 s) with the
+    same results (no fast-math at either level). Benchmarks run with XLA's defaults. A flag set
+    by the caller wins; notebook kernels and subprocesses inherit the environment.
+    """
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_backend_optimization_level" not in flags:
+        os.environ["XLA_FLAGS"] = (flags + " --xla_backend_optimization_level=0").strip()
+
+
+_fast_compiles()
+
 import jax  # noqa: E402
 
 import jaxnav  # noqa: E402

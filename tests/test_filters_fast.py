@@ -167,8 +167,15 @@ def test_vmap_dispatch_keeps_the_per_sequence_filter_where_it_must(problem):
                                rtol=1e-12, atol=1e-12)
 
 
+@pytest.fixture
+def always_block(monkeypatch):
+    """Take the blocked batch path for any batch size (it starts at B T = 2**14 by default)."""
+    from jaxnav.filters import _blocked
+    monkeypatch.setattr(_blocked, "MIN_BATCH_EPOCHS", 0)
+
+
 @pytest.mark.parametrize("T_", [13, 5])
-def test_blocked_batch_filter_equals_per_sequence(problem, T_):
+def test_blocked_batch_filter_equals_per_sequence(problem, T_, always_block):
     """The shared-recursion batch runs its means in blocks of epochs (filters._blocked); every output equals
     the per-sequence filter: T not a multiple of the block (13) and shorter than one (5), x0 per
     sequence, a time-varying model with G, a user mask, a gap common to the batch, and one
@@ -191,14 +198,23 @@ def test_blocked_batch_filter_equals_per_sequence(problem, T_):
     assert [bool(int(s) & _status.NONFINITE_STATE) for s in got.status] == [False, False, False, True]
     assert int(got.status[3]) == int(ref.status) and int(got.n_nonfinite[0]) == 1
     np.testing.assert_array_equal(np.isfinite(np.asarray(got.means[3])), np.isfinite(np.asarray(ref.means)))
+    if T_ == 13:  # grad(vmap) through the blocks equals the per-sequence gradients
+        def nll(th, z):
+            m = mod._replace(R=mod.R * jnp.exp(th))
+            return -jf.kalman_filter(m, x0, P0, z, mask=mk, save=()).loglik
+
+        g_ref = jax.vmap(jax.grad(nll), in_axes=(None, 0))(0.2, batch[:3]).sum()  # vmap(grad): per sequence
+        g = jax.grad(lambda t: jax.vmap(lambda z: nll(t, z))(batch[:3]).sum())(0.2)
+        np.testing.assert_allclose(float(g), float(g_ref), rtol=1e-9)
 
 
 def test_blocking_is_kept_for_batches_whose_maps_stay_small():
     """The block maps grow with T, not B: a long series with few sequences keeps the per-sequence scan."""
     from jaxnav.filters._blocked import worth_blocking
-    assert worth_blocking(256, 3600, 6, 3, ("means",)) and worth_blocking(2, 3600, 6, 3, ())
+    assert worth_blocking(256, 3600, 6, 3, ("means",)) and worth_blocking(8, 3600, 6, 3, ())
     assert worth_blocking(256, 86_400, 6, 3, ("means",))  # maps ~0.6 GB < the 1.4 GB of outputs
     assert not worth_blocking(2, 86_400, 6, 3, ("means",))  # ~0.6 GB of maps for 11 MB of means
+    assert not worth_blocking(4, 120, 6, 3, ("means",))  # too small to pay for the extra compile
     model = jf.constant_velocity(1.0, sigma=0.1, q=0.01)
     zs = jnp.asarray(np.random.default_rng(3).standard_normal((2, 40, 3)))
     run = lambda z: jf.kalman_filter(model, jnp.zeros(6), jnp.eye(6), z, save=("means",)).means  # noqa: E731
