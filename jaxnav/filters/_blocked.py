@@ -37,7 +37,8 @@ from jaxnav._numerics import cholesky, whiten
 from jaxnav.filters._kalman import KalmanResult, _filter_step, _fused_products, scan_setup
 
 #: epochs per block: the products' width grows with L and their count falls with it; 8 was the
-#: fastest of 4, 8, 12, 16, 24 for the 6-state model at B = 256 (benchmarks/bench_filters.py (c))
+#: fastest of 4, 6, 8, 12, 16, 24 and 40 for the 6-state model at B = 256, T = 3600 (case (c) of
+#: benchmarks/bench_filters.py, timed in this module's development)
 BLOCK = 8
 
 #: per-epoch outputs that differ between the sequences; the rest are shared and broadcast
@@ -132,8 +133,10 @@ def blocked_batch_filter(model, x0s, P0, zs, mask, inflation, estimator, *, save
     """The Kalman filter for a batch sharing model, P0, mask and a data-independent rule, by blocks.
 
     Equal to ``jax.vmap`` of :func:`~jaxnav.filters.kalman_filter` with ``check_finite=False``
-    (which is what the batch switch runs once it has masked the batch's common non-finite
-    elements; masked measurement elements are ignored whatever their value here).
+    for measurements that are finite wherever the mask is True: what the batch switch passes,
+    once it has masked the batch's common non-finite elements. Masked elements are ignored
+    whatever their value; an unmasked NaN/inf would be read as 0 (not propagated), so callers
+    must mask them first.
 
     Args:
       model: shared :class:`LinearGaussian` (static or (T, ...) leaves).
