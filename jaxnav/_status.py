@@ -19,6 +19,7 @@ NONFINITE_IMU = 64  # a NaN/inf IMU sample reached the mechanization (it cannot 
 BAD_IMU_TIME = 128  # non-positive or irregular IMU sample interval
 DISCRETIZATION_INACCURATE = 256  # a truncated Taylor discretisation had not converged (use more terms or Van Loan)
 COVARIANCE_INDEFINITE = 512  # an adaptive filter's covariance lost positive semi-definiteness (diverged)
+IMU_INCREMENT_TOO_LARGE = 1024  # a rotation increment above pi rad in one sample (nav_every > 1)
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -34,6 +35,9 @@ _MESSAGES = {
     COVARIANCE_INDEFINITE: "a filtered or predicted covariance of an adaptive filter lost positive "
                            "semi-definiteness (eigenvalue below -1e-10 of its largest variance): the "
                            "inflation or noise estimate diverged and the results are unreliable",
+    IMU_INCREMENT_TOO_LARGE: "an IMU rotation increment exceeded pi rad in one sample: the record is undersampled "
+                             "for strapdown integration, and the attitude series of nav_every > 1 is exact only "
+                             "up to 2 pi per sample (use nav_every=1)",
 }
 
 #: flags that are reported but are not errors by default

@@ -231,5 +231,14 @@ def test_two_speed_tail_short_record_vmap_and_bad_input(s0_window):
     bad[37, 1] = np.nan
     res = ins.mechanize(n0, bad, dv[:100], 0.01, nav_every=10, validate=False)
     assert int(res.status) & jaxnav._status.NONFINITE_IMU
+    assert not int(res.status) & jaxnav._status.IMU_INCREMENT_TOO_LARGE
+    # a rotation increment above pi in one sample leaves the range of the block path's attitude series
+    big = np.asarray(dth[:100]).copy()
+    big[50] = [0.0, 0.0, 3.2]
+    flagged = ins.mechanize(n0, big, dv[:100], 0.01, nav_every=10, validate=False).status
+    assert int(flagged) == jaxnav._status.IMU_INCREMENT_TOO_LARGE
+    assert int(ins.mechanize(n0, big, dv[:100], 0.01, validate=False).status) == 0  # per sample: sin/cos, exact
+    with pytest.raises(jaxnav.StatusError, match="exceeded pi rad in one sample"):
+        jaxnav.raise_for_status(flagged)
     with pytest.raises(ValueError, match="nav_every=0 must be an integer >= 1"):
         ins.mechanize(n0, dth[:100], dv[:100], 0.01, nav_every=0)

@@ -55,6 +55,7 @@ from jaxnav.ins.mechanization import (
     MechState,
     NavState,
     _body_blocks,
+    _imu_flags,
     _nav_update,
     mech_step,
 )
@@ -307,9 +308,7 @@ def _epoch_two_speed(mech: MechState, biases: SensorBiases, G_prev, dth_raw, dv_
 
     (nav, a_end, G_end, acc), _ = jax.lax.scan(update, (mech.nav, mech.a_prev, G_prev, acc0), (blk, f_b, C_b))
     last = jnp.maximum(jnp.sum(use) - 1, 0)
-    bad_in = ~(jnp.all(jnp.isfinite(dth)) & jnp.all(jnp.isfinite(dvc)))
-    bad_dt = ~jnp.all(jnp.where(use, jnp.isfinite(dt) & (dt > 0), True))
-    flags = (jnp.where(bad_in, _status.NONFINITE_IMU, 0) | jnp.where(bad_dt, _status.BAD_IMU_TIME, 0)).astype(jnp.int32)
+    flags = _imu_flags(dth, dvc, jnp.where(use, dt, 1.0), series=True)
     new_mech = MechState(nav=nav, dtheta_prev=dth[last], dv_prev=dvc[last], a_prev=a_end, status=mech.status | flags)
     T = jnp.sum(dtu)
     new_biases = biases._replace(markov=biases.markov * jnp.exp(-T / tau))

@@ -27,6 +27,7 @@ from jaxnav.ins.attitude import (
     quat_rotate_c,
     rv_to_quat,
     rv_to_quat_c,
+    rv_to_quat_series_c,
 )
 from jaxnav.ins.earth import earth_params, position_rate
 
@@ -160,10 +161,19 @@ def _nav_update(nav: NavState, a_prev, blk: _Block, earth_rate_sign, ellipsoid, 
     return NavState(q_bn=q_new, v_n=v_new, pos=pos_new), (v_new - nav.v_n) / T, frame
 
 
-def _imu_flags(dth, dv, dt):
-    bad_in = ~(jnp.all(jnp.isfinite(dth)) & jnp.all(jnp.isfinite(dv)))
+def _imu_flags(dth, dv, dt, series=False):
+    """NONFINITE_IMU, BAD_IMU_TIME and, with ``series`` (the block paths), IMU_INCREMENT_TOO_LARGE.
+
+    |dtheta| <= pi keeps the coning-corrected increment below pi + pi^2/12 < 2 pi, the range where
+    :func:`rv_to_quat_series_c` is exact.
+    """
+    r2 = jnp.sum(dth * dth, axis=-1)
+    bad_in = ~(jnp.all(jnp.isfinite(r2)) & jnp.all(jnp.isfinite(dv)))
     bad_dt = ~jnp.all(jnp.isfinite(dt) & (dt > 0))
-    return (jnp.where(bad_in, _status.NONFINITE_IMU, 0) | jnp.where(bad_dt, _status.BAD_IMU_TIME, 0)).astype(jnp.int32)
+    flags = jnp.where(bad_in, _status.NONFINITE_IMU, 0) | jnp.where(bad_dt, _status.BAD_IMU_TIME, 0)
+    if series:
+        flags = flags | jnp.where(jnp.any(r2 > np.pi ** 2), _status.IMU_INCREMENT_TOO_LARGE, 0)
+    return flags.astype(jnp.int32)
 
 
 def mech_step(state: MechState, imu: ImuSample, params: MechParams = MechParams(), *,
@@ -234,7 +244,7 @@ def _body_blocks(dtheta, dv, dt, dth_prev, dv_prev, M: int, coning: bool, prefix
     phi = tuple(a.reshape(nb, M) for a in phi)
     dv_b = tuple(a.reshape(nb, M) for a in dv_b)
     dt = dt.reshape(nb, M)
-    B = _prefix_products(rv_to_quat_c(*phi))
+    B = _prefix_products(rv_to_quat_series_c(*phi))
     first = (jnp.ones((nb, 1), dt.dtype),) + (jnp.zeros((nb, 1), dt.dtype),) * 3
     B_prev = tuple(jnp.concatenate([f, b[:, :-1]], axis=1) for f, b in zip(first, B))
     u = quat_rotate_c(B_prev, dv_b)
@@ -268,8 +278,8 @@ def _between(start: NavState, fr: _NavFrame, pre: _Prefix, dt, hold_height, elli
     trap = [jnp.cumsum(0.5 * dt * (jnp.concatenate([v0[i], v[i][:, :-1]], axis=1) + v[i]), axis=1) for i in range(3)]
     k = col(position_rate(fr.pos_mid, jnp.ones_like(fr.pos_mid), ellipsoid))  # [1/(R_M+h), 1/((R_N+h) cos L), 1]
     pos = [p0[0] + trap[1] * k[0], p0[1] + trap[0] * k[1], p0[2] + (0.0 if hold_height else trap[2])]
-    # rotation of the nav frame over tau: |w tau| < 1e-4, where rv2q is its Taylor series
-    n = rv_to_quat_c(*(-tau * w[i] for i in range(3)))
+    # rotation of the nav frame over tau: |w tau| < 1e-4, well inside the exact range of the series
+    n = rv_to_quat_series_c(*(-tau * w[i] for i in range(3)))
     qj = quat_mul_c(n, quat_mul_c(q, pre.B))
     norm = jnp.sqrt(sum(a * a for a in qj))
     stack = lambda xs: jnp.stack([jnp.broadcast_to(x, tau.shape) for x in xs], axis=-1)  # noqa: E731
@@ -282,7 +292,7 @@ class MechResult(NamedTuple):
     Attributes:
       nav: :class:`NavState` with a leading axis (one row per saved sample, see ``save_every``).
       final: the :class:`MechState` after the last sample (carry it on to continue).
-      status: int32 flags (NONFINITE_IMU, BAD_IMU_TIME); see :func:`jaxnav.raise_for_status`.
+      status: int32 flags (NONFINITE_IMU, BAD_IMU_TIME, IMU_INCREMENT_TOO_LARGE); see :func:`jaxnav.raise_for_status`.
     """
 
     nav: NavState
@@ -372,7 +382,7 @@ def _mechanize_blocks(init: MechState, dtheta, dv, dt, params, ellipsoid, save_e
     nb, r = divmod(N, M)
     at_ends = save_every % M == 0  # then N % M == 0 too (N % save_every == 0 is checked)
     sign = params.earth_rate_sign
-    status = init.status | _imu_flags(dtheta, dv, dt)
+    status = init.status | _imu_flags(dtheta, dv, dt, series=True)
     blk, pre = _body_blocks(dtheta[:nb * M], dv[:nb * M], dt[:nb * M], init.dtheta_prev, init.dv_prev, M, coning,
                             prefix=not at_ends)
 
