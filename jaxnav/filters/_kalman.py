@@ -134,8 +134,10 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     """Joseph-form measurement update with Cholesky solves (S0 eqs. (5), (7), (9)).
 
     K = P H^T (H P H^T + R)^{-1}; x = x_pred + K v; P = (I - K H) P (I - K H)^T + K R K^T,
-    symmetrised. Invalid components (``valid`` False) are removed exactly: their H rows are
-    zeroed and their rows/columns of S replaced by the identity, so K has zero columns for them.
+    symmetrised, with the Joseph product evaluated as W - K (H W), W = P - (P H^T) K^T (3 n^2 m
+    multiplications instead of 2 n^3 + n^2 m). Invalid components (``valid`` False) are removed
+    exactly: their columns of P H^T and rows of H P H^T are zeroed and their rows/columns of S
+    replaced by the identity, so K has zero columns for them.
     If S is not positive definite the prior is returned with ``ok = False``.
 
     Args:
@@ -149,20 +151,23 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     dt = P_pred.dtype
     if valid is None:
         valid = jnp.ones((m,), bool)
-    Hm = jnp.where(valid[:, None], H, 0.0)
+    # products with the unmasked H, masked afterwards: under vmap a per-sequence mask then leaves
+    # H shared, and its products stay single matrix products over the batch
+    rows = lambda A: jnp.where(valid[:, None], A, 0.0)  # noqa: E731  (m, k): zero the invalid rows
     both = valid[:, None] & valid[None, :]
     Rm = jnp.where(both, R, 0.0)
     Rm = Rm + jnp.diag(jnp.where(valid, 0.0, 1.0).astype(dt))
-    v = jnp.where(valid, z - _mm(Hm, x_pred), 0.0)
-    PHt = _mm(P_pred, Hm.T)
-    S = symmetrize(_mm(Hm, PHt) + Rm)
+    v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
+    PHt = jnp.where(valid[None, :], _mm(P_pred, H.T), 0.0)  # P Hm^T
+    S = symmetrize(rows(_mm(H, PHt)) + Rm)
     L = cholesky(S)
     ok = jnp.all(jnp.isfinite(L))
     Lsafe = jnp.where(ok, L, jnp.eye(m, dtype=dt))
     K = cho_solve(Lsafe, PHt.T).T
     x = x_pred + _mm(K, v)
-    IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - _mm(K, Hm)
-    P = symmetrize(_mm(_mm(IKH, P_pred), IKH.T) + _mm(_mm(K, Rm), K.T))
+    # (I - K H) P (I - K H)^T = A W with W = P A^T = P - (P H^T) K^T and A W = W - K (H W)
+    W = P_pred - _mm(PHt, K.T)
+    P = symmetrize(W - _mm(K, rows(_mm(H, W))) + _mm(_mm(K, Rm), K.T))
     w = whiten(Lsafe, v)
     nis = jnp.sum(w * w)
     mv = jnp.sum(valid)
@@ -268,7 +273,7 @@ def _filter_step(state: FilterState, inp: StepInput, params: FilterParams, check
     k = state.k + 1.0
     x_pred = _mm(F, state.x)
     FPF = _mm(_mm(F, state.P), F.T)
-    v = jnp.where(valid, z - _mm(Hm, x_pred), 0.0)
+    v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
     ctx = StepContext(k=k, v=v, z=z, x_pred=x_pred, valid=valid, observed=observed, F=F, H=Hm, G=Gm, Q=Q, R=R,
                       FPF=FPF, GQG=GQG, R_used=R)
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
@@ -281,7 +286,7 @@ def _filter_step(state: FilterState, inp: StepInput, params: FilterParams, check
         d = inflation_scale(factor, n, states)
         x_pred, P_pred = predict(state.x, state.P, F, GQG, 1.0, FPF=d[:, None] * FPF * d[None, :])
     up = update(x_pred, P_pred, z, H, R_used, valid)
-    post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - _mm(Hm, up.x), 0.0), P_pred=P_pred)
+    post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - _mm(H, up.x), 0.0), P_pred=P_pred)
     est_state = est.after(est_state, ctx, post)
 
     n_bad = jnp.sum(inp.mask & ~finite).astype(jnp.int32)
