@@ -99,7 +99,11 @@ def first_prior(F, Q, x0, P0):
 
 
 def flops_per_step(n=N_STATE, m=N_OBS):
-    """Nominal dense floating-point operations of one Joseph-form KF step (multiply+add = 2).
+    """Nominal dense floating-point operations of one textbook Joseph-form KF step (multiply+add = 2).
+
+    A fixed yardstick for the rates: jaxnav evaluates (I-KH) P (I-KH)^T with 3 n^2 m
+    multiplications instead of 2 n^3 + n^2 m (``filters.update``), and its shared-recursion batch
+    executes far fewer.
 
     predict: F x (2n^2), F P F^T (4n^3), + Q (n^2);
     update:  H x (2mn), P H^T (2n^2 m), H (P H^T) + R (2m^2 n + m^2), Cholesky (m^3/3),
@@ -751,7 +755,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
         out.append("### Batch throughput")
         out.append("")
         out.append(f"Nominal operation count: {fl:.0f} flop per filter step (n = {N_STATE}, m = {N_OBS}, "
-                   "the dense Joseph-form step jaxnav executes, see `flops_per_step`; masks, "
+                   "the textbook dense Joseph-form step, see `flops_per_step`; masks, "
                    "symmetrisation and log-likelihood not counted), i.e. "
                    f"{fl * T * B / 1e9:.2f} GFLOP per batch of B = {B}, T = {T}. "
                    f"Rates are relative to the best measured float64 matmul rate, {best:.1f} GFLOP/s. "
