@@ -350,7 +350,7 @@ def test_rv_to_quat_series_is_exact_up_to_two_pi():
         q = np.stack(jax.jit(A.rv_to_quat_series_c)(*jnp.asarray(phi.T)), axis=-1)
         ref = Rotation.from_rotvec(phi).as_quat()[:, [3, 0, 1, 2]]  # scipy: scalar last, w >= 0
         err = np.minimum(np.abs(q - ref).max(axis=1), np.abs(q + ref).max(axis=1))
-        assert err.max() < 2e-15, (tmax, err.max())  # measured 8.9e-16 at 2 pi against rv_to_quat_c
+        assert err.max() < 2e-15, (tmax, err.max())  # measured 9.0e-16 at 2 pi, 3.3e-16 at pi
         np.testing.assert_allclose(np.sum(q * q, axis=1), 1.0, rtol=0, atol=4e-15)
     J = jax.jacfwd(lambda p: jnp.stack(A.rv_to_quat_series_c(*p)))(jnp.zeros(3))
     np.testing.assert_array_equal(np.asarray(J), np.vstack([np.zeros(3), 0.5 * np.eye(3)]))

@@ -167,9 +167,10 @@ SERIES_MAX_ANGLE = 2.0 * math.pi
 def rv_to_quat_series_c(x, y, z):
     """:func:`rv_to_quat_c` by the power series of cos(t/2) and sin(t/2)/t, t = |phi| (no sin, cos or sqrt).
 
-    Exact to float64 rounding (within 9e-16 of ``rv_to_quat_c``, tests/test_attitude) for
+    Exact to float64 rounding (within 9e-16 of scipy's rotation, tests/test_attitude) for
     t <= ``SERIES_MAX_ANGLE`` = 2 pi, and smooth at zero. For the per-sample rotation increments of
-    the block mechanization, where sin/cos were ~4x the cost of the rest of the fused pass.
+    the block mechanization: one fused loop over 256 x 20 000 increments took 185 ms with sin/cos
+    and 41.5 ms with the series.
     Components of same-shape arrays (rad) -> (w, x, y, z) tuple.
     """
     t = 0.25 * (x * x + y * y + z * z)
