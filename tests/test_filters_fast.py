@@ -67,6 +67,34 @@ def test_unmasked_nan_is_flagged(problem):
     assert int(fast.n_nonfinite) == 1 + 2 + 3  # counted, though not masked
 
 
+def test_trusted_batch_takes_the_blocks_only_when_finite(problem, always_block):
+    """check_finite=False under vmap: a batch with finite unmasked data runs the blocks (equal to the
+    per-sequence filter); one unmasked NaN sends it to the per-sequence filter, which propagates and
+    flags it in its own sequence only; a NaN under the user mask does not."""
+    model, x0, P0, zs, mask = problem
+    clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
+    batch = jnp.stack([clean, 0.5 * clean, clean + 1.0])
+    run = lambda z: jf.kalman_filter(model, x0, P0, z, mask=mask, check_finite=False)  # noqa: E731
+    assert _shares(jax.vmap(run), batch)
+    f = jax.jit(jax.vmap(run))
+    for data in (batch, batch.at[2, 72, 0].set(jnp.nan)):  # epoch 72 is masked by the user
+        got = f(data)
+        for i in range(3):
+            _assert_same(jax.tree_util.tree_map(lambda a: a[i], got), run(data[i]), rtol=1e-11, atol=1e-12)
+        assert not np.any(np.asarray(got.status) & _status.NONFINITE_UNMASKED)
+    with np.errstate(all="ignore"):
+        dirty = batch.at[1, 30, 1].set(jnp.nan)
+        got = f(dirty)
+        ref = run(dirty[1])
+    flags = [int(s) & (_status.NONFINITE_UNMASKED | _status.NONFINITE_STATE) for s in got.status]
+    assert flags == [0, int(ref.status) & (_status.NONFINITE_UNMASKED | _status.NONFINITE_STATE), 0]
+    assert flags[1] == _status.NONFINITE_UNMASKED | _status.NONFINITE_STATE
+    assert [int(c) for c in got.n_nonfinite] == [0, 1, 0]
+    np.testing.assert_array_equal(np.isfinite(np.asarray(got.means[1])), np.isfinite(np.asarray(ref.means)))
+    assert np.all(np.isfinite(np.asarray(got.means[1, :30]))) and not np.any(np.isfinite(np.asarray(got.means[1, 30:])))
+    _assert_same(jax.tree_util.tree_map(lambda a: a[0], got), run(dirty[0]), rtol=1e-11, atol=1e-12)
+
+
 def test_vmap_grad_jvp(problem):
     model, x0, P0, zs, mask = problem
     zs = jnp.where(jnp.isfinite(zs), zs, 0.0)

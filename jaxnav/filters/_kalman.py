@@ -134,10 +134,11 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     """Joseph-form measurement update with Cholesky solves (S0 eqs. (5), (7), (9)).
 
     K = P H^T (H P H^T + R)^{-1}; x = x_pred + K v; P = (I - K H) P (I - K H)^T + K R K^T,
-    symmetrised, with the Joseph product evaluated as W - K (H W), W = P - (P H^T) K^T (3 n^2 m
-    multiplications instead of 2 n^3 + n^2 m). Invalid components (``valid`` False) are removed
-    exactly: their columns of P H^T and rows of H P H^T are zeroed and their rows/columns of S
-    replaced by the identity, so K has zero columns for them.
+    symmetrised. Invalid components (``valid`` False) are removed exactly: their columns of
+    P H^T and rows of H P H^T are zeroed and their rows/columns of S replaced by the identity, so
+    K has zero columns for them. (Expanding the Joseph product as W - K (H W), W = P - (P H^T) K^T,
+    would take 3 n^2 m multiplications instead of 2 n^3 + n^2 m, but it rounds like P - K S K^T
+    and loses the congruence that keeps P positive semi-definite; measured and not kept.)
     If S is not positive definite the prior is returned with ``ok = False``.
 
     Args:
@@ -165,9 +166,8 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     Lsafe = jnp.where(ok, L, jnp.eye(m, dtype=dt))
     K = cho_solve(Lsafe, PHt.T).T
     x = x_pred + _mm(K, v)
-    # (I - K H) P (I - K H)^T = A W with W = P A^T = P - (P H^T) K^T and A W = W - K (H W)
-    W = P_pred - _mm(PHt, K.T)
-    P = symmetrize(W - _mm(K, rows(_mm(H, W))) + _mm(_mm(K, Rm), K.T))
+    IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - _mm(K, H)  # K has zero columns for invalid components
+    P = symmetrize(_mm(_mm(IKH, P_pred), IKH.T) + _mm(_mm(K, Rm), K.T))
     w = whiten(Lsafe, v)
     nis = jnp.sum(w * w)
     mv = jnp.sum(valid)
@@ -392,6 +392,8 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
         products (``filters._blocked``; equal to rounding; 40.9 vs 68.8 ms for stepping every
         sequence at B = 256, T = 3600 in benchmarks/bench_filters.py). NaN patterns that differ between
         sequences, or a data-dependent rule or estimator, run one masked recursion per sequence.
+        With ``check_finite=False`` a shared batch takes the same blocks when all its unmasked
+        measurements are finite, else steps every sequence (propagating the NaN/inf).
     Returns:
       :class:`KalmanResult`.
     Raises:
@@ -402,9 +404,8 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
     batched = _under_vmap(*trees)
     products = resolve_products(products, *trees)
     static = dict(save=tuple(save), unroll=unroll, allow_float32=allow_float32, products=products)
-    if (batched and check_finite and _vmap_innermost()
-            and _data_independent(inflation) and _data_independent(estimator)):
-        return _batched_filter(*trees, **static)
+    if batched and _vmap_innermost() and _data_independent(inflation) and _data_independent(estimator):
+        return _batched_filter(*trees, check_finite=check_finite, **static)
     return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
                           check_finite=check_finite, **static)
 
@@ -414,7 +415,7 @@ def _data_independent(plugin) -> bool:
     return plugin is None or bool(getattr(plugin, "data_independent", False))
 
 
-def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
+def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, *, check_finite=True, **static):
     """:func:`kalman_filter` under ``vmap``: one covariance recursion when all sequences have the same gaps.
 
     With ``check_finite=True`` the NaN masks make every sequence's covariance recursion its own,
@@ -426,7 +427,9 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
     :func:`._blocked.blocked_batch_filter`: one covariance recursion, and the batch's means in
     blocks of epochs as dense products (equal to the per-sequence filter to rounding; counts and
     flags identical); else the per-sequence masked filter. Both are compiled; ``lax.cond`` runs
-    one.
+    one. With ``check_finite=False`` the shared recursion never depends on the data; the blocks
+    are taken when every unmasked measurement of the batch is finite (then both filters agree to
+    rounding), else the per-sequence filter, which propagates and flags the NaN/inf.
     Taken only when ``vmap`` is the innermost transformation (see :func:`_vmap_innermost`):
     ``grad(vmap(f))`` gets it, ``vmap(grad(f))`` and ``vmap(jit(f))`` keep the per-sequence filter.
     """
@@ -437,7 +440,7 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
 
     @jax.custom_batching.custom_vmap
     def f(*a):
-        return call(True, *a)
+        return call(check_finite, *a)
 
     @f.def_vmap
     def rule(axis_size, in_batched, *a):
@@ -446,14 +449,19 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
         def run(check_finite, *b):
             return jax.vmap(partial(call, check_finite), in_axes=axes)(*b)
 
+        def worth(x, z):
+            from jaxnav.filters._blocked import worth_blocking
+
+            zshape = jnp.shape(z)[1:] if axes[3] == 0 else jnp.shape(z)
+            return len(zshape) == 2 and worth_blocking(axis_size, zshape[0], jnp.shape(x)[-1], zshape[1],
+                                                       static["save"], jnp.dtype(jnp.result_type(z)).itemsize)
+
         def blocked(m, x, P, z, mk, inf, est):
             # the shared recursion with the means of the whole batch in blocks of epochs as
             # dense products (._blocked); equal to run(False, ...) to rounding
-            from jaxnav.filters._blocked import blocked_batch_filter, worth_blocking
+            from jaxnav.filters._blocked import blocked_batch_filter
 
-            zshape = jnp.shape(z)[1:] if axes[3] == 0 else jnp.shape(z)
-            if len(zshape) != 2 or not worth_blocking(axis_size, zshape[0], jnp.shape(x)[-1], zshape[1],
-                                                      static["save"], jnp.dtype(jnp.result_type(z)).itemsize):
+            if not worth(x, z):
                 return run(False, m, x, P, z, mk, inf, est)
             batch = lambda v, ax: jnp.broadcast_to(v, (axis_size,) + jnp.shape(v)) if ax is None else v  # noqa: E731
             return blocked_batch_filter(m, batch(jnp.asarray(x), axes[1]), P, batch(jnp.asarray(z), axes[3]), mk,
@@ -461,7 +469,20 @@ def _batched_filter(model, x0, P0, zs, mask, inflation, estimator, **static):
                                         allow_float32=static["allow_float32"])
 
         shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (0, 2, 4, 5, 6)]))
-        if shared:
+        if not check_finite:
+            if shared and worth(a[1], a[3]):
+                # data trusted: the blocks when every unmasked measurement is finite; else the
+                # per-sequence filter, which lets the NaN/inf through and flags them
+                z, mk = jnp.asarray(a[3]), a[4]
+                fin = jnp.isfinite(jax.lax.optimization_barrier(z))
+                if mk is not None:
+                    fin = fin | ~jnp.broadcast_to(jnp.asarray(mk, bool).reshape(fin.shape[-2:-1] + (-1,)),
+                                                  fin.shape[-2:])
+                trusted = jax.checkpoint(partial(run, False))
+                out = jax.lax.cond(jnp.all(fin), lambda: blocked(*a), lambda: trusted(*a))
+            else:
+                out = run(False, *a)
+        elif shared:
             z, mk = jnp.asarray(a[3]), a[4]
             # the barrier keeps XLA from constant-folding this reduction when the data is a
             # jit constant (seconds of compile time for a 256 x 3600 batch)
