@@ -101,9 +101,8 @@ def first_prior(F, Q, x0, P0):
 def flops_per_step(n=N_STATE, m=N_OBS):
     """Nominal dense floating-point operations of one textbook Joseph-form KF step (multiply+add = 2).
 
-    A fixed yardstick for the rates: jaxnav evaluates (I-KH) P (I-KH)^T with 3 n^2 m
-    multiplications instead of 2 n^3 + n^2 m (``filters.update``), and its shared-recursion batch
-    executes far fewer.
+    A fixed yardstick for the rates (jaxnav's per-sequence step executes about this; its
+    shared-recursion batch far fewer).
 
     predict: F x (2n^2), F P F^T (4n^3), + Q (n^2);
     update:  H x (2mn), P H^T (2n^2 m), H (P H^T) + R (2m^2 n + m^2), Cholesky (m^3/3),

@@ -392,8 +392,9 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
         products (``filters._blocked``; equal to rounding; 40.9 vs 68.8 ms for stepping every
         sequence at B = 256, T = 3600 in benchmarks/bench_filters.py). NaN patterns that differ between
         sequences, or a data-dependent rule or estimator, run one masked recursion per sequence.
-        With ``check_finite=False`` a shared batch takes the same blocks when all its unmasked
-        measurements are finite, else steps every sequence (propagating the NaN/inf).
+        With ``check_finite=False`` and no covariances saved, a shared batch takes the same blocks
+        when all its unmasked measurements are finite, else steps every sequence (propagating the
+        NaN/inf).
     Returns:
       :class:`KalmanResult`.
     Raises:
@@ -404,7 +405,10 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
     batched = _under_vmap(*trees)
     products = resolve_products(products, *trees)
     static = dict(save=tuple(save), unroll=unroll, allow_float32=allow_float32, products=products)
-    if batched and _vmap_innermost() and _data_independent(inflation) and _data_independent(estimator):
+    # check_finite=False only without saved covariances: plain vmap keeps those unbatched (one
+    # copy for the batch), where the batch rule would return B copies (log_likelihood saves them)
+    if (batched and _vmap_innermost() and _data_independent(inflation) and _data_independent(estimator)
+            and (check_finite or not set(static["save"]) & {"covs", "pred_covs", "innov_covs"})):
         return _batched_filter(*trees, check_finite=check_finite, **static)
     return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
                           check_finite=check_finite, **static)
