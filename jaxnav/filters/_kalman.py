@@ -152,15 +152,20 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     dt = P_pred.dtype
     if valid is None:
         valid = jnp.ones((m,), bool)
-    # products with the unmasked H, masked afterwards: under vmap a per-sequence mask then leaves
-    # H shared, and its products stay single matrix products over the batch
-    rows = lambda A: jnp.where(valid[:, None], A, 0.0)  # noqa: E731  (m, k): zero the invalid rows
     both = valid[:, None] & valid[None, :]
     Rm = jnp.where(both, R, 0.0)
     Rm = Rm + jnp.diag(jnp.where(valid, 0.0, 1.0).astype(dt))
-    v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
-    PHt = jnp.where(valid[None, :], _mm(P_pred, H.T), 0.0)  # P Hm^T
-    S = symmetrize(rows(_mm(H, PHt)) + Rm)
+    if _under_vmap(valid) and not _under_vmap(H):
+        # a per-sequence mask under vmap: products with the shared H, masked afterwards, stay
+        # single matrix products over the batch (masking H first makes B copies of it)
+        v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
+        PHt = jnp.where(valid[None, :], _mm(P_pred, H.T), 0.0)  # P Hm^T
+        S = symmetrize(jnp.where(valid[:, None], _mm(H, PHt), 0.0) + Rm)
+    else:
+        H = jnp.where(valid[:, None], H, 0.0)
+        v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
+        PHt = _mm(P_pred, H.T)
+        S = symmetrize(_mm(H, PHt) + Rm)
     L = cholesky(S)
     ok = jnp.all(jnp.isfinite(L))
     Lsafe = jnp.where(ok, L, jnp.eye(m, dtype=dt))
