@@ -134,11 +134,13 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     """Joseph-form measurement update with Cholesky solves (S0 eqs. (5), (7), (9)).
 
     K = P H^T (H P H^T + R)^{-1}; x = x_pred + K v; P = (I - K H) P (I - K H)^T + K R K^T,
-    symmetrised. Invalid components (``valid`` False) are removed exactly: their columns of
-    P H^T and rows of H P H^T are zeroed and their rows/columns of S replaced by the identity, so
-    K has zero columns for them. (Expanding the Joseph product as W - K (H W), W = P - (P H^T) K^T,
-    would take 3 n^2 m multiplications instead of 2 n^3 + n^2 m, but it rounds like P - K S K^T
-    and loses the congruence that keeps P positive semi-definite; measured and not kept.)
+    symmetrised. Invalid components (``valid`` False) are removed exactly: their H rows are
+    zeroed and their rows/columns of S replaced by the identity, so K has zero columns for them.
+    (Tried in issue 8 and not kept: expanding the Joseph product as W - K (H W),
+    W = P - (P H^T) K^T, takes 3 n^2 m multiplications instead of 2 n^3 + n^2 m but rounds like
+    P - K S K^T and loses the congruence that keeps P positive semi-definite; multiplying by the
+    unmasked H and masking afterwards keeps H shared under a per-sequence vmap mask, but made
+    the loosely coupled filter's single run 2x slower.)
     If S is not positive definite the prior is returned with ``ok = False``.
 
     Args:
@@ -152,26 +154,19 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     dt = P_pred.dtype
     if valid is None:
         valid = jnp.ones((m,), bool)
+    Hm = jnp.where(valid[:, None], H, 0.0)
     both = valid[:, None] & valid[None, :]
     Rm = jnp.where(both, R, 0.0)
     Rm = Rm + jnp.diag(jnp.where(valid, 0.0, 1.0).astype(dt))
-    if _under_vmap(valid) and not _under_vmap(H):
-        # a per-sequence mask under vmap: products with the shared H, masked afterwards, stay
-        # single matrix products over the batch (masking H first makes B copies of it)
-        v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
-        PHt = jnp.where(valid[None, :], _mm(P_pred, H.T), 0.0)  # P Hm^T
-        S = symmetrize(jnp.where(valid[:, None], _mm(H, PHt), 0.0) + Rm)
-    else:
-        H = jnp.where(valid[:, None], H, 0.0)
-        v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
-        PHt = _mm(P_pred, H.T)
-        S = symmetrize(_mm(H, PHt) + Rm)
+    v = jnp.where(valid, z - _mm(Hm, x_pred), 0.0)
+    PHt = _mm(P_pred, Hm.T)
+    S = symmetrize(_mm(Hm, PHt) + Rm)
     L = cholesky(S)
     ok = jnp.all(jnp.isfinite(L))
     Lsafe = jnp.where(ok, L, jnp.eye(m, dtype=dt))
     K = cho_solve(Lsafe, PHt.T).T
     x = x_pred + _mm(K, v)
-    IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - _mm(K, H)  # K has zero columns for invalid components
+    IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - _mm(K, Hm)
     P = symmetrize(_mm(_mm(IKH, P_pred), IKH.T) + _mm(_mm(K, Rm), K.T))
     w = whiten(Lsafe, v)
     nis = jnp.sum(w * w)
@@ -278,7 +273,7 @@ def _filter_step(state: FilterState, inp: StepInput, params: FilterParams, check
     k = state.k + 1.0
     x_pred = _mm(F, state.x)
     FPF = _mm(_mm(F, state.P), F.T)
-    v = jnp.where(valid, z - _mm(H, x_pred), 0.0)
+    v = jnp.where(valid, z - _mm(Hm, x_pred), 0.0)
     ctx = StepContext(k=k, v=v, z=z, x_pred=x_pred, valid=valid, observed=observed, F=F, H=Hm, G=Gm, Q=Q, R=R,
                       FPF=FPF, GQG=GQG, R_used=R)
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
@@ -291,7 +286,7 @@ def _filter_step(state: FilterState, inp: StepInput, params: FilterParams, check
         d = inflation_scale(factor, n, states)
         x_pred, P_pred = predict(state.x, state.P, F, GQG, 1.0, FPF=d[:, None] * FPF * d[None, :])
     up = update(x_pred, P_pred, z, H, R_used, valid)
-    post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - _mm(H, up.x), 0.0), P_pred=P_pred)
+    post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - _mm(Hm, up.x), 0.0), P_pred=P_pred)
     est_state = est.after(est_state, ctx, post)
 
     n_bad = jnp.sum(inp.mask & ~finite).astype(jnp.int32)
