@@ -26,7 +26,6 @@ from jaxnav.ins.attitude import (
     quat_rotate,
     quat_rotate_c,
     rv_to_quat,
-    rv_to_quat_c,
     rv_to_quat_series_c,
 )
 from jaxnav.ins.earth import earth_params, position_rate
