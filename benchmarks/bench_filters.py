@@ -282,26 +282,26 @@ def run_benchmarks(args, zs_batch, log):
     save_rts = ("means", "covs", "pred_means", "pred_covs")
 
     log("jaxnav (a) filter")
-    f = lambda: jf.kalman_filter(model, jx0, jP0, jz1, save=("means",))  # noqa: E731
-    c = lambda: jf.kalman_filter.lower(model, jx0, jP0, jz1, save=("means",)).compile()  # noqa: E731
-    first, runs, out = time_call(f, reps, compile=c)
+    f1 = jax.jit(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",)))
+    first, runs, out = jit_time(f1, (jz1,), reps)
     rows.append(Row("a", "jaxnav", first, runs, means=np.asarray(out.means), jax_impl=True,
                     note="means saved; log-lik, status always computed"))
-    f = lambda: jf.kalman_filter(model, jx0, jP0, jz1, save=("means", "covs"))  # noqa: E731
-    c = lambda: jf.kalman_filter.lower(model, jx0, jP0, jz1, save=("means", "covs")).compile()  # noqa: E731
-    first, runs, out = time_call(f, reps, compile=c)
+    f1 = jax.jit(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means", "covs")))
+    first, runs, out = jit_time(f1, (jz1,), reps)
     rows.append(Row("a", "jaxnav (means+covs)", first, runs, means=np.asarray(out.means),
                     jax_impl=True, note="also saves the (T, 6, 6) covariances"))
 
     log("jaxnav (b) filter+RTS")
+    kf = jax.jit(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=save_rts))
+    rts = jax.jit(lambda r: jf.rts_smoother(model, r))
+
     def f():
-        res = jf.kalman_filter(model, jx0, jP0, jz1, save=save_rts)
-        return res.means, jf.rts_smoother(model, res)
+        res = kf(jz1)
+        return res.means, rts(res)
 
     def c():
-        jf.kalman_filter.lower(model, jx0, jP0, jz1, save=save_rts).compile()
-        shapes = jax.eval_shape(lambda: jf.kalman_filter(model, jx0, jP0, jz1, save=save_rts))
-        jf.rts_smoother.lower(model, shapes).compile()
+        kf.lower(jz1).compile()
+        rts.lower(jax.eval_shape(kf, jz1)).compile()
     first, runs, out = time_call(f, reps, compile=c)
     rows.append(Row("b", "jaxnav", first, runs, means=np.asarray(out[0]),
                     smoothed=np.asarray(out[1].means), jax_impl=True,
@@ -313,25 +313,25 @@ def run_benchmarks(args, zs_batch, log):
                     smoothed=np.asarray(out[1]), jax_impl=True,
                     note="both in one jit returning filtered + smoothed means, like the peers"))
 
-    log("jaxnav (c) vmap batch")
-    fb = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",))))
+    log("jaxnav (c) batch")
+    fb = jax.jit(lambda z: jf.kalman_filter_batch(model, jx0, jP0, z, save=("means",)))
     first, runs, out = jit_time(fb, (jzB,), max(3, reps // 2))
     rows.append(Row("c", "jaxnav", first, runs, means=np.asarray(out.means), jax_impl=True,
-                    note=f"jit(vmap) over B={B}, defaults (NaN masking on): the batch is clean, so one "
-                         "shared P recursion"))
-    jzN = jzB.at[B // 2, T // 2, 0].set(jnp.nan)
-    first, runs, out = jit_time(fb, (jzN,), max(3, reps // 2))
-    rows.append(Row("c", "jaxnav (one NaN in the batch)", first, runs, jax_impl=True,
-                    note="the same call; one masked element makes every sequence run its own P recursion"))
+                    note=f"kalman_filter_batch over B={B}: one covariance recursion (NaN masking on), the means "
+                         "in blocks of 8 epochs"))
     jzG = jzB.at[:, T // 3: T // 3 + 60, :].set(jnp.nan)
     first, runs, out = jit_time(fb, (jzG,), max(3, reps // 2))
     rows.append(Row("c", "jaxnav (common gap)", first, runs, jax_impl=True,
-                    note="the same call; a 60 s outage in every sequence: masked for all, P recursion shared"))
-    fb = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",),
-                                                     check_finite=False)))
-    first, runs, out = jit_time(fb, (jzB,), max(3, reps // 2))
-    rows.append(Row("c", "jaxnav (check_finite=False)", first, runs, means=np.asarray(out.means),
-                    jax_impl=True, note="data trusted (NaN flagged, not masked): one shared P recursion"))
+                    note="the same call; a 60 s outage in every sequence: masked for all"))
+    fv = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",), check_finite=False)))
+    first, runs, out = jit_time(fv, (jzB,), max(3, reps // 2))
+    rows.append(Row("c", "jaxnav vmap(kalman_filter, check_finite=False)", first, runs, means=np.asarray(out.means),
+                    jax_impl=True, note="plain vmap, data trusted: nothing in P depends on the batched data, so "
+                                        "vmap runs one P recursion"))
+    fv = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",))))
+    first, runs, out = jit_time(fv, (jzB,), max(3, reps // 2))
+    rows.append(Row("c", "jaxnav vmap(kalman_filter)", first, runs, means=np.asarray(out.means), jax_impl=True,
+                    note="plain vmap with NaN masking: the masks make P per sequence (as in (d))"))
 
     floor = jax.jit(lambda z: jnp.concatenate([z, z], axis=-1) * 2.0)
     first, runs, out = jit_time(floor, (jzB,), max(3, reps // 2))
@@ -347,6 +347,34 @@ def run_benchmarks(args, zs_batch, log):
     first, runs, out = jit_time(fd, (jzB, jP0B), max(3, reps // 2))
     rows.append(Row("d", "jaxnav", first, runs, means=np.asarray(out.means), jax_impl=True,
                     note=f"jit(vmap) over (zs, P0), B={B}"))
+    jzN = jzB.at[jnp.arange(B), (jnp.arange(B) * 37) % T, jnp.arange(B) % N_OBS].set(jnp.nan)
+    fv = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",))))
+    first, runs, out = jit_time(fv, (jzN,), max(3, reps // 2))
+    rows.append(Row("d", "jaxnav (one NaN per sequence, shared P0)", first, runs, jax_impl=True,
+                    note="jit(vmap(kalman_filter)): every sequence masks its own NaN, so each has its own P"))
+
+    # (g): filter + RTS means under vmap, written as a user writes it, and by the batch entry points
+    log("jaxnav (g) filter + RTS, batch")
+    fg = jax.jit(lambda z: jf.rts_smoother_batch(model, jf.kalman_filter_batch(
+        model, jx0, jP0, z, save=("means", "covs", "pred_covs"))).means)
+    first, runs, out = jit_time(fg, (jzB,), max(3, reps // 2))
+    rows.append(Row("g", "jaxnav", first, runs, smoothed=np.asarray(out), jax_impl=True,
+                    note="rts_smoother_batch(m, kalman_filter_batch(m, x0, P0, zs, save=(\"means\", \"covs\", "
+                         "\"pred_covs\"))).means: one P recursion, the means of filter and smoother in blocks"))
+    fg = jax.jit(lambda z: jf.rts_smoother_batch(model, jf.kalman_filter_batch(model, jx0, jP0, z)).means)
+    first, runs, out = jit_time(fg, (jzB,), max(3, reps // 2))
+    rows.append(Row("g", "jaxnav (default outputs)", first, runs, smoothed=np.asarray(out), jax_impl=True,
+                    note="the same with the filter's default save (every output)"))
+    fg = jax.jit(jax.vmap(lambda z: jf.rts_smoother(model, jf.kalman_filter(model, jx0, jP0, z,
+                                                                             check_finite=False)).means))
+    first, runs, out = jit_time(fg, (jzB,), max(3, reps // 2))
+    rows.append(Row("g", "jaxnav vmap(filter(check_finite=False) + RTS)", first, runs, smoothed=np.asarray(out),
+                    jax_impl=True, note="plain vmap, data trusted: vmap shares P and the smoother gains"))
+    fg = jax.jit(jax.vmap(lambda z: jf.rts_smoother(model, jf.kalman_filter(model, jx0, jP0, z)).means))
+    first, runs, out = jit_time(fg, (jzB,), max(3, reps // 2))
+    rows.append(Row("g", "jaxnav vmap(filter + RTS)", first, runs, smoothed=np.asarray(out), jax_impl=True,
+                    note="jit(vmap(lambda z: rts_smoother(m, kalman_filter(m, x0, P0, z)).means)): NaN masking on, "
+                         "P per sequence"))
 
     # ---------------- plain lax.scan ----------------
     log("plain lax.scan")
@@ -370,6 +398,11 @@ def run_benchmarks(args, zs_batch, log):
     first, runs, out = jit_time(pfd, (jzB, jP0B), max(3, reps // 2))
     rows.append(Row("d", "plain lax.scan", first, runs, means=np.asarray(out), jax_impl=True,
                     note=f"jit(vmap) over (zs, P0), B={B}"))
+    pfg = jax.jit(jax.vmap(lambda z: (lambda o: plain_rts(jF, *o))(plain_filter(jF, jH, jQ, jR, jx0, jP0, z,
+                                                                                 keep_all=True))))
+    first, runs, out = jit_time(pfg, (jzB,), max(3, reps // 2))
+    rows.append(Row("g", "plain lax.scan", first, runs, smoothed=np.asarray(out), jax_impl=True,
+                    note=f"jit(vmap) of the plain filter + RTS over B={B} (no NaN handling: vmap shares P)"))
 
     # ---------------- dynamax ----------------
     try:
@@ -399,6 +432,10 @@ def run_benchmarks(args, zs_batch, log):
         first, runs, out = jit_time(dfd, (jzB, jP1B), max(3, reps // 2))
         rows.append(Row("d", "dynamax", first, runs, means=np.asarray(out[0]), jax_impl=True,
                         note=f"jit(vmap) over (zs, initial cov), B={B}"))
+        dsg = jax.jit(jax.vmap(lambda z: lgssm_smoother(params, z).smoothed_means))
+        first, runs, out = jit_time(dsg, (jzB,), max(3, reps // 2))
+        rows.append(Row("g", "dynamax", first, runs, smoothed=np.asarray(out), jax_impl=True,
+                        note=f"jit(vmap(lgssm_smoother)) over B={B}"))
 
     # ---------------- (e), (f): value_and_grad of the innovation log-likelihood ----------------
     # theta = (log q, log sigma); the forward pass (log-likelihood only) is the reference row
@@ -446,6 +483,23 @@ def run_benchmarks(args, zs_batch, log):
                 rows.append(Row(case, "jaxnav log_likelihood value_and_grad", first, runs, jax_impl=True,
                                 note="the same gradient from one backward smoothing pass (`jf.log_likelihood`); max rel. "
                                      f"difference to autodiff {rel:.1e}" + sfx))
+    def jx_nll_batch(theta, zB):
+        mod = jf.constant_velocity(DT, sigma=jnp.exp(theta[1]), q=jnp.exp(theta[0]))
+        return -jnp.sum(jf.kalman_filter_batch(mod, jx0, jP0, zB, save=()).loglik)
+
+    rr = max(3, reps // 2)
+    fwd = jax.jit(jx_nll_batch)
+    first, runs, _ = jit_time(fwd, (theta0, jzB), rr)
+    rows.append(Row("f", "jaxnav kalman_filter_batch", first, runs, jax_impl=True,
+                    note=f"forward: the batch entry point (one covariance recursion) over B={B}"))
+    vg = jax.jit(jax.value_and_grad(jx_nll_batch))
+    first, runs, _ = jit_time(vg, (theta0, jzB), rr)
+    rows.append(Row("f", "jaxnav kalman_filter_batch value_and_grad", first, runs, jax_impl=True,
+                    note=f"reverse mode through the batch entry point over B={B}"))
+    vg = jax.jit(lambda th, d: jtune.value_and_grad(lambda t: jx_nll_batch(t, d), mode="forward")(th))
+    first, runs, _ = jit_time(vg, (theta0, jzB), rr)
+    rows.append(Row("f", "jaxnav kalman_filter_batch value_and_grad, forward mode", first, runs, jax_impl=True,
+                    note=f"forward mode through the batch entry point over B={B}"))
     try:
         from dynamax.linear_gaussian_ssm import lgssm_filter as _dlf
         from dynamax.linear_gaussian_ssm.inference import make_lgssm_params as _dmp
@@ -703,7 +757,8 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
               "e": f"(e) value_and_grad of the innovation log-likelihood, single sequence, T = {T} "
                    "(ratio column: times jaxnav's forward pass)",
               "f": f"(f) value_and_grad of the innovation log-likelihood, batch of B = {B}, T = {T} "
-                   "(ratio column: times jaxnav's default forward pass)"}
+                   "(ratio column: times jaxnav's default forward pass)",
+              "g": f"(g) batch of B = {B} sequences, filter + RTS smoother (smoothed means returned), T = {T}"}
     out = []
     v = info["versions"]
     cmd = " ".join(["benchmarks/bench_filters.py"] + sys.argv[1:])
@@ -723,7 +778,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                f"{max(2, args.repeats // 3)} (NumPy peers, their batch loops included); repeats run round-robin in shuffled order |")
     out.append(f"| total wall time | {wall:.0f} s |")
     out.append("")
-    for case in "abcdef":
+    for case in "abcdgef":
         crow = [r for r in rows if r.case == case]
         if not crow:
             continue
@@ -736,7 +791,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                    "max abs Δ smoothed vs jaxnav | vs filterpy | notes |")
         out.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for r in crow:
-            steps = T * (B if case in "cdf" else 1)
+            steps = T * (B if case in "cdfg" else 1)
             ratio = "1.00" if r is ref else (f"{r.tmin / ref.tmin:.2f}" if ref and r.tmin == r.tmin else "n/a")
             per = "n/a" if r.tmin != r.tmin else (
                 f"{r.tmin / steps * 1e9:.0f} ns" if r.tmin / steps < 1e-6 else f"{r.tmin / steps * 1e6:.2f} µs")
@@ -864,16 +919,20 @@ def main(argv=None):
             params = make_lgssm_params(m1, P1, F, Q, H, R)
             impls["dynamax"] = lambda z: (lambda r: (r.filtered_means, r.marginal_loglik))(
                 lgssm_filter(params, z))
+        try:
+            key = (f"jaxnav kalman_filter_batch (c), B={len(zB)} (every loop, fusions x trips: the covariance pass "
+                   "x T, the block maps x 8 (x 4 for the tail), the blocks x T/8)")
+            profile[key] = loop_body_profile(
+                lambda z: (lambda r: (r.means, r.loglik))(jf.kalman_filter_batch(model, x0, P0, z, save=("means",),
+                                                                                 block=8)), zB, batch=len(zB),
+                split=True)
+        except Exception as e:
+            log(f"profile of the batch filter skipped: {e!r}")
         for batched in (False, True):
             for name, fn in impls.items():
                 key = f"{name} (c) vmap, B={len(zB)}" if batched else f"{name} (a) single"
-                if batched and name == "jaxnav":
-                    key += (" (every loop, fusions x trips; shared-recursion branch: the covariance pass x T, "
-                            "the block maps x 8 (x 4 for the tail), the blocks x T/8; NaN branch: the "
-                            "per-sequence scan x T)")
                 try:  # profiling is best effort
-                    profile[key] = (loop_body_profile(jax.vmap(fn), zB, batch=len(zB), split=name == "jaxnav")
-                                    if batched
+                    profile[key] = (loop_body_profile(jax.vmap(fn), zB, batch=len(zB)) if batched
                                     else loop_body_profile(fn, z1))
                 except Exception as e:
                     log(f"profile of {key} skipped: {e!r}")

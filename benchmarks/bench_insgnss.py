@@ -19,7 +19,7 @@ with P = [[0,1,0],[1,0,0],[0,0,-1]] for pyins, see tests/test_pyins.py):
            gyro random constant, gyro first-order Markov drift (tau 300 s), accelerometer random
            constant; phi-angle error model in ENU; Phi/Qd by Van Loan once per 1 s epoch from the
            epoch-averaged F; 6-D position + velocity update; feedback after every fix), as the
-           demo calls it (``_demo_s0._Setup`` parameters), saving only the per-epoch navigation
+           demo calls it (``jaxnav.experiments.S0Setup`` parameters), saving only the per-epoch navigation
            state. Single seed: the user call (host-side validation + IMU segmentation included).
            Seeds: ``jax.jit(jax.vmap(...))`` over the per-seed IMU record, fixes and initial state.
   pyins    ``pyins.filters.run_feedback_filter`` (python-ins 1.0.1; EKF with feedback), what a
@@ -77,8 +77,7 @@ from pyins import filters as pfilters  # noqa: E402
 from pyins import inertial_sensor, measurements, strapdown, transform  # noqa: E402
 
 from jaxnav import sim  # noqa: E402
-from jaxnav.tune._s0 import S0Setup as _Setup  # noqa: E402
-from jaxnav.tune._s0 import _measurements, load_experiment  # noqa: E402
+from jaxnav.experiments import S0Setup, load_experiment, s0_measurements  # noqa: E402
 from jaxnav.ins import attitude as att  # noqa: E402
 from jaxnav.ins.integration import loosely_coupled  # noqa: E402
 
@@ -96,7 +95,7 @@ DEG = np.pi / 180.0
 def make_setup():
     exp = load_experiment()
     exp["scenario"]["unsensed_velocity_steps"] = False  # well specified: both filters in their comfort zone
-    return _Setup(exp)
+    return S0Setup(exp)
 
 
 def simulate_seeds(S, keys):
@@ -301,7 +300,7 @@ def main(argv=None):
     t_imu, t_g = S.t_imu, S.t_gnss
 
     def lc(dth, dv, gpos, gvel, valid, nav0, nav_every=1):
-        meas = _measurements(S.cfg, SimpleNamespace(pos=gpos, vel=gvel, valid=valid), t_g)
+        meas = s0_measurements(S.cfg, SimpleNamespace(pos=gpos, vel=gvel, valid=valid), t_g)
         return loosely_coupled(nav0, t_imu, dth, dv, meas, S.params, dt_imu=S.cfg.dt, n_states=n_states,
                                inflation=None, save=("nav",), nav_every=nav_every)
 

@@ -7,7 +7,7 @@ in under 60 s after compilation; compile under 15 s"). Runs in the main test env
     .venv/bin/python benchmarks/bench_s0_study.py --seeds 8 --no-write
 
 The workload is what ``make demo`` computes for its table: the experiment of
-``jaxnav/tune/s0_experiment.toml`` (IMU 100 Hz, GPS 1 Hz, 18 states, the experiment's model
+``jaxnav/experiments/s0_experiment.toml`` (IMU 100 Hz, GPS 1 Hz, 18 states, the experiment's model
 mismatch), the classic (b = 0), attenuated (b = 0.254) and fading filters, per-epoch navigation
 state, covariances and fading factors saved, the per-run RMS and error series reduced on the
 device. One compiled program (``jaxnav.filters.switch`` picks the rule by an array index; the
@@ -45,21 +45,21 @@ from jaxnav import filters as jf  # noqa: E402
 from jaxnav import sim  # noqa: E402
 from jaxnav import tune  # noqa: E402
 from jaxnav.ins import loosely_coupled  # noqa: E402
-from jaxnav.tune._s0 import _measurements, inflated_states, rules  # noqa: E402
+from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules, s0_measurements  # noqa: E402
 
 BEGIN, END = "<!-- BEGIN bench_s0_study -->", "<!-- END bench_s0_study -->"
 
 
 def study(exp, seeds, chunk, discretization, nav_every=1):
     """Time the three filters over ``seeds`` seeds; returns (per-filter mean position RMS, timings)."""
-    S = tune.S0Setup(exp)
+    S = S0Setup(exp)
     states = inflated_states(exp)
     keys = jax.random.split(jax.random.PRNGKey(2019), seeds)
     save = ("nav", "covs", "factors")
 
     def run(key, rule):
         r = sim.simulate(S.cfg, key, trajectory=S.truth)
-        return loosely_coupled(r.nav0, S.t_imu, r.imu.dtheta, r.imu.dv, _measurements(S.cfg, r.gnss, S.t_gnss),
+        return loosely_coupled(r.nav0, S.t_imu, r.imu.dtheta, r.imu.dv, s0_measurements(S.cfg, r.gnss, S.t_gnss),
                                S.params, dt_imu=S.cfg.dt, n_states=exp["filter"]["n_states"], inflation=rule,
                                save=save, discretization=discretization, nav_every=nav_every)
 
@@ -86,7 +86,7 @@ def main(argv=None):
     p.add_argument("--chunk", type=int, default=16, help="runs per compiled call (default 16)")
     p.add_argument("--no-write", action="store_true")
     a = p.parse_args(argv)
-    exp = tune.load_experiment()
+    exp = load_experiment()
     load0 = loadavg()
     t_all = time.perf_counter()
     rows = []

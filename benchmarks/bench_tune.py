@@ -53,7 +53,7 @@ import numpy as np  # noqa: E402
 import optax  # noqa: E402
 
 from jaxnav import tune  # noqa: E402
-from jaxnav.tune._problems import s0_metrics  # noqa: E402
+from jaxnav.experiments import S0Setup, load_experiment, s0_metrics  # noqa: E402
 
 BEGIN, END = "<!-- BEGIN bench_tune -->", "<!-- END bench_tune -->"
 B_PAPER = 0.254
@@ -169,7 +169,7 @@ def main(argv=None):
     runs, n_grid = (2, 10) if a.quick else (a.runs, a.grid)
     t_all = time.perf_counter()
     load0 = loadavg()
-    setup = tune.S0Setup(tune.load_experiment(), duration=duration)
+    setup = S0Setup(load_experiment(), duration=duration)
     keys = jax.random.split(jax.random.PRNGKey(2019), runs)
     print(f"S0 {setup.cfg.duration:.0f} s, {runs} runs; grid {n_grid}; L-BFGS <= {a.max_evals} evaluations; "
           f"optax.lbfgs {a.steps} steps", flush=True)

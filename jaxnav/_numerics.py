@@ -1,10 +1,43 @@
-"""Safe small linear algebra shared by the filters: symmetrisation, Cholesky solves, kinks."""
+"""Safe small linear algebra shared by the filters: symmetrisation, Cholesky solves, masked
+measurements, the Gaussian log-likelihood, kinks, and the package's one float64 guard."""
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
+from jax.custom_batching import custom_vmap
 from jax.scipy.linalg import solve_triangular
+
+
+#: log(2 pi), the constant of the Gaussian log-density
+LOG_2PI = math.log(2.0 * math.pi)
+
+
+def check_float64(*arrays, what: str = "absolute coordinates", allow_float32: bool = False) -> None:
+    """The package's float64 guard: raise ValueError if a floating array is narrower than float64.
+
+    float32 spacing is ~0.5 m at ECEF magnitude and ~4 m for a Gauss-Krueger y with its zone
+    prefix, so navigation states and absolute coordinates must be float64 (DESIGN.md).
+
+    Args:
+      arrays: arrays, dtypes or anything ``jnp.result_type`` accepts.
+      what: what the arrays are, for the message.
+      allow_float32: the caller's opt-in to a float32 path (then nothing is checked).
+    Raises:
+      ValueError: naming ``what``, the dtype and the fix (``jaxnav.enable_x64()``).
+    """
+    if allow_float32:
+        return
+    for a in arrays:
+        dt = jnp.result_type(a)
+        if jnp.issubdtype(dt, jnp.floating) and jnp.finfo(dt).bits < 64:
+            raise ValueError(
+                f"{what} given as {jnp.dtype(dt).name}: float32 spacing is ~0.5 m at Earth radius and "
+                "loses mm-level variances; call jaxnav.enable_x64() before creating arrays"
+                + ("" if what.startswith("absolute") else ", or pass allow_float32=True to opt in to float32")
+            )
 
 
 def as_leaf(x):
@@ -97,6 +130,56 @@ def whiten(L, v):
     return solve_triangular(L, v, lower=True)
 
 
+def masked_measurement(H, R, valid):
+    """Measurement matrices with invalid components removed exactly (S0 eqs. (5), (7)).
+
+    The rows of H of invalid components are zeroed and R is replaced on their rows and columns by
+    the identity, so H P H^T + R stays positive definite, the gain has zero columns for them and
+    they add nothing to the log-likelihood but log 1 = 0.
+
+    Args:
+      H: (..., m, n).  R: (..., m, m).  valid: (..., m) bool.
+    Returns:
+      (Hm (..., m, n), Rm (..., m, m)).
+    """
+    Hm = jnp.where(valid[..., :, None], H, 0.0)
+    both = valid[..., :, None] & valid[..., None, :]
+    eye = jnp.eye(valid.shape[-1], dtype=jnp.result_type(R))
+    Rm = jnp.where(both, R, 0.0) + jnp.where(valid, 0.0, 1.0)[..., :, None] * eye
+    return Hm, Rm
+
+
+def safe_cholesky(S):
+    """Lower Cholesky factor of S with a flag: (L, ok), L the identity where S is not positive definite.
+
+    The identity keeps every later solve finite (and their gradients, double-where style); callers
+    use ``ok`` to discard what was computed with it.
+
+    Args:
+      S: (..., m, m) symmetric.
+    Returns:
+      (L (..., m, m), ok (...) bool).
+    """
+    L = cholesky(S)
+    ok = jnp.all(jnp.isfinite(L), axis=(-2, -1))
+    return jnp.where(ok[..., None, None], L, jnp.eye(S.shape[-1], dtype=S.dtype)), ok
+
+
+def gaussian_loglik(w, L, n_valid):
+    """log N(v; 0, S) from the whitened v, w = L^-1 v, and S = L L^T (S0 eq. (17) innovations).
+
+    -(|w|^2 + 2 sum_i log L_ii + n_valid log 2 pi) / 2; components removed by
+    :func:`masked_measurement` have w_i = 0 and L_ii = 1, so they contribute nothing.
+
+    Args:
+      w: (..., m) whitened innovation.  L: (..., m, m) lower factor.  n_valid: (...) count of valid components.
+    Returns:
+      (...) log-density.
+    """
+    logdet = 2.0 * jnp.sum(jnp.log(jnp.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
+    return -0.5 * (jnp.sum(w * w, axis=-1) + logdet + n_valid * LOG_2PI)
+
+
 def all_finite(*arrays):
     """Scalar bool: every element of every array is finite."""
     ok = jnp.array(True)
@@ -113,24 +196,60 @@ def smooth_max1(x, tau):
     return 1.0 + tau * jax.nn.softplus((x - 1.0) / tau)
 
 
-def mm(A, B):
-    """Matrix product over the last two axes (leading axes broadcast), fusable for small sizes.
-
-    For inner dimensions up to :data:`SMALL` the product is written as an elementwise
-    multiply and a sum, which XLA fuses with its neighbours; on CPU each ``dot`` of tiny
-    matrices is a separate kernel costing ~0.5 us, several times the arithmetic, so this
-    halves a single-sequence filter step (6x6: 12 -> 6 ms for T = 3600, measured in
-    ``benchmarks/bench_filters.py``). Under ``vmap`` with one matrix per sequence it is
-    about as fast as the batched ``dot``; for wide batched operands prefer ``jnp.matmul``
-    (the parallel filter does). A 1-D ``B`` is a vector: ``mm(A, v) = A v``.
-    """
+def _fused_mm(A, B):
+    """A B written out elementwise: a sum over k of the outer products A[:, k] B[k, :] (a matrix B), or a
+    multiply and a sum over the last axis (a vector B); XLA fuses it with its neighbours."""
     if B.ndim == 1:
-        if A.shape[-1] <= SMALL:
-            return jnp.sum(A * B, axis=-1)
+        return jnp.sum(A * B, axis=-1)
+    out = A[..., :, 0:1] * B[..., 0:1, :]
+    for i in range(1, A.shape[-1]):
+        out = out + A[..., :, i:i + 1] * B[..., i:i + 1, :]
+    return out
+
+
+#: batch size from which a vmapped small product runs as XLA's batched dot (see :func:`mm`)
+DOT_FROM_BATCH = 128
+
+
+def mm(A, B):
+    """Matrix product over the last two axes (leading axes broadcast), fast for small sizes.
+
+    For inner dimensions up to :data:`SMALL` one sequence's product is written out elementwise
+    (:func:`_fused_mm`), which XLA fuses with its neighbours; on CPU each ``dot`` of tiny matrices
+    is a separate kernel costing ~0.5 us, several times the arithmetic (6-state filter, T = 3600:
+    13-16 ms against 34 ms with ``dot``). Under ``jax.vmap`` over :data:`DOT_FROM_BATCH` or more
+    sequences with their own matrices, the elementwise form becomes slow broadcasts of (B, 6, 6)
+    arrays, and XLA's batched dot is faster (B = 256 sequences with their own covariance: the
+    Joseph-form filter 1.27 s against 1.95 s), so the product has that batching rule
+    (``jax.custom_batching.custom_vmap``: the same product, another kernel; static, whatever
+    the nesting of ``jit``, ``vmap`` and ``grad``). Derivatives (``custom_jvp``) are the
+    elementwise products of the tangents. A 1-D ``B`` is a vector: ``mm(A, v) = A v``.
+    """
+    if A.shape[-1] > SMALL:
         return A @ B
-    if A.shape[-1] <= SMALL:
-        return jnp.sum(A[..., :, :, None] * B[..., None, :, :], axis=-2)
-    return A @ B
+    return _mm(A, B)
+
+
+@jax.custom_jvp
+def _mm(A, B):
+    return _mm_batchable(A, B)
+
+
+@_mm.defjvp
+def _mm_jvp(primals, tangents):
+    (A, B), (dA, dB) = primals, tangents
+    return _mm(A, B), _fused_mm(dA, B) + _fused_mm(A, dB)
+
+
+@custom_vmap
+def _mm_batchable(A, B):
+    return _fused_mm(A, B)
+
+
+@_mm_batchable.def_vmap
+def _mm_batched(axis_size, in_batched, A, B):
+    kernel = _fused_mm if axis_size < DOT_FROM_BATCH else jnp.matmul
+    return jax.vmap(kernel, in_axes=tuple(0 if b else None for b in in_batched))(A, B), True
 
 
 def mT(A):

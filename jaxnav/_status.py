@@ -20,6 +20,7 @@ BAD_IMU_TIME = 128  # non-positive or irregular IMU sample interval
 DISCRETIZATION_INACCURATE = 256  # a truncated Taylor discretisation had not converged (use more terms or Van Loan)
 COVARIANCE_INDEFINITE = 512  # an adaptive filter's covariance lost positive semi-definiteness (diverged)
 IMU_INCREMENT_TOO_LARGE = 1024  # a rotation increment above pi rad in one sample (nav_every > 1)
+BATCH_MASK_WIDENED = 2048  # a finite measurement was masked because another sequence of the batch had NaN/inf there
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -38,6 +39,9 @@ _MESSAGES = {
     IMU_INCREMENT_TOO_LARGE: "an IMU rotation increment exceeded pi rad in one sample: the record is undersampled "
                              "for strapdown integration, and the attitude series of nav_every > 1 is exact only "
                              "up to 2 pi per sample (use nav_every=1)",
+    BATCH_MASK_WIDENED: "finite measurements were left out because another sequence of the batch had NaN/inf at "
+                        "the same element (kalman_filter_batch shares one covariance recursion); for sequences "
+                        "with gaps of their own use jax.vmap(kalman_filter)",
 }
 
 #: flags that are reported but are not errors by default

@@ -4,13 +4,24 @@
 * :func:`kalman_filter`: classic KF with Cholesky solves and Joseph update, plus plug-ins:
   prior-inflation rules :func:`constant`, :func:`attenuated`, :func:`fading` (and
   :func:`switch` to pick one by an array index in one compiled program) and noise
-  estimators :func:`variance_compensation`, :func:`sage_husa`.
+  estimators :func:`variance_compensation`, :func:`sage_husa`, :func:`igg3`, :func:`chain`.
+  New plug-ins follow the protocols :class:`InflationRule` and :class:`NoiseEstimator`.
 * :func:`rts_smoother`: fixed-interval smoothing over the saved filter moments.
+* :func:`kalman_filter_batch`, :func:`rts_smoother_batch`: B sequences sharing one covariance
+  recursion (Monte Carlo studies), the means in blocks of epochs as dense products.
+  ``jax.vmap(kalman_filter)`` is the per-sequence computation.
 * :func:`log_likelihood`: the classic filter's innovation log-likelihood with exact gradients
   from one backward smoothing pass (no tape through the filter).
-* :func:`predict`, :func:`update`, :func:`filter_step`: the pure pieces, for custom scans.
+* :func:`parallel_filter`, :func:`parallel_smoother`: associative-scan forms.
+* :func:`predict`, :func:`update`, :func:`filter_step`, :func:`init_state`: the pure pieces,
+  for custom scans.
+
+Module layout (imports point down): ``_plugins`` (protocols, contexts, defaults) <- ``_rules``,
+``_estimators``, ``_robust`` <- ``_step`` (records, predict, update, filter_step) <- ``_kalman``
+(the driver) <- ``_smoother`` <- ``_batch``, ``_loglik``, ``_parallel``.
 """
 
+from jaxnav.filters._batch import kalman_filter_batch, rts_smoother_batch
 from jaxnav.filters._estimators import (
     SageHusa,
     SageHusaInfo,
@@ -19,22 +30,19 @@ from jaxnav.filters._estimators import (
     sage_husa,
     variance_compensation,
 )
-from jaxnav.filters._kalman import (
-    ALL_OUTPUTS,
-    FilterParams,
-    FilterState,
-    KalmanResult,
-    StepInfo,
-    StepInput,
-    UpdateResult,
-    filter_step,
-    kalman_filter,
-    predict,
-    update,
-)
-from jaxnav.filters._model import LinearGaussian, check_shapes, validate_model
+from jaxnav.filters._kalman import KalmanResult, kalman_filter
 from jaxnav.filters._loglik import LoglikGradients, log_likelihood, loglik_and_gradients
+from jaxnav.filters._model import LinearGaussian, check_shapes, validate_model
 from jaxnav.filters._models import constant_velocity
+from jaxnav.filters._parallel import parallel_filter, parallel_smoother
+from jaxnav.filters._plugins import (
+    InflationRule,
+    NoEstimator,
+    NoInflation,
+    NoiseEstimator,
+    PostUpdate,
+    StepContext,
+)
 from jaxnav.filters._robust import (
     IGG3,
     IGG3State,
@@ -52,7 +60,6 @@ from jaxnav.filters._rules import (
     Attenuated,
     Constant,
     Fading,
-    StepContext,
     Switch,
     attenuated,
     constant,
@@ -60,16 +67,29 @@ from jaxnav.filters._rules import (
     switch,
 )
 from jaxnav.filters._smoother import SmootherResult, rts_smoother
-from jaxnav.filters._parallel import parallel_filter, parallel_smoother
+from jaxnav.filters._step import (
+    ALL_OUTPUTS,
+    FilterParams,
+    FilterState,
+    StepInfo,
+    StepInput,
+    UpdateResult,
+    filter_step,
+    init_state,
+    predict,
+    update,
+)
 
 __all__ = [
     "ALL_OUTPUTS", "Attenuated", "Constant", "Fading", "FilterParams", "FilterState",
     "KalmanResult", "LinearGaussian", "SageHusa", "SageHusaInfo", "SmootherResult", "StepContext",
     "StepInfo", "StepInput", "UpdateResult", "VCInfo", "VarianceCompensation", "attenuated",
-    "check_shapes", "constant", "constant_velocity", "fading", "filter_step", "kalman_filter",
+    "check_shapes", "constant", "constant_velocity", "fading", "filter_step", "init_state", "kalman_filter",
     "predict", "rts_smoother", "sage_husa", "update", "validate_model", "variance_compensation",
     "IGG3", "IGG3State", "Chain", "ChainInfo", "RobustInfo", "YangFactor", "chain", "igg3", "igg3_weight", "yang_alpha",
     "yang_factor",
     "parallel_filter", "parallel_smoother", "Switch", "switch",
     "LoglikGradients", "log_likelihood", "loglik_and_gradients",
+    "kalman_filter_batch", "rts_smoother_batch",
+    "InflationRule", "NoiseEstimator", "NoInflation", "NoEstimator", "PostUpdate",
 ]

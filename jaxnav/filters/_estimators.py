@@ -1,11 +1,12 @@
 """Noise estimators that plug into the shared filter step: variance compensation, Sage-Husa.
 
-An estimator is a frozen dataclass pytree with three methods:
+An estimator is a frozen dataclass pytree following :class:`jaxnav.filters.NoiseEstimator`:
 
 * ``init(n, m, p, dtype) -> state``
-* ``noise(state, ctx) -> (GQG, R, state, info)``: the process noise G Q G^T (n, n) and the
-  measurement noise R (m, m) to use at epoch k, given the innovation of that epoch;
-* ``after(state, ctx, post) -> state``: learn from the update (post-fit quantities).
+* ``noise(state, ctx) -> (GQG, R, state, (info, flags))``: the process noise G Q G^T (n, n) and
+  the measurement noise R (m, m) to use at epoch k, given the innovation of that epoch;
+* ``after(state, ctx, post) -> state``: learn from the update (post-fit quantities);
+* ``screen(info, ctx) -> (m,) bool``: components later members of a chain must not learn from.
 """
 
 from __future__ import annotations
@@ -18,35 +19,7 @@ import jax.numpy as jnp
 
 from jaxnav import _status
 from jaxnav._numerics import as_leaf, cho_solve, cholesky, symmetrize
-
-
-class PostUpdate(NamedTuple):
-    """What the update produced at epoch k (for estimators that learn after it)."""
-
-    x: Any  # (n,) filtered mean
-    P: Any  # (n, n) filtered covariance
-    K: Any  # (n, m) gain (zero columns for invalid components)
-    eps: Any  # (m,) post-fit residual Z - H x (zero where invalid)
-    P_pred: Any  # (n, n) the prior covariance used
-
-
-class NoEstimator:
-    """Keep the model's Q and R (the default)."""
-
-    #: Q and R do not depend on the measurements (see filters._kalman._batched_filter)
-    data_independent: ClassVar[bool] = True
-
-    def init(self, n, m, p, dtype):
-        return ()
-
-    def noise(self, state, ctx):
-        return ctx.GQG, ctx.R, state, ((), jnp.zeros((), jnp.int32))
-
-    def after(self, state, ctx, post):
-        return state
-
-
-jax.tree_util.register_pytree_node(NoEstimator, lambda s: ((), None), lambda a, c: NoEstimator())
+from jaxnav.filters._plugins import NoEstimator, PostUpdate  # noqa: F401  (PostUpdate: what after() sees)
 
 
 class VCState(NamedTuple):
@@ -108,6 +81,8 @@ class VarianceCompensation:
       horizon: static int I >= 1, largest prediction step i of the residuals.
       min_epochs: static int, epochs needed before estimating (default: window).
     """
+
+    data_independent: ClassVar[bool] = False
 
     floor: Any = 0.0
     floor_rel: Any = 1e-2
@@ -179,6 +154,9 @@ class VarianceCompensation:
     def after(self, state, ctx, post):
         return state
 
+    def screen(self, info, ctx):
+        return jnp.zeros_like(ctx.valid)
+
 
 class SageHusaState(NamedTuple):
     """Current noise estimates and the number of updates that formed them."""
@@ -224,6 +202,8 @@ class SageHusa:
       estimate: static, "R", "Q" or "QR".
     """
 
+    data_independent: ClassVar[bool] = False
+
     b: Any = 0.95
     eig_floor: Any = 0.0
     estimate: str = dataclasses.field(default="R", metadata=dict(static=True))
@@ -259,6 +239,9 @@ class SageHusa:
             Qnew = (1.0 - d) * Q + d * _psd_clip(Qinc, jnp.asarray(self.eig_floor, dt))
             Q = jnp.where(obs, symmetrize(Qnew), Q)
         return SageHusaState(Q=Q, R=R, count=jnp.where(obs, c, state.count))
+
+    def screen(self, info, ctx):
+        return jnp.zeros_like(ctx.valid)
 
 
 def variance_compensation(window: int = 30, *, horizon: int = 1, floor=0.0, floor_rel=1e-2, ridge=0.0,

@@ -27,9 +27,10 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxnav._numerics import cho_solve, cholesky, mm
-from jaxnav.filters._kalman import kalman_filter, prepare_inputs, resolve_products
+from jaxnav._numerics import cho_solve, cholesky, masked_measurement, mm
+from jaxnav.filters._kalman import kalman_filter
 from jaxnav.filters._model import LinearGaussian
+from jaxnav.filters._step import prepare_inputs
 
 _FILTER_SAVE = ("means", "covs", "pred_means", "pred_covs")
 
@@ -143,11 +144,9 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     # Only innovation covariances are inverted, so a singular P_t|t-1 (exactly known x0, a
     # rank-deficient G Q G^T) is fine.
     H, R = model.H, model.R
-    Hm = jnp.where(valid[:, :, None], H, 0.0)
+    Hm, Rm = masked_measurement(H, R, valid)
     vm = jnp.where(valid, zs - jnp.sum(Hm * f.pred_means[:, None, :], axis=-1), 0.0)
-    both = valid[:, :, None] & valid[:, None, :]
-    S = jnp.where(both, Hm @ f.pred_covs @ jnp.swapaxes(Hm, -1, -2) + R, 0.0) + jax.vmap(jnp.diag)(
-        jnp.where(valid, 0.0, 1.0).astype(dtype))
+    S = Hm @ f.pred_covs @ jnp.swapaxes(Hm, -1, -2) + Rm
     SiH = cho_solve(cholesky(S), Hm)  # S^-1 H (T, m, n), zero rows where invalid
     u = jnp.sum(SiH * vm[:, :, None], axis=1)  # H^T S^-1 v (T, n)
     K = f.pred_covs @ jnp.swapaxes(SiH, -1, -2)
@@ -158,16 +157,11 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     W = jnp.swapaxes(F_next @ (eye_n - K @ Hm), -1, -2)
     HtSiH = jnp.swapaxes(Hm, -1, -2) @ SiH
 
-    # small products: fused for one sequence, batched dots where vmap batches them (the means
-    # always; the covariances only when the batch does not share them)
-    prod_b = mm if resolve_products("auto", zs) == "fused" else jnp.matmul
-    prod_L = mm if resolve_products("auto", W) == "fused" else jnp.matmul
-
     def back(carry, inp):
         b_next, Lam_next = carry
         u_t, HSH_t, W_t = inp
-        b_t = u_t + prod_b(W_t, b_next)
-        Lam_t = HSH_t + prod_L(prod_L(W_t, Lam_next), W_t.T)
+        b_t = u_t + mm(W_t, b_next)
+        Lam_t = HSH_t + mm(mm(W_t, Lam_next), W_t.T)
         return (b_t, Lam_t), (b_t, Lam_t)
 
     _, (b, Lam) = jax.lax.scan(back, (jnp.zeros(n, dtype), jnp.zeros((n, n), dtype)), (u, HtSiH, W), reverse=True)
@@ -197,7 +191,7 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
               + fold("ti,tl->il", b, jnp.einsum(f"tk,{Qi}kl->tl", bG, Q), leaf="G"))
 
     # measurement sensitivities over the valid components (R^-1 of the valid block, zero elsewhere)
-    Rm = jnp.where(both, R, 0.0) + jax.vmap(jnp.diag)(jnp.where(valid, 0.0, 1.0).astype(dtype))
+    both = valid[:, :, None] & valid[:, None, :]
     Ri = jnp.where(both, cho_solve(cholesky(Rm), jnp.broadcast_to(jnp.eye(m, dtype=dtype), (T, m, m))), 0.0)
     e = jnp.where(valid, zs - jnp.sum(Hm * sm_means[:, None, :], axis=-1), 0.0)
     Rie = jnp.sum(Ri * e[:, None, :], axis=-1)

@@ -21,10 +21,11 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import cho_solve, cholesky, mT, solve_small, symmetrize, whiten
-from jaxnav.filters._kalman import ALL_OUTPUTS, LOG_2PI, KalmanResult, prepare_inputs
+from jaxnav._numerics import cho_solve, gaussian_loglik, masked_measurement, mT, safe_cholesky, solve_small, symmetrize, whiten
+from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
-from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoother_inputs
+from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoother_gains, smoother_inputs
+from jaxnav.filters._step import ALL_OUTPUTS, prepare_inputs
 
 
 def mm(A, B):
@@ -198,9 +199,7 @@ def parallel_filter(model: LinearGaussian, x0, P0, zs, *, mask=None, save=ALL_OU
     valid = mask & finite if check_finite else mask
     observed = jnp.any(valid, axis=-1)
     z = jnp.where(valid, zs, 0.0) if check_finite else zs
-    Hm = jnp.where(valid[:, :, None], H, 0.0)  # (T, m, n)
-    both = valid[:, :, None] & valid[:, None, :]
-    Rm = jnp.where(both, R, 0.0) + jnp.where(valid, 0.0, 1.0)[:, :, None] * jnp.eye(m, dtype=dtype)
+    Hm, Rm = masked_measurement(H, R, valid)  # (T, m, n), (T, m, m)
 
     # --- elements: epoch 1 from (x0, P0); later epochs from a zero-mean GQG prior ---
     F1 = F[0]
@@ -208,9 +207,7 @@ def parallel_filter(model: LinearGaussian, x0, P0, zs, *, mask=None, save=ALL_OU
     mk = jnp.zeros((T, n), dtype).at[0].set(mm(F1, x0))
     PHt = mm(Pk, mT(Hm))  # (T, n, m)
     S = symmetrize(mm(Hm, PHt) + Rm)
-    L = cholesky(S)
-    ok = jnp.all(jnp.isfinite(L), axis=(-2, -1))
-    Lsafe = jnp.where(ok[:, None, None], L, jnp.eye(m, dtype=dtype))
+    Lsafe, ok = safe_cholesky(S)
     K = jnp.where(ok[:, None, None], mT(cho_solve(Lsafe, mT(PHt))), 0.0)  # (T, n, m)
     IKH = eye_n - mm(K, Hm)
     b = mk + _mv(K, z - _mv(Hm, mk))
@@ -233,14 +230,11 @@ def parallel_filter(model: LinearGaussian, x0, P0, zs, *, mask=None, save=ALL_OU
     pred_P = symmetrize(mm(mm(F, prev_P), mT(F)) + GQG)
     v = jnp.where(valid, z - _mv(Hm, pred_m), 0.0)
     Sp = symmetrize(mm(Hm, mm(pred_P, mT(Hm))) + Rm)
-    Lp = cholesky(Sp)
-    okp = jnp.all(jnp.isfinite(Lp), axis=(-2, -1))
-    Lp = jnp.where(okp[:, None, None], Lp, jnp.eye(m, dtype=dtype))
+    Lp, okp = safe_cholesky(Sp)
     w = whiten(Lp, v[..., None])[..., 0]
     nis = jnp.sum(w * w, axis=-1)
     mv = jnp.sum(valid, axis=-1)
-    ll = -0.5 * (nis + 2.0 * jnp.sum(jnp.log(jnp.diagonal(Lp, axis1=-2, axis2=-1)), axis=-1) + mv * LOG_2PI)
-    ll = jnp.where(observed & okp, ll, 0.0)
+    ll = jnp.where(observed & okp, gaussian_loglik(w, Lp, mv), 0.0)
 
     n_bad = jnp.sum(mask & ~finite).astype(jnp.int32)
     bad_flag = _status.NONFINITE_MEASUREMENT if check_finite else _status.NONFINITE_UNMASKED
@@ -279,16 +273,11 @@ def parallel_smoother(model: LinearGaussian, filtered, *, save=SMOOTHER_OUTPUTS,
     Raises:
       ValueError: if the needed outputs were not saved, or F has a wrong shape.
     """
-    save, Fn = smoother_inputs(model, filtered, save, "parallel_smoother")
+    save, _ = smoother_inputs(model, filtered, save, "parallel_smoother")
     xs, Ps, xp, Pp = filtered.means, filtered.covs, filtered.pred_means, filtered.pred_covs
     T, n = xs.shape
-    L = cholesky(Pp[1:])
-    ok = jnp.all(jnp.isfinite(L), axis=(-2, -1))
-    L = jnp.where(ok[:, None, None], L, jnp.eye(n, dtype=xs.dtype))
-    E = jnp.where(ok[:, None, None], mT(cho_solve(L, mm(Fn, Ps[:-1]))), 0.0)  # (T-1, n, n)
-    g = xs[:-1] - _mv(E, xp[1:])
-    E = jnp.concatenate([E, jnp.zeros((1, n, n), xs.dtype)], axis=0)
-    g = jnp.concatenate([g, xs[-1:]], axis=0)
+    E, status = smoother_gains(model, filtered, save, "parallel_smoother")  # (T, n, n), zero at the end
+    g = jnp.concatenate([xs[:-1] - _mv(E[:-1], xp[1:]), xs[-1:]], axis=0)
     elems = (E, g)
     want_cov = "covs" in save
     if want_cov:
@@ -296,7 +285,6 @@ def parallel_smoother(model: LinearGaussian, filtered, *, save=SMOOTHER_OUTPUTS,
         elems = elems + (jnp.concatenate([Lc, Ps[-1:]], axis=0),)
     identity = (jnp.eye(n, dtype=xs.dtype), jnp.zeros((n,), xs.dtype), jnp.zeros((n, n), xs.dtype))[:len(elems)]
     res = _scan(_smoother_combine, elems, identity, method, chunk, True)
-    status = jnp.where(jnp.all(ok), 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
     return SmootherResult(means=res[1] if "means" in save else None,
                           covs=res[2] if want_cov else None,
                           gains=E if "gains" in save else None, status=status)

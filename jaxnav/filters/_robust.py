@@ -23,12 +23,13 @@ come out in ``KalmanResult.noise`` (:class:`RobustInfo`), the factors 1/alpha in
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple, Optional
+from typing import Any, ClassVar, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
 
 from jaxnav._numerics import as_leaf, symmetrize
+from jaxnav.filters._plugins import NoiseEstimator
 from jaxnav.filters._rules import _states
 
 
@@ -135,6 +136,8 @@ class IGG3:
       max_run: static int or None, consecutive rejections after which a component is accepted.
     """
 
+    data_independent: ClassVar[bool] = False
+
     k0: Any = 2.0
     k1: Any = 4.5
     w_min: Any = 1e-12
@@ -169,7 +172,7 @@ class IGG3:
     def after(self, state, ctx, post):
         return state
 
-    def screen(self, info):
+    def screen(self, info, ctx):
         """(m,) bool components that later members of a :func:`chain` should not learn from."""
         return info.rejected
 
@@ -199,12 +202,14 @@ class YangFactor:
       states: static indices of the inflated states (None = all).
     """
 
+    data_independent: ClassVar[bool] = False
+
     c0: Any = 1.0
     c1: Any = None
     max_factor: Any = 1e6
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
 
-    def init(self, m, dtype):
+    def init(self, n, m, p, dtype):
         return ()
 
     def statistic(self, ctx):
@@ -250,6 +255,10 @@ class Chain:
 
     parts: tuple = ()
 
+    @property
+    def data_independent(self):
+        return all(e.data_independent for e in self.parts)
+
     def init(self, n, m, p, dtype):
         return tuple(e.init(n, m, p, dtype) for e in self.parts)
 
@@ -259,9 +268,8 @@ class Chain:
         for est, st in zip(self.parts, state):
             GQG, R, st, (info, f) = est.noise(st, ctx)
             ctx = ctx._replace(GQG=GQG, R_used=R)
-            if hasattr(est, "screen"):
-                valid = ctx.valid & ~est.screen(info)
-                ctx = ctx._replace(valid=valid, observed=jnp.any(valid))
+            valid = ctx.valid & ~est.screen(info, ctx)
+            ctx = ctx._replace(valid=valid, observed=jnp.any(valid))
             states.append(st)
             infos.append(info)
             flag = flag | f
@@ -269,6 +277,12 @@ class Chain:
 
     def after(self, state, ctx, post):
         return tuple(e.after(st, ctx, post) for e, st in zip(self.parts, state))
+
+    def screen(self, info, ctx):
+        out = jnp.zeros_like(ctx.valid)
+        for e, i in zip(self.parts, info.parts):
+            out = out | e.screen(i, ctx)
+        return out
 
 
 def _concrete(x):
@@ -332,6 +346,7 @@ def chain(*estimators) -> Chain:
     if not estimators:
         raise ValueError("chain(): give at least one estimator")
     for e in estimators:
-        if not all(hasattr(e, a) for a in ("init", "noise", "after")):
-            raise ValueError(f"chain(): {type(e).__name__} is not a noise estimator (needs init, noise, after)")
+        if not isinstance(e, NoiseEstimator):
+            raise ValueError(f"chain(): {type(e).__name__} is not a noise estimator (jaxnav.filters.NoiseEstimator: "
+                             "data_independent, init, noise, after, screen)")
     return Chain(parts=tuple(estimators))

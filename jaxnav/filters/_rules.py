@@ -1,4 +1,5 @@
-"""Prior-inflation rules that plug into the one shared predict step.
+"""Prior-inflation rules that plug into the one shared predict step (protocol:
+:class:`jaxnav.filters.InflationRule`).
 
 Every rule returns a scalar factor f_k and the predict step forms
 ``P_{k,k-1} = f_k * F P_{k-1} F^T + G Q G^T`` (S0 eqs. (8), (10), (12), (13)). Rules are frozen
@@ -16,42 +17,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav._numerics import as_leaf, smooth_max1
-
-
-class StepContext(NamedTuple):
-    """What a rule or estimator may look at when epoch k is predicted (all shapes per sequence).
-
-    Attributes:
-      k: scalar float, the epoch number being predicted (1 for the first measurement).
-      v: (m,) innovation Z_k - H X_{k,k-1} (S0 eq. (17)); zero in invalid components.
-      z: (m,) measurement Z_k (zero in invalid components).
-      x_pred: (n,) predicted mean F X_{k-1}.
-      valid: (m,) bool, which components of Z_k are used.
-      observed: scalar bool, any component valid.
-      F: (n, n) transition into epoch k.
-      H: (m, n) measurement matrix with invalid rows zeroed.
-      G: (n, p) noise input matrix (identity when the model has none).
-      Q: (p, p) the model's process-noise covariance at this epoch.
-      R: (m, m) the model's measurement-noise covariance at this epoch (not masked).
-      FPF: (n, n) F P_{k-1} F^T.
-      GQG: (n, n) process noise used in this prediction (after any noise estimator).
-      R_used: (m, m) measurement noise used in this update (after any noise estimator).
-    """
-
-    k: Any
-    v: Any
-    z: Any
-    x_pred: Any
-    valid: Any
-    observed: Any
-    F: Any
-    H: Any
-    G: Any
-    Q: Any
-    R: Any
-    FPF: Any
-    GQG: Any
-    R_used: Any
+from jaxnav.filters._plugins import NoInflation, StepContext  # noqa: F401  (StepContext: the rules' input)
 
 
 def state_mask(n, states):
@@ -85,21 +51,6 @@ def _masked_trace(A, valid):
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class NoInflation:
-    """The classic Kalman filter: factor 1 (S0 eq. (8))."""
-
-    #: the factor does not depend on the measurements (see filters._kalman._batched_filter)
-    data_independent: ClassVar[bool] = True
-
-    def init(self, m, dtype):
-        return ()
-
-    def factor(self, state, ctx):
-        return jnp.ones((), ctx.FPF.dtype), state
-
-
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
 class Constant:
     """Constant inflation S >= 1 (S0 eq. (10)); equals filterpy's fading ``alpha`` with S = alpha^2.
 
@@ -107,13 +58,12 @@ class Constant:
       S: scalar array, the factor applied to F P F^T at every epoch.
     """
 
-    #: the factor does not depend on the measurements (see filters._kalman._batched_filter)
     data_independent: ClassVar[bool] = True
 
     S: Any
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
 
-    def init(self, m, dtype):
+    def init(self, n, m, p, dtype):
         return ()
 
     def factor(self, state, ctx):
@@ -131,13 +81,12 @@ class Attenuated:
       b: scalar array in [0, 1), the attenuation factor (S0 used 0.254 chosen by trial and error).
     """
 
-    #: the factor does not depend on the measurements (see filters._kalman._batched_filter)
     data_independent: ClassVar[bool] = True
 
     b: Any
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
 
-    def init(self, m, dtype):
+    def init(self, n, m, p, dtype):
         return ()
 
     def factor(self, state, ctx):
@@ -184,6 +133,8 @@ class Fading:
       absolute: static bool, take |tr N / tr M| as printed in S0 eq. (14).
     """
 
+    data_independent: ClassVar[bool] = False
+
     rho: Any = None
     smooth: Any = None
     window: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
@@ -193,7 +144,7 @@ class Fading:
     def _n(self):
         return 1 if self.window is None else int(self.window)
 
-    def init(self, m, dtype):
+    def init(self, n, m, p, dtype):
         w = self._n() if self.rho is None else 0
         return FadingState(
             buf=jnp.zeros((w,), dtype),
@@ -258,14 +209,14 @@ class Switch:
     @property
     def states(self):
         """The inflated states, common to the rules (the classic rule has none of its own)."""
-        return next((r.states for r in self.rules if getattr(r, "states", None) is not None), None)
+        return next((r.states for r in self.rules if not isinstance(r, NoInflation)), None)
 
     @property
     def data_independent(self):
-        return all(bool(getattr(r, "data_independent", False)) for r in self.rules)
+        return all(r.data_independent for r in self.rules)
 
-    def init(self, m, dtype):
-        return tuple(r.init(m, dtype) for r in self.rules)
+    def init(self, n, m, p, dtype):
+        return tuple(r.init(n, m, p, dtype) for r in self.rules)
 
     def factor(self, state, ctx):
         out = [r.factor(s, ctx) for r, s in zip(self.rules, state)]
@@ -343,7 +294,7 @@ def switch(index, rules) -> Switch:
     rules = tuple(NoInflation() if r is None else r for r in rules)
     if not rules:
         raise ValueError("switch(): give at least one rule")
-    states = {r.states for r in rules if hasattr(r, "states")}
+    states = {r.states for r in rules if not isinstance(r, NoInflation)}  # factor 1: its states do not matter
     if len(states) > 1:
         raise ValueError(f"switch(): the rules inflate different states {sorted(map(str, states))}; "
                          "one filter step needs one set")

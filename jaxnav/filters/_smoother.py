@@ -9,8 +9,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import cho_solve, cholesky, mm, symmetrize
-from jaxnav.filters._kalman import resolve_products
+from jaxnav._numerics import cho_solve, mm, safe_cholesky, symmetrize
 from jaxnav.filters._model import LinearGaussian
 
 
@@ -32,13 +31,17 @@ class SmootherResult(NamedTuple):
 SMOOTHER_OUTPUTS = ("means", "covs", "gains")
 
 
-def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOTHER_OUTPUTS,
-                 products: str = "auto") -> SmootherResult:
+def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOTHER_OUTPUTS) -> SmootherResult:
     """RTS smoother: C_t = P_t F_{t+1}^T P_{t+1|t}^{-1}, x^s_t = x_t + C_t (x^s_{t+1} - x_{t+1|t}).
 
     P^s_t = P_t + C_t (P^s_{t+1} - P_{t+1|t}) C_t^T. It uses the filter's *saved* predicted
     moments, so for an inflated (attenuated or fading) filter it smooths with the inflated priors
     the filter actually used; for the classic filter it equals the textbook RTS.
+
+    The gains depend only on the filter's covariances: under ``jax.vmap`` over filter results
+    whose covariances are not batched (``kalman_filter(check_finite=False)`` with a shared
+    model), they are computed once for the batch. :func:`~jaxnav.filters.rts_smoother_batch`
+    smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
 
     Args:
       model: the model given to the filter (only F is used; (n, n) or (T, n, n)).
@@ -47,15 +50,20 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
       save: static subset of ("means", "covs", "gains") to return (others are None). The
         smoothed-covariance recursion is skipped when "covs" is not requested (the means need
         only the gains).
-      products: static; "auto", "fused" or "dot" small-product kernels, as in
-        :func:`~jaxnav.filters.kalman_filter` (see ``jaxnav.filters._kalman.resolve_products``).
     Returns:
       :class:`SmootherResult`.
     Raises:
       ValueError: if the needed outputs were not saved, or F has a wrong shape.
     """
-    products = resolve_products(products, model, filtered)
-    return _rts_smoother(model, filtered, unroll=unroll, save=tuple(save), products=products)
+    return _rts_smoother(model, filtered, unroll=unroll, save=tuple(save))
+
+
+@partial(jax.jit, static_argnames=("unroll", "save"))
+def _rts_smoother(model, filtered, *, unroll, save) -> SmootherResult:
+    C, status = smoother_gains(model, filtered, save)
+    means = smoothed_means(C, filtered.means, filtered.pred_means, unroll) if "means" in save else None
+    covs = smoothed_covs(C, filtered.covs, filtered.pred_covs, unroll) if "covs" in save else None
+    return SmootherResult(means=means, covs=covs, gains=C if "gains" in save else None, status=status)
 
 
 def smoother_inputs(model, filtered, save, who):
@@ -82,48 +90,55 @@ def smoother_inputs(model, filtered, save, who):
     raise ValueError(f"model.F has shape {F.shape}; expected {(n, n)} or {(T, n, n)}")
 
 
-def _lower(model, filtered, *, unroll=1, save=SMOOTHER_OUTPUTS, products="auto"):
-    products = resolve_products(products, model, filtered)
-    return _rts_smoother.lower(model, filtered, unroll=unroll, save=tuple(save), products=products)
+def smoother_gains(model, filtered, save=SMOOTHER_OUTPUTS, who="rts_smoother"):
+    """The RTS gains C_t = P_t F_{t+1}^T P_{t+1|t}^{-1} of all epochs at once (zero at the last).
 
+    Vectorised over the epochs, outside any scan, so that the recursions are left with the small
+    products of each epoch (filter + RTS means for T = 3600: 12.0 -> 8.0 ms,
+    benchmarks/bench_filters.py case (b)).
 
-rts_smoother.lower = _lower  # ahead-of-time compilation, as on a jitted function
-
-
-@partial(jax.jit, static_argnames=("unroll", "save", "products"))
-def _rts_smoother(model, filtered, *, unroll, save, products) -> SmootherResult:
-    prod = mm if products == "fused" else jnp.matmul
-    save, Fn = smoother_inputs(model, filtered, save, "rts_smoother")
-    xs, Ps, xp, Pp = filtered.means, filtered.covs, filtered.pred_means, filtered.pred_covs
-    T, n = xs.shape
-    if Fn.ndim == 2:
-        Fn = jnp.broadcast_to(Fn, (T - 1, n, n))
-
-    want_cov = "covs" in save
-
-    # The gains depend on the filter's covariances only: one vectorised factorisation over all
-    # epochs, so that the sequential scan is left with the two small products of each epoch
-    # (filter + RTS means for T = 3600: 12.0 -> 8.0 ms, benchmarks/bench_filters.py case (b)).
-    L = cholesky(Pp[1:])
-    ok = jnp.all(jnp.isfinite(L), axis=(-2, -1))
-    L = jnp.where(ok[:, None, None], L, jnp.eye(n, dtype=Ps.dtype))
-    C = jnp.swapaxes(cho_solve(L, prod(Fn, Ps[:-1])), -1, -2)
-    C = jnp.where(ok[:, None, None], C, 0.0)
+    Returns:
+      (C (T, n, n), int32 status: SMOOTHER_FAILED if a predicted covariance was not positive definite).
+    """
+    _, Fn = smoother_inputs(model, filtered, save, who)
+    Ps, Pp = filtered.covs, filtered.pred_covs
+    T, n = filtered.means.shape
+    Fn = jnp.broadcast_to(Fn, (T - 1, n, n))
+    L, ok = safe_cholesky(Pp[1:])
+    C = jnp.where(ok[:, None, None], jnp.swapaxes(cho_solve(L, mm(Fn, Ps[:-1])), -1, -2), 0.0)
     status = jnp.where(jnp.all(ok), 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
+    return jnp.concatenate([C, jnp.zeros((1, n, n), C.dtype)], axis=0), status
 
-    def body(carry, inp):
-        xs_next, Ps_next = carry
-        x, P, x_p, P_p, Ck = inp
-        x_s = x + prod(Ck, xs_next - x_p)
-        P_s = symmetrize(P + prod(prod(Ck, Ps_next - P_p), Ck.T)) if want_cov else Ps_next
-        out = (x_s if "means" in save else None, P_s if "covs" in save else None)
-        return (x_s, P_s), out
 
-    init = (xs[-1], Ps[-1] if want_cov else jnp.zeros((), xs.dtype))
-    inp = (xs[:-1], Ps[:-1] if want_cov else None, xp[1:], Pp[1:] if want_cov else None, C)
-    _, (m_s, P_s) = jax.lax.scan(body, init, inp, reverse=True, unroll=unroll)
-    C = C if "gains" in save else None
-    means = None if m_s is None else jnp.concatenate([m_s, xs[-1:]], axis=0)
-    covs = None if P_s is None else jnp.concatenate([P_s, Ps[-1:]], axis=0)
-    gains = None if C is None else jnp.concatenate([C, jnp.zeros((1, n, n), xs.dtype)], axis=0)
-    return SmootherResult(means=means, covs=covs, gains=gains, status=status)
+def smoothed_means(C, xs, xp, unroll=1):
+    """x^s_t = x_t + C_t (x^s_{t+1} - x_{t+1|t}), x^s_T = x_T, by a reverse scan.
+
+    Args:
+      C: (T, n, n) gains.  xs: (T, n) filtered means.  xp: (T, n) predicted means.
+    Returns:
+      (T, n) smoothed means.
+    """
+    def body(x_next, inp):
+        x, x_p, Ck = inp
+        x_s = x + mm(Ck, x_next - x_p)
+        return x_s, x_s
+
+    _, m_s = jax.lax.scan(body, xs[-1], (xs[:-1], xp[1:], C[:-1]), reverse=True, unroll=unroll)
+    return jnp.concatenate([m_s, xs[-1:]], axis=0)
+
+
+def smoothed_covs(C, Ps, Pp, unroll=1):
+    """P^s_t = P_t + C_t (P^s_{t+1} - P_{t+1|t}) C_t^T, P^s_T = P_T, by a reverse scan.
+
+    Args:
+      C: (T, n, n) gains.  Ps: (T, n, n) filtered covariances.  Pp: (T, n, n) predicted ones.
+    Returns:
+      (T, n, n) smoothed covariances.
+    """
+    def body(P_next, inp):
+        P, P_p, Ck = inp
+        P_s = symmetrize(P + mm(mm(Ck, P_next - P_p), Ck.T))
+        return P_s, P_s
+
+    _, P_s = jax.lax.scan(body, Ps[-1], (Ps[:-1], Pp[1:], C[:-1]), reverse=True, unroll=unroll)
+    return jnp.concatenate([P_s, Ps[-1:]], axis=0)

@@ -1,5 +1,7 @@
 """Ellipsoids and coordinate conversions: geodetic <-> ECEF <-> local ENU (radians, metres).
 
+Small geodetic differences <-> local ENU metres: :func:`curvilinear_to_enu`, :func:`enu_to_curvilinear`.
+
 Every function takes an ``ellipsoid=`` keyword (default WGS-84) and works under
 ``jit``/``vmap``/``grad``. Absolute coordinates must be float64 (a float32 ECEF or geodetic
 input raises ``ValueError`` naming the fix, :func:`jaxnav.enable_x64`).
@@ -47,6 +49,7 @@ from jaxnav.geodesy._frames import (
     meridian_radius,
     prime_vertical_radius,
 )
+from jaxnav.geodesy._local import curvilinear_to_enu, enu_to_curvilinear
 
 __all__ = [
     "CGCS2000", "ELLIPSOIDS", "Ellipsoid", "GRS80", "KRASSOVSKY", "WGS84", "check_float64",
@@ -58,4 +61,5 @@ __all__ = [
     "helmert7", "helmert7_inverse", "rotation_matrix", "similarity2d", "similarity2d_inverse",
     "HeightAnomalyModel", "choose_surface", "fit_height_anomaly", "height_anomaly", "height_anomaly_std",
     "normal_height",
+    "curvilinear_to_enu", "enu_to_curvilinear",
 ]

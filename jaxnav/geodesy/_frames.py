@@ -4,23 +4,10 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from jaxnav._numerics import check_float64  # noqa: F401  (the package's one float64 guard, re-exported here)
 from jaxnav.geodesy._ellipsoid import WGS84, Ellipsoid
 
 _BOWRING_ITERATIONS = 4
-
-
-def check_float64(*arrays, what="absolute coordinates"):
-    """Raise ValueError if any array is a floating type narrower than float64.
-
-    float32 spacing is ~0.5 m at ECEF magnitude, so absolute coordinates must be float64.
-    """
-    for a in arrays:
-        dt = jnp.result_type(a)
-        if jnp.issubdtype(dt, jnp.floating) and jnp.finfo(dt).bits < 64:
-            raise ValueError(
-                f"{what} given as {jnp.dtype(dt).name}: its spacing is ~0.5 m at Earth radius; "
-                "call jaxnav.enable_x64() before creating arrays (float32 is only for local offsets)"
-            )
 
 
 def _f(x):

@@ -5,12 +5,16 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 """
 
 from jaxnav.ins import attitude, earth, error_model, integration
-from jaxnav.ins.earth import EarthParams, earth_params, normal_gravity, position_rate
+from jaxnav.ins.alignment import Alignment, coarse_alignment, sensor_to_body_from_upstream
+from jaxnav.ins.earth import EarthParams, earth_params, gravity_minus_coriolis, normal_gravity, position_rate
 from jaxnav.ins.error_model import (
+    ERROR_MODEL_15,
+    ERROR_MODEL_18,
     IDX15,
     IDX18,
     STATE_NAMES15,
     STATE_NAMES18,
+    ErrorModel,
     discretize_series,
     discretize_taylor,
     discretize_van_loan,
@@ -20,6 +24,7 @@ from jaxnav.ins.error_model import (
     error_model_G15,
     error_model_Qc,
     error_model_Qc15,
+    error_model_for,
     markov_psd,
     nav_error_F,
 )
@@ -51,9 +56,10 @@ __all__ = [
     "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "discretize_series", "discretize_taylor", "discretize_van_loan",
     "error_model", "error_model_F", "error_model_F15", "error_model_G", "error_model_G15",
     "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",
+    "ERROR_MODEL_15", "ERROR_MODEL_18", "ErrorModel", "error_model_for", "gravity_minus_coriolis",
     "LC_OUTPUTS", "LCEpochs", "LCParams", "LCResult", "PVMeasurements", "SensorBiases", "integration",
     "loosely_coupled", "measurement_model", "segment_imu", "smooth",
     "EarthParams", "ImuSample", "MechParams", "MechResult", "MechState", "NavState", "attitude",
     "check_imu", "earth", "earth_params", "mech_step", "mechanize", "mechanize_backward",
-    "normal_gravity", "position_rate",
+    "normal_gravity", "position_rate", "Alignment", "coarse_alignment", "sensor_to_body_from_upstream",
 ]

@@ -82,6 +82,21 @@ def earth_params(pos, v_n, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0) ->
     return EarthParams(R_M=RM, R_N=RN, w_ie_n=wie, w_en_n=wen, w_in_n=wie + wen, g_n=g_n)
 
 
+def gravity_minus_coriolis(e: EarthParams, v_n):
+    """Gravity minus the Coriolis and centripetal-transport terms, g_n - (2 w_ie + w_en) x v_n.
+
+    The ENU velocity equation (S3 class 2) is v_dot = C_bn f_b + this term; conversely the
+    specific force of a trajectory is f_n = a_n - this term.
+
+    Args:
+      e: :class:`EarthParams` at the point (its ``w_ie_n``, ``w_en_n``, ``g_n``).
+      v_n: (..., 3) ENU velocity, m/s (the one ``e.w_en_n`` was computed with).
+    Returns:
+      (..., 3) m/s^2 in n.
+    """
+    return e.g_n - jnp.cross(2.0 * e.w_ie_n + e.w_en_n, v_n)
+
+
 def position_rate(pos, v_n, ellipsoid: Ellipsoid = WGS84):
     """d[lat, lon, h]/dt = [V_N/(R_M+h), V_E/((R_N+h) cos L), V_U] for pos = [lat, lon, h]."""
     lat, h = pos[..., 0], pos[..., 2]

@@ -17,6 +17,9 @@ Process noise (S0 eq. 19), 9 components::
          w_a (3) accelerometer white noise]
 
 The 15-state subset drops eps_r (and w_b): X15 = [phi, dV, dpos, eps_b, nabla], W15 = [w_g, w_a].
+Each model is an :class:`ErrorModel` record (:data:`ERROR_MODEL_18`, :data:`ERROR_MODEL_15`,
+:func:`error_model_for`) chosen once by its user; the 15-state one is derived from the 18-state
+one by :meth:`ErrorModel.drop` (rows and columns deleted), as larger models can be reduced.
 
 Conventions (jaxnav-wide): navigation frame n = ENU, body frame b = right-forward-up,
 ``C_bn`` = body -> nav DCM, ``pos = [lat rad, lon rad, h m]``.
@@ -39,7 +42,8 @@ All functions are pure JAX (jit / vmap / grad), single-point shapes (batch with 
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import dataclasses
+from typing import Callable, NamedTuple, Optional
 
 import jax.numpy as jnp
 from jax.scipy.linalg import expm
@@ -244,7 +248,7 @@ def error_model_G(C_bn):
 def error_model_F15(pos, v_n, f_n, C_bn, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
     """System matrix F (15x15) of the 15-state model [phi, dV, dpos, eps_b, nabla] (S0 eq. 18 without eps_r).
 
-    Equal to :func:`error_model_F` with the eps_r rows and columns deleted.
+    :func:`error_model_F` with the eps_r rows and columns deleted (:data:`ERROR_MODEL_15`).
 
     Args:
       pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
@@ -253,29 +257,20 @@ def error_model_F15(pos, v_n, f_n, C_bn, *, ellipsoid: Ellipsoid = WGS84, earth_
     Returns:
       (15, 15) F; state order :data:`IDX15`.
     """
-    Fn = nav_error_F(pos, v_n, f_n, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
-    dtype = Fn.dtype
-    C = jnp.asarray(C_bn, dtype)
-    F = jnp.zeros((15, 15), dtype)
-    F = F.at[0:9, 0:9].set(Fn)
-    F = F.at[IDX15.phi, IDX15.eps_b].set(-C)
-    F = F.at[IDX15.dv, IDX15.nabla].set(C)
-    return F
+    return ERROR_MODEL_15.F(pos, v_n, f_n, C_bn, 1.0, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
 
 
 def error_model_G15(C_bn):
     """Noise input matrix G (15x6) of the 15-state model for W15 = [w_g, w_a].
+
+    :func:`error_model_G` without the eps_r rows and the w_b columns (:data:`ERROR_MODEL_15`).
 
     Args:
       C_bn: (3, 3) body -> nav DCM.
     Returns:
       (15, 6) G: phi rows get -C_bn w_g, dV rows get C_bn w_a.
     """
-    C = jnp.asarray(C_bn)
-    G = jnp.zeros((15, 6), C.dtype)
-    G = G.at[IDX15.phi, 0:3].set(-C)
-    G = G.at[IDX15.dv, 3:6].set(C)
-    return G
+    return ERROR_MODEL_15.G(C_bn)
 
 
 def markov_psd(sigma, tau):
@@ -316,13 +311,14 @@ def error_model_Qc(gyro_arw, markov_sigma, tau_markov, accel_vrw):
 def error_model_Qc15(gyro_arw, accel_vrw):
     """Continuous noise density Qc (6x6) of W15 = [w_g, w_a]: diag(ARW^2 (x3), VRW^2 (x3)).
 
+    :func:`error_model_Qc` without the w_b rows and columns.
+
     Args:
       gyro_arw: scalar or (3,), rad/sqrt(s).  accel_vrw: scalar or (3,), m/s/sqrt(s).
     Returns:
       (6, 6) Qc.
     """
-    dtype = jnp.result_type(gyro_arw, accel_vrw, float)
-    return jnp.diag(jnp.concatenate([jnp.square(_vec3(gyro_arw, dtype)), jnp.square(_vec3(accel_vrw, dtype))]))
+    return ERROR_MODEL_15.Qc(error_model_Qc(gyro_arw, 0.0, 1.0, accel_vrw))
 
 
 def discretize_van_loan(F, G, Qc, dt):
@@ -415,7 +411,118 @@ def discretize_taylor(F, G, Qc, dt, *, order: int = 8):
     return Phi, 0.5 * (Qd + Qd.T), err
 
 
+def _runs(keep):
+    """Sorted indices -> tuple of contiguous slices (static: selecting by slices keeps the XLA graph simple)."""
+    runs, start = [], None
+    for i, j in zip(keep, keep[1:] + (None,)):
+        start = i if start is None else start
+        if j != i + 1:
+            runs.append(slice(start, i + 1))
+            start = None
+    return tuple(runs)
+
+
+def _take(A, runs, axis):
+    return jnp.concatenate([A[(slice(None),) * axis + (r,)] for r in runs], axis=axis)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ErrorModel:
+    """An INS error-state model chosen once: its layout and the builders of F, G and the Qc selection.
+
+    Static data plus two pure builders, hashed by identity so that a model can be a ``jax.jit``
+    static argument; the array inputs (position, velocity, specific force, C_bn, tau) are arguments.
+
+    Attributes:
+      names: the n state names, in order.  noise_names: the p noise-input names, in order.
+      idx: :class:`ErrorStateIndex` of the blocks (None for blocks the model lacks).
+      build_F: (pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid, earth_rate_sign) -> (n, n).
+      build_G: (C_bn) -> (n, p).
+      noise_keep: slices of the parent model's noise inputs kept (None: all), for :meth:`Qc`.
+    """
+
+    names: tuple
+    noise_names: tuple
+    idx: ErrorStateIndex
+    build_F: Callable
+    build_G: Callable
+    noise_keep: Optional[tuple] = None
+
+    @property
+    def n(self) -> int:
+        """Number of error states."""
+        return len(self.names)
+
+    @property
+    def p(self) -> int:
+        """Number of noise inputs (the size of Qc)."""
+        return len(self.noise_names)
+
+    def F(self, pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
+        """Continuous system matrix (n, n); arguments as :func:`error_model_F` (tau unused without Markov states)."""
+        return self.build_F(pos, v_n, f_n, C_bn, tau_markov, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
+
+    def G(self, C_bn):
+        """Noise input matrix (n, p) for C_bn (3, 3)."""
+        return self.build_G(C_bn)
+
+    def Qc(self, Qc_parent):
+        """This model's (p, p) noise density from the parent model's (the full one it was derived from)."""
+        if self.noise_keep is None:
+            return Qc_parent
+        return _take(_take(Qc_parent, self.noise_keep, 0), self.noise_keep, 1)
+
+    def drop(self, states, noises, idx: ErrorStateIndex) -> "ErrorModel":
+        """The model without some states and noise inputs.
+
+        F loses the states' rows (their dynamics) and columns (the kept states then take them as
+        zero: a sensor error no longer modelled); G loses the states' rows and the noises'
+        columns. Exact selections of the parent's matrices, no new algebra.
+
+        Args:
+          states, noises: names to remove.  idx: the layout of the result.
+        """
+        keep = tuple(i for i, nm in enumerate(self.names) if nm not in states)
+        nkeep = tuple(i for i, nm in enumerate(self.noise_names) if nm not in noises)
+        rs, rn = _runs(keep), _runs(nkeep)
+        parent = self
+
+        def build_F(*args, **kwargs):
+            return _take(_take(parent.build_F(*args, **kwargs), rs, 0), rs, 1)
+
+        def build_G(C_bn):
+            return _take(_take(parent.build_G(C_bn), rs, 0), rn, 1)
+
+        return ErrorModel(names=tuple(self.names[i] for i in keep),
+                          noise_names=tuple(self.noise_names[i] for i in nkeep), idx=idx, build_F=build_F,
+                          build_G=build_G, noise_keep=rn)
+
+
+#: Names of the 9 noise inputs of the 18-state model (S0 eq. 19).
+NOISE_NAMES18 = ("w_gx", "w_gy", "w_gz", "w_bx", "w_by", "w_bz", "w_ax", "w_ay", "w_az")
+
+#: The 18-state model of S0 eqs. (18)-(19).
+ERROR_MODEL_18 = ErrorModel(names=STATE_NAMES18, noise_names=NOISE_NAMES18, idx=IDX18,
+                            build_F=error_model_F, build_G=error_model_G)
+#: The 15-state model: the 18-state one without the gyro Markov drift eps_r and its driving noise w_b.
+ERROR_MODEL_15 = ERROR_MODEL_18.drop(STATE_NAMES18[12:15], NOISE_NAMES18[3:6], IDX15)
+
+_MODELS = {18: ERROR_MODEL_18, 15: ERROR_MODEL_15}
+
+
+def error_model_for(n_states: int) -> ErrorModel:
+    """The :class:`ErrorModel` with ``n_states`` states (18: S0's model; 15: without the Markov drift).
+
+    Raises:
+      ValueError: no such model.
+    """
+    if n_states not in _MODELS:
+        raise ValueError(f"n_states must be one of {sorted(_MODELS)}, got {n_states!r}")
+    return _MODELS[n_states]
+
+
 __all__ = [
+    "ERROR_MODEL_15", "ERROR_MODEL_18", "ErrorModel", "NOISE_NAMES18", "error_model_for",
     "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "ErrorStateIndex", "discretize_series",
     "discretize_taylor", "discretize_van_loan", "error_model_F", "error_model_F15", "error_model_G", "error_model_G15",
     "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",

@@ -1,14 +1,22 @@
 """Loosely coupled INS/GNSS integration with feedback correction (S0 experiment; S3 stop updates).
 
 One nested ``lax.scan``: the outer scan runs over measurement epochs, the inner one over the
-IMU samples between them. Inside, the strapdown step (:func:`jaxnav.ins.mech_step`) integrates
-bias-corrected increments while the time averages of what the error-state system matrix depends
-on (position, velocity, specific force and C_bn) are accumulated; at each epoch F is built from
-them, the interval's transition and process noise are discretised (Van Loan) and **the filter family's
-own** :func:`jaxnav.filters.filter_step` performs the prediction and the update, so every
-prior-inflation rule (constant, attenuated S_k, fading lambda_k) and noise estimator plugs in
-unchanged. The estimate is fed back (attitude, velocity, position reset; sensor-error
-estimates accumulated and applied to the IMU) and the error state restarts at zero.
+IMU samples between them. Each epoch is four pure steps:
+
+* propagate (:func:`_propagate_samples`, or :func:`_propagate_blocks` with ``nav_every > 1``):
+  the strapdown step (:func:`jaxnav.ins.mech_step`) integrates bias-corrected increments while
+  the integrals of what the error-state system matrix depends on (position, velocity, specific
+  force and C_bn) are accumulated;
+* discretise (:func:`_discretise`): F from their time averages, the interval's transition and
+  process noise by a Taylor series or Van Loan's matrix exponential;
+* measure (:func:`_measure`): the INS extrapolated to the epoch time, the antenna's position and
+  velocity, z, H and R; then **the filter family's own** :func:`jaxnav.filters.filter_step`
+  performs the prediction and the update, so every prior-inflation rule (constant, attenuated
+  S_k, fading lambda_k) and noise estimator plugs in unchanged;
+* feedback (:func:`_feedback`): the estimate is fed back (attitude, velocity, position reset;
+  sensor-error estimates accumulated and applied to the IMU) and the error state restarts at zero.
+
+The error-state model (18 or 15 states) is an :class:`jaxnav.ins.ErrorModel` chosen once per run.
 
 With ``nav_every > 1`` the inner loop is replaced by the two-speed mechanization of
 :func:`jaxnav.ins.mechanize` (array operations over the epoch's samples, one navigation-frame
@@ -31,24 +39,22 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxnav import _status
-from jaxnav.filters import LinearGaussian
-from jaxnav.filters._estimators import NoEstimator
-from jaxnav.filters._kalman import FilterParams, FilterState, StepInput, filter_step
-from jaxnav.filters._rules import NoInflation
-from jaxnav.filters._smoother import rts_smoother
-from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, meridian_radius, prime_vertical_radius
+from jaxnav.filters import (
+    FilterParams,
+    FilterState,
+    KalmanResult,
+    LinearGaussian,
+    NoEstimator,
+    NoInflation,
+    StepInput,
+    filter_step,
+    init_state,
+    rts_smoother,
+)
+from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat, skew
 from jaxnav.ins.earth import earth_params, position_rate
-from jaxnav.ins.error_model import (
-    IDX15,
-    IDX18,
-    discretize_taylor,
-    discretize_van_loan,
-    error_model_F,
-    error_model_F15,
-    error_model_G,
-    error_model_G15,
-)
+from jaxnav.ins.error_model import ErrorModel, discretize_taylor, discretize_van_loan, error_model_for
 from jaxnav.ins.mechanization import (
     ImuSample,
     MechParams,
@@ -56,9 +62,12 @@ from jaxnav.ins.mechanization import (
     NavState,
     _body_blocks,
     _imu_flags,
-    _nav_update,
+    _scan_blocks,
+    _two_speed_start,
+    _TwoSpeed,
     mech_step,
 )
+
 
 #: per-epoch outputs that :func:`loosely_coupled` can save
 LC_OUTPUTS = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs",
@@ -206,20 +215,6 @@ def segment_imu(t_imu, t_meas, dt_imu) -> Segments:
     return Segments(idx=idx, use=use, t_last=t_imu[ends - 1], K=K)
 
 
-def _pos_to_enu_metres(pos, dpos):
-    """[dlat, dlon, dh] at pos -> [dE, dN, dU] metres."""
-    lat, h = pos[0], pos[2]
-    RM, RN = meridian_radius(lat), prime_vertical_radius(lat)
-    return jnp.stack([dpos[1] * (RN + h) * jnp.cos(lat), dpos[0] * (RM + h), dpos[2]])
-
-
-def _enu_metres_to_pos(pos, d_enu):
-    """[dE, dN, dU] metres at pos -> [dlat, dlon, dh]."""
-    lat, h = pos[0], pos[2]
-    RM, RN = meridian_radius(lat), prime_vertical_radius(lat)
-    return jnp.stack([d_enu[1] / (RM + h), d_enu[0] / ((RN + h) * jnp.cos(lat)), d_enu[2]])
-
-
 def measurement_model(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid: Ellipsoid = WGS84):
     """Predicted antenna position/velocity and H (6 x n) of the PV measurement.
 
@@ -236,12 +231,11 @@ def measurement_model(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid: 
     w_nb_b = w_ib_b - C.T @ e.w_in_n
     l_n = C @ lever_b
     lv_n = C @ jnp.cross(w_nb_b, lever_b)
-    pos_ant = nav.pos + _enu_metres_to_pos(nav.pos, l_n)
+    pos_ant = nav.pos + enu_to_curvilinear(nav.pos, l_n, ellipsoid)
     v_ant = nav.v_n + lv_n
-    lat, h = nav.pos[0], nav.pos[2]
-    RM, RN = meridian_radius(lat, ellipsoid), prime_vertical_radius(lat, ellipsoid)
-    # rows E, N, U; columns dlat, dlon, dh
-    D = jnp.array([[0.0, (RN + h) * jnp.cos(lat), 0.0], [RM + h, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    # D: rows E, N, U; columns dlat, dlon, dh. s: metres per rad of dlon (E), per rad of dlat (N), per m of dh
+    s = curvilinear_to_enu(nav.pos, jnp.ones(3, nav.pos.dtype), ellipsoid)
+    D = jnp.array([[0.0, s[0], 0.0], [s[1], 0.0, 0.0], [0.0, 0.0, 1.0]])
     H = jnp.zeros((6, n_states), nav.v_n.dtype)
     H = H.at[0:3, 0:3].set(skew(l_n)).at[0:3, 6:9].set(D)
     H = H.at[3:6, 0:3].set(skew(lv_n)).at[3:6, 3:6].set(jnp.eye(3, dtype=H.dtype))
@@ -258,26 +252,94 @@ def _apply_correction(nav: NavState, biases: SensorBiases, x, idx):
 
 
 class _Carry(NamedTuple):
+    """Carry of the epoch scan."""
+
     mech: MechState
     biases: SensorBiases
     kf: FilterState
     G_prev: Any = None  # two-speed mechanization: the last block's gravity minus Coriolis (else None)
 
 
-def _epoch_two_speed(mech: MechState, biases: SensorBiases, G_prev, dth_raw, dv_raw, dt, use, tau, M: int,
-                     ellipsoid, hold_height):
+class _Sums(NamedTuple):
+    """Integrals over one epoch interval of what F depends on; divided by the interval they build F.
+
+    F is linear in f_n and C_bn and varies slowly with pos and v, so F at the time averages equals
+    the average of F up to O(dt_epoch^2) in the slowly varying terms.
+    """
+
+    pos: Any  # (3,) sum pos dt
+    v: Any  # (3,) sum v_n dt, m
+    f: Any  # (3,) sum C_bn dv = integral of f_n dt, m/s
+    C: Any  # (3, 3) sum C_bn dt, s
+
+
+class _Propagated(NamedTuple):
+    """The INS at the last IMU sample of an epoch interval, and what the filter needs from the interval."""
+
+    mech: MechState
+    biases: SensorBiases  # the Markov drift decayed over the interval
+    sums: _Sums
+    T: Any  # time covered by the interval's samples, s
+    w_last: Any  # (3,) angular rate of the last sample, rad/s (lever-arm velocity)
+    G: Any  # two-speed: the last block's gravity minus Coriolis (else None)
+
+
+def _where_tree(c, a, b):
+    return jax.tree_util.tree_map(lambda x, y: jnp.where(c, x, y), a, b)
+
+
+def _zero_sums(dtype):
+    z3 = jnp.zeros(3, dtype)
+    return _Sums(z3, z3, z3, jnp.zeros((3, 3), dtype))
+
+
+def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipsoid, hold_height, save_imu_every):
+    """The IMU samples of one epoch interval, one :func:`mech_step` each, with the sensor-error correction.
+
+    Args:
+      rows: (raw dtheta (K, 3) rad, raw dv (K, 3) m/s, dt (K,) s, use (K,) bool); unused samples
+        (padding) leave everything as it is.
+    Returns:
+      (:class:`_Propagated`, NavState every ``save_imu_every``-th sample or None).
+    """
+    dtype = mech.nav.v_n.dtype
+    mparams = MechParams(earth_rate_sign=1.0)
+
+    def step(c, x):
+        (mech, biases, sums, T, w_last), (dth_raw, dv_raw, dt, use) = c, x
+        dth = dth_raw - (biases.gyro + biases.markov) * dt
+        dvc = dv_raw - biases.accel * dt
+        new_mech, nav = mech_step(mech, ImuSample(dth, dvc, dt), mparams, ellipsoid=ellipsoid,
+                                  hold_height=hold_height)
+        C = quat_to_dcm(nav.q_bn)
+        sums = _Sums(sums.pos + nav.pos * dt, sums.v + nav.v_n * dt, sums.f + C @ dvc, sums.C + C * dt)
+        new = (new_mech, biases._replace(markov=biases.markov * jnp.exp(-dt / tau)), sums, T + dt, dth / dt)
+        return _where_tree(use, new, c), (nav if save_imu_every else None)
+
+    init = (mech, biases, _zero_sums(dtype), jnp.zeros((), dtype), jnp.zeros(3, dtype))
+    (mech, biases, sums, T, w_last), navs = jax.lax.scan(step, init, rows)
+    if save_imu_every:
+        navs = jax.tree_util.tree_map(lambda a: a[save_imu_every - 1::save_imu_every], navs)
+    return _Propagated(mech, biases, sums, T, w_last, None), navs
+
+
+def _propagate_blocks(mech: MechState, biases: SensorBiases, G_prev, rows, tau, M: int, ellipsoid, hold_height):
     """The IMU samples of one epoch interval by the two-speed mechanization (:func:`jaxnav.ins.mechanize`'s
-    ``nav_every``), with the sensor-error correction and the time averages that F needs.
+    ``nav_every``), with the sensor-error correction and F's sums.
 
     Bias-corrected increments, coning/sculling and the in-block attitude increments are array
-    operations over the epoch's K samples; one navigation-frame update per M samples is a scan.
-    The Markov drift decays sample by sample exactly as in the per-sample loop. The averages of
-    pos and v use each block's mid-point position and mean velocity, those of f_n and C_bn the
-    block's body-frame sums rotated by its start attitude (the nav frame turns < 1e-5 rad in a block).
+    operations over the epoch's K samples; one navigation-frame update per M samples is the block
+    driver :func:`jaxnav.ins.mechanization._scan_blocks`. The Markov drift decays sample by
+    sample exactly as in the per-sample loop. The sums of pos and v use each block's mid-point
+    position and mean velocity, those of f_n and C_bn the block's body-frame sums rotated by its
+    start attitude (the nav frame turns < 1e-5 rad in a block).
 
-    Args: (K, 3) raw increments, (K,) dt and use (padded samples at the end are unused).
-    Returns: (mech, biases, (sum pos dt, sum v dt, sum f_n, sum C dt), T, w_last, G_prev).
+    Args:
+      rows: as :func:`_propagate_samples` (padded samples at the end).  M: static block length.
+    Returns:
+      :class:`_Propagated`.
     """
+    dth_raw, dv_raw, dt, use = rows
     dtype = dt.dtype
     K = dt.shape[0]
     dtu = jnp.where(use, dt, 0.0)
@@ -291,32 +353,58 @@ def _epoch_two_speed(mech: MechState, biases: SensorBiases, G_prev, dth_raw, dv_
     Bq = jnp.stack(pre.B, axis=-1)  # (nb, M, 4) body rotation to the end of each sample
     f_b = jnp.sum(quat_rotate(Bq, pad(dvc).reshape(nb, M, 3)), axis=1)  # (nb, 3)
     C_b = jnp.sum(quat_to_dcm(Bq) * pad(dtu).reshape(nb, M)[..., None, None], axis=1)  # (nb, 3, 3)
-    z3 = jnp.zeros(3, dtype)
-    acc0 = (z3, z3, z3, jnp.zeros((3, 3), dtype))
 
-    def update(c, x):
-        nav, a_prev, Gp, acc = c
-        b, fb, Cb = x
-        ok = b.T > 0  # a block of padding only leaves the state as it is
-        b = b._replace(T=jnp.where(ok, b.T, 1.0))
-        new, a_new, fr = _nav_update(nav, a_prev, b, 1.0, ellipsoid, hold_height, Gp)
-        C0 = quat_to_dcm(nav.q_bn)
-        T = jnp.where(ok, b.T, 0.0)
-        acc_new = (acc[0] + fr.pos_mid * T, acc[1] + fr.v_mid * T, acc[2] + C0 @ fb, acc[3] + C0 @ Cb)
-        out = (new, a_new, fr.G, acc_new)
-        return jax.tree_util.tree_map(lambda x_, y_: jnp.where(ok, x_, y_), out, c), None
+    def add(sums, start, fr, T, x):
+        fb, Cb = x
+        C0 = quat_to_dcm(start.q_bn)
+        return _Sums(sums.pos + fr.pos_mid * T, sums.v + fr.v_mid * T, sums.f + C0 @ fb, sums.C + C0 @ Cb)
 
-    (nav, a_end, G_end, acc), _ = jax.lax.scan(update, (mech.nav, mech.a_prev, G_prev, acc0), (blk, f_b, C_b))
+    two, sums, _ = _scan_blocks(_TwoSpeed(mech.nav, mech.a_prev, G_prev), blk, 1.0, ellipsoid, hold_height,
+                                acc=_zero_sums(dtype), accumulate=add, xs=(f_b, C_b), skip_empty=True)
     last = jnp.maximum(jnp.sum(use) - 1, 0)
     flags = _imu_flags(dth, dvc, jnp.where(use, dt, 1.0), series=True)
-    new_mech = MechState(nav=nav, dtheta_prev=dth[last], dv_prev=dvc[last], a_prev=a_end, status=mech.status | flags)
+    new_mech = MechState(nav=two.nav, dtheta_prev=dth[last], dv_prev=dvc[last], a_prev=two.a_prev,
+                         status=mech.status | flags)
     T = jnp.sum(dtu)
     new_biases = biases._replace(markov=biases.markov * jnp.exp(-T / tau))
-    return new_mech, new_biases, acc, T, dth[last] / dt[last], G_end
+    return _Propagated(new_mech, new_biases, sums, T, dth[last] / dt[last], two.G)
 
 
-def _where_tree(c, a, b):
-    return jax.tree_util.tree_map(lambda x, y: jnp.where(c, x, y), a, b)
+def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, method, order):
+    """Phi and Qd of one epoch interval (S0 eqs. (1), (8)) from F at the interval's time averages.
+
+    Returns:
+      (Phi (n, n), Qd (n, n), int32 flag: DISCRETIZATION_INACCURATE if the Taylor series had not converged).
+    """
+    Tsafe = jnp.maximum(p.T, 1e-300)
+    F = model.F(*(a / Tsafe for a in p.sums), tau, ellipsoid=ellipsoid)
+    G = model.G(quat_to_dcm(p.mech.nav.q_bn))
+    if method == "van_loan":
+        Phi, Qd = discretize_van_loan(F, G, Qc, p.T)
+        return Phi, Qd, jnp.zeros((), jnp.int32)
+    Phi, Qd, err = discretize_taylor(F, G, Qc, p.T, order=order)
+    return Phi, Qd, jnp.where(err > 1e-10, _status.DISCRETIZATION_INACCURATE, 0).astype(jnp.int32)
+
+
+def _measure(nav: NavState, w_last, dtx, m: PVMeasurements, R_scale, n: int, ellipsoid):
+    """z (6,), H (6, n), R (6, 6) of one epoch's PV measurement (m: its row of :class:`PVMeasurements`).
+
+    The INS state is extrapolated from its last IMU sample by dtx = t_epoch - t_sample (s).
+    """
+    nav_x = nav._replace(pos=nav.pos + dtx * position_rate(nav.pos, nav.v_n, ellipsoid))
+    pos_ant, v_ant, H = measurement_model(nav_x, w_last, m.lever, n, ellipsoid)
+    z = jnp.concatenate([curvilinear_to_enu(nav_x.pos, pos_ant - m.pos, ellipsoid), v_ant - m.vel])
+    return z, H, R_scale * m.R
+
+
+def _feedback(p: _Propagated, kf: FilterState, idx, flag) -> _Carry:
+    """Feed the estimate kf.x back to the INS and the sensor errors; the error state restarts at zero."""
+    nav, biases = _apply_correction(p.mech.nav, p.biases, kf.x, idx)
+    kf = kf._replace(x=jnp.zeros_like(kf.x), status=kf.status | flag)
+    return _Carry(mech=p.mech._replace(nav=nav), biases=biases, kf=kf, G_prev=p.G)
+
+
+_STEP_OUTPUTS = ("means", "covs", "pred_covs", "innovations", "innov_covs", "nis", "factors", "noise", "valid")
 
 
 @partial(jax.jit, static_argnames=("n_states", "save", "ellipsoid", "hold_height", "check_finite",
@@ -325,107 +413,48 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
              estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False,
              discretization="taylor", taylor_order=8, nav_every=1):
     dtype = nav0.v_n.dtype
-    n = n_states
-    idx = IDX18 if n == 18 else IDX15
+    model = error_model_for(n_states)
     tau = jnp.broadcast_to(jnp.asarray(params.tau_markov, dtype), (3,))
-    rule = NoInflation() if inflation is None else inflation
-    est = NoEstimator() if estimator is None else estimator
-    fparams = FilterParams(model=LinearGaussian(None, None, None, None, None), inflation=rule, estimator=est)
-    kf0 = FilterState(
-        x=jnp.zeros(n, dtype), P=jnp.asarray(params.P0, dtype), k=jnp.zeros((), dtype),
-        rule=rule.init(6, dtype), est=est.init(n, 6, n, dtype), status=jnp.zeros((), jnp.int32),
-        loglik=jnp.zeros((), dtype), n_nonfinite=jnp.zeros((), jnp.int32), n_skipped=jnp.zeros((), jnp.int32),
-    )
-    z3 = jnp.zeros(3, dtype)
-    mech0 = MechState(nav=nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3, status=jnp.zeros((), jnp.int32))
-    mparams = MechParams(earth_rate_sign=1.0)
-    dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (dtheta.shape[0],))
+    Qc, R_scale = jnp.asarray(params.Qc, dtype), jnp.asarray(params.R_scale, dtype)
+    fparams = FilterParams(model=LinearGaussian(None, None, None, None, None),
+                           inflation=NoInflation() if inflation is None else inflation,
+                           estimator=NoEstimator() if estimator is None else estimator)
 
-    def inner(c, x):
-        (mech, biases, acc, T, w_last), (dth_raw, dv_raw, dt, use) = c, x
-        dth = dth_raw - (biases.gyro + biases.markov) * dt
-        dvc = dv_raw - biases.accel * dt
-        new_mech, nav = mech_step(mech, ImuSample(dth, dvc, dt), mparams, ellipsoid=ellipsoid,
-                                  hold_height=hold_height)
-        C = quat_to_dcm(nav.q_bn)
-        # F is linear in f_n and C_bn and varies slowly with pos and v: accumulate their time
-        # averages and build F once per epoch (equal to the average of F up to O(dt_epoch^2)
-        # in the slowly varying position/velocity terms)
-        acc = (acc[0] + nav.pos * dt, acc[1] + nav.v_n * dt, acc[2] + C @ dvc, acc[3] + C * dt)
-        decay = jnp.exp(-dt / tau)
-        new_biases = biases._replace(markov=biases.markov * decay)
-        new = (new_mech, new_biases, acc, T + dt, dth / dt)
-        out = _where_tree(use, new, c)
-        return out, (nav if save_imu_every else None)
-
-    def outer(carry, inp):
-        dth_row, dv_row, dt_row, use_row, t_meas, t_nav, m = inp
+    def outer(carry: _Carry, inp):
+        rows, t_meas, t_nav, m = inp
         if nav_every > 1:
-            mech, biases, acc, T, w_last, G_prev = _epoch_two_speed(
-                carry.mech, carry.biases, carry.G_prev, dth_row, dv_row, dt_row, use_row, tau, nav_every,
-                ellipsoid, hold_height)
+            p = _propagate_blocks(carry.mech, carry.biases, carry.G_prev, rows, tau, nav_every, ellipsoid, hold_height)
             navs = None
         else:
-            acc0 = (z3, z3, z3, jnp.zeros((3, 3), dtype))
-            (mech, biases, acc, T, w_last), navs = jax.lax.scan(
-                inner, (carry.mech, carry.biases, acc0, jnp.zeros((), dtype), z3), (dth_row, dv_row, dt_row, use_row))
-            G_prev = None
-        Tsafe = jnp.maximum(T, 1e-300)
-        pos_m, v_m, f_m, C_m = (a / Tsafe for a in acc)
-        if n == 18:
-            Fbar = error_model_F(pos_m, v_m, f_m, C_m, tau, ellipsoid=ellipsoid)
-        else:
-            Fbar = error_model_F15(pos_m, v_m, f_m, C_m, ellipsoid=ellipsoid)
-        C = quat_to_dcm(mech.nav.q_bn)
-        G = error_model_G(C) if n == 18 else error_model_G15(C)
-        if discretization == "van_loan":
-            Phi, Qd = discretize_van_loan(Fbar, G, jnp.asarray(params.Qc, dtype), T)
-            disc_flag = jnp.zeros((), jnp.int32)
-        else:
-            Phi, Qd, err = discretize_taylor(Fbar, G, jnp.asarray(params.Qc, dtype), T, order=taylor_order)
-            disc_flag = jnp.where(err > 1e-10, _status.DISCRETIZATION_INACCURATE, 0).astype(jnp.int32)
-        # INS state extrapolated from the last IMU sample to the epoch time
-        dtx = t_meas - t_nav
-        nav_x = mech.nav._replace(pos=mech.nav.pos + dtx * position_rate(mech.nav.pos, mech.nav.v_n, ellipsoid))
-        pos_ant, v_ant, H = measurement_model(nav_x, w_last, m.lever, n, ellipsoid)
-        dz_pos = _pos_to_enu_metres(nav_x.pos, pos_ant - m.pos)
-        z = jnp.concatenate([dz_pos, v_ant - m.vel])
-        R = jnp.asarray(params.R_scale, dtype) * m.R
-        kf_in = carry.kf._replace(x=jnp.zeros(n, dtype))
-        kf, info = filter_step(kf_in, StepInput(z=z, mask=m.mask, F=Phi, H=H, Q=Qd, R=R), fparams,
-                               save=("means", "covs", "pred_covs", "innovations", "innov_covs", "nis",
-                                     "factors", "noise", "valid"), check_finite=check_finite)
-        xhat = kf.x
-        nav_c, biases_c = _apply_correction(mech.nav, biases, xhat, idx)
-        mech = mech._replace(nav=nav_c)
-        new = _Carry(mech=mech, biases=biases_c, kf=kf._replace(x=jnp.zeros(n, dtype), status=kf.status | disc_flag),
-                     G_prev=G_prev)
-        allv = dict(nav=nav_c, biases=biases_c, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi, corrections=xhat,
-                    innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
+            p, navs = _propagate_samples(carry.mech, carry.biases, rows, tau, ellipsoid, hold_height, save_imu_every)
+        Phi, Qd, flag = _discretise(model, p, tau, Qc, ellipsoid, discretization, taylor_order)
+        z, H, R = _measure(p.mech.nav, p.w_last, t_meas - t_nav, m, R_scale, model.n, ellipsoid)
+        # x is zero after every feedback; the literal zero lets XLA drop the products F x and H x
+        kf_prior = carry.kf._replace(x=jnp.zeros(model.n, dtype))
+        kf, info = filter_step(kf_prior, StepInput(z=z, mask=m.mask, F=Phi, H=H, Q=Qd, R=R), fparams,
+                               save=_STEP_OUTPUTS, check_finite=check_finite)
+        new = _feedback(p, kf, model.idx, flag)
+        allv = dict(nav=new.mech.nav, biases=new.biases, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi,
+                    corrections=kf.x, innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
                     factors=info.factors, noise=info.noise, valid=info.valid)
-        ep = LCEpochs(t=t_meas, t_nav=t_nav, **{k: allv[k] for k in save})
-        if save_imu_every:
-            navs = jax.tree_util.tree_map(lambda a: a[save_imu_every - 1::save_imu_every], navs)
-        return new, (ep, navs)
+        return new, (LCEpochs(t=t_meas, t_nav=t_nav, **{k: allv[k] for k in save}), navs)
 
-    G0 = None
-    if nav_every > 1:
-        e0 = earth_params(nav0.pos, nav0.v_n, ellipsoid)
-        G0 = e0.g_n - jnp.cross(2.0 * e0.w_ie_n + e0.w_en_n, nav0.v_n)
-    carry0 = _Carry(mech=mech0, biases=biases0, kf=kf0, G_prev=G0)
+    z3 = jnp.zeros(3, dtype)
+    mech0 = MechState(nav=nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3, status=jnp.zeros((), jnp.int32))
+    kf0 = init_state(jnp.zeros(model.n, dtype), params.P0, 6, inflation=inflation, estimator=estimator)
+    G0 = _two_speed_start(nav0, z3, 1.0, ellipsoid).G if nav_every > 1 else None
     if remat:
         # reverse mode keeps only the per-epoch carries and recomputes each epoch's IMU samples
         # on the way back: tape memory O(epochs) instead of O(IMU samples)
         outer = jax.checkpoint(outer)
     # gather the IMU samples of every epoch interval once: (M, K, 3), padded samples get dt = 1
     # and are skipped by the ``use`` mask (no dynamic indexing inside the scan)
-    dt_seg = jnp.where(seg_use, dt_all[seg_idx], 1.0)
-    xs = (dtheta[seg_idx], dv[seg_idx], dt_seg, seg_use, meas.t, t_last, meas)
-    final, (ep, navs) = jax.lax.scan(outer, carry0, xs)
-    status = final.kf.status | final.mech.status
+    dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (dtheta.shape[0],))
+    rows = (dtheta[seg_idx], dv[seg_idx], jnp.where(seg_use, dt_all[seg_idx], 1.0), seg_use)
+    final, (ep, navs) = jax.lax.scan(outer, _Carry(mech0, biases0, kf0, G0), (rows, meas.t, t_last, meas))
     return LCResult(epochs=ep, final_nav=final.mech.nav, final_biases=final.biases, loglik=final.kf.loglik,
-                    n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped, status=status,
-                    imu_nav=navs if save_imu_every else None)
+                    n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped,
+                    status=final.kf.status | final.mech.status, imu_nav=navs if save_imu_every else None)
 
 
 def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, params: LCParams, *,
@@ -471,8 +500,7 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     Raises:
       ValueError: shapes, non-increasing times, IMU/measurement spans that do not overlap.
     """
-    if n_states not in (15, 18):
-        raise ValueError(f"n_states must be 15 or 18, got {n_states!r}")
+    model = error_model_for(n_states)  # raises ValueError for other sizes
     if discretization not in ("taylor", "van_loan"):
         raise ValueError(f"discretization must be 'taylor' or 'van_loan', got {discretization!r}")
     unknown = [s for s in save if s not in LC_OUTPUTS]
@@ -485,10 +513,10 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     for name, shp in (("pos", (M, 3)), ("vel", (M, 3)), ("R", (M, 6, 6)), ("mask", (M, 6)), ("lever", (M, 3))):
         if jnp.shape(getattr(meas, name)) != shp:
             raise ValueError(f"meas.{name} has shape {jnp.shape(getattr(meas, name))}; expected {shp}")
-    p = 9 if n_states == 18 else 6
-    if jnp.shape(params.P0) != (n_states, n_states) or jnp.shape(params.Qc) != (p, p):
+    n, p = model.n, model.p
+    if jnp.shape(params.P0) != (n, n) or jnp.shape(params.Qc) != (p, p):
         raise ValueError(f"params.P0 {jnp.shape(params.P0)} / Qc {jnp.shape(params.Qc)} must be "
-                         f"({n_states}, {n_states}) / ({p}, {p}) for n_states={n_states}")
+                         f"({n}, {n}) / ({p}, {p}) for n_states={n_states}")
     check_float64(nav0.pos, meas.pos, what="absolute positions")
     if isinstance(t_imu, jax.core.Tracer) or isinstance(meas.t, jax.core.Tracer):
         raise ValueError("t_imu and meas.t must be concrete arrays (they set the scan's shapes); close over "
@@ -537,11 +565,9 @@ def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBia
     M, n = ep.covs.shape[:2]
     if n != n_states:
         raise ValueError(f"the result has {n} states; pass n_states={n}")
-    from jaxnav.filters import KalmanResult
-
     zeros = jnp.zeros((M, n), ep.covs.dtype)
     filt = KalmanResult(means=zeros, covs=ep.covs, pred_means=-ep.corrections, pred_covs=ep.pred_covs)
     sm = rts_smoother(LinearGaussian(F=ep.Phi, H=None, Q=None, R=None), filt)
-    idx = IDX18 if n == 18 else IDX15
+    idx = error_model_for(n).idx
     nav, biases = jax.vmap(lambda nv, b, x: _apply_correction(nv, b, x, idx))(ep.nav, ep.biases, sm.means)
     return nav, biases, sm.covs

@@ -28,7 +28,7 @@ from jaxnav.ins.attitude import (
     rv_to_quat,
     rv_to_quat_series_c,
 )
-from jaxnav.ins.earth import earth_params, position_rate
+from jaxnav.ins.earth import earth_params, gravity_minus_coriolis, position_rate
 
 
 class NavState(NamedTuple):
@@ -141,7 +141,7 @@ def _nav_update(nav: NavState, a_prev, blk: _Block, earth_rate_sign, ellipsoid, 
             v_mid = v_mid.at[2].set(0.0)
     pos_mid = nav.pos + 0.5 * T * position_rate(nav.pos, v_mid, ellipsoid)
     e = earth_params(pos_mid, v_mid, ellipsoid, earth_rate_sign)
-    G = e.g_n - jnp.cross(2.0 * e.w_ie_n + e.w_en_n, v_mid)
+    G = gravity_minus_coriolis(e, v_mid)
     if blk.S.shape[0] == 1:  # one sample: c = T/2, and the trapezoid is T (v + v') / 2
         cw = 0.5 * T * e.w_in_n
         dv_rot = Y[0] - jnp.cross(cw, Y[0]) + 0.5 * jnp.cross(cw, jnp.cross(cw, Y[0]))
@@ -285,6 +285,52 @@ def _between(start: NavState, fr: _NavFrame, pre: _Prefix, dt, hold_height, elli
     return NavState(q_bn=stack([a / norm for a in qj]), v_n=stack(v), pos=stack(pos))
 
 
+class _TwoSpeed(NamedTuple):
+    """Carry of the navigation-frame recursion of the two-speed mechanization."""
+
+    nav: NavState
+    a_prev: Any  # (3,) mean nav acceleration of the last block, m/s^2
+    G: Any  # (3,) the last block's g - (2 w_ie + w_en) x v, m/s^2 (predicts the next block's mean velocity)
+
+
+def _two_speed_start(nav: NavState, a_prev, earth_rate_sign, ellipsoid) -> _TwoSpeed:
+    """The carry before the first block: G taken at the start state."""
+    e = earth_params(nav.pos, nav.v_n, ellipsoid, earth_rate_sign)
+    return _TwoSpeed(nav, a_prev, gravity_minus_coriolis(e, nav.v_n))
+
+
+def _scan_blocks(carry: _TwoSpeed, blk: _Block, earth_rate_sign, ellipsoid, hold_height, *, emit=None, acc=None,
+                 accumulate=None, xs=None, skip_empty=False):
+    """The two-speed block driver: one :func:`_nav_update` per block of samples, a ``lax.scan``.
+
+    Used by :func:`mechanize` (``nav_every``) and by :func:`jaxnav.ins.loosely_coupled`
+    (``nav_every``, between two fixes). The blocks' body-frame parts come from :func:`_body_blocks`.
+
+    Args:
+      carry: :class:`_TwoSpeed` at the start of the first block.  blk: :class:`_Block` with a leading (nb,) axis.
+      emit: optional (start nav, new nav, :class:`_NavFrame`) -> per-block output.
+      acc, accumulate, xs: an optional running sum over the blocks, acc <- accumulate(acc, start nav,
+        :class:`_NavFrame`, T, x), with per-block inputs xs (leading axis nb).
+      skip_empty: static; blocks of zero duration (padding) leave the carry and acc as they are.
+    Returns:
+      (carry after the last block, acc, stacked outputs of ``emit`` or None).
+    """
+
+    def step(c, bx):
+        (two, a), (b, x) = c, bx
+        if skip_empty:
+            ok = b.T > 0
+            b = b._replace(T=jnp.where(ok, b.T, 1.0))
+        nav, a_new, fr = _nav_update(two.nav, two.a_prev, b, earth_rate_sign, ellipsoid, hold_height, two.G)
+        new = (_TwoSpeed(nav, a_new, fr.G), a if accumulate is None else accumulate(a, two.nav, fr, b.T, x))
+        if skip_empty:
+            new = jax.tree_util.tree_map(lambda n_, o_: jnp.where(ok, n_, o_), new, c)
+        return new, (None if emit is None else emit(two.nav, nav, fr))
+
+    (carry, acc), out = jax.lax.scan(step, (carry, acc), (blk, xs))
+    return carry, acc, out
+
+
 class MechResult(NamedTuple):
     """Output of :func:`mechanize`.
 
@@ -385,42 +431,32 @@ def _mechanize_blocks(init: MechState, dtheta, dv, dt, params, ellipsoid, save_e
     blk, pre = _body_blocks(dtheta[:nb * M], dv[:nb * M], dt[:nb * M], init.dtheta_prev, init.dv_prev, M, coning,
                             prefix=not at_ends)
 
-    def update(c, b):
-        nav, a_prev, G_prev = c
-        new, a_new, fr = _nav_update(nav, a_prev, b, sign, ellipsoid, hold_height, G_prev)
-        return (new, a_new, fr.G), (new if at_ends else (nav, fr))
-
-    e0 = earth_params(init.nav.pos, init.nav.v_n, ellipsoid, sign)
-    carry = (init.nav, init.a_prev, e0.g_n - jnp.cross(2.0 * e0.w_ie_n + e0.w_en_n, init.nav.v_n))
+    run = partial(_scan_blocks, earth_rate_sign=sign, ellipsoid=ellipsoid, hold_height=hold_height)
+    carry = _two_speed_start(init.nav, init.a_prev, sign, ellipsoid)
     if at_ends and save_every > M:
         k = save_every // M
         blk = jax.tree_util.tree_map(lambda a: a.reshape((nb // k, k) + a.shape[1:]), blk)
 
         def chunk(c, b):
-            c, _ = jax.lax.scan(update, c, b)
-            return c, c[0]
+            c, _, _ = run(c, b)
+            return c, c.nav
 
-        (nav_end, a_end, _), navs = jax.lax.scan(chunk, carry, blk)
+        end, navs = jax.lax.scan(chunk, carry, blk)
+    elif at_ends:
+        end, _, navs = run(carry, blk, emit=lambda start, new, fr: new)
     else:
-        (nav_end, a_end, G_end), out = jax.lax.scan(update, carry, blk)
-        if at_ends:
-            navs = out
-        else:
-            starts, frames = out
-            navs = _between(starts, frames, pre, dt[:nb * M].reshape(nb, M), hold_height, ellipsoid)
-            navs = jax.tree_util.tree_map(lambda a: a.reshape((nb * M,) + a.shape[2:]), navs)
-            if r:
-                n = nb * M
-                tb, tp = _body_blocks(dtheta[n:], dv[n:], dt[n:], dtheta[n - 1], dv[n - 1], r, coning, True)
-                start = nav_end
-                nav_end, a_end, fr = _nav_update(start, a_end, jax.tree_util.tree_map(lambda a: a[0], tb), sign,
-                                                 ellipsoid, hold_height, G_end)
-                tail = _between(*jax.tree_util.tree_map(lambda a: a[None], (start, fr)), tp, dt[n:][None], hold_height,
-                                ellipsoid)
-                tail = jax.tree_util.tree_map(lambda a: a[0], tail)
-                navs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), navs, tail)
-            navs = jax.tree_util.tree_map(lambda a: a[save_every - 1::save_every], navs)
-    final = MechState(nav=nav_end, dtheta_prev=dtheta[-1], dv_prev=dv[-1], a_prev=a_end, status=status)
+        end, _, (starts, frames) = run(carry, blk, emit=lambda start, new, fr: (start, fr))
+        navs = _between(starts, frames, pre, dt[:nb * M].reshape(nb, M), hold_height, ellipsoid)
+        navs = jax.tree_util.tree_map(lambda a: a.reshape((nb * M,) + a.shape[2:]), navs)
+        if r:
+            n = nb * M
+            tb, tp = _body_blocks(dtheta[n:], dv[n:], dt[n:], dtheta[n - 1], dv[n - 1], r, coning, True)
+            end, _, (start, fr) = run(end, tb, emit=lambda start, new, fr: (start, fr))
+            tail = _between(start, fr, tp, dt[n:][None], hold_height, ellipsoid)
+            tail = jax.tree_util.tree_map(lambda a: a[0], tail)
+            navs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), navs, tail)
+        navs = jax.tree_util.tree_map(lambda a: a[save_every - 1::save_every], navs)
+    final = MechState(nav=end.nav, dtheta_prev=dtheta[-1], dv_prev=dv[-1], a_prev=end.a_prev, status=status)
     return MechResult(nav=navs, final=final, status=status)
 
 

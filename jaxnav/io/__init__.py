@@ -1,12 +1,16 @@
 """File readers (host side): RTKLIB solutions, raw IMU logs with RTKLIB time tags, daily station
-series (NGL tenv3, SIO .neu, .col tables).
+series (NGL tenv3, SIO .neu, .col tables), TOML configuration files; the walk_0827 set; S3 stop
+lists and S2 result tables (readers and writers).
 
 Errors name the file and line; units are converted to SI here, at the edge.
 """
 
+from jaxnav._config import load_toml, loads_toml  # the one TOML parser sits below every layer (sim reads scenarios)
 from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_tenv3, year_to_seconds
-from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, read_rtklib_imu, read_rtklib_tag
+from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, read_rtklib_imu, read_rtklib_tag
+from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
 from jaxnav.io._rtklib import GPS_EPOCH, PosSolution, read_pos
+from jaxnav.io._stop_list import read_stop_list, write_stop_list
 from jaxnav.io._survey_files import (
     ControlPoints,
     EpochLog,
@@ -18,7 +22,11 @@ from jaxnav.io._survey_files import (
     write_epoch_log,
     write_levelling,
 )
+from jaxnav.io._walk import WalkData, load_walk
 
 __all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags", "read_pos", "read_rtklib_imu",
            "read_rtklib_tag", "ControlPoints", "EpochLog", "Levelling", "read_control_points", "read_epoch_log",
-           "read_levelling", "write_control_points", "write_epoch_log", "write_levelling"]
+           "read_levelling", "write_control_points", "write_epoch_log", "write_levelling", "load_toml",
+           "loads_toml",
+           "imu_increments", "RTK_RESULT_COLUMNS", "write_rtk_results", "read_stop_list", "write_stop_list",
+           "WalkData", "load_walk"]

@@ -354,3 +354,26 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
     return ImuLog(path=str(csv_path), t=t, f_b=a[:, :3] * accel_scale, w_b=a[:, 3:6] * gyro_scale,
                   counter=counter, lineno=lineno, n_skipped_lines=len(skipped), skipped=tuple(skipped),
                   timing=timing, t_start=float(t0))
+
+
+def imu_increments(imu: ImuLog, C_bs):
+    """Body-frame angle and velocity increments from a rate log (rectangular integration).
+
+    Sample i is taken to cover (t[i-1], t[i]] (the logged rate times the interval); the first
+    interval copies the second.
+
+    Args:
+      imu: :class:`ImuLog` (or any record with ``t`` (N,) s, ``w_b`` (N, 3) rad/s and ``f_b``
+        (N, 3) m/s^2 in the sensor axes).
+      C_bs: (3, 3) sensor -> body rotation (e.g. from
+        :func:`jaxnav.ins.sensor_to_body_from_upstream`).
+    Returns:
+      (t (N,) s, dtheta (N, 3) rad, dv (N, 3) m/s, dt (N,) s), increments in the body frame.
+    """
+    t = np.asarray(imu.t, float)
+    dt = np.diff(t)
+    dt = np.concatenate([dt[:1], dt])
+    C = np.asarray(C_bs, float)
+    w_b = np.asarray(imu.w_b, float) @ C.T
+    f_b = np.asarray(imu.f_b, float) @ C.T
+    return t, w_b * dt[:, None], f_b * dt[:, None], dt

@@ -16,7 +16,6 @@ import functools
 import importlib.resources
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -25,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxnav import units
+from jaxnav._config import load_toml, loads_toml
 from jaxnav.sim._imu import SensorErrorModel
 from jaxnav.sim._scenario import (
     _ACCEL,
@@ -384,17 +384,18 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
 
 def load_cadastral(path: str | os.PathLike | None = None) -> tuple[dict, dict]:
     """Read a cadastral TOML (default: the shipped ``scenarios/cadastral.toml``); see :func:`cadastral_from_dict`."""
-    if path is None:
-        text = importlib.resources.files("jaxnav.sim").joinpath("scenarios/cadastral.toml").read_text(encoding="utf-8")
-        src = "cadastral.toml"
-    else:
-        with open(path, "rb") as f:
-            text = f.read().decode("utf-8")
-        src = os.fspath(path)
     try:
-        return cadastral_from_dict(tomllib.loads(text))
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{src}: invalid TOML: {e}") from None
+        if path is None:
+            src = "cadastral.toml"
+            d = loads_toml(importlib.resources.files("jaxnav.sim").joinpath("scenarios/cadastral.toml")
+                           .read_text(encoding="utf-8"), source=src)
+        else:
+            src = os.fspath(path)
+            d = load_toml(path)
+    except ValueError as e:
+        raise ScenarioError(str(e)) from None
+    try:
+        return cadastral_from_dict(d)
     except ScenarioError as e:
         raise ScenarioError(f"{src}: {e}") from None
 

@@ -29,7 +29,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxnav.geodesy import WGS84, Similarity2D, gauss_kruger_inverse, similarity2d
+from jaxnav.geodesy import WGS84, Similarity2D, enu_to_curvilinear, gauss_kruger_inverse, similarity2d
 
 
 class RtkPointsConfig(NamedTuple):
@@ -124,12 +124,14 @@ def true_height_anomaly(cfg: RtkPointsConfig, dx, dy):
 
 
 def _enu_to_latlon(lat, lon, dn, de, ell):
-    """Small horizontal offsets (m) -> geodetic offsets (rad), to first order (mm over 10 cm)."""
-    a, e2 = ell.a, ell.e2
-    s = jnp.sin(lat)
-    w = jnp.sqrt(1.0 - e2 * s * s)
-    RN, RM = a / w, a * (1.0 - e2) / w**3
-    return lat + dn / RM, lon + de / (RN * jnp.cos(lat))
+    """Small horizontal offsets (m) -> geodetic lat, lon (rad), to first order (mm over 10 cm).
+
+    The radii are taken on the ellipsoid (h = 0): the heights of the area (~20 m) would change
+    the cm-level offsets by ~3e-6 of their size.
+    """
+    d = enu_to_curvilinear(jnp.stack([lat, lon, jnp.zeros_like(lat)], -1), jnp.stack([de, dn, jnp.zeros_like(de)], -1),
+                           ell)
+    return lat + d[..., 0], lon + d[..., 1]
 
 
 @partial(jax.jit, static_argnames=("cfg",))

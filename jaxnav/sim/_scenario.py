@@ -14,7 +14,6 @@ import importlib.resources
 import json
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -25,6 +24,7 @@ from jaxnav import units
 from jaxnav.geodesy import WGS84, meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_mul, rv_to_quat
 from jaxnav.ins.mechanization import NavState
+from jaxnav._config import load_toml, loads_toml
 from jaxnav.sim._gnss import GnssConfig, GnssData, gnss_epochs, simulate_gnss
 from jaxnav.sim._imu import SensorErrorModel, corrupt_increments
 from jaxnav.sim._trajectory import (
@@ -415,18 +415,20 @@ def scenario_from_dict(d: dict, *, validate: bool = True) -> ScenarioConfig:
 def loads_scenario(text: str) -> ScenarioConfig:
     """Parse a scenario from TOML text (see ``jaxnav/sim/scenarios/s0.toml`` for the fields)."""
     try:
-        d = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"invalid TOML: {e}") from None
+        d = loads_toml(text)
+    except ValueError as e:
+        raise ScenarioError(str(e)) from None
     return scenario_from_dict(d)
 
 
 def load_scenario(path: str | os.PathLike) -> ScenarioConfig:
     """Read a scenario TOML file."""
-    with open(path, "rb") as f:
-        text = f.read().decode("utf-8")
     try:
-        return loads_scenario(text)
+        d = load_toml(path)
+    except ValueError as e:
+        raise ScenarioError(str(e)) from None
+    try:
+        return scenario_from_dict(d)
     except ScenarioError as e:
         raise ScenarioError(f"{os.fspath(path)}: {e}") from None
 

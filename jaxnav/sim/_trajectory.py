@@ -38,7 +38,7 @@ import numpy as np
 
 from jaxnav.geodesy import WGS84, Ellipsoid
 from jaxnav.ins.attitude import euler_to_dcm, euler_to_quat
-from jaxnav.ins.earth import earth_params, position_rate
+from jaxnav.ins.earth import earth_params, gravity_minus_coriolis, position_rate
 
 
 class ScenarioError(ValueError):
@@ -388,7 +388,7 @@ def _build(start, rate, piece, local, pos0, dt, unsensed_mask, *, substeps, elli
         e = earth_params(pos_nodes, kn.v_n, ellipsoid)
         CT = jnp.swapaxes(euler_to_dcm(kn.euler), -1, -2)
         w_ib = kn.w_nb_b + jnp.sum(CT * e.w_in_n[:, None, :], -1)
-        f_n = kn.a_n + jnp.cross(2.0 * e.w_ie_n + e.w_en_n, kn.v_n) - e.g_n
+        f_n = kn.a_n - gravity_minus_coriolis(e, kn.v_n)  # v_dot = f_n + g - (2 w_ie + w_en) x v
         f_b = jnp.sum(CT * f_n[:, None, :], -1)
         out = (dt * (w @ w_ib), dt * (w @ f_b))
         if with_unsensed:

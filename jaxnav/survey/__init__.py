@@ -52,11 +52,9 @@ from jaxnav.survey._stops import (  # noqa: E402
     detect_stops,
     make_stop_list,
     match_stops,
-    read_stop_list,
     stance_statistic,
     static_spans,
     validate_stops,
-    write_stop_list,
 )
 from jaxnav.survey.cadastral import (  # noqa: E402
     STAGES,

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.geodesy import meridian_radius, prime_vertical_radius
+from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled, smooth
 from jaxnav.ins.error_model import IDX18
 from jaxnav.ins.mechanization import ImuSample, MechParams, MechState, NavState, mech_step
@@ -335,17 +335,15 @@ def propagate_covariances(Phi, pred_covs, covs, P0, reset_f, reset_b, table_P):
 
 def enu_difference(pos, ref):
     """[E, N, U] metres of geodetic ``pos`` relative to ``ref`` (small offsets; (..., 3))."""
-    lat, h = ref[..., 0], ref[..., 2]
-    RM, RN = meridian_radius(lat), prime_vertical_radius(lat)
-    d = pos - ref
-    return jnp.stack([d[..., 1] * (RN + h) * jnp.cos(lat), d[..., 0] * (RM + h), d[..., 2]], -1)
+    return curvilinear_to_enu(ref, pos - ref)
 
 
 def _enu_var(P, pos):
-    lat, h = pos[..., 0], pos[..., 2]
-    RM, RN = meridian_radius(lat), prime_vertical_radius(lat)
+    """E, N, U variances (m^2) of the position-error block of P (..., 18, 18) at pos (..., 3)."""
     i = IDX18.dpos.start
-    return jnp.stack([P[..., i + 1, i + 1] * ((RN + h) * jnp.cos(lat)) ** 2, P[..., i, i] * (RM + h) ** 2,
+    # the metres per unit of [dlat, dlon, dh] in E, N, U order
+    s = curvilinear_to_enu(pos, jnp.ones_like(pos))
+    return jnp.stack([P[..., i + 1, i + 1] * s[..., 0] ** 2, P[..., i, i] * s[..., 1] ** 2,
                       P[..., i + 2, i + 2]], -1)
 
 
@@ -472,10 +470,7 @@ def process_survey(plan: SurveyPlan, nav0: NavState, dtheta, dv, known_pos, para
     w = jnp.where(has_next, vb / (vf + vb), 1.0)
     d_b = enu_difference(bwd, fwd_b)
     fused_enu = (1.0 - w) * d_b
-    lat, h = fwd_b[:, 0], fwd_b[:, 2]
-    RM, RN = meridian_radius(lat), prime_vertical_radius(lat)
-    fused = fwd_b + jnp.stack([fused_enu[:, 1] / (RM + h), fused_enu[:, 0] / ((RN + h) * jnp.cos(lat)),
-                               fused_enu[:, 2]], -1)
+    fused = fwd_b + enu_to_curvilinear(fwd_b, fused_enu)
     sw = jnp.asarray(plan.stop_epoch_w)[..., None]
     sidx = np.asarray(plan.stop_epochs)
     filt = jnp.sum(ep.nav.pos[sidx] * sw, 1)

@@ -14,21 +14,23 @@ function of array leaves:
   per scan step, so an expensive loss is compiled once (``optax.lbfgs`` compiles it three times);
 * :func:`sweep`: ``vmap`` over a parameter :func:`grid` x Monte Carlo keys, chunked with a
   progress bar, sharded over all devices (``jax.sharding``), with :func:`table` for tidy rows;
-* :class:`S0Setup` and friends: the S0 experiment as a reusable problem (also used by
-  ``jaxnav demo``), and :func:`s0_metrics` / :func:`cv_nll` as ready-made tuning targets.
+* :func:`run_chunked`: ``vmap`` of a function of one PRNG key over many keys, in chunks of one
+  compiled size with a progress bar (:func:`map_chunked` is the loop behind both);
+* :func:`cv_nll`: a ready-made tuning target (constant-velocity noise scales); the S0
+  experiment's targets (``S0Setup``, ``s0_metrics``) are in :mod:`jaxnav.experiments`.
 """
 
 from jaxnav.tune._bijectors import Bijector, Space, bijector, interval, log, positive, real, unit
 from jaxnav.tune._losses import innovation_nll, nees, nees_consistency, nis_consistency, rms
 from jaxnav.tune._lbfgs import minimize_lbfgs
+from jaxnav.tune._montecarlo import map_chunked, run_chunked
 from jaxnav.tune._optimize import TuneResult, forward_gradient, minimize, value_and_grad
-from jaxnav.tune._problems import cv_nll, s0_metrics, simulate_cv_batch
-from jaxnav.tune._s0 import EXPERIMENT, S0Setup, load_experiment
+from jaxnav.tune._problems import cv_nll, simulate_cv_batch
 from jaxnav.tune._sweep import SweepResult, grid, sweep, table
 
 __all__ = [
-    "Bijector", "EXPERIMENT", "S0Setup", "Space", "SweepResult", "TuneResult", "bijector", "cv_nll", "forward_gradient", "grid",
-    "innovation_nll", "interval", "load_experiment", "log", "minimize", "minimize_lbfgs", "nees", "nees_consistency",
-    "nis_consistency", "positive", "real", "rms", "s0_metrics", "simulate_cv_batch", "sweep", "table", "unit",
+    "Bijector", "Space", "SweepResult", "TuneResult", "bijector", "cv_nll", "forward_gradient", "grid",
+    "innovation_nll", "interval", "log", "map_chunked", "minimize", "minimize_lbfgs", "nees", "nees_consistency",
+    "nis_consistency", "positive", "real", "rms", "run_chunked", "simulate_cv_batch", "sweep", "table", "unit",
     "value_and_grad",
 ]

@@ -25,7 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
-from tqdm.auto import tqdm
+
+from jaxnav.tune._montecarlo import map_chunked
 
 
 class SweepResult(NamedTuple):
@@ -103,29 +104,21 @@ def sweep(fn: Callable, params: Mapping, keys, *, chunk: Optional[int] = None, p
 
     sh = NamedSharding(_mesh(devices), PartitionSpec("batch")) if nd > 1 else None
 
-    def batch(s):
-        idx = np.arange(s, s + chunk)
-        idx = np.minimum(idx, N - 1)  # padding repeats the last pair
+    def batch(idx):
+        """The (params, keys) of the padded pair indices ``idx``, placed on the mesh."""
         p = {k: jnp.asarray(v[gi[idx]]) for k, v in params.items()}
         kk = keys[ki[idx]]
         if sh is not None:
             p = jax.device_put(p, sh)
             kk = jax.device_put(kk, sh)
-        return p, kk, min(chunk, N - s)
+        return p, kk
 
-    p0, k0, _ = batch(0)
     t0 = time.perf_counter()
-    compiled = _compiled(fn, p0, k0, devices, sh)
+    compiled = _compiled(fn, *batch(np.minimum(np.arange(chunk), N - 1)), devices, sh)
     compile_time = time.perf_counter() - t0
     peak = _peak_bytes(compiled)
-    outs = []
-    with tqdm(total=N, desc=desc, disable=not progress, unit="run") as bar:
-        for s in range(0, N, chunk):
-            p, kk, n = (p0, k0, min(chunk, N)) if s == 0 else batch(s)
-            out = jax.tree_util.tree_map(lambda a: np.asarray(a)[:n], compiled(p, kk))
-            outs.append(out)
-            bar.update(n)
-    values = jax.tree_util.tree_map(lambda *a: np.concatenate(a, 0).reshape((G, K) + a[0].shape[1:]), *outs)
+    flat = map_chunked(lambda idx: compiled(*batch(idx)), N, chunk=chunk, desc=desc, progress=progress)
+    values = jax.tree_util.tree_map(lambda a: a.reshape((G, K) + a.shape[1:]), flat)
     return SweepResult(grid=params, values=values, wall_time_s=time.perf_counter() - t_start,
                        compile_time_s=compile_time, n_devices=nd, chunk=chunk, peak_bytes=peak)
 

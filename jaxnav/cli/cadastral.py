@@ -1,0 +1,39 @@
+"""``jaxnav cadastral``: the S3 cadastral-survey post-processing over Monte Carlo seeds
+(:func:`jaxnav.experiments.run_cadastral`)."""
+
+from __future__ import annotations
+
+from jaxnav.cli._common import DATA_ENV, data_dir
+from jaxnav.cli.walk import WALK_SET
+
+
+def register(subparsers):
+    """Add the ``cadastral`` subcommand; returns its parser."""
+    p = subparsers.add_parser("cadastral", help="S3: cadastral-survey IMU post-processing (preprocessing, stops, "
+                                                "KF/RTS at stops, strapdown, reverse navigation) over Monte Carlo "
+                                                "seeds")
+    p.add_argument("--out", required=True, help="output folder (results.json and figures)")
+    p.add_argument("--config", default=None, help="cadastral TOML (default: jaxnav/sim/scenarios/cadastral.toml)")
+    p.add_argument("--seeds", type=int, default=64, help="Monte Carlo seeds per IMU grade (vmapped); default 64")
+    p.add_argument("--grade", action="append", default=None,
+                   help="IMU grade(s) of the config to run (repeatable); default all")
+    p.add_argument("--stops", default=None,
+                   help="stop-list CSV replacing the simulated one (checked against the data)")
+    p.add_argument("--legs", type=int, default=None, help="use only the first n legs (short run)")
+    p.add_argument("--chunk", type=int, default=8, help="seeds per compiled batch; default 8")
+    p.add_argument("--data", default=None, help=f"{WALK_SET} folder for the real-walk stop detection "
+                                                f"(default ${DATA_ENV}/{WALK_SET}; skipped if neither is set)")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    return p
+
+
+def run(args) -> int:
+    """Run the S3 experiment, print its summary, write results.json and figures into ``--out``."""
+    from jaxnav.experiments import format_cadastral, run_cadastral
+
+    walk_dir = data_dir(args.data, WALK_SET, required=False)
+    res = run_cadastral(args.out, config=args.config, seeds=args.seeds, grades=args.grade, stops=args.stops,
+                        chunk=args.chunk, progress=not args.no_progress, n_legs=args.legs, walk_dir=walk_dir)
+    print(format_cadastral(res))
+    print(f"wrote {args.out}/results.json and figures")
+    return 0

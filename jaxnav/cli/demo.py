@@ -1,0 +1,31 @@
+"""``jaxnav demo``: the S0 reproduction (:func:`jaxnav.experiments.run_s0`)."""
+
+from __future__ import annotations
+
+import pathlib
+
+
+def register(subparsers):
+    """Add the ``demo`` subcommand; returns its parser."""
+    p = subparsers.add_parser("demo", help="the S0 reproduction: classic, attenuated and fading filters in "
+                                           "INS/GPS integration over Monte Carlo seeds")
+    p.add_argument("--out", default="out/demo", help="output folder (created); default out/demo")
+    p.add_argument("--seeds", type=int, default=None, help="Monte Carlo seeds (vmapped); default 32")
+    p.add_argument("--config", default=None,
+                   help="experiment TOML (default: the shipped jaxnav/experiments/s0_experiment.toml)")
+    p.add_argument("--sweep-points", type=int, default=None, help="use only the first n b values of the sweep")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    return p
+
+
+def run(args) -> int:
+    """Run the reproduction, print its table, write results.json and figures into ``--out``."""
+    from jaxnav.experiments import format_s0, run_s0
+
+    res = run_s0(args.out, seeds=args.seeds, config=args.config, sweep_points=args.sweep_points,
+                 progress=not args.no_progress)
+    out = pathlib.Path(args.out)
+    print(format_s0(res))
+    print(f"\nwrote {out / 'results.json'} and {len(res['figures'])} figures to {out} "
+          f"({res['wall_time_s']['total']:.0f} s in all)")
+    return 0

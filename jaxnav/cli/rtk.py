@@ -1,0 +1,46 @@
+"""``jaxnav rtk``: the S2 pipeline on RTK epoch logs or RTKLIB .pos files (:func:`jaxnav.experiments.run_rtk`)."""
+
+from __future__ import annotations
+
+from jaxnav.cli._common import UsageError
+
+
+def register(subparsers):
+    """Add the ``rtk`` subcommand; returns its parser."""
+    p = subparsers.add_parser("rtk", help="S2: Kalman filtering of RTK point series (epoch-log CSV or static .pos "
+                                          "files) -> per-point results CSV + JSON + figure")
+    p.add_argument("files", nargs="*", help="RTKLIB .pos files (static) and/or CSV epoch logs")
+    p.add_argument("--out", default="out/rtk", help="output folder; default out/rtk")
+    p.add_argument("--control", default=None, help="control-point CSV (point,B,L,H,x,y,h) of the connection survey")
+    p.add_argument("--levelling", default=None, help="levelling CSV (point,height) for the Table 3 comparison")
+    p.add_argument("--lon0", type=float, default=None, help="central meridian, deg (default: zone of the data)")
+    p.add_argument("--zone-width", type=int, default=3, choices=(3, 6), help="zone width for the default lon0")
+    p.add_argument("--step", type=float, default=2.0, help=".pos files: thinning interval, s (default 2)")
+    p.add_argument("--window", type=int, default=60, help=".pos files: epochs per occupation (default 60)")
+    p.add_argument("--min-epochs", type=int, default=30, help=".pos files: shortest occupation kept (default 30)")
+    p.add_argument("--all-epochs", action="store_true", help=".pos files: also use float (Q != 1) epochs")
+    p.add_argument("--smoother", action="store_true", help="add an RTS pass after the forward filter")
+    p.add_argument("--surface", default="auto", choices=("auto", "plane", "quadratic"),
+                   help="height-anomaly surface (auto: quadratic with >= 7 control points)")
+    p.add_argument("--simulate", type=int, default=None, metavar="SEED",
+                   help="write the simulated 45-point S2 survey (epoch log, control, levelling) into --out "
+                        "and process it together with FILES")
+    return p
+
+
+def run(args) -> int:
+    """Optionally write the simulated survey, then run the pipeline on the files (prints a summary)."""
+    from jaxnav.experiments import run_rtk, write_simulated_survey
+
+    files, control, levelling = list(args.files), args.control, args.levelling
+    if args.simulate is not None:
+        f_ep, f_cp, f_lv, _ = write_simulated_survey(args.out, seed=args.simulate)
+        files.append(f_ep)
+        control = control or f_cp
+        levelling = levelling or f_lv
+    if not files:
+        raise UsageError("give FILES or --simulate SEED")
+    run_rtk(files, args.out, control=control, levelling=levelling, lon0_deg=args.lon0,
+            zone_width=args.zone_width, step=args.step, window=args.window, min_epochs=args.min_epochs,
+            fixed_only=not args.all_epochs, smoother=args.smoother, surface=args.surface)
+    return 0

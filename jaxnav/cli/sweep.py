@@ -1,0 +1,28 @@
+"""``jaxnav sweep CONFIG --out DIR``: a parameter grid x Monte Carlo runs (:func:`jaxnav.experiments.run_sweep`).
+
+CONFIG is a TOML file or the name of a shipped one (``s0_b``, ``cv_noise``; see
+``jaxnav/experiments/configs/``); writes ``DIR/results.json``, ``DIR/table.csv`` and figures.
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+from jaxnav.cli._common import add_config_parser
+
+
+def register(subparsers):
+    """Add the ``sweep`` subcommand; returns its parser."""
+    return add_config_parser(subparsers, "sweep",
+                             "vmap a parameter grid x Monte Carlo runs (chunked, sharded over devices)")
+
+
+def run(args) -> int:
+    """Run the sweep, print its summary, write results.json, table.csv and figures into ``--out``."""
+    from jaxnav.experiments import format_sweep, run_sweep
+
+    res = run_sweep(args.config, args.out, progress=not args.no_progress)
+    out = pathlib.Path(args.out)
+    print(format_sweep(res))
+    print(f"wrote {out / 'results.json'}, {out / 'table.csv'} and {len(res['figures'])} figure(s)")
+    return 0

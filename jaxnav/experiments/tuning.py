@@ -1,0 +1,309 @@
+"""Sweeps and gradient tuning of the S0 filters and of CV noise scales from a config file
+(what ``jaxnav sweep CONFIG --out DIR`` and ``jaxnav tune CONFIG --out DIR`` run).
+
+A config is a TOML file (or the name of a shipped one: ``s0_b``, ``cv_noise``; see
+``jaxnav/experiments/configs/``) with sections ``[problem]``, ``[params.NAME]`` (init, bijector,
+trainable), ``[sweep]`` (grid axes) and ``[tune]`` (optimiser). :func:`run_sweep` and
+:func:`run_tune` write ``results.json`` (values, losses, grid, wall times) and PNG figures;
+:func:`format_sweep` / :func:`format_tune` give their one-line summaries.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import pathlib
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from jaxnav import filters as jf
+from jaxnav import tune
+from jaxnav.experiments.s0 import (
+    EXPERIMENT,
+    S0_FILTERS,
+    S0_LOSSES,
+    S0_PARAMS,
+    S0Setup,
+    load_experiment,
+    s0_metrics,
+)
+from jaxnav.io import load_toml
+from jaxnav.sim import simulate_linear
+
+#: the shipped sweep/tune configs (``s0_b``, ``cv_noise``)
+CONFIGS = pathlib.Path(__file__).with_name("configs")
+_PROBLEM = {"kind": str, "filter": str, "loss": str, "seeds": int, "seed": int, "duration": float,
+            "experiment": str, "series": int, "epochs": int, "sigma": float, "q": float}
+_TUNE = {"optimizer": str, "learning_rate": float, "steps": int, "mode": str, "landscape": int}
+_OPTIMIZERS = ("adam", "sgd", "lbfgs", "lbfgs_wolfe")
+
+
+def _err(path, msg):
+    raise ValueError(f"{path}: {msg}")
+
+
+def load_config(spec) -> dict:
+    """Read and check a sweep/tune TOML (a path or a shipped name); errors name the file and key."""
+    path = pathlib.Path(spec)
+    if not path.exists() and (CONFIGS / f"{spec}.toml").exists():
+        path = CONFIGS / f"{spec}.toml"
+    if not path.exists():
+        raise ValueError(f"{spec}: no such config file (shipped: {sorted(p.stem for p in CONFIGS.glob('*.toml'))})")
+    cfg = load_toml(path)
+    for sec in cfg:
+        if sec not in ("problem", "params", "sweep", "tune"):
+            _err(path, f"unknown section [{sec}]; expected problem, params, sweep, tune")
+    prob = cfg.get("problem") or _err(path, "missing section [problem]")
+    for k, v in prob.items():
+        if k not in _PROBLEM:
+            _err(path, f"unknown key problem.{k}; expected one of {sorted(_PROBLEM)}")
+        if _PROBLEM[k] is float and isinstance(v, int):
+            prob[k] = float(v)
+        elif not isinstance(prob[k], _PROBLEM[k]):
+            _err(path, f"problem.{k} must be {_PROBLEM[k].__name__}, got {v!r}")
+    kind = prob.get("kind")
+    if kind == "s0":
+        prob.setdefault("filter", "attenuated")
+        prob.setdefault("loss", "rms")
+        prob.setdefault("seeds", 8)
+        if prob["filter"] not in S0_FILTERS:
+            _err(path, f"problem.filter must be one of {S0_FILTERS}, got {prob['filter']!r}")
+        if prob["loss"] not in S0_LOSSES:
+            _err(path, f"problem.loss must be one of {S0_LOSSES}, got {prob['loss']!r}")
+        allowed = set(S0_PARAMS[prob["filter"]]) | {"q_scale", "r_scale"} | (
+            {"tau"} if prob["filter"] == "fading" else set())
+    elif kind == "cv":
+        prob.setdefault("loss", "nll")
+        prob.setdefault("series", 64)
+        prob.setdefault("epochs", 500)
+        if prob["loss"] != "nll":
+            _err(path, "problem.loss must be 'nll' for kind = 'cv'")
+        allowed = {"q_scale", "r_scale"}
+    else:
+        _err(path, f"problem.kind must be 's0' or 'cv', got {kind!r}")
+    prob.setdefault("seed", 0)
+    params = cfg.get("params") or _err(path, "missing section [params.NAME] (at least one parameter)")
+    for name, p in params.items():
+        if name not in allowed:
+            _err(path, f"parameter {name!r} does not apply to this problem; allowed: {sorted(allowed)}")
+        if "init" not in p:
+            _err(path, f"params.{name}.init is missing")
+        unknown = set(p) - {"init", "bijector", "trainable"}
+        if unknown:
+            _err(path, f"unknown keys {sorted(unknown)} in [params.{name}]")
+        p.setdefault("bijector", "unit" if name == "b" else "log")
+        p.setdefault("trainable", True)
+        try:
+            tune.bijector(p["bijector"])
+        except ValueError as exc:
+            _err(path, f"params.{name}.bijector: {exc}")
+    if kind == "s0" and prob["filter"] != "classic":
+        need = S0_PARAMS[prob["filter"]]
+        if prob["filter"] != "fading" and not set(need) <= set(params):
+            _err(path, f"filter {prob['filter']} needs parameter(s) {need}")
+    sw = cfg.setdefault("sweep", {})
+    for name, ax in sw.items():
+        if name == "chunk":
+            continue
+        if name not in params:
+            _err(path, f"sweep axis {name!r} is not a parameter")
+        if not (isinstance(ax, dict) and {"start", "stop", "num"} <= set(ax)):
+            _err(path, f"sweep.{name} must be {{ start = , stop = , num = [, log = true] }}")
+    tn = cfg.setdefault("tune", {})
+    for k in tn:
+        if k not in _TUNE:
+            _err(path, f"unknown key tune.{k}; expected one of {sorted(_TUNE)}")
+    tn.setdefault("optimizer", "adam")
+    tn.setdefault("learning_rate", 0.1)
+    tn.setdefault("steps", 50)
+    tn.setdefault("mode", "auto")
+    tn.setdefault("landscape", 0)
+    if tn["optimizer"] not in _OPTIMIZERS:
+        _err(path, f"tune.optimizer must be one of {_OPTIMIZERS}, got {tn['optimizer']!r}")
+    cfg["_path"] = str(path)
+    return cfg
+
+
+class Problem:
+    """The config's problem: ``point(params, key) -> metrics dict`` and the keys of its runs."""
+
+    def __init__(self, cfg):
+        prob = cfg["problem"]
+        self.cfg = cfg
+        self.kind = prob["kind"]
+        self.init = {k: float(v["init"]) for k, v in cfg["params"].items()}
+        self.space = tune.Space({k: v["bijector"] for k, v in cfg["params"].items()},
+                                trainable=tuple(k for k, v in cfg["params"].items() if v["trainable"]))
+        if self.kind == "s0":
+            exp = load_experiment(prob.get("experiment") or EXPERIMENT)
+            self.setup = S0Setup(exp, duration=prob.get("duration"))
+            self.keys = jax.random.split(jax.random.PRNGKey(prob["seed"]), prob["seeds"])
+            self.loss_name = {"rms": "mean position RMS, m", "nll": "innovation NLL per component",
+                              "nis": "NIS consistency (log ratio)^2"}[prob["loss"]]
+        else:
+            self.keys = jax.random.split(jax.random.PRNGKey(prob["seed"]), prob["series"])
+            self.loss_name = "innovation NLL per component"
+
+    def point(self, params, key, remat=False):
+        """Metrics of one run (one Monte Carlo seed / one series) at ``params``."""
+        prob = self.cfg["problem"]
+        if self.kind == "s0":
+            return s0_metrics(self.setup, params, key, filter=prob["filter"], loss=prob["loss"], remat=remat)
+        sigma, q, T = prob.get("sigma", 0.003), prob.get("q", 1e-8), prob["epochs"]
+        model = jf.constant_velocity(1.0, sigma=sigma, q=q)
+        zs = simulate_linear(key, model, jnp.zeros(6), T)[1]
+        nll = tune.cv_nll(params, zs[None], sigma=sigma, q=q)
+        return {"loss": nll, "nll": nll}
+
+    def loss(self, params):
+        """Mean loss over the runs (common random numbers)."""
+        remat = self.cfg["tune"]["mode"] == "reverse"
+        return jnp.mean(jax.vmap(lambda k: self.point(params, k, remat)["loss"])(self.keys))
+
+
+def _axis(ax):
+    if ax.get("log"):
+        return np.geomspace(ax["start"], ax["stop"], int(ax["num"]))
+    return np.linspace(ax["start"], ax["stop"], int(ax["num"]))
+
+
+def _grid(P: Problem, axes: dict):
+    full = {k: (axes[k] if k in axes else np.asarray([P.init[k]])) for k in P.init}
+    return tune.grid(**full)
+
+
+def _write(out: pathlib.Path, results: dict):
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=_jsonable))
+
+
+def _jsonable(a):
+    return np.asarray(a).tolist()
+
+
+def run_sweep(config, out, *, progress=True) -> dict:
+    """Sweep the config's grid x Monte Carlo runs; write results.json, table.csv and figures into ``out``.
+
+    Returns:
+      The results dict written to ``results.json`` (grid, per-run and mean losses, best point).
+    """
+    t0 = time.perf_counter()
+    cfg = load_config(config)
+    P = Problem(cfg)
+    axes = {k: _axis(v) for k, v in cfg["sweep"].items() if k != "chunk"}
+    if not axes:
+        raise ValueError(f"{cfg['_path']}: [sweep] has no axes")
+    g = _grid(P, axes)
+    res = tune.sweep(lambda p, k: P.point(p, k), g, P.keys, chunk=cfg["sweep"].get("chunk"), progress=progress,
+                     desc="sweep")
+    loss = res.values["loss"]  # (G, K)
+    mean = loss.mean(1)
+    best = int(np.argmin(mean))
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = tune.table(res, lambda v: {"loss": v["loss"]})
+    with open(out / "table.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    from jaxnav.plot import plot_sweep
+
+    figs = plot_sweep(out, grid=g, axes=list(axes), loss=loss, loss_name=P.loss_name, init=P.init)
+    results = dict(
+        command="sweep", config=cfg["_path"], problem=cfg["problem"], loss_name=P.loss_name,
+        grid={k: v for k, v in g.items()},
+        axes=list(axes), loss_mean=mean, loss_std=loss.std(1), loss_per_run=loss,
+        best={**{k: float(v[best]) for k, v in g.items()}, "loss": float(mean[best])},
+        runs=len(P.keys), points=len(mean), chunk=res.chunk, n_devices=res.n_devices,
+        peak_bytes_per_chunk=res.peak_bytes,
+        wall_time_s=dict(total=time.perf_counter() - t0, sweep=res.wall_time_s, compile=res.compile_time_s),
+        figures=[str(f) for f in figs], table=str(out / "table.csv"),
+        jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
+    )
+    if "rms" in res.values:
+        results["rms_best_mean"] = res.values["rms"][best].mean(0)
+    _write(out, results)
+    return results
+
+
+def format_sweep(results: dict) -> str:
+    """One line: the size and wall time of :func:`run_sweep`'s sweep and its best point."""
+    b, w = results["best"], results["wall_time_s"]
+    return (f"sweep: {results['points']} points x {results['runs']} runs in {w['sweep']:.1f} s "
+            f"({w['compile']:.1f} s compile, {results['n_devices']} device(s), chunk {results['chunk']}); "
+            f"best " + ", ".join(f"{k} = {v:.4g}" for k, v in b.items() if k != "loss")
+            + f": {results['loss_name']} {b['loss']:.4f}")
+
+
+def _optimizer(tn):
+    if tn["optimizer"] == "adam":
+        return optax.adam(tn["learning_rate"])
+    if tn["optimizer"] == "sgd":
+        return optax.sgd(tn["learning_rate"])
+    return optax.lbfgs()
+
+
+def run_tune(config, out, *, progress=True) -> dict:
+    """Tune the config's parameters by gradient descent (optax in lax.scan); write results.json and figures.
+
+    Returns:
+      The results dict written to ``results.json`` (initial and tuned values, loss path).
+    """
+    t0 = time.perf_counter()
+    cfg = load_config(config)
+    P = Problem(cfg)
+    tn = cfg["tune"]
+    if tn["optimizer"] == "lbfgs_wolfe":  # steps = evaluation budget; the loss is compiled once
+        res = tune.minimize_lbfgs(P.loss, P.init, P.space, max_evals=tn["steps"], mode=tn["mode"])
+        done = np.isfinite(np.asarray(res.losses))
+        res = res._replace(losses=np.asarray(res.losses)[done], grad_norm=np.asarray(res.grad_norm)[done],
+                           path={k: np.asarray(v)[done] for k, v in res.path.items()})
+    else:
+        res = tune.minimize(P.loss, P.init, P.space, optimizer=_optimizer(tn), steps=tn["steps"], mode=tn["mode"])
+    t_tune = time.perf_counter() - t0
+    final = {k: float(v) for k, v in res.params.items()}
+    landscape = None
+    if tn["landscape"] and len(P.init) == 1:
+        (name,) = P.init
+        ax = cfg["sweep"].get(name)
+        vals = _axis(dict(ax, num=tn["landscape"])) if ax else None
+        if vals is not None:
+            sw = tune.sweep(lambda p, k: P.point(p, k), {name: vals}, P.keys, chunk=cfg["sweep"].get("chunk"),
+                            progress=progress, desc="landscape")
+            landscape = dict(values=vals, loss=sw.values["loss"].mean(1), wall_time_s=sw.wall_time_s)
+    # Monte Carlo distribution of the per-run loss at the start and at the tuned values
+    per_run = jax.jit(jax.vmap(lambda p, k: P.point(p, k)["loss"], in_axes=(None, 0)))
+    start_runs = np.asarray(per_run({k: jnp.asarray(v) for k, v in P.init.items()}, P.keys))
+    final_runs = np.asarray(per_run({k: jnp.asarray(v) for k, v in final.items()}, P.keys))
+    from jaxnav.plot import plot_tune
+
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    figs = plot_tune(out, path={k: np.asarray(v) for k, v in res.path.items()}, losses=np.asarray(res.losses),
+                     final=final, final_loss=float(res.loss), landscape=landscape, loss_name=P.loss_name,
+                     start_runs=start_runs, final_runs=final_runs)
+    results = dict(
+        command="tune", config=cfg["_path"], problem=cfg["problem"], loss_name=P.loss_name, init=P.init,
+        tuned=final,
+        loss_init=float(res.losses[0]), loss_final=float(res.loss), losses=np.asarray(res.losses),
+        path={k: np.asarray(v) for k, v in res.path.items()}, grad_norm=np.asarray(res.grad_norm),
+        optimizer=dict(tn), loss_evaluations=int(res.n_evals), runs=len(P.keys),
+        loss_per_run=dict(init=start_runs, tuned=final_runs),
+        landscape=landscape, wall_time_s=dict(tune=t_tune, total=time.perf_counter() - t0),
+        figures=[str(f) for f in figs], jax_version=jax.__version__,
+    )
+    _write(out, results)
+    return results
+
+
+def format_tune(results: dict) -> str:
+    """One line: optimiser, steps, wall time and the parameters and loss before and after :func:`run_tune`."""
+    tn, init = results["optimizer"], results["init"]
+    return (f"tune: {tn['optimizer']} x {tn['steps']} steps ({tn['mode']} mode) over {results['runs']} runs in "
+            f"{results['wall_time_s']['tune']:.1f} s: "
+            + ", ".join(f"{k} {init[k]:.4g} -> {v:.4g}" for k, v in results["tuned"].items())
+            + f"; {results['loss_name']} {results['loss_init']:.4f} -> {results['loss_final']:.4f}")

@@ -1,0 +1,406 @@
+"""Batches that share one covariance recursion: :func:`kalman_filter_batch`, :func:`rts_smoother_batch`.
+
+In a Monte Carlo study every sequence has the same model, P0 and mask, and a classic, constant
+or attenuated filter has the same covariances and gains K_t for all of them (S0 eqs. (4)-(9):
+nothing in P_k depends on the measurements). Only the means differ, and they follow a linear
+recursion with the shared gains,
+
+    x_t|t-1 = F_t x_t-1,   v_t = z_t - H_t x_t|t-1,   x_t = x_t|t-1 + K_t v_t,   w_t = L_t^-1 v_t,
+
+with S_t = L_t L_t^T (w_t gives the NIS |w_t|^2 and the log-likelihood). So the batch runs the
+covariance recursion once (:func:`jaxnav.filters.filter_step` on zero data) and then the means
+of all B sequences. Over a block of L epochs every output is a fixed linear map of the state
+before the block and the block's measurements, so for the whole batch one dense product
+
+    Y = s M_s + z_block M_z,     (B, n) x (n, R)  +  (B, L m) x (L m, R),
+
+gives every requested output of the L epochs, written once, in place, in the (B, T, ...) result.
+Results equal ``jax.vmap(kalman_filter)`` to rounding (products of up to L transitions are
+formed once per block).
+
+The shared covariance outputs (``covs``, ``pred_covs``, ``innov_covs``, ``factors``, ``valid``,
+``n_skipped``, ``P_final``, ``noise``) are returned once, without a batch axis; the per-sequence
+ones (``means``, ``pred_means``, ``innovations``, ``nis``, ``logliks``, ``loglik``,
+``n_nonfinite``, ``status``, ``x_final``) with a leading axis B.
+
+Why named entry points and not a ``vmap`` rule: with NaN masking (the default of
+:func:`~jaxnav.filters.kalman_filter`) each sequence's covariance depends on its own NaN/inf
+elements, so whether a batch can share one recursion is known only from the data, while the
+batch axes of a ``vmap``'s outputs must be fixed when it is traced. A rule that checked the data
+would have to return B copies of the covariances (what made a following smoother slow) or give
+up exactness. Here the batch is explicit and so is the policy: a NaN/inf element of one sequence
+masks that element in every sequence (exact for clean batches and gaps common to all sequences,
+the Monte Carlo case); sequences that lose finite data that way are flagged
+(``BATCH_MASK_WIDENED``). Batches with their own gaps per sequence (real stations) keep
+``jax.vmap(kalman_filter)``.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from jaxnav import _status
+from jaxnav._numerics import safe_cholesky, whiten
+from jaxnav.filters._kalman import KalmanResult
+from jaxnav.filters._model import LinearGaussian
+from jaxnav.filters._plugins import data_independent
+from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains
+from jaxnav.filters._step import ALL_OUTPUTS, scan_setup, step_with_gain
+
+#: per-epoch outputs that differ between the sequences of a shared-recursion batch
+PER_SEQUENCE = ("means", "pred_means", "innovations", "nis", "logliks")
+
+#: epochs per block: the products' width grows with L and their count falls with it; 8 was the
+#: fastest of 4, 6, 8, 12, 16, 24 and 40 for the 6-state model at B = 256, T = 3600
+#: (benchmarks/bench_filters.py case (c))
+BLOCK = 8
+
+#: smallest batch size x epochs for which the blocks are used by default. Below it the plain
+#: per-sequence mean recursion costs a few ms at most, and the blocks' extra program (maps, block
+#: loop, and their derivatives) would double the compile time (measured 2.0 -> 5.2 s for grad at
+#: B = 4, T = 120). At B = 8, T = 3600 (28 800) the blocks already run 12.3 vs 15.8 ms.
+MIN_BATCH_EPOCHS = 2**14
+
+
+def worth_blocking(B, T, n, m, save, itemsize=8, block=BLOCK, floor_bytes=256 * 2**20) -> bool:
+    """Whether the means of a shared-recursion batch run in blocks (``block="auto"``).
+
+    True when the batch is large enough (B T >= :data:`MIN_BATCH_EPOCHS`) and the block maps
+    (T / L blocks of (n + L m) x R, a few copies while built) stay small next to what the batch
+    writes anyway: below ``floor_bytes`` or below the batch's per-epoch outputs. A long series
+    with few sequences (e.g. B = 2, T = 86 400: ~0.5 GB of maps for 11 MB of means) keeps the
+    recursion per sequence.
+    """
+    if B * T < MIN_BATCH_EPOCHS:
+        return False
+    L = max(1, min(block, T))
+    _, width, R = _groups(save, n, m, L)
+    maps = 3 * -(-T // L) * (n + L * m) * R * itemsize
+    out = B * T * (2 + sum(width[g] for g in ("means", "pred_means", "innovations") if g in save)) * itemsize
+    return maps <= max(floor_bytes, out)
+
+
+def kalman_filter_batch(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimator=None, mask=None,
+                        save=ALL_OUTPUTS, unroll: int = 1, allow_float32: bool = False,
+                        block="auto") -> KalmanResult:
+    """The Kalman filter for B sequences that share one covariance recursion (S0 eqs. (4)-(12)).
+
+    Equal to ``jax.vmap(kalman_filter)`` for batches whose non-finite elements are common to all
+    sequences (none, or shared outages), at a fraction of its cost: one covariance recursion and
+    the means in blocks of epochs (module docstring).
+
+    Args:
+      model: shared :class:`LinearGaussian` (static or (T, ...) leaves).
+      x0: (n,) shared or (B, n) per-sequence initial means.  P0: (n, n) shared initial covariance.
+      zs: (B, T, m) measurements. A NaN/inf element of any sequence masks that element in every
+        sequence: counted in ``n_nonfinite`` of the sequences that have it (flag
+        NONFINITE_MEASUREMENT); sequences that lose a finite element that way get the error flag
+        BATCH_MASK_WIDENED.
+      inflation, estimator: shared data-independent plug-ins (classic, :func:`constant`,
+        :func:`attenuated`, or any with ``data_independent = True``).
+      mask: None, (T,) or (T, m) shared bool mask.
+      save, unroll, allow_float32: as in :func:`~jaxnav.filters.kalman_filter` (static).
+      block: static; "auto" (blocks of :data:`BLOCK` epochs where :func:`worth_blocking` says so,
+        else the per-sequence mean recursion with the shared gains), an int L >= 1, or None
+        (never blocks).
+    Returns:
+      :class:`KalmanResult`: per-sequence fields with a leading axis B, shared ones without.
+    Raises:
+      ValueError: shapes (named), a data-dependent plug-in, a bad ``block``.
+    """
+    if not data_independent(inflation, estimator):
+        raise ValueError("kalman_filter_batch shares one covariance recursion, which needs a data-independent "
+                         "inflation rule and noise estimator (classic, constant, attenuated); for fading, "
+                         "variance compensation, Sage-Husa or robust filters use jax.vmap(kalman_filter)")
+    if not (block == "auto" or block is None or (isinstance(block, int) and block >= 1)):
+        raise ValueError(f"block must be 'auto', None or an integer >= 1, got {block!r}")
+    zshape = jnp.shape(zs)
+    if len(zshape) != 3:
+        raise ValueError(f"zs has shape {zshape}; expected (B, T, m)")
+    if jnp.ndim(x0) not in (1, 2) or (jnp.ndim(x0) == 2 and jnp.shape(x0)[0] != zshape[0]):
+        raise ValueError(f"x0 has shape {jnp.shape(x0)}; expected (n,) or ({zshape[0]}, n) to match zs {zshape}")
+    return _kalman_filter_batch(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
+                                save=tuple(save), unroll=unroll, allow_float32=allow_float32, block=block)
+
+
+@partial(jax.jit, static_argnames=("save", "unroll", "allow_float32", "block"))
+def _kalman_filter_batch(model, x0, P0, zs, *, inflation, estimator, mask, save, unroll, allow_float32, block):
+    B, T, m = zs.shape
+    x0s = jnp.broadcast_to(x0, (B, jnp.shape(x0)[-1]))
+    params, init, xs, save, (n, _, _, _), tv, dtype = scan_setup(model, x0s[0], P0, zs[0], inflation, estimator,
+                                                                 mask, save, allow_float32)
+    zs = jnp.asarray(zs, dtype)
+    # the batch's common mask: an element non-finite in any sequence is masked in all
+    user = xs.mask
+    fin = jnp.isfinite(zs)
+    common = user & jnp.all(fin, axis=0)
+    n_bad = jnp.sum(user & ~fin, axis=(1, 2)).astype(jnp.int32)
+    widened = jnp.any(user & fin & ~common, axis=(1, 2))
+    xs = xs._replace(mask=common)
+    seq_flags = (jnp.where(n_bad > 0, _status.NONFINITE_MEASUREMENT, 0)
+                 | jnp.where(widened, _status.BATCH_MASK_WIDENED, 0)).astype(jnp.int32)
+
+    final, (allv, K) = _covariance_pass(params, init, xs, unroll)
+    L = block if isinstance(block, int) else (BLOCK if block == "auto" and worth_blocking(
+        B, T, n, m, save, jnp.dtype(dtype).itemsize) else None)
+    if L is None:
+        out, ll, x_final, fin_state = _means_recursion(model, tv, allv, K, xs, x0s, zs, save)
+    else:
+        out, ll, x_final, fin_state = _means_blocks(model, tv, allv, K, xs, x0s, zs, save, min(L, T))
+    shared = {g: allv[g] for g in save if g not in PER_SEQUENCE}
+    status = final.status | seq_flags | jnp.where(fin_state, 0, _status.NONFINITE_STATE).astype(jnp.int32)
+    return KalmanResult(**out, **shared, loglik=ll, n_nonfinite=n_bad, n_skipped=final.n_skipped,
+                        status=status, x_final=x_final, P_final=final.P)
+
+
+def _covariance_pass(params, init, xs, unroll):
+    """The covariance recursion once, on zero data with the shared mask: every shared output and the gains."""
+    zero = init._replace(x=jnp.zeros_like(init.x))
+
+    def body(state, inp):
+        new, allv, K = step_with_gain(state, inp._replace(z=jnp.zeros_like(inp.z)), params, False)
+        return new, (allv, K)
+
+    return jax.lax.scan(body, zero, xs, unroll=unroll)
+
+
+def _shared_terms(model, tv, allv, K, xs):
+    """Per-epoch shared matrices of the mean recursion: F, masked H, K, L^-1, valid (0/1), log-lik constant."""
+    valid = xs.mask
+    T, m = valid.shape
+    n = K.shape[1]
+    dtype = K.dtype
+    Lc, ok = safe_cholesky(allv["innov_covs"])
+    Linv = whiten(Lc, jnp.broadcast_to(jnp.eye(m, dtype=dtype), (T, m, m)))
+    F = model.F if tv["F"] else jnp.broadcast_to(jnp.asarray(model.F, dtype), (T, n, n))
+    H = model.H if tv["H"] else jnp.broadcast_to(jnp.asarray(model.H, dtype), (T, m, n))
+    Hm = jnp.where(valid[:, :, None], jnp.asarray(H, dtype), 0.0)
+    observed = jnp.any(valid, axis=-1)
+    # allv["logliks"] is -(log det S + m log 2 pi) / 2 where observed and S factored (zero data)
+    return dict(F=F, Hm=Hm, K=K, Linv=Linv, valid=valid.astype(dtype), c_ll=allv["logliks"],
+                okf=(observed & ok).astype(dtype), obsf=observed.astype(dtype))
+
+
+def _means_recursion(model, tv, allv, K, xs, x0s, zs, save):
+    """The means of every sequence by its own scan with the shared gains (small batches)."""
+    sh = _shared_terms(model, tv, allv, K, xs)
+
+    def one(x0, z):
+        def step(x, inp):
+            F, Hm, Kt, Linv, vf, c, okf, obsf, zt = inp
+            xp = F @ x
+            v = vf * jnp.nan_to_num(zt - Hm @ xp, nan=0.0, posinf=0.0, neginf=0.0)
+            x = xp + Kt @ v
+            w = Linv @ v
+            nis = jnp.sum(w * w)
+            outs = dict(means=x, pred_means=xp, innovations=v, nis=obsf * nis, logliks=okf * (c - 0.5 * nis))
+            return x, {g: outs[g] for g in PER_SEQUENCE if g in save or g == "logliks"}
+
+        inp = (sh["F"], sh["Hm"], sh["K"], sh["Linv"], sh["valid"], sh["c_ll"], sh["okf"], sh["obsf"], z)
+        x_final, outs = jax.lax.scan(step, x0, inp)
+        return x_final, outs
+
+    x_final, outs = jax.vmap(one)(x0s, zs)
+    ll = jnp.sum(outs["logliks"], axis=1)
+    out = {g: outs[g] for g in PER_SEQUENCE if g in save}
+    fin = jnp.all(jnp.isfinite(x_final), axis=-1) & jnp.all(jnp.isfinite(outs["logliks"]), axis=-1)
+    return out, ll, x_final, fin
+
+
+def _groups(save, n, m, block):
+    """The column groups of the block maps for ``save`` and their total width R (static)."""
+    want = tuple(g for g in ("means", "pred_means", "innovations") if g in save)
+    groups = want + ("w",) + (() if "means" in save else ("end",))
+    width = dict(means=n, pred_means=n, innovations=m, w=m, end=n)
+    return groups, width, sum(width[g] * (1 if g == "end" else block) for g in groups)
+
+
+def _block_maps(F, Hm, K, Linv, valid, groups):
+    """The linear maps from (state before the block, block measurements) to each output group.
+
+    Args (leading axes (nb, L): nb blocks of L epochs):
+      F: (nb, L, n, n) transitions.  Hm: (nb, L, m, n) measurement matrices with masked rows zeroed.
+      K: (nb, L, n, m) gains (zero columns where masked, zero where S failed).
+      Linv: (nb, L, m, m) inverse Cholesky factors of S.  valid: (nb, L, m) 0/1 float.
+      groups: static names in column order, from "means", "pred_means", "innovations", "w", "end".
+    Returns:
+      (M (nb, n + L m, R)): rows for the state, then the block's measurements; group g of epoch j
+      occupies r_g columns at the group's offset + j r_g ("end", the state after the block: n).
+    """
+    nb, L, n, _ = F.shape
+    m = Hm.shape[2]
+    sel = jnp.eye(L * m, dtype=F.dtype).reshape(L, m, L * m)  # picks z_j out of the block
+
+    def step(carry, inp):
+        Phi, Psi = carry  # x_{j-1} = Phi s + Psi z_block
+        Fj, Hj, Kj, Lj, vj, Sj = inp
+        pPhi, pPsi = Fj @ Phi, Fj @ Psi
+        vPhi, vPsi = -(Hj @ pPhi), vj[..., None] * Sj - Hj @ pPsi
+        xPhi, xPsi = pPhi + Kj @ vPhi, pPsi + Kj @ vPsi
+        maps = dict(means=(xPhi, xPsi), pred_means=(pPhi, pPsi), innovations=(vPhi, vPsi),
+                    w=(Lj @ vPhi, Lj @ vPsi))
+        return (xPhi, xPsi), tuple(maps[g] for g in groups if g != "end")
+
+    lead = lambda a: jnp.swapaxes(a, 0, 1)  # noqa: E731  (L, nb, ...) for the scan
+    init = (jnp.broadcast_to(jnp.eye(n, dtype=F.dtype), (nb, n, n)), jnp.zeros((nb, n, L * m), F.dtype))
+    (Phi, Psi), outs = jax.lax.scan(step, init, (lead(F), lead(Hm), lead(K), lead(Linv), lead(valid), sel))
+    Ms, Mz = [], []
+    for aPhi, aPsi in outs:  # (L, nb, r, n), (L, nb, r, L m)
+        r = aPhi.shape[2]
+        Ms.append(jnp.transpose(aPhi, (1, 3, 0, 2)).reshape(nb, n, L * r))
+        Mz.append(jnp.transpose(aPsi, (1, 3, 0, 2)).reshape(nb, L * m, L * r))
+    if "end" in groups:
+        Ms.append(jnp.swapaxes(Phi, 1, 2))
+        Mz.append(jnp.swapaxes(Psi, 1, 2))
+    return jnp.concatenate([jnp.concatenate(Ms, axis=-1), jnp.concatenate(Mz, axis=-1)], axis=1)
+
+
+def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
+    """The means of the whole batch in blocks of ``Lb`` epochs, one dense product per block."""
+    sh = _shared_terms(model, tv, allv, K, xs)
+    B, T, m = zs.shape
+    n = K.shape[1]
+    dtype = zs.dtype
+    groups, width, _ = _groups(save, n, m, Lb)
+    want = [g for g in groups if g in save]
+    nb, tail = divmod(T, Lb)
+    Z = zs.reshape(B, T * m)
+    vflat = sh["valid"].reshape(T * m)
+    bufs0 = {g: jnp.zeros((B, T * width[g]), dtype) for g in want}
+    for g in ("nis", "logliks"):
+        if g in save:
+            bufs0[g] = jnp.zeros((B, T), dtype)
+
+    def apply(carry, t0, Lk, M):
+        s, bufs, ll, fin = carry
+        # masked elements may hold NaN/inf: zero them (multiply-then-clean is a plain vector
+        # operation here; a select on the mask costs ~10 us per block, measured)
+        zb = jax.lax.dynamic_slice_in_dim(Z, t0 * m, Lk * m, axis=1)
+        zb = jnp.nan_to_num(zb * jax.lax.dynamic_slice_in_dim(vflat, t0 * m, Lk * m), nan=0.0, posinf=0.0,
+                            neginf=0.0)
+        Y = jnp.concatenate([s, zb], axis=1) @ M
+        cols, off = {}, 0
+        for g in groups:
+            w = width[g] * (1 if g == "end" else Lk)
+            cols[g] = Y[:, off:off + w]
+            off += w
+        wv = cols["w"].reshape(B, Lk, m)
+        nis = jnp.sum(wv * wv, axis=-1)
+        sl = lambda a: jax.lax.dynamic_slice_in_dim(a, t0, Lk)  # noqa: E731
+        lls = sl(sh["okf"]) * (sl(sh["c_ll"]) - 0.5 * nis)
+        vals = dict(cols, nis=sl(sh["obsf"]) * nis, logliks=lls)
+        bufs = {g: jax.lax.dynamic_update_slice_in_dim(b, vals[g], t0 * (b.shape[1] // T), axis=1)
+                for g, b in bufs.items()}
+        state = cols["means"] if "means" in cols else cols["end"]
+        fin = fin & jnp.all(jnp.isfinite(state), axis=1)
+        return state[:, -n:], bufs, ll + jnp.sum(lls, axis=1), fin
+
+    carry = (jnp.asarray(x0s, dtype), bufs0, jnp.zeros((B,), dtype), jnp.ones((B,), bool))
+    per_epoch = (sh["F"], sh["Hm"], sh["K"], sh["Linv"], sh["valid"])
+    if nb:
+        blk = [a[:nb * Lb].reshape((nb, Lb) + a.shape[1:]) for a in per_epoch]
+        maps = _block_maps(*blk, groups)
+        carry, _ = jax.lax.scan(lambda c, k: (apply(c, k * Lb, Lb, maps[k]), None), carry, jnp.arange(nb))
+    if tail:
+        blk = [a[nb * Lb:][None] for a in per_epoch]
+        carry = apply(carry, nb * Lb, tail, _block_maps(*blk, groups)[0])
+    x_final, bufs, ll, fin = carry
+    shape = {g: (B, T, width[g]) for g in ("means", "pred_means", "innovations")}
+    out = {g: bufs[g].reshape(shape.get(g, (B, T))) for g in PER_SEQUENCE if g in save}
+    return out, ll, x_final, fin
+
+
+def rts_smoother_batch(model: LinearGaussian, filtered: KalmanResult, *, save=SMOOTHER_OUTPUTS,
+                       unroll: int = 1) -> SmootherResult:
+    """RTS smoothing of a :func:`kalman_filter_batch` result: shared gains, per-sequence means.
+
+    The gains C_t = P_t F_{t+1}^T P_{t+1|t}^{-1} and the smoothed covariances depend only on
+    the shared covariances, so they are computed once; the smoothed means of all sequences
+    follow x^s_t = x_t + C_t (x^s_{t+1} - x_{t+1|t}) (see :func:`~jaxnav.filters.rts_smoother`).
+
+    Args:
+      model: the filter's model (only F is used).
+      filtered: a batch result saved with means (B, T, n) and covs and pred_covs (T, n, n)
+        (``save=("means", "covs", "pred_covs")`` is all it needs).
+      save: static subset of ("means", "covs", "gains").  unroll: ``lax.scan`` unroll factor.
+    Returns:
+      :class:`SmootherResult` with means (B, T, n), covs and gains (T, n, n) shared, status scalar.
+    Raises:
+      ValueError: missing filter outputs or shapes that are not a batch result's.
+    """
+    for name in ("means", "covs", "pred_covs"):  # the predicted means are F x: not needed
+        if getattr(filtered, name) is None:
+            raise ValueError(f"rts_smoother_batch needs the filter output '{name}': run the filter with it in save=")
+    if jnp.ndim(filtered.means) != 3 or jnp.ndim(filtered.covs) != 3:
+        raise ValueError(f"rts_smoother_batch needs a kalman_filter_batch result: means {jnp.shape(filtered.means)} "
+                         f"(expected (B, T, n)) and covs {jnp.shape(filtered.covs)} (expected (T, n, n))")
+    return _rts_smoother_batch(model, filtered, save=tuple(save), unroll=unroll)
+
+
+@partial(jax.jit, static_argnames=("save", "unroll"))
+def _rts_smoother_batch(model, filtered, *, save, unroll):
+    one = filtered._replace(means=filtered.means[0], pred_means=filtered.means[0])  # gains need covariances only
+    C, status = smoother_gains(model, one, save, "rts_smoother_batch")
+    means = None
+    if "means" in save:
+        T, n = one.means.shape
+        F = jnp.broadcast_to(jnp.asarray(model.F, C.dtype), (T, n, n))
+        F_next = jnp.concatenate([F[1:], jnp.zeros_like(F[:1])], axis=0)
+        means = _smoothed_means_blocks(C, jnp.eye(n, dtype=C.dtype) - C @ F_next, filtered.means, BLOCK)
+    covs = smoothed_covs(C, filtered.covs, filtered.pred_covs, unroll) if "covs" in save else None
+    gains = C if "gains" in save else None
+    return SmootherResult(means=means, covs=covs, gains=gains, status=status)
+
+
+def _smoothed_means_blocks(C, A, xs, L):
+    """RTS means of a batch with shared gains, in blocks of epochs: x^s_t = A_t x_t + C_t x^s_t+1.
+
+    With x_t+1|t = F_t+1 x_t (the filter's prediction), x^s_t = x_t + C_t (x^s_t+1 - x_t+1|t)
+    reads x^s_t = (I - C_t F_t+1) x_t + C_t x^s_t+1, and C_T = 0 gives x^s_T = x_T. Backwards
+    over blocks of L epochs starting at t0, every x^s_t0+j is a fixed linear map of the smoothed
+    state after the block and the block's filtered means, formed once from the shared A and C;
+    one dense product per block gives the whole batch's L epochs.
+
+    Args:
+      C: (T, n, n) shared gains (zero at the last epoch).  A: (T, n, n) shared I - C_t F_t+1.
+      xs: (B, T, n) filtered means.  L: static block length.
+    Returns:
+      (B, T, n) smoothed means.
+    """
+    B, T, n = xs.shape
+    L = max(1, min(L, T))
+    nb, tail = divmod(T, L)
+    X = xs.reshape(B, T * n)
+
+    def maps(Cb, Ab):  # (k, L', n, n) -> (k, n + L' n, L' n): rows [x^s after the block, x block]
+        k, Lk = Cb.shape[:2]
+        eye = jnp.eye(Lk * n, dtype=Cb.dtype).reshape(Lk, n, Lk * n)
+
+        def step(carry, inp):
+            Phi, Psi = carry  # x^s_j+1 = Phi s + Psi x_block
+            Cj, Aj, Sj = inp
+            Phi, Psi = Cj @ Phi, Cj @ Psi + Aj @ Sj
+            return (Phi, Psi), (Phi, Psi)
+
+        init = (jnp.broadcast_to(jnp.eye(n, dtype=Cb.dtype), (k, n, n)), jnp.zeros((k, n, Lk * n), Cb.dtype))
+        lead = lambda a: jnp.swapaxes(a, 0, 1)  # noqa: E731
+        _, out = jax.lax.scan(step, init, (lead(Cb), lead(Ab), eye), reverse=True)
+        rows = [jnp.transpose(a, (1, 3, 0, 2)).reshape(k, a.shape[-1], Lk * n) for a in out]
+        return jnp.concatenate(rows, axis=1)
+
+    def apply(carry, t0, Lk, M):
+        s, out = carry
+        Y = jnp.concatenate([s, jax.lax.dynamic_slice_in_dim(X, t0 * n, Lk * n, axis=1)], axis=1) @ M
+        return Y[:, :n], jax.lax.dynamic_update_slice_in_dim(out, Y, t0 * n, axis=1)
+
+    carry = (jnp.zeros((B, n), xs.dtype), jnp.zeros((B, T * n), xs.dtype))
+    if tail:
+        carry = apply(carry, nb * L, tail, maps(C[nb * L:][None], A[nb * L:][None])[0])
+    if nb:
+        Mb = maps(C[:nb * L].reshape(nb, L, n, n), A[:nb * L].reshape(nb, L, n, n))
+        carry, _ = jax.lax.scan(lambda c, k: (apply(c, k * L, L, Mb[k]), None), carry, jnp.arange(nb), reverse=True)
+    return carry[1].reshape(B, T, n)

@@ -1,0 +1,65 @@
+"""Figure of the real-data walk experiment (``jaxnav walk``): track and error inside each GNSS outage."""
+
+from __future__ import annotations
+
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def plot_walk(scores, extras: dict, path) -> pathlib.Path:
+    """Track with outage windows (left) and horizontal error inside each outage (right).
+
+    Args:
+      scores: :class:`jaxnav.experiments.walk.OutageScores` (windows (K, 2) s, t (M,) s, err_fwd/err_sm (M,) m,
+        n_ref/fwd_max/sm_max (K,), fwd_rms_all/sm_rms_all m).
+      extras: dict with "enu_ref", "enu_fwd", "enu_sm": (M, 3) local ENU, m.
+      path: the PNG written (folders created).
+    Returns:
+      The path written.
+    """
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ref, f, s = extras["enu_ref"], extras["enu_fwd"], extras["enu_sm"]
+    t = scores.t
+    fig, ax = plt.subplots(1, 2, figsize=(13, 5.5))
+    a = ax[0]
+    a.plot(ref[:, 0], ref[:, 1], ".", color="0.6", ms=3, label="RTK (.pos)")
+    a.plot(f[:, 0], f[:, 1], "-", color="C0", lw=1, label="forward filter")
+    a.plot(s[:, 0], s[:, 1], "-", color="C1", lw=1, label="RTS smoother")
+    for k, (ta, tb) in enumerate(scores.windows):
+        w = (t >= ta) & (t < tb)
+        a.plot(ref[w, 0], ref[w, 1], "k.", ms=4, label="withheld (outage)" if k == 0 else None)
+        if w.any():
+            i = np.nonzero(w)[0][0]
+            a.annotate(f"outage {k + 1}", ref[i, :2], fontsize=8)
+    a.plot(ref[0, 0], ref[0, 1], "g^", label="start")
+    a.set_xlabel("east, m")
+    a.set_ylabel("north, m")
+    a.axis("equal")
+    a.legend(fontsize=8)
+    a.set_title("walk_0827: track, GNSS withheld on the outage windows")
+    b = ax[1]
+    for k, (ta, tb) in enumerate(scores.windows):
+        w = (t >= ta) & (t < tb)
+        c = f"C{k % 10}"
+        if not scores.n_ref[k]:
+            b.plot([], [], " ", label=f"#{k + 1}: no RTK-fixed epoch inside (not scored)")
+            continue
+        b.plot(t[w] - ta, scores.err_fwd[w], "-", color=c,
+               label=f"#{k + 1} fwd (max {scores.fwd_max[k]:.2f} m)")
+        b.plot(t[w] - ta, scores.err_sm[w], "--", color=c,
+               label=f"#{k + 1} RTS (max {scores.sm_max[k]:.2f} m)")
+    b.set_xlabel("time since outage start, s")
+    b.set_ylabel("horizontal error vs RTK fix, m")
+    b.set_title(f"RMS over outages: forward {scores.fwd_rms_all:.2f} m, RTS {scores.sm_rms_all:.2f} m")
+    b.grid(alpha=0.3)
+    b.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

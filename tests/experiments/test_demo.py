@@ -1,0 +1,102 @@
+"""The demonstration runs end to end on small sizes and writes its table, JSON and figure."""
+
+import json
+import pathlib
+
+import pytest
+
+import jax
+import numpy as np
+
+from jaxnav.cli import main
+from jaxnav.experiments import EXPERIMENT, load_experiment
+from jaxnav.tune import run_chunked
+
+
+def test_demo_writes_results_and_figure(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo-filters", "--out", str(out), "--seeds", "5", "--epochs", "300", "--no-progress"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert set(res["table"]) == {"classic", "attenuated", "fading", "variance_compensation"}
+    assert res["settings"]["seeds"] == 5 and res["settings"]["b"] == 0.254
+    t = res["table"]
+    # the unmodelled burst hurts the classic filter most; every adaptive variant suppresses it
+    for name in ("attenuated", "fading", "variance_compensation"):
+        assert t[name]["pos_rms_during_mm"]["mean"] < 0.5 * t["classic"]["pos_rms_during_mm"]["mean"]
+    assert (out / "filter_family.png").stat().st_size > 10_000
+    printed = capsys.readouterr().out
+    assert "classic" in printed and "fading" in printed
+
+
+def test_run_chunked_pads_last_chunk_and_matches_vmap():
+    keys = jax.random.split(jax.random.PRNGKey(0), 7)
+    f = lambda k: {"a": jax.random.normal(k, (3,)), "b": jax.random.uniform(k)}  # noqa: E731
+    got = run_chunked(f, keys, chunk=3, progress=False)
+    ref = jax.vmap(f)(keys)
+    np.testing.assert_array_equal(got["a"], ref["a"])
+    np.testing.assert_array_equal(got["b"], ref["b"])
+
+
+def test_s0_demo_writes_table_json_and_figures(tmp_path, capsys):
+    """The S0 reproduction on 2 seeds and a 2-point b sweep (the full run is ``make demo``)."""
+    out = tmp_path / "s0"
+    assert main(["demo", "--out", str(out), "--seeds", "2", "--sweep-points", "2", "--no-progress"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert set(res["filters"]) == {"classic", "attenuated", "fading"}
+    for name, f in res["filters"].items():
+        assert len(f["per_seed"]["pos_rms_m"]) == 2 and len(f["mean"]["vel_rms_mps"]) == 3
+        assert len(f["published"]["pos_rms_m"]) == 3
+    # the unmodelled sudden velocity changes hurt the classic filter; fading suppresses it
+    assert res["filters"]["fading"]["mean_pos_rms_m"] < res["filters"]["classic"]["mean_pos_rms_m"]
+    # no filter may lose the heading (inflating the heading error did: median errors of 30-55 deg)
+    for name, f in res["filters"].items():
+        assert max(max(r) for r in f["per_seed"]["att_rms_rad"]) < 0.02, name
+    assert 0.254 in res["sweep"]["b"]
+    for f in res["figures"]:
+        assert pathlib.Path(f).stat().st_size > 10_000
+    printed = capsys.readouterr().out
+    assert "published" in printed and "b sweep" in printed
+
+
+def test_experiment_file_errors_name_the_key(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(EXPERIMENT.read_text().replace("q_scale = 1.0", "q_scal = 1.0"))
+    with pytest.raises(ValueError, match="unknown key filter.q_scal"):
+        load_experiment(bad)
+    bad.write_text(EXPERIMENT.read_text().replace("seeds = 32", 'seeds = "many"'))
+    with pytest.raises(ValueError, match="monte_carlo.seeds must be int"):
+        load_experiment(bad)
+
+
+def test_data_dir_from_flag_or_environment(tmp_path, monkeypatch, capsys):
+    """--data wins, else $JAXNAV_DATA/<set>; neither set: one clear line naming both; no cwd default."""
+    from jaxnav.cli._common import CommandError, data_dir
+
+    (tmp_path / "walkset").mkdir()
+    monkeypatch.delenv("JAXNAV_DATA", raising=False)
+    assert data_dir(str(tmp_path / "walkset"), "walkset") == tmp_path / "walkset"
+    with pytest.raises(CommandError, match="--data.*JAXNAV_DATA"):
+        data_dir(None, "walkset")
+    assert data_dir(None, "walkset", required=False) is None
+    monkeypatch.setenv("JAXNAV_DATA", str(tmp_path))
+    assert data_dir(None, "walkset") == tmp_path / "walkset"
+    assert data_dir(None, "other", required=False) is None
+    with pytest.raises(CommandError, match="no such data folder"):
+        data_dir(None, "other")
+
+
+def test_cli_registry_has_every_command(capsys):
+    """The eight commands of the README, each from its own module with register/run."""
+    import importlib
+
+    from jaxnav.cli import COMMANDS
+
+    assert COMMANDS == ("demo", "demo_filters", "walk", "rtk", "cadastral", "monitor", "sweep", "tune")
+    for name in COMMANDS:
+        mod = importlib.import_module(f"jaxnav.cli.{name}")
+        assert callable(mod.register) and callable(mod.run), name
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    printed = capsys.readouterr().out
+    for name in ("demo", "demo-filters", "walk", "rtk", "cadastral", "monitor", "sweep", "tune"):
+        assert f"    {name} " in printed, name

@@ -1,0 +1,328 @@
+"""INS error model (S0 eqs. 18-19): F = Jacobian of the nonlinear navigation equations, discretisation.
+
+The reference is the continuous nonlinear ENU navigation model written here from jaxnav's Earth
+helpers; the error state is mapped to a perturbed (computed) state with the phi convention
+C_bn_computed = exp(-[phi x]) C_bn_true, and F is compared with jax.jacfwd of the error dynamics.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.linalg import solve_discrete_lyapunov
+
+from jaxnav import units
+from jaxnav.ins import error_model as em
+from jaxnav.ins.attitude import euler_to_dcm, rv_to_dcm, skew
+from jaxnav.ins.earth import earth_params, position_rate
+
+TAU = jnp.array([300.0, 500.0, 1000.0])  # s, per-axis Markov correlation times
+NAV_BLOCKS = {"phi": em.IDX18.phi, "dv": em.IDX18.dv, "dpos": em.IDX18.dpos}
+ALL_BLOCKS = dict(NAV_BLOCKS, eps_b=em.IDX18.eps_b, eps_r=em.IDX18.eps_r, nabla=em.IDX18.nabla)
+
+
+# ----------------------------------------------------------------------------- reference model
+def _nav_dot(C, v, pos, w_ib, f_b, sign=1.0):
+    """Continuous ENU navigation equations: C_dot, v_dot, pos_dot (sign = -1: reverse Earth rate)."""
+    e = earth_params(pos, v, earth_rate_sign=sign)
+    C_dot = C @ skew(w_ib) - skew(e.w_in_n) @ C
+    v_dot = C @ f_b - jnp.cross(2.0 * e.w_ie_n + e.w_en_n, v) + e.g_n
+    return C_dot, v_dot, position_rate(pos, v)
+
+
+def _chart(Cc, C, vc, v, pc, p):
+    """Error state of a computed state w.r.t. the true one: phi = -vee(asym(Cc C^T)), dv, dpos."""
+    R = Cc @ C.T
+    A = 0.5 * (R - R.T)  # = -[phi x] + O(|phi|^3)
+    phi = -jnp.stack([A[2, 1], A[0, 2], A[1, 0]])
+    return jnp.concatenate([phi, vc - v, pc - p])
+
+
+def _error_dynamics(x, w, C, v, pos, w_ib, f_b, sign=1.0):
+    """d/dt of the 9 navigation errors for the 18-state error x and noise w = [w_g, w_b, w_a]."""
+    Cc = rv_to_dcm(-x[0:3]) @ C
+    vc, pc = v + x[3:6], pos + x[6:9]
+    w_c = w_ib + x[9:12] + x[12:15] + w[0:3]  # gyro reads true + eps_b + eps_r + w_g
+    f_c = f_b + x[15:18] + w[6:9]  # accelerometer reads true + nabla + w_a
+    Cc_dot, vc_dot, pc_dot = _nav_dot(Cc, vc, pc, w_c, f_c, sign)
+    C_dot, v_dot, p_dot = _nav_dot(C, v, pos, w_ib, f_b, sign)
+    return jax.jvp(_chart, (Cc, C, vc, v, pc, pos), (Cc_dot, C_dot, vc_dot, v_dot, pc_dot, p_dot))[1]
+
+
+def _points():
+    """Four nontrivial points; the first is S0's start (39 N, 108 E) moving at ~80 m/s.
+
+    The last one uses the reversed Earth rate of backward navigation (earth_rate_sign = -1).
+    """
+    deg = units.DEG
+    pos = jnp.array([[39.0 * deg, 108.0 * deg, 205.8795], [-33.0 * deg, 151.0 * deg, 1200.0],
+                     [62.0 * deg, -20.0 * deg, 15.0], [5.0 * deg, 10.0 * deg, 3000.0]])
+    v = jnp.array([[40.0, 69.3, 2.5], [-55.0, 20.0, -1.0], [10.0, -80.0, 0.5], [150.0, 30.0, 4.0]])
+    att = jnp.array([[5.0, -3.0, -30.0], [-2.0, 8.0, 120.0], [1.0, 1.0, 45.0], [10.0, -15.0, -170.0]]) * deg
+    C = euler_to_dcm(att)
+    w_ib = jnp.array([[0.01, -0.02, 0.03], [-0.05, 0.01, 0.2], [0.0, 0.002, -0.01], [0.1, 0.1, -0.1]])
+    f_b = jnp.array([[0.5, 1.2, 9.9], [-2.0, 0.3, 9.5], [0.1, -3.0, 10.4], [4.0, 2.0, 8.0]])
+    return pos, v, C, w_ib, f_b
+
+
+SIGNS = jnp.array([1.0, 1.0, 1.0, -1.0])
+
+
+@pytest.fixture(scope="module")
+def jac():
+    """(analytic F, G, reference dx/dx, dx/dw) at each point, vmapped once."""
+    pos, v, C, w_ib, f_b = _points()
+
+    @jax.jit
+    @jax.vmap
+    def both(pos, v, C, w_ib, f_b, sign):
+        x0, w0 = jnp.zeros(18), jnp.zeros(9)
+        Jx = jax.jacfwd(_error_dynamics, argnums=0)(x0, w0, C, v, pos, w_ib, f_b, sign)
+        Jw = jax.jacfwd(_error_dynamics, argnums=1)(x0, w0, C, v, pos, w_ib, f_b, sign)
+        F = em.error_model_F(pos, v, C @ f_b, C, TAU, earth_rate_sign=sign)
+        G = em.error_model_G(C)
+        return F, G, Jx, Jw
+
+    return jax.tree_util.tree_map(np.asarray, both(pos, v, C, w_ib, f_b, SIGNS))
+
+
+def _block_errors(F, J):
+    """{(row block, col block): |F - J|_F / |J|_F} (absolute |F| where J's block is zero)."""
+    out = {}
+    for rn, rs in NAV_BLOCKS.items():
+        for cn, cs in ALL_BLOCKS.items():
+            a, b = F[rs, cs], J[rs, cs]
+            nb = np.linalg.norm(b)
+            out[(rn, cn)] = np.linalg.norm(a - b) / nb if nb > 0 else np.linalg.norm(a)
+    return out
+
+
+# ----------------------------------------------------------------------------- 1. Jacobian
+def test_F_equals_jacobian_of_nonlinear_navigation_blockwise(jac):
+    F, _, Jx, _ = jac
+    for k in range(F.shape[0]):
+        errs = _block_errors(F[k, :9], Jx[k])
+        worst = max(errs, key=errs.get)
+        assert errs[worst] < 1e-6, (k, worst, errs[worst])
+        # the blocks that physics makes nonzero are nonzero (the test is not vacuous)
+        for blk in [("phi", "phi"), ("phi", "dv"), ("phi", "dpos"), ("dv", "phi"), ("dv", "dv"),
+                    ("dv", "dpos"), ("dpos", "dv"), ("dpos", "dpos"), ("phi", "eps_b"), ("phi", "eps_r"),
+                    ("dv", "nabla")]:
+            assert np.linalg.norm(Jx[k][NAV_BLOCKS[blk[0]], ALL_BLOCKS[blk[1]]]) > 0, blk
+
+
+def test_F_equals_jacobian_elementwise(jac):
+    """Stronger than the block test: every entry, incl. tiny ones (-2g/R, dR/dlat, w_ie terms)."""
+    F, _, Jx, _ = jac
+    for k in range(F.shape[0]):
+        for rs in NAV_BLOCKS.values():
+            for cs in ALL_BLOCKS.values():
+                a, b = F[k, rs, cs], Jx[k, rs, cs]  # atol: rounding of the reference (~3e-13 |block|)
+                np.testing.assert_allclose(a, b, rtol=1e-8, atol=1e-11 * np.linalg.norm(b) + 1e-30)
+    # the small terms really are present: dg/dh ~ 2 g / R and the d(R_N)/dlat part of d(lon_dot)/dlat
+    assert 2.5e-6 < F[0, 5, 8] < 3.5e-6
+
+
+def test_G_equals_noise_jacobian(jac):
+    _, G, _, Jw = jac
+    np.testing.assert_allclose(G[:, :9], Jw, rtol=1e-12, atol=1e-20)
+
+
+def test_sensor_and_markov_rows():
+    pos, v, C, _, f_b = _points()
+    F = em.error_model_F(pos[0], v[0], C[0] @ f_b[0], C[0], TAU)
+    G = em.error_model_G(C[0])
+    np.testing.assert_array_equal(F[9:12], 0.0)
+    np.testing.assert_array_equal(F[15:18], 0.0)
+    np.testing.assert_allclose(F[12:15], np.hstack([np.zeros((3, 12)), np.diag(-1.0 / TAU), np.zeros((3, 3))]))
+    np.testing.assert_array_equal(G[9:12], 0.0)
+    np.testing.assert_array_equal(G[15:18], 0.0)
+    np.testing.assert_array_equal(G[12:15], np.hstack([np.zeros((3, 3)), np.eye(3), np.zeros((3, 3))]))
+
+
+# ----------------------------------------------------------------------------- 2. discretisation
+@pytest.fixture(scope="module")
+def model():
+    pos, v, C, _, f_b = _points()
+    F = em.error_model_F(pos[0], v[0], C[0] @ f_b[0], C[0], TAU)
+    G = em.error_model_G(C[0])
+    Qc = em.error_model_Qc(0.01 * units.DEG_PER_SQRT_HOUR, 0.1 * units.DEG_PER_HOUR, TAU,
+                           jnp.array([1e-3, 2e-3, 3e-3]))
+    return F, G, Qc
+
+
+NOISY = np.r_[0:9, 12:15]  # states driven by noise (eps_b and nabla are random constants: Qd rows = 0)
+
+
+def _scaled_err(A, B, Q):
+    """max |A - B|_ij / sqrt(Q_ii Q_jj) over the noise-driven states: unit-independent error."""
+    ix = np.ix_(NOISY, NOISY)
+    d = np.sqrt(np.diag(np.asarray(Q)[ix]))
+    return np.max(np.abs(np.asarray(A)[ix] - np.asarray(B)[ix]) / np.outer(d, d))
+
+
+def test_van_loan_phi_and_qd_against_quadrature(model):
+    F, G, Qc = model
+    dt = 1.0
+    Phi, Qd = jax.jit(em.discretize_van_loan)(F, G, Qc, dt)
+    Phi_ref = jax.scipy.linalg.expm(F * dt)
+    assert np.linalg.norm(Phi - Phi_ref) / np.linalg.norm(Phi_ref) < 1e-12
+    # Simpson on 2001 nodes of expm(F s) G Qc G^T expm(F s)^T
+    s = jnp.linspace(0.0, dt, 2001)
+    Ps = jax.jit(jax.vmap(lambda t: jax.scipy.linalg.expm(F * t)))(s)
+    GQG = G @ Qc @ G.T
+    vals = np.asarray(jnp.einsum("kij,jl,kml->kim", Ps, GQG, Ps))
+    wts = np.ones(s.size)
+    wts[1:-1:2], wts[2:-1:2] = 4.0, 2.0
+    Q_ref = np.tensordot(wts, vals, axes=1) * (dt / (s.size - 1)) / 3.0
+    assert np.linalg.norm(Qd - Q_ref) / np.linalg.norm(Q_ref) < 1e-9
+    assert _scaled_err(Qd, Q_ref, Q_ref) < 1e-9
+    np.testing.assert_array_equal(Qd, Qd.T)
+    np.testing.assert_array_equal(Qd[9:12], 0.0)
+    np.testing.assert_array_equal(Qd[15:18], 0.0)
+    Qn = np.asarray(Qd)[np.ix_(NOISY, NOISY)]
+    d = 1.0 / np.sqrt(np.diag(Qn))
+    assert np.linalg.eigvalsh(Qn * np.outer(d, d)).min() > -1e-12
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_series_converges_with_stated_order(model, order):
+    F, G, Qc = model
+    dts = [8.0, 4.0, 2.0]
+    e_phi, e_q = [], []
+    for dt in dts:
+        Phi_x, Qd_x = em.discretize_van_loan(F, G, Qc, dt)
+        Phi_s, Qd_s = em.discretize_series(F, G, Qc, dt, order=order)
+        e_phi.append(np.linalg.norm(Phi_s - Phi_x))
+        e_q.append(np.linalg.norm(Qd_s - Qd_x))  # absolute: Qd itself scales with dt (to dt^5 for dpos)
+    rate_phi = np.log2(np.array(e_phi[:-1]) / np.array(e_phi[1:]))
+    rate_q = np.log2(np.array(e_q[:-1]) / np.array(e_q[1:]))
+    np.testing.assert_allclose(rate_phi, order + 1, atol=0.15)  # one-step Phi error O(dt^(order+1))
+    np.testing.assert_allclose(rate_q, 3.0, atol=0.15)  # trapezoid: one-step Qd error O(dt^3)
+
+
+def test_series_rejects_bad_order(model):
+    F, G, Qc = model
+    with pytest.raises(ValueError, match="order"):
+        em.discretize_series(F, G, Qc, 1.0, order=0)
+
+
+@pytest.mark.parametrize("dt", [0.01, 1.0, 2.0])
+def test_taylor_equals_van_loan_to_rounding(model, dt):
+    """Order 8 reproduces the exact discretisation at GPS-epoch intervals (the INS chain is nilpotent)."""
+    F, G, Qc = model
+    Phi_x, Qd_x = em.discretize_van_loan(F, G, Qc, dt)
+    Phi_t, Qd_t, err = jax.jit(em.discretize_taylor)(F, G, Qc, dt)
+    assert np.linalg.norm(Phi_t - Phi_x) / np.linalg.norm(Phi_x) < 1e-13
+    assert _scaled_err(Qd_t, Qd_x, Qd_x) < 1e-11
+    np.testing.assert_array_equal(Qd_t, Qd_t.T)
+    assert float(err) < 1e-10
+
+
+def test_taylor_error_estimate_tracks_the_truncation_error(model):
+    """Few terms over a long interval: the reported last-term size bounds the Phi error and is large."""
+    F, G, Qc = model
+    Phi_x, _ = em.discretize_van_loan(F, G, Qc, 20.0)
+    errs, ests = [], []
+    for order in (2, 4, 6):
+        Phi_t, _, est = em.discretize_taylor(F, G, Qc, 20.0, order=order)
+        errs.append(float(jnp.max(jnp.abs(Phi_t - Phi_x)) / jnp.max(jnp.abs(Phi_x))))
+        ests.append(float(est))
+    assert errs[0] > errs[1] > errs[2] and ests[0] > ests[1] > ests[2]
+    assert all(e <= 10 * t for e, t in zip(errs, ests)) and ests[0] > 1e-10
+    with pytest.raises(ValueError, match="order"):
+        em.discretize_taylor(F, G, Qc, 1.0, order=0)
+
+
+# ----------------------------------------------------------------------------- 3. 15-state subset
+def test_15_state_is_18_state_without_markov():
+    pos, v, C, _, f_b = _points()
+    keep = np.r_[0:12, 15:18]
+    F18 = em.error_model_F(pos[1], v[1], C[1] @ f_b[1], C[1], TAU)
+    F15 = em.error_model_F15(pos[1], v[1], C[1] @ f_b[1], C[1])
+    np.testing.assert_array_equal(F15, F18[np.ix_(keep, keep)])
+    G18, G15 = em.error_model_G(C[1]), em.error_model_G15(C[1])
+    np.testing.assert_array_equal(G15, G18[np.ix_(keep, np.r_[0:3, 6:9])])
+    Qc18 = em.error_model_Qc(1e-4, 2e-6, TAU, 3e-3)
+    np.testing.assert_array_equal(em.error_model_Qc15(1e-4, 3e-3), Qc18[np.ix_(np.r_[0:3, 6:9], np.r_[0:3, 6:9])])
+    assert em.STATE_NAMES15 == tuple(np.array(em.STATE_NAMES18)[keep])
+
+
+def test_error_model_records():
+    """ERROR_MODEL_15 (derived from the 18-state record) equals the 15-state model written out."""
+    pos, v, C, _, f_b = _points()
+    f_n = C[1] @ f_b[1]
+    # S0 eq. 18 without eps_r: navigation block, phi_dot -= C_bn eps_b, dV_dot += C_bn nabla
+    F = np.zeros((15, 15))
+    F[:9, :9] = em.nav_error_F(pos[1], v[1], f_n, earth_rate_sign=-1.0)
+    F[0:3, 9:12], F[3:6, 12:15] = -C[1], C[1]
+    G = np.zeros((15, 6))
+    G[0:3, 0:3], G[3:6, 3:6] = -C[1], C[1]
+    m15, m18 = em.error_model_for(15), em.error_model_for(18)
+    assert m15 is em.ERROR_MODEL_15 and m18 is em.ERROR_MODEL_18
+    np.testing.assert_array_equal(m15.F(pos[1], v[1], f_n, C[1], TAU, earth_rate_sign=-1.0), F)
+    np.testing.assert_array_equal(m15.G(C[1]), G)
+    np.testing.assert_array_equal(m18.F(pos[1], v[1], f_n, C[1], TAU), em.error_model_F(pos[1], v[1], f_n, C[1], TAU))
+    assert (m15.n, m15.p, m18.n, m18.p) == (15, 6, 18, 9)
+    assert m15.idx == em.IDX15 and m18.idx == em.IDX18 and m15.names == em.STATE_NAMES15
+    Qc18 = em.error_model_Qc(1e-4, 2e-6, TAU, 3e-3)
+    np.testing.assert_array_equal(m15.Qc(Qc18), em.error_model_Qc15(1e-4, 3e-3))
+    # a record is a static argument of jit (hashed by identity)
+    f = jax.jit(lambda m, c: m.G(c), static_argnums=0)
+    np.testing.assert_array_equal(f(m15, C[1]), G)
+    with pytest.raises(ValueError, match="n_states"):
+        em.error_model_for(17)
+
+
+# ----------------------------------------------------------------------------- 4. Markov block
+def test_markov_decay_and_stationary_variance(model):
+    F, G, _ = model
+    sigma = jnp.array([1.0, 2.0, 3.0]) * units.DEG_PER_HOUR
+    Qc = em.error_model_Qc(0.0, sigma, TAU, 0.0)
+    dt, n = 1.0, 2000
+    Phi, Qd = em.discretize_van_loan(F, G, Qc, dt)
+    x0 = jnp.zeros(18).at[12:15].set(sigma)
+    xn = jnp.linalg.matrix_power(Phi, n) @ x0
+    np.testing.assert_allclose(xn[12:15], sigma * np.exp(-n * dt / TAU), rtol=1e-9)
+    r = em.IDX18.eps_r
+    P = solve_discrete_lyapunov(np.asarray(Phi[r, r]), np.asarray(Qd[r, r]))
+    np.testing.assert_allclose(P, np.diag(sigma**2), rtol=1e-10, atol=1e-30)
+    np.testing.assert_allclose(em.markov_psd(sigma, TAU) * TAU / 2.0, sigma**2, rtol=1e-15)
+
+
+# ----------------------------------------------------------------------------- 5. transformations
+def test_vmap_equals_loop_and_jit_equals_eager():
+    pos, v, C, _, f_b = _points()
+    f_n = jnp.einsum("kij,kj->ki", C, f_b)
+    fn = jax.jit(jax.vmap(em.error_model_F, in_axes=(0, 0, 0, 0, None)))
+    batched = fn(pos, v, f_n, C, TAU)
+    looped = np.stack([em.error_model_F(pos[k], v[k], f_n[k], C[k], TAU) for k in range(4)])
+    np.testing.assert_allclose(batched, looped, rtol=1e-14, atol=1e-30)
+    F, G = looped[0], em.error_model_G(C[0])
+    Qc = em.error_model_Qc(1e-4, 1e-6, TAU, 1e-3)
+    for disc in (em.discretize_van_loan, em.discretize_series):
+        eager = disc(F, G, Qc, 0.5)
+        jitted = jax.jit(disc)(F, G, Qc, 0.5)
+        np.testing.assert_allclose(jitted[0], eager[0], rtol=1e-13, atol=1e-30)
+        np.testing.assert_allclose(jitted[1], eager[1], rtol=1e-12, atol=1e-30)
+
+
+def test_grad_of_qd_wrt_noise_parameters(model):
+    F, G, _ = model
+
+    def loss(logs):
+        Qc = em.error_model_Qc(jnp.exp(logs[0]), jnp.exp(logs[1]), TAU, jnp.exp(logs[2]))
+        _, Qd = em.discretize_van_loan(F, G, Qc, 1.0)
+        return jnp.log(Qd[0, 0]) + jnp.log(Qd[4, 4]) + jnp.log(Qd[13, 13])
+
+    x = jnp.log(jnp.array([1e-4, 1e-6, 1e-3]))
+    g = jax.grad(loss)(x)
+    eps = 1e-5
+    fd = np.array([(loss(x.at[i].add(eps)) - loss(x.at[i].add(-eps))) / (2 * eps) for i in range(3)])
+    np.testing.assert_allclose(g, fd, rtol=1e-6)
+
+
+def test_float32_position_raises():
+    pos, v, C, _, f_b = _points()
+    with pytest.raises(ValueError, match="enable_x64"):
+        em.error_model_F(pos[0].astype(jnp.float32), v[0], f_b[0], C[0], TAU)
