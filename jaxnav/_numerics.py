@@ -8,6 +8,7 @@ import math
 import jax
 import jax.numpy as jnp
 from jax.custom_batching import custom_vmap
+from jax.custom_derivatives import SymbolicZero
 from jax.scipy.linalg import solve_triangular
 
 
@@ -197,18 +198,17 @@ def smooth_max1(x, tau):
 
 
 def _fused_mm(A, B):
-    """A B written out elementwise: a sum over k of the outer products A[:, k] B[k, :] (a matrix B), or a
-    multiply and a sum over the last axis (a vector B); XLA fuses it with its neighbours."""
+    """A B as one broadcast multiply and a sum over k (a 1-D B: over the last axis), which XLA fuses
+    with its neighbours; its transpose (reverse mode) is a broadcast and a multiply."""
     if B.ndim == 1:
         return jnp.sum(A * B, axis=-1)
-    out = A[..., :, 0:1] * B[..., 0:1, :]
-    for i in range(1, A.shape[-1]):
-        out = out + A[..., :, i:i + 1] * B[..., i:i + 1, :]
-    return out
+    return jnp.sum(A[..., :, :, None] * B[..., None, :, :], axis=-2)
 
 
-#: batch size from which a vmapped small product runs as XLA's batched dot (see :func:`mm`)
-DOT_FROM_BATCH = 128
+#: batch size from which a vmapped small product runs as XLA's batched dot (see :func:`mm`); measured
+#: on the 6-state filter with a covariance per sequence: B = 16 fused 104 vs dot 114 ms, B = 64 fused
+#: 499 vs dot 339 ms, B = 256 about equal (1.69 vs 1.70 s) on the loaded 2-core machine
+DOT_FROM_BATCH = 32
 
 
 def mm(A, B):
@@ -216,14 +216,14 @@ def mm(A, B):
 
     For inner dimensions up to :data:`SMALL` one sequence's product is written out elementwise
     (:func:`_fused_mm`), which XLA fuses with its neighbours; on CPU each ``dot`` of tiny matrices
-    is a separate kernel costing ~0.5 us, several times the arithmetic (6-state filter, T = 3600:
-    13-16 ms against 34 ms with ``dot``). Under ``jax.vmap`` over :data:`DOT_FROM_BATCH` or more
-    sequences with their own matrices, the elementwise form becomes slow broadcasts of (B, 6, 6)
-    arrays, and XLA's batched dot is faster (B = 256 sequences with their own covariance: the
-    Joseph-form filter 1.27 s against 1.95 s), so the product has that batching rule
-    (``jax.custom_batching.custom_vmap``: the same product, another kernel; static, whatever
-    the nesting of ``jit``, ``vmap`` and ``grad``). Derivatives (``custom_jvp``) are the
-    elementwise products of the tangents. A 1-D ``B`` is a vector: ``mm(A, v) = A v``.
+    is a separate kernel costing ~0.5 us, several times the arithmetic (the 6-state filter,
+    T = 3600, runs about twice as fast as with ``dot``; benchmarks/bench_filters.py case (a)).
+    Under ``jax.vmap`` over :data:`DOT_FROM_BATCH` or more sequences with their own matrices,
+    the elementwise form becomes a reduction over a non-minor axis of (B, n, n, n) arrays and
+    XLA's batched dot is faster, so the product has that batching rule
+    (``jax.custom_batching.custom_vmap``: the same product, another kernel; a static choice,
+    whatever the nesting of ``jit``, ``vmap`` and ``grad``). Derivatives (``custom_jvp``) are
+    dA B + A dB in the elementwise form. A 1-D ``B`` is a vector: ``mm(A, v) = A v``.
     """
     if A.shape[-1] > SMALL:
         return A @ B
@@ -235,10 +235,16 @@ def _mm(A, B):
     return _mm_batchable(A, B)
 
 
-@_mm.defjvp
 def _mm_jvp(primals, tangents):
+    # symbolic zeros: a constant factor (F, H of a fixed model) costs no tangent product
     (A, B), (dA, dB) = primals, tangents
-    return _mm(A, B), _fused_mm(dA, B) + _fused_mm(A, dB)
+    parts = [_fused_mm(dA, B)] if not isinstance(dA, SymbolicZero) else []
+    parts += [_fused_mm(A, dB)] if not isinstance(dB, SymbolicZero) else []
+    out = _mm_batchable(A, B)
+    return out, (sum(parts[1:], parts[0]) if parts else jnp.zeros_like(out))
+
+
+_mm.defjvp(_mm_jvp, symbolic_zeros=True)
 
 
 @custom_vmap
