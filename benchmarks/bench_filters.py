@@ -231,8 +231,8 @@ class Row:
 # implementations
 # --------------------------------------------------------------------------------------
 
-def plain_filter(F, H, Q, R, x0, P0, zs, keep_all=False):
-    """A plain textbook KF in lax.scan (jnp.linalg.solve, no Joseph, no masks, no log-lik)."""
+def plain_filter(F, H, Q, R, x0, P0, zs, keep_all=False, joseph=False):
+    """A plain textbook KF in lax.scan (jnp.linalg.solve, no masks, no log-lik; Joseph form on request)."""
     def step(carry, z):
         x, P = carry
         xp, Pp = F @ x, F @ P @ F.T + Q
@@ -240,7 +240,11 @@ def plain_filter(F, H, Q, R, x0, P0, zs, keep_all=False):
         S = H @ PHt + R
         K = jnp.linalg.solve(S, PHt.T).T
         x = xp + K @ (z - H @ xp)
-        P = Pp - K @ S @ K.T
+        if joseph:
+            IKH = jnp.eye(F.shape[0]) - K @ H
+            P = IKH @ Pp @ IKH.T + K @ R @ K.T
+        else:
+            P = Pp - K @ S @ K.T
         P = 0.5 * (P + P.T)
         out = (x, P, xp, Pp) if keep_all else x
         return (x, P), out
@@ -347,6 +351,10 @@ def run_benchmarks(args, zs_batch, log):
     first, runs, out = jit_time(fd, (jzB, jP0B), max(3, reps // 2))
     rows.append(Row("d", "jaxnav", first, runs, means=np.asarray(out.means), jax_impl=True,
                     note=f"jit(vmap) over (zs, P0), B={B}"))
+    fd = jax.jit(jax.vmap(lambda z, P: jf.kalman_filter(model, jx0, P, z, save=("means",), joseph=False)))
+    first, runs, out = jit_time(fd, (jzB, jP0B), max(3, reps // 2))
+    rows.append(Row("d", "jaxnav (joseph=False)", first, runs, means=np.asarray(out.means), jax_impl=True,
+                    note="textbook covariance update P - K H P, like the plain scan below"))
     jzN = jzB.at[jnp.arange(B), (jnp.arange(B) * 37) % T, jnp.arange(B) % N_OBS].set(jnp.nan)
     fv = jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, jx0, jP0, z, save=("means",))))
     first, runs, out = jit_time(fv, (jzN,), max(3, reps // 2))
@@ -398,6 +406,10 @@ def run_benchmarks(args, zs_batch, log):
     first, runs, out = jit_time(pfd, (jzB, jP0B), max(3, reps // 2))
     rows.append(Row("d", "plain lax.scan", first, runs, means=np.asarray(out), jax_impl=True,
                     note=f"jit(vmap) over (zs, P0), B={B}"))
+    pfj = jax.jit(jax.vmap(lambda z, P: plain_filter(jF, jH, jQ, jR, jx0, P, z, joseph=True)))
+    first, runs, out = jit_time(pfj, (jzB, jP0B), max(3, reps // 2))
+    rows.append(Row("d", "plain lax.scan, Joseph form", first, runs, means=np.asarray(out), jax_impl=True,
+                    note="the same with jaxnav's default covariance update (I-KH) P (I-KH)^T + K R K^T"))
     pfg = jax.jit(jax.vmap(lambda z: (lambda o: plain_rts(jF, *o))(plain_filter(jF, jH, jQ, jR, jx0, jP0, z,
                                                                                  keep_all=True))))
     first, runs, out = jit_time(pfg, (jzB,), max(3, reps // 2))

@@ -120,13 +120,19 @@ def predict(x, P, F, GQG, factor=1.0, FPF=None):
     return mm(F, x), symmetrize(factor * FPF + GQG)
 
 
-def update(x_pred, P_pred, z, H, R, valid=None):
-    """Joseph-form measurement update with Cholesky solves (S0 eqs. (5), (7), (9)).
+def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True):
+    """Measurement update with Cholesky solves (S0 eqs. (5), (7), (9)), Joseph form by default.
 
     K = P H^T (H P H^T + R)^{-1}; x = x_pred + K v; P = (I - K H) P (I - K H)^T + K R K^T,
     symmetrised. Invalid components (``valid`` False) are removed exactly
     (:func:`jaxnav._numerics.masked_measurement`), so K has zero columns for them.
     If S is not positive definite the prior is returned with ``ok = False``.
+
+    ``joseph=False`` (static) uses the textbook form P = P_pred - K H P_pred, symmetrised: equal
+    for the optimal gain, about 40 % less work per epoch on the 6-state model (the Joseph
+    products are most of what a filter with a covariance per sequence costs under ``vmap``,
+    benchmarks/bench_filters.py case (d)), but it can lose positive semi-definiteness to rounding
+    when R is small next to H P H^T; the Joseph form is a congruence plus a PSD term and keeps it.
 
     Notes:
       Tried in issue 8 and not kept: expanding the Joseph product as W - K (H W),
@@ -136,7 +142,7 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     Args:
       x_pred: (n,) prior mean.  P_pred: (n, n) prior covariance.
       z: (m,) measurement (any value where invalid).  H: (m, n).  R: (m, m).
-      valid: optional (m,) bool.
+      valid: optional (m,) bool.  joseph: static, the covariance form (above).
     Returns:
       :class:`UpdateResult`.
     """
@@ -150,9 +156,12 @@ def update(x_pred, P_pred, z, H, R, valid=None):
     S = symmetrize(mm(Hm, PHt) + Rm)
     L, ok = safe_cholesky(S)
     K = cho_solve(L, PHt.T).T
-    IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - mm(K, Hm)
     x = x_pred + mm(K, v)
-    P = symmetrize(mm(mm(IKH, P_pred), IKH.T) + mm(mm(K, Rm), K.T))
+    if joseph:
+        IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - mm(K, Hm)
+        P = symmetrize(mm(mm(IKH, P_pred), IKH.T) + mm(mm(K, Rm), K.T))
+    else:
+        P = symmetrize(P_pred - mm(K, PHt.T))
     w = whiten(L, v)
     loglik = gaussian_loglik(w, L, jnp.sum(valid))
     return UpdateResult(x=jnp.where(ok, x, x_pred), P=jnp.where(ok, P, P_pred), v=v, S=S,
@@ -167,7 +176,7 @@ def _near_psd(P, rel=1e-10):
 
 
 def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=ALL_OUTPUTS,
-                check_finite: bool = True):
+                check_finite: bool = True, joseph: bool = True):
     """One epoch of the Kalman filter family: noise, inflation, predict, update (S0 eqs. (4)-(17)).
 
     Args:
@@ -176,14 +185,16 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
       params: :class:`FilterParams`.
       save: names of the per-epoch outputs to return (see ``ALL_OUTPUTS``).
       check_finite: mask NaN/inf measurement elements (default); see :func:`~jaxnav.filters.kalman_filter`.
+      joseph: static, the covariance update form (:func:`update`).
     Returns:
       (state at k, :class:`StepInfo`).
     """
-    new, allv, _ = step_with_gain(state, inp, params, check_finite)
+    new, allv, _ = step_with_gain(state, inp, params, check_finite, joseph)
     return new, StepInfo(**{name: allv[name] for name in save})
 
 
-def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, check_finite: bool):
+def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, check_finite: bool,
+                   joseph: bool = True):
     """:func:`filter_step` returning (state, every output by name, the gain K (n, m) applied).
 
     The batch entry points run it once on zero data for the batch's shared covariances and gains.
@@ -220,7 +231,7 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
         factor_used = factor
 
     x_pred, P_pred = predict(state.x, state.P, F, GQG, factor_used, FPF=FPF)
-    up = update(x_pred, P_pred, z, H, R_used, valid)
+    up = update(x_pred, P_pred, z, H, R_used, valid, joseph)
     post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - mm(Hm, up.x), 0.0), P_pred=P_pred)
     est_state = est.after(est_state, ctx, post)
 

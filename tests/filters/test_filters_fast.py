@@ -63,6 +63,24 @@ def test_classic_equals_identity_rule(problem):
     assert int(fast.status) & _status.NONFINITE_MEASUREMENT
 
 
+def test_textbook_covariance_update_equals_joseph(problem):
+    """joseph=False (P - K H P) equals the Joseph form for the optimal gain, in the filter, its vmap with a
+    covariance per sequence, and the batch entry point; PSD is kept on this well-conditioned model."""
+    model, x0, P0, zs, mask = problem
+    _assert_same(jf.kalman_filter(model, x0, P0, zs, mask=mask, joseph=False),
+                 jf.kalman_filter(model, x0, P0, zs, mask=mask), rtol=1e-9, atol=1e-11)
+    P0s = jnp.stack([P0, 2.0 * P0])
+    run = lambda P, j: jf.kalman_filter(model, x0, P, zs, mask=mask, joseph=j)  # noqa: E731
+    got = jax.jit(jax.vmap(lambda P: run(P, False)))(P0s)
+    for i in range(2):
+        _assert_same(jax.tree_util.tree_map(lambda a: a[i], got), run(P0s[i], True), rtol=1e-9, atol=1e-11)
+        assert np.all(np.linalg.eigvalsh(np.asarray(got.covs[i])) > 0)
+    clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
+    b = jf.kalman_filter_batch(model, x0, P0, jnp.stack([clean, -clean]), mask=mask, joseph=False)
+    np.testing.assert_allclose(np.asarray(b.covs), np.asarray(jf.kalman_filter(model, x0, P0, clean, mask=mask).covs),
+                               rtol=1e-9, atol=1e-11)
+
+
 def test_unmasked_nan_is_flagged(problem):
     model, x0, P0, zs, mask = problem
     fast = jf.kalman_filter(model, x0, P0, zs, mask=mask, check_finite=False, save=("means",))
