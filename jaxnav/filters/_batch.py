@@ -82,9 +82,9 @@ def worth_blocking(B, T, n, m, save, itemsize=8, block=BLOCK, floor_bytes=256 * 
     if B * T < MIN_BATCH_EPOCHS:
         return False
     L = max(1, min(block, T))
-    maps = 3 * -(-T // L) * (n + L * m) * L * n * itemsize
-    width = dict(means=n, pred_means=n, innovations=m)
-    out = B * T * (2 + sum(width[g] for g in width if g in save)) * itemsize
+    _, width, R = _groups(save, n, m, L)
+    maps = 3 * -(-T // L) * (n + L * m) * R * itemsize
+    out = B * T * (2 + sum(width[g] for g in ("means", "pred_means", "innovations") if g in save)) * itemsize
     return maps <= max(floor_bytes, out)
 
 
@@ -217,15 +217,25 @@ def _means_recursion(model, tv, allv, K, xs, x0s, zs, save):
     return out, ll, x_final, fin
 
 
-def _block_maps(F, Hm, K, valid):
-    """The linear map from (state before the block, block measurements) to the block's means.
+def _groups(save, n, m, block):
+    """The column groups of the block maps for ``save`` and their total width R (static)."""
+    want = tuple(g for g in ("means", "pred_means", "innovations") if g in save)
+    groups = want + ("w",) + (() if "means" in save else ("end",))
+    width = dict(means=n, pred_means=n, innovations=m, w=m, end=n)
+    return groups, width, sum(width[g] * (1 if g == "end" else block) for g in groups)
+
+
+def _block_maps(F, Hm, K, Linv, valid, groups):
+    """The linear maps from (state before the block, block measurements) to each output group.
 
     Args (leading axes (nb, L): nb blocks of L epochs):
       F: (nb, L, n, n) transitions.  Hm: (nb, L, m, n) measurement matrices with masked rows zeroed.
-      K: (nb, L, n, m) gains (zero columns where masked, zero where S failed).  valid: (nb, L, m) 0/1.
+      K: (nb, L, n, m) gains (zero columns where masked, zero where S failed).
+      Linv: (nb, L, m, m) inverse Cholesky factors of S.  valid: (nb, L, m) 0/1 float.
+      groups: static names in column order, from "means", "pred_means", "innovations", "w", "end".
     Returns:
-      M (nb, n + L m, L n): rows for the state, then the block's measurements; the mean of
-      epoch j occupies columns j n to (j + 1) n.
+      (M (nb, n + L m, R)): rows for the state, then the block's measurements; group g of epoch j
+      occupies r_g columns at the group's offset + j r_g ("end", the state after the block: n).
     """
     nb, L, n, _ = F.shape
     m = Hm.shape[2]
@@ -233,78 +243,81 @@ def _block_maps(F, Hm, K, valid):
 
     def step(carry, inp):
         Phi, Psi = carry  # x_{j-1} = Phi s + Psi z_block
-        Fj, Hj, Kj, vj, Sj = inp
+        Fj, Hj, Kj, Lj, vj, Sj = inp
         pPhi, pPsi = Fj @ Phi, Fj @ Psi
-        xPhi = pPhi - Kj @ (Hj @ pPhi)
-        xPsi = pPsi + Kj @ (vj[..., None] * Sj - Hj @ pPsi)
-        return (xPhi, xPsi), (xPhi, xPsi)
+        vPhi, vPsi = -(Hj @ pPhi), vj[..., None] * Sj - Hj @ pPsi
+        xPhi, xPsi = pPhi + Kj @ vPhi, pPsi + Kj @ vPsi
+        maps = dict(means=(xPhi, xPsi), pred_means=(pPhi, pPsi), innovations=(vPhi, vPsi),
+                    w=(Lj @ vPhi, Lj @ vPsi))
+        return (xPhi, xPsi), tuple(maps[g] for g in groups if g != "end")
 
     lead = lambda a: jnp.swapaxes(a, 0, 1)  # noqa: E731  (L, nb, ...) for the scan
     init = (jnp.broadcast_to(jnp.eye(n, dtype=F.dtype), (nb, n, n)), jnp.zeros((nb, n, L * m), F.dtype))
-    _, (aPhi, aPsi) = jax.lax.scan(step, init, (lead(F), lead(Hm), lead(K), lead(valid), sel))
-    Ms = jnp.transpose(aPhi, (1, 3, 0, 2)).reshape(nb, n, L * n)  # (L, nb, n, n) -> (nb, n, L n)
-    Mz = jnp.transpose(aPsi, (1, 3, 0, 2)).reshape(nb, L * m, L * n)
-    return jnp.concatenate([Ms, Mz], axis=1)
+    (Phi, Psi), outs = jax.lax.scan(step, init, (lead(F), lead(Hm), lead(K), lead(Linv), lead(valid), sel))
+    Ms, Mz = [], []
+    for aPhi, aPsi in outs:  # (L, nb, r, n), (L, nb, r, L m)
+        r = aPhi.shape[2]
+        Ms.append(jnp.transpose(aPhi, (1, 3, 0, 2)).reshape(nb, n, L * r))
+        Mz.append(jnp.transpose(aPsi, (1, 3, 0, 2)).reshape(nb, L * m, L * r))
+    if "end" in groups:
+        Ms.append(jnp.swapaxes(Phi, 1, 2))
+        Mz.append(jnp.swapaxes(Psi, 1, 2))
+    return jnp.concatenate([jnp.concatenate(Ms, axis=-1), jnp.concatenate(Mz, axis=-1)], axis=1)
 
 
 def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
-    """The means of the whole batch in blocks of ``Lb`` epochs, one dense product per block.
-
-    Only the means come from the blocks; predictions, innovations and their whitened form
-    follow from them epoch by epoch without a recursion (:func:`_innovation_outputs`), so
-    under ``jit`` XLA drops whatever the caller does not use.
-    """
+    """The means of the whole batch in blocks of ``Lb`` epochs, one dense product per block."""
     sh = _shared_terms(model, tv, allv, K, xs)
     B, T, m = zs.shape
     n = K.shape[1]
     dtype = zs.dtype
+    groups, width, _ = _groups(save, n, m, Lb)
+    want = [g for g in groups if g in save]
     nb, tail = divmod(T, Lb)
     Z = zs.reshape(B, T * m)
     vflat = sh["valid"].reshape(T * m)
+    bufs0 = {g: jnp.zeros((B, T * width[g]), dtype) for g in want}
+    for g in ("nis", "logliks"):
+        if g in save:
+            bufs0[g] = jnp.zeros((B, T), dtype)
 
     def apply(carry, t0, Lk, M):
-        s, means = carry
+        s, bufs, ll, fin = carry
         # masked elements may hold NaN/inf: zero them (multiply-then-clean is a plain vector
         # operation here; a select on the mask costs ~10 us per block, measured)
         zb = jax.lax.dynamic_slice_in_dim(Z, t0 * m, Lk * m, axis=1)
         zb = jnp.nan_to_num(zb * jax.lax.dynamic_slice_in_dim(vflat, t0 * m, Lk * m), nan=0.0, posinf=0.0,
                             neginf=0.0)
         Y = jnp.concatenate([s, zb], axis=1) @ M
-        return Y[:, -n:], jax.lax.dynamic_update_slice_in_dim(means, Y, t0 * n, axis=1)
+        cols, off = {}, 0
+        for g in groups:
+            w = width[g] * (1 if g == "end" else Lk)
+            cols[g] = Y[:, off:off + w]
+            off += w
+        wv = cols["w"].reshape(B, Lk, m)
+        nis = jnp.sum(wv * wv, axis=-1)
+        sl = lambda a: jax.lax.dynamic_slice_in_dim(a, t0, Lk)  # noqa: E731
+        lls = sl(sh["okf"]) * (sl(sh["c_ll"]) - 0.5 * nis)
+        vals = dict(cols, nis=sl(sh["obsf"]) * nis, logliks=lls)
+        bufs = {g: jax.lax.dynamic_update_slice_in_dim(b, vals[g], t0 * (b.shape[1] // T), axis=1)
+                for g, b in bufs.items()}
+        state = cols["means"] if "means" in cols else cols["end"]
+        fin = fin & jnp.all(jnp.isfinite(state), axis=1)
+        return state[:, -n:], bufs, ll + jnp.sum(lls, axis=1), fin
 
-    carry = (jnp.asarray(x0s, dtype), jnp.zeros((B, T * n), dtype))
-    per_epoch = (sh["F"], sh["Hm"], sh["K"], sh["valid"])
+    carry = (jnp.asarray(x0s, dtype), bufs0, jnp.zeros((B,), dtype), jnp.ones((B,), bool))
+    per_epoch = (sh["F"], sh["Hm"], sh["K"], sh["Linv"], sh["valid"])
     if nb:
         blk = [a[:nb * Lb].reshape((nb, Lb) + a.shape[1:]) for a in per_epoch]
-        maps = _block_maps(*blk)
+        maps = _block_maps(*blk, groups)
         carry, _ = jax.lax.scan(lambda c, k: (apply(c, k * Lb, Lb, maps[k]), None), carry, jnp.arange(nb))
     if tail:
         blk = [a[nb * Lb:][None] for a in per_epoch]
-        carry = apply(carry, nb * Lb, tail, _block_maps(*blk)[0])
-    x_final, means = carry
-    means = means.reshape(B, T, n)
-    outs = _innovation_outputs(sh, x0s, means, zs)
-    ll = jnp.sum(outs["logliks"], axis=1)
-    out = {g: outs[g] for g in PER_SEQUENCE if g in save}
-    fin = jnp.all(jnp.isfinite(x_final), axis=-1) & jnp.isfinite(ll)
+        carry = apply(carry, nb * Lb, tail, _block_maps(*blk, groups)[0])
+    x_final, bufs, ll, fin = carry
+    shape = {g: (B, T, width[g]) for g in ("means", "pred_means", "innovations")}
+    out = {g: bufs[g].reshape(shape.get(g, (B, T))) for g in PER_SEQUENCE if g in save}
     return out, ll, x_final, fin
-
-
-def _innovation_outputs(sh, x0s, means, zs):
-    """Per-epoch outputs that follow from the filtered means: x_t|t-1 = F_t x_t-1, v_t, NIS, log-lik.
-
-    Elementwise over (B, T) (no recursion): v_t = z_t - H_t x_t|t-1 on the valid elements,
-    w_t = L_t^-1 v_t. Args: ``sh`` from :func:`_shared_terms`, x0s (B, n), means (B, T, n), zs (B, T, m).
-    """
-    prev = jnp.concatenate([jnp.asarray(x0s, means.dtype)[:, None], means[:, :-1]], axis=1)
-    apply = lambda A, x: jnp.sum(A[None] * x[:, :, None, :], axis=-1)  # noqa: E731  (T, r, c), (B, T, c)
-    pred = apply(sh["F"], prev)
-    zc = jnp.nan_to_num(zs * sh["valid"], nan=0.0, posinf=0.0, neginf=0.0)
-    v = sh["valid"] * (zc - apply(sh["Hm"], pred))
-    w = apply(sh["Linv"], v)
-    nis = jnp.sum(w * w, axis=-1)
-    return dict(means=means, pred_means=pred, innovations=v, nis=sh["obsf"] * nis,
-                logliks=sh["okf"] * (sh["c_ll"] - 0.5 * nis))
 
 
 def rts_smoother_batch(model: LinearGaussian, filtered: KalmanResult, *, save=SMOOTHER_OUTPUTS,
