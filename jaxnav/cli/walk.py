@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import DATA_ENV, data_dir
+from jaxnav.cli._common import DATA_ENV, data_dir, prepare_out
 
 #: the walk set's folder inside ``$JAXNAV_DATA``
 WALK_SET = "rtklibexplorer-gnss-imu"
@@ -24,8 +24,7 @@ def run(args) -> int:
     from jaxnav.experiments import format_walk, run_walk, write_walk_scores
 
     data = data_dir(args.data, WALK_SET)
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_out(args.out)
     scores, _ = run_walk(data, out_dir=out)
     path = write_walk_scores(out, scores)
     print(format_walk(scores))

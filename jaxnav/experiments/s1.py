@@ -13,7 +13,6 @@ experiment's tables and figures.
 
 from __future__ import annotations
 
-import json
 import pathlib
 import time
 from functools import partial
@@ -23,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav.io import write_json
 from jaxnav import io
 from jaxnav.monitoring import (
     S1_THRESHOLDS_XYH,
@@ -348,7 +348,7 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
         fl = "  ".join(f"{n}: m_P {np.mean(d['m_P_mm']):.2f} m_H {np.mean(d['m_H_mm']):.2f} mm" for n, d in st.items())
         lines.append(f"{'':<8}one-day forecasts (mean over periods of {period} epochs): {fl}")
     result["text"] = "\n".join(lines)
-    (out / "monitor.json").write_text(json.dumps(result, indent=1))
+    write_json(out / "monitor.json", result)
     return result
 
 
@@ -396,5 +396,5 @@ def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs:
         status=res["status"], wall_time_s=wall, jax_version=jax.__version__,
         figures=[str(out / "s1_statistics.png"), str(out / "s1_period.png")],
     )
-    (out / "monitor.json").write_text(json.dumps(result, indent=1, default=float))
+    write_json(out / "monitor.json", result)
     return result
