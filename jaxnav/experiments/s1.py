@@ -333,7 +333,7 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
         plot_daily_velocity(s, v, fig)
         ref = v.reference_velocity
         result["stations"][s.station] = dict(
-            file=str(f), format=s.fmt, epochs=v.n, span_years=v.span_years,
+            file=str(f), format=s.fmt, epochs=v.n, span_years=v.span_years, masked_values=s.n_masked,
             velocity_mm_per_yr=_tolist(v.velocity / MM_PER_YEAR), sigma_formal_mm_per_yr=_tolist(v.sigma / MM_PER_YEAR),
             sigma_ar1_mm_per_yr=_tolist(v.sigma_ar1 / MM_PER_YEAR),
             ls_slope_mm_per_yr=_tolist(v.ls_velocity / MM_PER_YEAR),
@@ -347,6 +347,9 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
                          f"{v.sigma_ar1[i] / MM_PER_YEAR:>9.3f}{v.ls_velocity[i] / MM_PER_YEAR:>10.2f}{pub:>16}")
         fl = "  ".join(f"{n}: m_P {np.mean(d['m_P_mm']):.2f} m_H {np.mean(d['m_H_mm']):.2f} mm" for n, d in st.items())
         lines.append(f"{'':<8}one-day forecasts (mean over periods of {period} epochs): {fl}")
+        if s.n_masked:
+            lines.append(f"{'':<8}{s.n_masked} position value(s) given as nan in {f}: masked (left out of the "
+                         f"filters and the LS slope)")
     result["text"] = "\n".join(lines)
     write_json(out / "monitor.json", result)
     return result
