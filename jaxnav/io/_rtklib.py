@@ -91,7 +91,8 @@ _COLUMN_RANGES = {"latitude(deg)": (-90.0, 90.0), "longitude(deg)": (-360.0, 360
                   "Q": Q_RANGE, "ns": (0, 1000), "sdn(m)": (0.0, 1e4), "sde(m)": (0.0, 1e4), "sdu(m)": (0.0, 1e4),
                   "sdne(m)": (-1e4, 1e4), "sdeu(m)": (-1e4, 1e4), "sdun(m)": (-1e4, 1e4), "age(s)": (-1e6, 1e6),
                   "ratio": (0.0, 1e9), "ve(m/s)": (-1e4, 1e4), "vn(m/s)": (-1e4, 1e4), "vu(m/s)": (-1e4, 1e4),
-                  "sdvn": (0.0, 1e4), "sdve": (0.0, 1e4), "sdvu": (0.0, 1e4)}
+                  "sdvn": (0.0, 1e4), "sdve": (0.0, 1e4), "sdvu": (0.0, 1e4), "sdvne": (-1e4, 1e4),
+                  "sdveu": (-1e4, 1e4), "sdvun": (-1e4, 1e4)}
 
 
 def _check_record(vals, header, path, lineno):

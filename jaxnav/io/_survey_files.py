@@ -114,7 +114,7 @@ def _rows(path, required, alternatives=None):
             header = row
             cols = {name: i for i, name in enumerate(header)}
             missing = [c for c in required if c not in cols
-                       and not all(a in cols for a in alternatives.get(c, ("",)))]
+                       and not (c in alternatives and all(a in cols for a in alternatives[c]))]
             if missing:
                 raise ReaderError(path, lineno, f"header lacks column(s) {missing}; "
                                                 f"expected {list(required)}, found {header}"[:300])
