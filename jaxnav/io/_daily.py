@@ -80,7 +80,7 @@ def _check_times(t, lines, path, rng, what):
     bad = np.flatnonzero(~((t >= rng[0]) & (t <= rng[1])))
     if bad.size:
         i = int(bad[0])
-        raise _err(path, lines[i], f"{what} {t[i]!r} is outside [{rng[0]:g}, {rng[1]:g}] (not a GNSS-era time)")
+        raise _err(path, lines[i], f"{what} {float(t[i])!r} is outside [{rng[0]:g}, {rng[1]:g}] (not a GNSS-era time)")
 
 
 def _masked_positions(enu, sig, lines, path, limits, corr=None):
@@ -100,7 +100,7 @@ def _masked_positions(enu, sig, lines, path, limits, corr=None):
         bad = np.flatnonzero(~miss[:, j] & ~(np.abs(enu[:, j]) <= limits[j]))
         if bad.size:
             i = int(bad[0])
-            raise _err(path, lines[i], f"{name} = {enu[i, j]!r} m is not finite or beyond {limits[j]:g} m")
+            raise _err(path, lines[i], f"{name} = {float(enu[i, j]):g} m is not finite or beyond {limits[j]:g} m")
     sig = np.where(miss, 1.0, sig)
     bad = np.flatnonzero(~np.all(np.isfinite(sig) & (sig > 0) & (sig <= SIGMA_MAX_M), axis=1))
     if bad.size:
@@ -120,7 +120,7 @@ def _check_increasing(t, lines, path):
     bad = np.flatnonzero(~(d > 0))
     if bad.size:
         i = int(bad[0]) + 1
-        raise _err(path, lines[i], f"time {t[i]!r} does not increase (previous epoch {t[i - 1]!r}, line "
+        raise _err(path, lines[i], f"time {float(t[i])!r} does not increase (previous epoch {float(t[i - 1])!r}, line "
                                    f"{lines[i - 1]})")
 
 
@@ -188,10 +188,10 @@ def read_tenv3(path) -> DailySeries:
     for j, name, lim in ((15, "latitude", 90.0), (16, "longitude", 360.0)):
         bad = np.flatnonzero(~np.isnan(a[:, j]) & ~(np.abs(a[:, j]) <= lim))
         if bad.size:
-            raise _err(path, lines[int(bad[0])], f"{name} = {a[bad[0], j]!r} deg is beyond +-{lim:g} deg")
+            raise _err(path, lines[int(bad[0])], f"{name} = {float(a[bad[0], j]):g} deg is beyond +-{lim:g} deg")
     bad = np.flatnonzero(~np.isnan(a[:, 17]) & ~((a[:, 17] >= HEIGHT_RANGE_M[0]) & (a[:, 17] <= HEIGHT_RANGE_M[1])))
     if bad.size:
-        raise _err(path, lines[int(bad[0])], f"height = {a[bad[0], 17]!r} m is outside {list(HEIGHT_RANGE_M)} m")
+        raise _err(path, lines[int(bad[0])], f"height = {float(a[bad[0], 17]):g} m is outside {list(HEIGHT_RANGE_M)} m")
     ok = np.all(np.isfinite(enu), axis=1)
     if not ok.any():
         raise ReaderError(path, None, "every record has a missing (nan) position component")
