@@ -145,6 +145,7 @@ def add_config_parser(subparsers, name: str, what: str):
     """
     p = subparsers.add_parser(name, help=f"{what}; CONFIG is a TOML file or a shipped name (s0_b, cv_noise)")
     p.add_argument("config", help="sweep/tune TOML, or the name of a shipped one: s0_b, cv_noise")
-    p.add_argument("--out", default=f"out/{name}", help=f"output folder (created and checked first); default out/{name}")
+    p.add_argument("--out", default=f"out/{name}",
+                   help=f"output folder (created and checked first); default out/{name}")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     return p

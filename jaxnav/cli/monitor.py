@@ -33,7 +33,8 @@ def register(subparsers):
                    help="epochs per simulated period, 2 .. 1e6; default 3600 (1 h)")
     p.add_argument("--gross", type=float_range(0.0, 1.0), default=0.0,
                    help="share of 10-sigma gross errors in [0, 1] (simulation)")
-    p.add_argument("--seed", type=int_range(0, 2**32 - 1), default=2017, help="PRNG seed of the simulation (0 .. 2^32-1)")
+    p.add_argument("--seed", type=int_range(0, 2**32 - 1), default=2017,
+                   help="PRNG seed of the simulation (0 .. 2^32-1)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return p
 

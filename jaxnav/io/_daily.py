@@ -120,8 +120,8 @@ def _check_increasing(t, lines, path):
     bad = np.flatnonzero(~(d > 0))
     if bad.size:
         i = int(bad[0]) + 1
-        raise _err(path, lines[i], f"time {float(t[i])!r} does not increase (previous epoch {float(t[i - 1])!r}, line "
-                                   f"{lines[i - 1]})")
+        raise _err(path, lines[i], f"time {float(t[i])!r} does not increase (previous epoch {float(t[i - 1])!r}, "
+                                   f"line {lines[i - 1]})")
 
 
 def _cov(sig, corr=None):

@@ -80,7 +80,8 @@ def _parse_time(words, path, lineno):
                 raise ValueError(f"seconds of week {words[1]} outside [0, 604800)")
             sec = week * SECONDS_PER_WEEK + tow
     except (ValueError, IndexError, OverflowError) as exc:
-        raise ReaderError(path, lineno, f"cannot read the GPST time from {' '.join(words[:2])[:60]!r} ({exc})") from None
+        raise ReaderError(path, lineno,
+                          f"cannot read the GPST time from {' '.join(words[:2])[:60]!r} ({exc})") from None
     if not GPST_RANGE_S[0] <= sec <= GPST_RANGE_S[1]:
         raise ReaderError(path, lineno, f"GPST time {' '.join(words[:2])[:60]!r} is before 1980-01-06 or after 2100")
     return sec, 2
