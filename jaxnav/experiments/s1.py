@@ -311,8 +311,8 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
     result = {"stations": {}, "settings": dict(period=period, robust=robust, window=window, horizon=horizon)}
     lines = [f"{'station':<8}{'axis':<6}{'CV filter mm/yr':>18}{'+-formal':>10}{'+-AR(1)':>9}{'LS slope':>10}"
              f"{'published':>16}"]
-    for f in files:
-        s = io.read_daily(f)
+    all_series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
+    for f, s in zip(files, all_series):
         v = station_velocity(s)
         fc = daily_forecasts(s, accel_psd=v.accel_psd, filters=filters)
         st = {}

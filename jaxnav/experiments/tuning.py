@@ -93,6 +93,8 @@ def load_config(spec) -> dict:
             _check_range(path, f"problem.{k}", prob[k], _PROBLEM_RANGE[k])
     if "experiment" in prob and not pathlib.Path(prob["experiment"]).is_file():
         _err(path, f"problem.experiment: {prob['experiment']}: no such file")
+    if prob.get("kind") == "s0":
+        load_experiment(prob.get("experiment") or EXPERIMENT)  # its keys checked now, not after a compile
     kind = prob.get("kind")
     if kind == "s0":
         prob.setdefault("filter", "attenuated")
