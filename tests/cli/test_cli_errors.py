@@ -262,3 +262,28 @@ def test_subprocess_bad_seeds_and_bad_control_file(files):
              files["tmp"])
     assert r.returncode == 2 and r.stderr == f"jaxnav rtk: {files['cp_inf']}:4: column 'B': 'inf' is not a finite " \
                                             f"number\n", r.stderr
+
+
+def test_monitor_masks_and_reports_a_nan_east_value(tmp_path, capsys):
+    """A ``nan`` east value in a real tenv3 file: exit 0, counted in monitor.json and the printout,
+    finite velocities and LS slope, strict JSON."""
+    from _paths import DATA_ROOT
+
+    src = DATA_ROOT / "gnss_daily_timeseries/LHAS.tenv3"
+    if not src.exists():
+        pytest.skip("shared data not present")
+    lines = src.read_text().splitlines()[:400]
+    w = lines[50].split()
+    w[8] = "nan"  # east fraction
+    lines[50] = " ".join(w)
+    f = tmp_path / "LHAS.tenv3"
+    f.write_text("\n".join(lines) + "\n")
+    assert main(["monitor", str(f), "--out", str(tmp_path / "o"), "--period", "100"]) == 0
+    assert "1 position value(s) given as nan" in capsys.readouterr().out
+
+    def no_constants(name):
+        raise AssertionError(f"{name} token in monitor.json")
+
+    st = json.loads((tmp_path / "o/monitor.json").read_text(), parse_constant=no_constants)["stations"]["LHAS"]
+    assert st["masked_values"] == 1
+    assert all(v is not None and math.isfinite(v) for v in st["velocity_mm_per_yr"] + st["ls_slope_mm_per_yr"])
