@@ -7,8 +7,9 @@ adds its subcommand and returns the parser, and ``run(args) -> int``; the comput
 One error path (:func:`main`): a problem the user must fix -- a bad option or value
 (:class:`~jaxnav.cli._common.UsageError`, argparse errors), a bad file or config
 (:class:`~jaxnav.cli._common.CommandError`, :class:`jaxnav.io.ReaderError` and the other
-``ValueError`` of the library, ``OSError``) -- prints one line ``jaxnav COMMAND: FILE:LINE: message``
-to stderr and exits with 2; anything else is an internal error (one line saying so, exit 3).
+``ValueError`` raised by jaxnav's own checks, ``OSError``) -- prints one line
+``jaxnav COMMAND: FILE:LINE: message`` to stderr and exits with 2; anything else (a ValueError from
+inside numpy or JAX included) is an internal error: one line saying so, exit 3.
 ``--debug`` (before or after the command) shows the traceback instead.
 """
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import pathlib
 import sys
 
 from jaxnav.cli._common import CommandError, UsageError
@@ -38,6 +40,23 @@ class _Parser(argparse.ArgumentParser):
 def _modules():
     """The command modules of :data:`COMMANDS` (each imports its experiment only in ``run``)."""
     return [importlib.import_module(f"jaxnav.cli.{c}") for c in COMMANDS]
+
+
+_PACKAGE = pathlib.Path(__file__).resolve().parents[1]
+
+
+def _raised_by_jaxnav(exc: BaseException) -> bool:
+    """True if the innermost frame of ``exc`` is jaxnav's own code (a deliberate check of the input),
+    False if it came from inside numpy, JAX or another library (then it is a bug, not bad input)."""
+    tb = exc.__traceback__
+    if tb is None:
+        return True
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    try:
+        return pathlib.Path(tb.tb_frame.f_code.co_filename).resolve().is_relative_to(_PACKAGE)
+    except (OSError, ValueError):
+        return False
 
 
 def _one_line(text: str) -> str:
@@ -69,8 +88,10 @@ def main(argv=None) -> int:
         p.set_defaults(_run=mod.run, _parser=p)
     prog = "jaxnav"
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
         prog = args._parser.prog
+        if extra:
+            raise UsageError(f"unrecognized arguments: {' '.join(extra)}", prog)
         import jaxnav
 
         jaxnav.enable_x64()  # navigation states and absolute coordinates are float64
@@ -84,6 +105,8 @@ def main(argv=None) -> int:
     except (CommandError, ValueError, OSError) as exc:
         if debug:
             raise
+        if isinstance(exc, ValueError) and not _raised_by_jaxnav(exc):
+            return _internal(prog, exc)
         print(f"{prog}: {_message(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
@@ -94,9 +117,14 @@ def main(argv=None) -> int:
     except Exception as exc:  # noqa: BLE001 - the one place that turns a bug into a message
         if debug:
             raise
-        print(f"{prog}: internal error: {type(exc).__name__}: {_one_line(exc)[:300]} (a bug in jaxnav: rerun with "
-              f"--debug for the traceback and report it)", file=sys.stderr)
-        return EXIT_INTERNAL
+        return _internal(prog, exc)
+
+
+def _internal(prog: str, exc: BaseException) -> int:
+    """Print the one line of an internal error; returns :data:`EXIT_INTERNAL`."""
+    print(f"{prog}: internal error: {type(exc).__name__}: {_one_line(exc)[:300]} (a bug in jaxnav: rerun with "
+          f"--debug for the traceback and report it)", file=sys.stderr)
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

@@ -287,3 +287,12 @@ def test_monitor_masks_and_reports_a_nan_east_value(tmp_path, capsys):
     st = json.loads((tmp_path / "o/monitor.json").read_text(), parse_constant=no_constants)["stations"]["LHAS"]
     assert st["masked_values"] == 1
     assert all(v is not None and math.isfinite(v) for v in st["velocity_mm_per_yr"] + st["ls_slope_mm_per_yr"])
+
+
+def test_a_value_error_from_inside_numpy_is_internal(monkeypatch, capsys):
+    """Only jaxnav's own checks make exit status 2; a ValueError raised inside numpy is a bug (3)."""
+    import jaxnav.cli.walk as walk
+
+    monkeypatch.setattr(walk, "run", lambda args: np.ones(3) + np.ones(4))
+    assert main(["walk", "--data", "."]) == 3
+    assert "internal error: ValueError: operands could not be broadcast" in capsys.readouterr().err
