@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import pathlib
 
 from jaxnav.cli._common import DATA_ENV, data_dir, prepare_out
 
