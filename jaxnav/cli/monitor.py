@@ -11,7 +11,6 @@ Both write ``monitor.json`` (statistics) and PNG figures to ``--out``.
 
 from __future__ import annotations
 
-
 from jaxnav.cli._common import MAX_SEEDS, UsageError, float_range, input_file, int_range, prepare_out
 
 

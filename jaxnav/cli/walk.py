@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from jaxnav.cli._common import DATA_ENV, data_dir, prepare_out
 
 #: the walk set's folder inside ``$JAXNAV_DATA``
