@@ -33,11 +33,16 @@ def load_toml(path) -> dict:
       path: str or path-like.
     Raises:
       FileNotFoundError: no such file (the message names the path).
-      ValueError: a syntax error, naming the file, line and column.
+      ValueError: a syntax error or a byte that is not UTF-8, naming the file, line and column.
     """
     path = pathlib.Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: no such TOML file") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ValueError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02X})") from None
     return loads_toml(text, source=path)

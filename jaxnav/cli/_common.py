@@ -1,26 +1,109 @@
 """What the command modules share: the data-folder lookup and the two error kinds of ``main``.
 
-A command's ``run(args)`` raises :class:`UsageError` for a wrong combination of arguments
-(``main`` prints the command's usage and the message, exit status 2, as argparse does) and
-:class:`CommandError` for anything else the user must fix (``main`` prints one line, status 2).
+A command's ``run(args)`` raises :class:`UsageError` for a wrong combination of arguments and
+:class:`CommandError` for anything else the user must fix; ``main`` prints either as one line
+``jaxnav COMMAND: message`` and exits with 2. Numeric options are checked while parsing by the
+``type=`` helpers here (:func:`int_range`, :func:`float_range`), and :func:`prepare_out` creates
+and checks the output folder before any work.
 """
 
 from __future__ import annotations
 
+import argparse
+import math
 import os
 import pathlib
+import uuid
 from typing import Optional
 
+#: the most Monte Carlo seeds (and batch sizes) a command accepts
+MAX_SEEDS = 100_000
 #: environment variable naming the folder that holds the data sets (e.g. ``rtklibexplorer-gnss-imu/``)
 DATA_ENV = "JAXNAV_DATA"
 
 
 class CommandError(Exception):
-    """A problem the user must fix; ``jaxnav`` prints ``jaxnav COMMAND: error: MESSAGE`` and exits with 2."""
+    """A problem the user must fix; ``jaxnav`` prints ``jaxnav COMMAND: MESSAGE`` and exits with 2."""
 
 
 class UsageError(CommandError):
-    """Wrong or missing arguments; ``jaxnav`` prints the command's usage and the message and exits with 2."""
+    """Wrong or missing arguments; ``jaxnav`` prints ``jaxnav COMMAND: MESSAGE (see ... --help)``, exits with 2."""
+
+
+def int_range(lo: Optional[int] = None, hi: Optional[int] = None):
+    """An argparse ``type=``: an integer in [lo, hi] (None: unbounded), else a one-line argparse error."""
+
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"must be {_range_text(lo, hi)}, got {v}")
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def float_range(lo: Optional[float] = None, hi: Optional[float] = None, *, lo_open=False, hi_open=False):
+    """An argparse ``type=``: a finite number in [lo, hi] (``lo_open``/``hi_open``: excluded ends)."""
+
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        bad = (not math.isfinite(v) or (lo is not None and (v <= lo if lo_open else v < lo))
+               or (hi is not None and (v >= hi if hi_open else v > hi)))
+        if bad:
+            raise argparse.ArgumentTypeError(f"must be a finite number {_range_text(lo, hi, lo_open, hi_open)}, "
+                                             f"got {text}")
+        return v
+
+    parse.__name__ = "number"
+    return parse
+
+
+def _range_text(lo, hi, lo_open=False, hi_open=False):
+    if lo is not None and hi is not None:
+        return f"in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    if lo is not None:
+        return f"{'>' if lo_open else '>='} {lo:g}"
+    if hi is not None:
+        return f"{'<' if hi_open else '<='} {hi:g}"
+    return "finite"
+
+
+def prepare_out(out, option: str = "--out") -> pathlib.Path:
+    """Create the output folder ``out`` and check that a file can be written in it, before any work.
+
+    Raises:
+      CommandError: naming the folder and the option, if it cannot be created or written.
+    """
+    path = pathlib.Path(out)
+    if path.exists() and not path.is_dir():
+        raise CommandError(f"{path}: {option} names an existing file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".jaxnav-write-test-{uuid.uuid4().hex}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise CommandError(f"{path}: cannot write the output folder ({option}): {exc.strerror or exc}") from None
+    return path
+
+
+def input_file(path, option: str) -> pathlib.Path:
+    """``path`` if it is a readable file, else :class:`CommandError` naming it and the option."""
+    p = pathlib.Path(path)
+    if not p.exists():
+        raise CommandError(f"{p}: no such file ({option})")
+    if not p.is_file():
+        raise CommandError(f"{p}: not a file ({option})")
+    if not os.access(p, os.R_OK):
+        raise CommandError(f"{p}: not readable ({option})")
+    return p
 
 
 def data_dir(args_data, subfolder: str, *, required: bool = True) -> Optional[pathlib.Path]:
@@ -62,6 +145,7 @@ def add_config_parser(subparsers, name: str, what: str):
     """
     p = subparsers.add_parser(name, help=f"{what}; CONFIG is a TOML file or a shipped name (s0_b, cv_noise)")
     p.add_argument("config", help="sweep/tune TOML, or the name of a shipped one: s0_b, cv_noise")
-    p.add_argument("--out", default=f"out/{name}", help=f"output folder; default out/{name}")
+    p.add_argument("--out", default=f"out/{name}",
+                   help=f"output folder (created and checked first); default out/{name}")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     return p

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from jaxnav.cli._common import DATA_ENV, data_dir
+from jaxnav.cli._common import DATA_ENV, MAX_SEEDS, CommandError, data_dir, input_file, int_range, prepare_out
 from jaxnav.cli.walk import WALK_SET
 
 
@@ -14,13 +14,14 @@ def register(subparsers):
                                                 "seeds")
     p.add_argument("--out", required=True, help="output folder (results.json and figures)")
     p.add_argument("--config", default=None, help="cadastral TOML (default: jaxnav/sim/scenarios/cadastral.toml)")
-    p.add_argument("--seeds", type=int, default=64, help="Monte Carlo seeds per IMU grade (vmapped); default 64")
+    p.add_argument("--seeds", type=int_range(1, MAX_SEEDS), default=64,
+                   help="Monte Carlo seeds per IMU grade (vmapped), >= 1; default 64")
     p.add_argument("--grade", action="append", default=None,
                    help="IMU grade(s) of the config to run (repeatable); default all")
     p.add_argument("--stops", default=None,
                    help="stop-list CSV replacing the simulated one (checked against the data)")
-    p.add_argument("--legs", type=int, default=None, help="use only the first n legs (short run)")
-    p.add_argument("--chunk", type=int, default=8, help="seeds per compiled batch; default 8")
+    p.add_argument("--legs", type=int_range(1), default=None, help="use only the first n (>= 1) legs (short run)")
+    p.add_argument("--chunk", type=int_range(1, MAX_SEEDS), default=8, help="seeds per compiled batch, >= 1; default 8")
     p.add_argument("--data", default=None, help=f"{WALK_SET} folder for the real-walk stop detection "
                                                 f"(default ${DATA_ENV}/{WALK_SET}; skipped if neither is set)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
@@ -31,7 +32,19 @@ def run(args) -> int:
     """Run the S3 experiment, print its summary, write results.json and figures into ``--out``."""
     from jaxnav.experiments import format_cadastral, run_cadastral
 
+    from jaxnav.io import read_stop_list
+    from jaxnav.sim import load_cadastral
+
     walk_dir = data_dir(args.data, WALK_SET, required=False)
+    if args.config is not None:
+        input_file(args.config, "--config")
+    scns, _ = load_cadastral(args.config)  # checked before any work
+    unknown = [g for g in (args.grade or []) if g not in scns]
+    if unknown:
+        raise CommandError(f"--grade {unknown[0]!r}: the config has the IMU grades {sorted(scns)}")
+    if args.stops is not None:
+        read_stop_list(input_file(args.stops, "--stops"))
+    prepare_out(args.out)
     res = run_cadastral(args.out, config=args.config, seeds=args.seeds, grades=args.grade, stops=args.stops,
                         chunk=args.chunk, progress=not args.no_progress, n_legs=args.legs, walk_dir=walk_dir)
     print(format_cadastral(res))

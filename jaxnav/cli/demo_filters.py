@@ -4,15 +4,20 @@ from __future__ import annotations
 
 import pathlib
 
+from jaxnav.cli._common import MAX_SEEDS, float_range, int_range, prepare_out
+
 
 def register(subparsers):
     """Add the ``demo-filters`` subcommand; returns its parser."""
     p = subparsers.add_parser("demo-filters", help="filter-family demonstration on a constant-velocity series "
                                                    "with a change of dynamics (S1/S2 model)")
     p.add_argument("--out", default="out/demo", help="output folder (created); default out/demo")
-    p.add_argument("--seeds", type=int, default=64, help="Monte Carlo seeds (vmapped); default 64")
-    p.add_argument("--epochs", type=int, default=1200, help="epochs per series (1 Hz); default 1200")
-    p.add_argument("--b", type=float, default=0.254, help="attenuation factor b; default 0.254 (S0)")
+    p.add_argument("--seeds", type=int_range(1, MAX_SEEDS), default=64,
+                   help="Monte Carlo seeds (vmapped), >= 1; default 64")
+    p.add_argument("--epochs", type=int_range(100, 10**6), default=1200,
+                   help="epochs per series (1 Hz), 100 .. 1e6; default 1200")
+    p.add_argument("--b", type=float_range(0.0, 1.0, hi_open=True), default=0.254,
+                   help="attenuation factor b in [0, 1); default 0.254 (S0)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return p
 
@@ -21,6 +26,7 @@ def run(args) -> int:
     """Run the demonstration, print its table, write results.json and filter_family.png into ``--out``."""
     from jaxnav.experiments import format_filter_family, run_filter_family
 
+    prepare_out(args.out)
     res = run_filter_family(out=args.out, seeds=args.seeds, epochs=args.epochs, b=args.b,
                             progress=not args.no_progress)
     out = pathlib.Path(args.out)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from jaxnav.cli._common import UsageError
+from jaxnav.cli._common import UsageError, float_range, input_file, int_range, prepare_out
 
 
 def register(subparsers):
@@ -13,16 +13,20 @@ def register(subparsers):
     p.add_argument("--out", default="out/rtk", help="output folder; default out/rtk")
     p.add_argument("--control", default=None, help="control-point CSV (point,B,L,H,x,y,h) of the connection survey")
     p.add_argument("--levelling", default=None, help="levelling CSV (point,height) for the Table 3 comparison")
-    p.add_argument("--lon0", type=float, default=None, help="central meridian, deg (default: zone of the data)")
+    p.add_argument("--lon0", type=float_range(-180.0, 360.0), default=None,
+                   help="central meridian, deg in [-180, 360] (default: zone of the data)")
     p.add_argument("--zone-width", type=int, default=3, choices=(3, 6), help="zone width for the default lon0")
-    p.add_argument("--step", type=float, default=2.0, help=".pos files: thinning interval, s (default 2)")
-    p.add_argument("--window", type=int, default=60, help=".pos files: epochs per occupation (default 60)")
-    p.add_argument("--min-epochs", type=int, default=30, help=".pos files: shortest occupation kept (default 30)")
+    p.add_argument("--step", type=float_range(0.0, 86400.0, lo_open=True), default=2.0,
+                   help=".pos files: thinning interval, s, > 0 (default 2)")
+    p.add_argument("--window", type=int_range(1, 10**6), default=60,
+                   help=".pos files: epochs per occupation, >= 1 (default 60)")
+    p.add_argument("--min-epochs", type=int_range(1, 10**6), default=30,
+                   help=".pos files: shortest occupation kept, >= 1 (default 30)")
     p.add_argument("--all-epochs", action="store_true", help=".pos files: also use float (Q != 1) epochs")
     p.add_argument("--smoother", action="store_true", help="add an RTS pass after the forward filter")
     p.add_argument("--surface", default="auto", choices=("auto", "plane", "quadratic"),
                    help="height-anomaly surface (auto: quadratic with >= 7 control points)")
-    p.add_argument("--simulate", type=int, default=None, metavar="SEED",
+    p.add_argument("--simulate", type=int_range(0, 2**32 - 1), default=None, metavar="SEED",
                    help="write the simulated 45-point S2 survey (epoch log, control, levelling) into --out "
                         "and process it together with FILES")
     return p
@@ -32,14 +36,20 @@ def run(args) -> int:
     """Optionally write the simulated survey, then run the pipeline on the files (prints a summary)."""
     from jaxnav.experiments import run_rtk, write_simulated_survey
 
-    files, control, levelling = list(args.files), args.control, args.levelling
+    if not args.files and args.simulate is None:
+        raise UsageError("give FILES or --simulate SEED")
+    if args.min_epochs > args.window:
+        raise UsageError(f"--min-epochs {args.min_epochs} is more than --window {args.window}: no occupation "
+                         "could be kept")
+    files = [input_file(f, "FILES") for f in args.files]
+    control = None if args.control is None else input_file(args.control, "--control")
+    levelling = None if args.levelling is None else input_file(args.levelling, "--levelling")
+    prepare_out(args.out)
     if args.simulate is not None:
         f_ep, f_cp, f_lv, _ = write_simulated_survey(args.out, seed=args.simulate)
         files.append(f_ep)
         control = control or f_cp
         levelling = levelling or f_lv
-    if not files:
-        raise UsageError("give FILES or --simulate SEED")
     run_rtk(files, args.out, control=control, levelling=levelling, lon0_deg=args.lon0,
             zone_width=args.zone_width, step=args.step, window=args.window, min_epochs=args.min_epochs,
             fixed_only=not args.all_epochs, smoother=args.smoother, surface=args.surface)

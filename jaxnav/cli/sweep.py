@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import add_config_parser
+from jaxnav.cli._common import add_config_parser, prepare_out
 
 
 def register(subparsers):
@@ -19,8 +19,10 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the sweep, print its summary, write results.json, table.csv and figures into ``--out``."""
-    from jaxnav.experiments import format_sweep, run_sweep
+    from jaxnav.experiments import format_sweep, load_config, run_sweep
 
+    load_config(args.config)  # every section and key checked before any work
+    prepare_out(args.out)
     res = run_sweep(args.config, args.out, progress=not args.no_progress)
     out = pathlib.Path(args.out)
     print(format_sweep(res))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import add_config_parser
+from jaxnav.cli._common import add_config_parser, prepare_out
 
 
 def register(subparsers):
@@ -18,8 +18,10 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the tuning, print its summary, write results.json and figures into ``--out``."""
-    from jaxnav.experiments import format_tune, run_tune
+    from jaxnav.experiments import format_tune, load_config, run_tune
 
+    load_config(args.config)  # every section and key checked before any work
+    prepare_out(args.out)
     res = run_tune(args.config, args.out, progress=not args.no_progress)
     out = pathlib.Path(args.out)
     print(format_tune(res))

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import pathlib
-
-from jaxnav.cli._common import DATA_ENV, data_dir
+from jaxnav.cli._common import DATA_ENV, data_dir, prepare_out
 
 #: the walk set's folder inside ``$JAXNAV_DATA``
 WALK_SET = "rtklibexplorer-gnss-imu"
@@ -22,12 +20,17 @@ def register(subparsers):
 def run(args) -> int:
     """Run and score the walk, print the scores, write scores.json and the figure into ``--out``."""
     from jaxnav.experiments import format_walk, run_walk, write_walk_scores
+    from jaxnav.io import load_walk
 
     data = data_dir(args.data, WALK_SET)
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    scores, _ = run_walk(data, out_dir=out)
+    out = prepare_out(args.out)
+    walk = load_walk(data)  # both files read and checked before any work
+    scores, _ = run_walk(walk, out_dir=out)
     path = write_walk_scores(out, scores)
     print(format_walk(scores))
+    if walk.imu.n_skipped_lines:
+        print(f"IMU log: {walk.imu.n_skipped_lines} line(s) skipped: "
+              + "; ".join(f"line {n}: {why}" for n, why in walk.imu.skipped[:3])
+              + (" ..." if walk.imu.n_skipped_lines > 3 else ""))
     print(f"wrote {path} and {scores.figure}")
     return 0

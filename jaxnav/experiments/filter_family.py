@@ -8,7 +8,6 @@ compensation (S1 eqs. (12)-(19)) filters run side by side over vmapped Monte Car
 
 from __future__ import annotations
 
-import json
 import pathlib
 import time
 
@@ -16,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav.io import write_json
 from jaxnav import filters as jf
 from jaxnav.tune import run_chunked
 from jaxnav.sim import simulate_cv_scenario
@@ -106,7 +106,7 @@ def run_filter_family(out="out/demo", seeds=64, epochs=1200, b=0.254, progress=T
                       vc_window=30, vc_horizon=10, vc_floor_rel=1.0),
         table=table, wall_time_s=wall, jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
     )
-    (outdir / "results.json").write_text(json.dumps(results, indent=2))
+    write_json(outdir / "results.json", results, indent=2)
     return results
 
 

@@ -12,7 +12,6 @@ figures, and :func:`format_s0` its table as text.
 from __future__ import annotations
 
 import dataclasses
-import json
 import pathlib
 import time
 from typing import Mapping
@@ -21,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav.io import write_json
 from jaxnav import filters as jf
 from jaxnav import ins, sim, tune
 from jaxnav.geodesy import meridian_radius, prime_vertical_radius
@@ -46,13 +46,32 @@ _SCHEMA = {
 }
 
 
+#: allowed values of the experiment's numbers: (low, high, what), ends included unless named in _OPEN
+_RANGES = {
+    ("filter", "q_scale"): (0.0, 1e6), ("filter", "r_scale"): (0.0, 1e6), ("filter", "b"): (0.0, 1.0),
+    ("filter", "fading_window"): (1, 100_000), ("monte_carlo", "seeds"): (1, 100_000),
+    ("monte_carlo", "chunk"): (1, 100_000), ("sweep", "seeds"): (1, 100_000),
+}
+_OPEN = {("filter", "q_scale"): "lo", ("filter", "r_scale"): "lo", ("filter", "b"): "hi"}
+
+
+def _in_range(v, key):
+    lo, hi = _RANGES[key]
+    side = _OPEN.get(key)
+    ok = (v > lo if side == "lo" else v >= lo) and (v < hi if side == "hi" else v <= hi)
+    return ok and v == v, f"{'(' if side == 'lo' else '['}{lo:g}, {hi:g}{')' if side == 'hi' else ']'}"
+
+
 def load_experiment(path=EXPERIMENT) -> dict:
-    """Read and check an S0 experiment TOML; unknown or mistyped keys raise ValueError naming them."""
+    """Read and check an S0 experiment TOML: every section and key present, of its type and in its
+    range; ValueError naming the file, the key and the allowed values otherwise."""
     path = pathlib.Path(path)
     d = load_toml(path)
     for sec, v in d.items():
         if sec not in _SCHEMA:
             raise ValueError(f"{path}: unknown section [{sec}]; expected one of {sorted(_SCHEMA)}")
+        if not isinstance(v, dict):
+            raise ValueError(f"{path}: {sec} must be a section [{sec}], got {v!r}")
         for k, val in v.items():
             if k not in _SCHEMA[sec]:
                 raise ValueError(f"{path}: unknown key {sec}.{k}; expected one of {sorted(_SCHEMA[sec])}")
@@ -60,13 +79,31 @@ def load_experiment(path=EXPERIMENT) -> dict:
             if typ is float and isinstance(val, int) and not isinstance(val, bool):
                 val = float(val)
                 v[k] = val
-            if not isinstance(val, typ):
+            if not isinstance(val, typ) or (typ is int and isinstance(val, bool)):
                 raise ValueError(f"{path}: {sec}.{k} must be {typ.__name__}, got {val!r}")
-            if typ is list and k == "inflate_states" and not all(isinstance(i, int) and i >= 0 for i in val):
-                raise ValueError(f"{path}: {sec}.{k} must be a list of non-negative state indices, got {val!r}")
+            if (sec, k) in _RANGES:
+                ok, rng = _in_range(val, (sec, k))
+                if not ok:
+                    raise ValueError(f"{path}: {sec}.{k} = {val!r} is outside the allowed range {rng}")
     for sec in _SCHEMA:
         if sec not in d:
             raise ValueError(f"{path}: missing section [{sec}]")
+        for k in _SCHEMA[sec]:
+            if k not in d[sec]:
+                raise ValueError(f"{path}: missing key {sec}.{k}")
+    f = d["filter"]
+    if f["n_states"] not in (15, 18):
+        raise ValueError(f"{path}: filter.n_states must be 15 or 18, got {f['n_states']!r}")
+    if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < f["n_states"] for i in f["inflate_states"]):
+        raise ValueError(f"{path}: filter.inflate_states must be a list of state indices in [0, {f['n_states'] - 1}], "
+                         f"got {f['inflate_states']!r}")
+    bs = d["sweep"]["b"]
+    if not bs or not all(isinstance(b, (int, float)) and not isinstance(b, bool) and 0.0 <= b < 1.0 for b in bs):
+        raise ValueError(f"{path}: sweep.b must be a non-empty list of numbers in [0, 1), got {bs!r}")
+    for name, vals in d["published"].items():
+        if len(vals) != 6 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in vals):
+            raise ValueError(f"{path}: published.{name} must be 6 numbers (E, N, U position m, velocity m/s), "
+                             f"got {vals!r}")
     return d
 
 
@@ -359,7 +396,7 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         wall_time_s=dict(total=wall, **timing), figures=[str(f) for f in figs],
         jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
     )
-    (outdir / "results.json").write_text(json.dumps(results, indent=1))
+    write_json(outdir / "results.json", results)
     return results
 
 

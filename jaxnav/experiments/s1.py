@@ -13,7 +13,6 @@ experiment's tables and figures.
 
 from __future__ import annotations
 
-import json
 import pathlib
 import time
 from functools import partial
@@ -23,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav.io import write_json
 from jaxnav import io
 from jaxnav.monitoring import (
     S1_THRESHOLDS_XYH,
@@ -311,8 +311,8 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
     result = {"stations": {}, "settings": dict(period=period, robust=robust, window=window, horizon=horizon)}
     lines = [f"{'station':<8}{'axis':<6}{'CV filter mm/yr':>18}{'+-formal':>10}{'+-AR(1)':>9}{'LS slope':>10}"
              f"{'published':>16}"]
-    for f in files:
-        s = io.read_daily(f)
+    all_series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
+    for f, s in zip(files, all_series):
         v = station_velocity(s)
         fc = daily_forecasts(s, accel_psd=v.accel_psd, filters=filters)
         st = {}
@@ -333,7 +333,7 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
         plot_daily_velocity(s, v, fig)
         ref = v.reference_velocity
         result["stations"][s.station] = dict(
-            file=str(f), format=s.fmt, epochs=v.n, span_years=v.span_years,
+            file=str(f), format=s.fmt, epochs=v.n, span_years=v.span_years, masked_values=s.n_masked,
             velocity_mm_per_yr=_tolist(v.velocity / MM_PER_YEAR), sigma_formal_mm_per_yr=_tolist(v.sigma / MM_PER_YEAR),
             sigma_ar1_mm_per_yr=_tolist(v.sigma_ar1 / MM_PER_YEAR),
             ls_slope_mm_per_yr=_tolist(v.ls_velocity / MM_PER_YEAR),
@@ -347,8 +347,11 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
                          f"{v.sigma_ar1[i] / MM_PER_YEAR:>9.3f}{v.ls_velocity[i] / MM_PER_YEAR:>10.2f}{pub:>16}")
         fl = "  ".join(f"{n}: m_P {np.mean(d['m_P_mm']):.2f} m_H {np.mean(d['m_H_mm']):.2f} mm" for n, d in st.items())
         lines.append(f"{'':<8}one-day forecasts (mean over periods of {period} epochs): {fl}")
+        if s.n_masked:
+            lines.append(f"{'':<8}{s.n_masked} position value(s) given as nan in {f}: masked (left out of the "
+                         f"filters and the LS slope)")
     result["text"] = "\n".join(lines)
-    (out / "monitor.json").write_text(json.dumps(result, indent=1))
+    write_json(out / "monitor.json", result)
     return result
 
 
@@ -396,5 +399,5 @@ def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs:
         status=res["status"], wall_time_s=wall, jax_version=jax.__version__,
         figures=[str(out / "s1_statistics.png"), str(out / "s1_period.png")],
     )
-    (out / "monitor.json").write_text(json.dumps(result, indent=1, default=float))
+    write_json(out / "monitor.json", result)
     return result

@@ -8,7 +8,6 @@ and the figure. :func:`write_simulated_survey` writes the simulated survey's fil
 
 from __future__ import annotations
 
-import json
 import math
 import pathlib
 
@@ -16,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav.io import write_json
 from jaxnav.geodesy import zone_central_meridian
 from jaxnav.io import (
     read_control_points,
@@ -89,6 +89,11 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     if not files:
         raise ValueError("jaxnav rtk: give at least one .pos or CSV epoch-log file")
     ep = _read_inputs(files, step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only)
+    if not len(ep["t"]):
+        raise ValueError(f"{', '.join(map(str, files))}: no epochs left to process (a .pos file needs occupations of "
+                         f"at least min_epochs={min_epochs} {'fixed ' if fixed_only else ''}epochs)")
+    cp = read_control_points(control) if control is not None else None  # all files read before any work
+    lev = read_levelling(levelling) if levelling is not None else None
     _, counts = np.unique(ep["point"], return_counts=True)
     length = int(-(-counts.max() // 20) * 20)  # padded to a multiple of 20: fewer compilations
     names, series = pack_points(ep["point"], ep["t"], ep["lat"], ep["lon"], ep["H"], ep["sigma"],
@@ -103,10 +108,11 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     if control is not None and len(zones) > 1:
         raise ValueError(f"points fall in zones with central meridians {zones} deg; one control set needs one "
                          "projection: give --lon0")
-    summary = dict(files=[str(f) for f in files], n_points=len(names), lon0_deg=zones, smoother=smoother)
+    summary = dict(files=[str(f) for f in files], n_points=len(names), lon0_deg=zones, smoother=smoother,
+                   masked_epochs=int(np.sum(~np.asarray(ep["mask"]) | ~np.all(np.isfinite(ep["sigma"]), axis=1)
+                                        | ~np.isfinite(ep["lat"]) | ~np.isfinite(ep["lon"]) | ~np.isfinite(ep["H"]))))
     transform = anomaly = None
     if control is not None:
-        cp = read_control_points(control)
         con = connection_models(cp.lat, cp.lon, cp.H, np.stack([cp.x, cp.y], -1), cp.h, lon0=float(lon0[0]),
                                 surface=surface)
         if con.transform is not None:
@@ -127,7 +133,6 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     res = type(res)(*[np.asarray(a) if not isinstance(a, tuple) else a for a in res])
     h_level = np.full(len(names), np.nan)
     if levelling is not None:
-        lev = read_levelling(levelling)
         table = dict(zip(lev.point, lev.height))
         h_level = np.array([table.get(n, np.nan) for n in names])
     prec = {key: dict(plane_mm=float(np.nanmean(np.hypot(p[:, 0], p[:, 1]))) / MM,
@@ -156,7 +161,7 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
                               formal_precision_mm=[float(v) / MM for v in res.formal_precision[i]])
                          for i, n in enumerate(names)]
     summary["outputs"] = [str(out / "rtk_results.csv"), str(out / "rtk_results.json"), str(out / "rtk.png")]
-    (out / "rtk_results.json").write_text(json.dumps(summary, indent=1, default=lambda a: None))
+    write_json(out / "rtk_results.json", summary)
     if not quiet:
         print(format_rtk(summary))
     return summary

@@ -8,7 +8,6 @@ walk set, identify the AR error model of a static record, and write ``results.js
 
 from __future__ import annotations
 
-import json
 import math
 import pathlib
 import time
@@ -18,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav.io import write_json
 from jaxnav.experiments.walk import WALK_SENSOR_TO_BODY
 from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.io import imu_increments, load_walk, read_stop_list, write_stop_list
@@ -322,7 +322,7 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
     else:
         results["walk_detection"] = {"skipped": f"walk set not found (looked in {walk_dir})"}
     results["wall_s_total"] = time.perf_counter() - t_start
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=lambda x: np.asarray(x).tolist()))
+    write_json(out / "results.json", results)
     return results
 
 

@@ -11,7 +11,6 @@ trainable), ``[sweep]`` (grid axes) and ``[tune]`` (optimiser). :func:`run_sweep
 from __future__ import annotations
 
 import csv
-import json
 import pathlib
 import time
 
@@ -20,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from jaxnav.io import write_json
 from jaxnav import filters as jf
 from jaxnav import tune
 from jaxnav.experiments.s0 import (
@@ -40,6 +40,28 @@ _PROBLEM = {"kind": str, "filter": str, "loss": str, "seeds": int, "seed": int, 
             "experiment": str, "series": int, "epochs": int, "sigma": float, "q": float}
 _TUNE = {"optimizer": str, "learning_rate": float, "steps": int, "mode": str, "landscape": int}
 _OPTIMIZERS = ("adam", "sgd", "lbfgs", "lbfgs_wolfe")
+_MODES = ("auto", "forward", "reverse")
+#: allowed ranges (lo, hi, open ends "lo"/"hi"/"") of the problem and tune numbers
+_PROBLEM_RANGE = {"seeds": (1, 100_000, ""), "series": (1, 100_000, ""), "epochs": (2, 10**6, ""),
+                  "seed": (0, 2**32 - 1, ""), "duration": (0.0, 1e6, "lo"), "sigma": (0.0, 1e4, "lo"),
+                  "q": (0.0, 1e6, "lo")}
+_TUNE_RANGE = {"learning_rate": (0.0, 1e6, "lo"), "steps": (1, 10**6, ""), "landscape": (0, 10**5, "")}
+#: allowed values of each tunable parameter (lo, hi, open ends)
+_PARAM_RANGE = {"b": (0.0, 1.0, "hi"), "q_scale": (0.0, 1e6, "lo"), "r_scale": (0.0, 1e6, "lo"),
+                "S": (1.0, 1e6, ""), "rho": (0.0, 1e6, "lo"), "tau": (0.0, 1e6, "lo")}
+
+
+def _number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _check_range(path, key, v, rng):
+    """ValueError naming ``key`` unless ``v`` is a finite number inside ``rng`` = (lo, hi, open ends)."""
+    lo, hi, opn = rng
+    ok = _number(v) and v == v and (v > lo if "lo" in opn else v >= lo) and (v < hi if "hi" in opn else v <= hi)
+    if not ok:
+        _err(path, f"{key} = {v!r} is outside the allowed range {'(' if 'lo' in opn else '['}{lo:g}, {hi:g}"
+                   f"{')' if 'hi' in opn else ']'}")
 
 
 def _err(path, msg):
@@ -58,13 +80,21 @@ def load_config(spec) -> dict:
         if sec not in ("problem", "params", "sweep", "tune"):
             _err(path, f"unknown section [{sec}]; expected problem, params, sweep, tune")
     prob = cfg.get("problem") or _err(path, "missing section [problem]")
+    if not isinstance(prob, dict):
+        _err(path, f"problem must be a section [problem], got {prob!r}")
     for k, v in prob.items():
         if k not in _PROBLEM:
             _err(path, f"unknown key problem.{k}; expected one of {sorted(_PROBLEM)}")
-        if _PROBLEM[k] is float and isinstance(v, int):
+        if _PROBLEM[k] is float and _number(v):
             prob[k] = float(v)
-        elif not isinstance(prob[k], _PROBLEM[k]):
+        elif not isinstance(prob[k], _PROBLEM[k]) or isinstance(v, bool):
             _err(path, f"problem.{k} must be {_PROBLEM[k].__name__}, got {v!r}")
+        if k in _PROBLEM_RANGE:
+            _check_range(path, f"problem.{k}", prob[k], _PROBLEM_RANGE[k])
+    if "experiment" in prob and not pathlib.Path(prob["experiment"]).is_file():
+        _err(path, f"problem.experiment: {prob['experiment']}: no such file")
+    if prob.get("kind") == "s0":
+        load_experiment(prob.get("experiment") or EXPERIMENT)  # its keys checked now, not after a compile
     kind = prob.get("kind")
     if kind == "s0":
         prob.setdefault("filter", "attenuated")
@@ -87,7 +117,11 @@ def load_config(spec) -> dict:
         _err(path, f"problem.kind must be 's0' or 'cv', got {kind!r}")
     prob.setdefault("seed", 0)
     params = cfg.get("params") or _err(path, "missing section [params.NAME] (at least one parameter)")
+    if not isinstance(params, dict):
+        _err(path, f"params must be sections [params.NAME], got {params!r}")
     for name, p in params.items():
+        if not isinstance(p, dict):
+            _err(path, f"params.{name} must be a section [params.{name}] with init = ..., got {p!r}")
         if name not in allowed:
             _err(path, f"parameter {name!r} does not apply to this problem; allowed: {sorted(allowed)}")
         if "init" not in p:
@@ -97,26 +131,60 @@ def load_config(spec) -> dict:
             _err(path, f"unknown keys {sorted(unknown)} in [params.{name}]")
         p.setdefault("bijector", "unit" if name == "b" else "log")
         p.setdefault("trainable", True)
+        if not isinstance(p["trainable"], bool):
+            _err(path, f"params.{name}.trainable must be true or false, got {p['trainable']!r}")
         try:
             tune.bijector(p["bijector"])
-        except ValueError as exc:
+        except (ValueError, TypeError) as exc:
             _err(path, f"params.{name}.bijector: {exc}")
+        _check_range(path, f"params.{name}.init", p["init"], _PARAM_RANGE[name])
+        if p["bijector"] == "unit" and not 0.0 < p["init"] < 1.0:
+            _err(path, f"params.{name}.init = {p['init']!r} must be in (0, 1) for bijector 'unit'")
+        if p["bijector"] == "log" and not p["init"] > 0.0:
+            _err(path, f"params.{name}.init = {p['init']!r} must be > 0 for bijector 'log'")
     if kind == "s0" and prob["filter"] != "classic":
         need = S0_PARAMS[prob["filter"]]
         if prob["filter"] != "fading" and not set(need) <= set(params):
             _err(path, f"filter {prob['filter']} needs parameter(s) {need}")
     sw = cfg.setdefault("sweep", {})
+    if not isinstance(sw, dict):
+        _err(path, f"sweep must be a section [sweep], got {sw!r}")
     for name, ax in sw.items():
         if name == "chunk":
+            _check_range(path, "sweep.chunk", ax, (1, 10**6, ""))
+            if not isinstance(ax, int):
+                _err(path, f"sweep.chunk must be an integer, got {ax!r}")
             continue
         if name not in params:
             _err(path, f"sweep axis {name!r} is not a parameter")
         if not (isinstance(ax, dict) and {"start", "stop", "num"} <= set(ax)):
             _err(path, f"sweep.{name} must be {{ start = , stop = , num = [, log = true] }}")
+        unknown = set(ax) - {"start", "stop", "num", "log"}
+        if unknown:
+            _err(path, f"unknown keys {sorted(unknown)} in sweep.{name}; expected start, stop, num, log")
+        if not isinstance(ax["num"], int) or isinstance(ax["num"], bool):
+            _err(path, f"sweep.{name}.num must be an integer, got {ax['num']!r}")
+        _check_range(path, f"sweep.{name}.num", ax["num"], (1, 10**6, ""))
+        if not isinstance(ax.get("log", False), bool):
+            _err(path, f"sweep.{name}.log must be true or false, got {ax['log']!r}")
+        for end in ("start", "stop"):
+            _check_range(path, f"sweep.{name}.{end}", ax[end], _PARAM_RANGE[name])
+            if ax.get("log") and not ax[end] > 0:
+                _err(path, f"sweep.{name}.{end} = {ax[end]!r} must be > 0 with log = true")
     tn = cfg.setdefault("tune", {})
-    for k in tn:
+    if not isinstance(tn, dict):
+        _err(path, f"tune must be a section [tune], got {tn!r}")
+    for k, v in tn.items():
         if k not in _TUNE:
             _err(path, f"unknown key tune.{k}; expected one of {sorted(_TUNE)}")
+        if _TUNE[k] is float and _number(v):
+            tn[k] = float(v)
+        elif not isinstance(v, _TUNE[k]) or isinstance(v, bool):
+            _err(path, f"tune.{k} must be {_TUNE[k].__name__}, got {v!r}")
+        if k in _TUNE_RANGE:
+            _check_range(path, f"tune.{k}", tn[k], _TUNE_RANGE[k])
+    if tn.get("mode", "auto") not in _MODES:
+        _err(path, f"tune.mode must be one of {_MODES}, got {tn['mode']!r}")
     tn.setdefault("optimizer", "adam")
     tn.setdefault("learning_rate", 0.1)
     tn.setdefault("steps", 50)
@@ -178,11 +246,7 @@ def _grid(P: Problem, axes: dict):
 
 def _write(out: pathlib.Path, results: dict):
     out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=_jsonable))
-
-
-def _jsonable(a):
-    return np.asarray(a).tolist()
+    write_json(out / "results.json", results)
 
 
 def run_sweep(config, out, *, progress=True) -> dict:
@@ -193,6 +257,8 @@ def run_sweep(config, out, *, progress=True) -> dict:
     """
     t0 = time.perf_counter()
     cfg = load_config(config)
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
     P = Problem(cfg)
     axes = {k: _axis(v) for k, v in cfg["sweep"].items() if k != "chunk"}
     if not axes:
@@ -255,6 +321,8 @@ def run_tune(config, out, *, progress=True) -> dict:
     """
     t0 = time.perf_counter()
     cfg = load_config(config)
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
     P = Problem(cfg)
     tn = cfg["tune"]
     if tn["optimizer"] == "lbfgs_wolfe":  # steps = evaluation budget; the loss is compiled once

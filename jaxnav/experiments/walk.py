@@ -26,7 +26,6 @@ Host-side glue (numpy) around :func:`jaxnav.io.load_walk`, :func:`jaxnav.ins.coa
 
 from __future__ import annotations
 
-import json
 import math
 import pathlib
 import time
@@ -34,6 +33,7 @@ from typing import Any, NamedTuple, Optional, Sequence
 
 import numpy as np
 
+from jaxnav.io import write_json
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (
     LCParams,
@@ -284,7 +284,7 @@ def run_walk(data, *, C_bs=WALK_SENSOR_TO_BODY, noise: WalkNoise = WalkNoise(), 
 def write_walk_scores(out_dir, scores: OutageScores) -> pathlib.Path:
     """Write :class:`OutageScores` as ``out_dir/scores.json`` (arrays as lists; units as in the record)."""
     path = pathlib.Path(out_dir) / "scores.json"
-    path.write_text(json.dumps(scores._asdict(), indent=1, default=lambda a: a.tolist()))
+    write_json(path, scores._asdict())
     return path
 
 

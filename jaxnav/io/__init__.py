@@ -2,10 +2,14 @@
 series (NGL tenv3, SIO .neu, .col tables), TOML configuration files; the walk_0827 set; S3 stop
 lists and S2 result tables (readers and writers).
 
-Errors name the file and line; units are converted to SI here, at the edge.
+Errors are :class:`ReaderError` (a ValueError) naming the file and line; units are converted to SI
+here, at the edge. :func:`write_json` is the one strict JSON writer (non-finite numbers as null
+with a reason).
 """
 
 from jaxnav._config import load_toml, loads_toml  # the one TOML parser sits below every layer (sim reads scenarios)
+from jaxnav.io._errors import ReaderError
+from jaxnav.io._json import json_ready, write_json
 from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_tenv3, year_to_seconds
 from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, read_rtklib_imu, read_rtklib_tag
 from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
@@ -29,4 +33,4 @@ __all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags",
            "read_levelling", "write_control_points", "write_epoch_log", "write_levelling", "load_toml",
            "loads_toml",
            "imu_increments", "RTK_RESULT_COLUMNS", "write_rtk_results", "read_stop_list", "write_stop_list",
-           "WalkData", "load_walk"]
+           "WalkData", "load_walk", "ReaderError", "json_ready", "write_json"]

@@ -1,7 +1,10 @@
 """Readers for daily GNSS station position series (host side): NGL tenv3, SIO .neu, .col tables.
 
 Every reader returns a :class:`DailySeries` in SI units (m, s) with the local east, north, up
-components in that order, whatever the file's order. Errors name the file and the line.
+components in that order, whatever the file's order. Errors are :class:`jaxnav.io.ReaderError`
+naming the file and the line. A position component written ``nan`` is a missing value: it stays
+NaN (the filters mask it), its variance is set to 1 m^2 (never used) and it is counted in
+:attr:`DailySeries.n_masked`; infinities and impossible values are errors.
 """
 
 from __future__ import annotations
@@ -12,11 +15,15 @@ from typing import Any, NamedTuple, Optional
 
 import numpy as np
 
+from jaxnav.io._errors import HEIGHT_RANGE_M, PLANE_MAX_M, SIGMA_MAX_M, ReaderError, text_lines
 from jaxnav.units import CM, DEG, YEAR
 
 #: decimal year of the time origin used for ``DailySeries.t`` (J2000.0 in Julian years)
 T0_YEAR = 2000.0
 _MJD_J2000 = 51544.5  # MJD of 2000-01-01 12:00
+#: decimal years accepted (GNSS daily series; anything else is a corrupted time)
+YEAR_RANGE = (1950.0, 2150.0)
+_MJD_RANGE = (33282.0, 106314.0)  # the same span as MJD
 
 
 class DailySeries(NamedTuple):
@@ -35,6 +42,7 @@ class DailySeries(NamedTuple):
       reference_velocity: (3,) east, north, up velocity published in the file header, m/s
         (SIO .neu "slope" lines), else None.
       reference_velocity_sigma: (3,) its standard deviation, m/s, else None.
+      n_masked: number of position components the file gave as ``nan`` (NaN in ``enu``).
     """
 
     station: str
@@ -48,6 +56,7 @@ class DailySeries(NamedTuple):
     llh: Any
     reference_velocity: Optional[Any] = None
     reference_velocity_sigma: Optional[Any] = None
+    n_masked: int = 0
 
 
 def year_to_seconds(year):
@@ -56,7 +65,7 @@ def year_to_seconds(year):
 
 
 def _err(path, lineno, msg):
-    return ValueError(f"{path}:{lineno}: {msg}")
+    return ReaderError(path, lineno, msg)
 
 
 def _floats(words, path, lineno, what):
@@ -66,20 +75,53 @@ def _floats(words, path, lineno, what):
         raise _err(path, lineno, f"cannot read {what}: {exc}") from None
 
 
+def _check_times(t, lines, path, rng, what):
+    """Times finite and inside ``rng`` (the file's unit ``what``)."""
+    bad = np.flatnonzero(~((t >= rng[0]) & (t <= rng[1])))
+    if bad.size:
+        i = int(bad[0])
+        raise _err(path, lines[i], f"{what} {float(t[i])!r} is outside [{rng[0]:g}, {rng[1]:g}] (not a GNSS-era time)")
+
+
+def _masked_positions(enu, sig, lines, path, limits, corr=None):
+    """Check positions and sigmas; NaN positions are missing values (masked, counted).
+
+    Args:
+      enu: (N, 3) m.  sig: (N, 3) m.  lines: (N,) line numbers.  limits: (3,) largest |e|, |n|, |u|, m.
+      corr: optional (N, 3) correlations en, eu, nu.
+    Returns:
+      (sig, corr, n_masked) with the masked components' sigma 1 m and their correlations 0.
+    Raises:
+      ReaderError: an infinite or impossible position, a bad sigma of a present component, a
+        correlation outside [-1, 1].
+    """
+    miss = np.isnan(enu)
+    for name, j in (("east", 0), ("north", 1), ("up", 2)):
+        bad = np.flatnonzero(~miss[:, j] & ~(np.abs(enu[:, j]) <= limits[j]))
+        if bad.size:
+            i = int(bad[0])
+            raise _err(path, lines[i], f"{name} = {float(enu[i, j]):g} m is not finite or beyond {limits[j]:g} m")
+    sig = np.where(miss, 1.0, sig)
+    bad = np.flatnonzero(~np.all(np.isfinite(sig) & (sig > 0) & (sig <= SIGMA_MAX_M), axis=1))
+    if bad.size:
+        i = int(bad[0])
+        raise _err(path, lines[i], f"sigmas must be positive, finite and <= {SIGMA_MAX_M:g} m, got {sig[i].tolist()}")
+    if corr is not None:
+        pair_miss = np.stack([miss[:, 0] | miss[:, 1], miss[:, 0] | miss[:, 2], miss[:, 1] | miss[:, 2]], axis=1)
+        corr = np.where(pair_miss, 0.0, corr)
+        bad = np.flatnonzero(~np.all(np.abs(corr) <= 1.0, axis=1))
+        if bad.size:
+            raise _err(path, lines[int(bad[0])], f"correlations must lie in [-1, 1], got {corr[bad[0]].tolist()}")
+    return sig, corr, int(miss.sum())
+
+
 def _check_increasing(t, lines, path):
     d = np.diff(t)
     bad = np.flatnonzero(~(d > 0))
     if bad.size:
         i = int(bad[0]) + 1
-        raise _err(path, lines[i], f"time {t[i]!r} does not increase (previous epoch {t[i - 1]!r}, line "
-                                   f"{lines[i - 1]})")
-
-
-def _check_sigmas(sig, lines, path):
-    bad = np.flatnonzero(~np.all(np.isfinite(sig) & (sig > 0), axis=1))
-    if bad.size:
-        i = int(bad[0])
-        raise _err(path, lines[i], f"sigmas must be positive and finite, got {sig[i].tolist()}")
+        raise _err(path, lines[i], f"time {float(t[i])!r} does not increase (previous epoch {float(t[i - 1])!r}, "
+                                   f"line {lines[i - 1]})")
 
 
 def _cov(sig, corr=None):
@@ -94,12 +136,11 @@ def _cov(sig, corr=None):
 
 
 def _data_lines(path):
-    """(lineno, words) of the non-empty, non-comment lines."""
-    with open(path, "r", encoding="utf-8", errors="replace") as fh:
-        for lineno, line in enumerate(fh, start=1):
-            s = line.strip()
-            if s and not s.startswith("#"):
-                yield lineno, s.split()
+    """(lineno, words) of the non-empty, non-comment lines (strict UTF-8)."""
+    for lineno, line in text_lines(path):
+        s = line.strip()
+        if s and not s.startswith("#"):
+            yield lineno, s.split()
 
 
 def read_tenv3(path) -> DailySeries:
@@ -116,8 +157,10 @@ def read_tenv3(path) -> DailySeries:
     Returns:
       :class:`DailySeries` (fmt "tenv3").
     Raises:
-      ValueError: naming file and line of a record with too few columns, a non-numeric field, a
-        non-positive sigma, a correlation outside [-1, 1], or time not increasing; or no records.
+        ReaderError: naming file and line of a record with too few columns, a non-numeric field, a
+        non-UTF-8 byte, an infinite or impossible value (latitude beyond 90 deg, MJD outside
+        1950-2150), a bad sigma, a correlation outside [-1, 1], or time not increasing; or no
+        records. ``nan`` positions are masked and counted (module docstring).
     """
     path = pathlib.Path(path)
     rows, lines, station = [], [], None
@@ -131,24 +174,32 @@ def read_tenv3(path) -> DailySeries:
                             "the numeric columns"))
         lines.append(lineno)
     if not rows:
-        raise ValueError(f"{path}: no data records")
+        raise ReaderError(path, None, "no data records")
     a = np.asarray(rows)
     year, mjd = a[:, 0], a[:, 1]
+    _check_times(mjd, lines, path, _MJD_RANGE, "MJD")
+    _check_times(year, lines, path, YEAR_RANGE, "decimal year")
     t = (mjd - _MJD_J2000) * 86400.0
     _check_increasing(t, lines, path)
     e, n, u = a[:, 2] + a[:, 3], a[:, 4] + a[:, 5], a[:, 6] + a[:, 7]
-    sig = a[:, 9:12]
-    _check_sigmas(sig, lines, path)
-    corr = a[:, 12:15]
-    bad = np.flatnonzero(~np.all(np.abs(corr) <= 1.0, axis=1))
-    if bad.size:
-        raise _err(path, lines[int(bad[0])], f"correlations must lie in [-1, 1], got {corr[bad[0]].tolist()}")
     enu = np.stack([e, n, u], axis=1)
-    origin = enu[0].copy()
+    sig, corr, n_masked = _masked_positions(enu, a[:, 9:12], lines, path,
+                                            (PLANE_MAX_M, PLANE_MAX_M, max(map(abs, HEIGHT_RANGE_M))), a[:, 12:15])
+    for j, name, lim in ((15, "latitude", 90.0), (16, "longitude", 360.0)):
+        bad = np.flatnonzero(~np.isnan(a[:, j]) & ~(np.abs(a[:, j]) <= lim))
+        if bad.size:
+            raise _err(path, lines[int(bad[0])], f"{name} = {float(a[bad[0], j]):g} deg is beyond +-{lim:g} deg")
+    bad = np.flatnonzero(~np.isnan(a[:, 17]) & ~((a[:, 17] >= HEIGHT_RANGE_M[0]) & (a[:, 17] <= HEIGHT_RANGE_M[1])))
+    if bad.size:
+        raise _err(path, lines[int(bad[0])], f"height = {float(a[bad[0], 17]):g} m is outside {list(HEIGHT_RANGE_M)} m")
+    ok = np.all(np.isfinite(enu), axis=1)
+    if not ok.any():
+        raise ReaderError(path, None, "every record has a missing (nan) position component")
+    origin = enu[int(np.argmax(ok))].copy()  # the first complete epoch
     lon = (a[:, 16] + 180.0) % 360.0 - 180.0
     llh = np.stack([a[:, 15] * DEG, lon * DEG, a[:, 17]], axis=1)
     return DailySeries(station=station, path=str(path), fmt="tenv3", t=t, year=year, enu=enu - origin,
-                       cov=_cov(sig, corr), origin=origin, llh=llh)
+                       cov=_cov(sig, corr), origin=origin, llh=llh, n_masked=n_masked)
 
 
 _SLOPE = re.compile(r"slope\s*1:\s*([-+0-9.eE]+)\s*\+/-\s*([-+0-9.eE]+)\s*m/yr")
@@ -167,40 +218,42 @@ def read_neu(path) -> DailySeries:
       :class:`DailySeries` (fmt "neu"); the station name is the file name up to the first
       non-letter (``bjfsCleanUnf.neu`` -> "BJFS").
     Raises:
-      ValueError: naming file and line of a record without 9 numeric columns, a non-positive
-        sigma, or time not increasing; or no records.
+      ReaderError: naming file and line of a record without 9 numeric columns, a non-UTF-8 byte,
+        an infinite or impossible value, a bad sigma, or time not increasing; or no records.
+        ``nan`` positions are masked and counted.
     """
     path = pathlib.Path(path)
     rows, lines = [], []
     slopes, comp = {}, None
-    with open(path, "r", encoding="utf-8", errors="replace") as fh:
-        for lineno, line in enumerate(fh, start=1):
-            s = line.strip()
-            if not s:
-                continue
-            if s.startswith("#"):
-                m = _COMP.match(s)
-                if m:
-                    comp = m.group(1)
-                m = _SLOPE.search(s)
-                if m and comp is not None:
-                    slopes[comp] = (float(m.group(1)), float(m.group(2)))
-                continue
-            w = s.split()
-            if len(w) < 9:
-                raise _err(path, lineno,
-                           f"expected 9 columns (year, yyyy, doy, dN, dE, dU, sN, sE, sU), found {len(w)}")
-            rows.append(_floats(w[:9], path, lineno, "the numeric columns"))
-            lines.append(lineno)
+    for lineno, line in text_lines(path):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            m = _COMP.match(s)
+            if m:
+                comp = m.group(1)
+            m = _SLOPE.search(s)
+            if m and comp is not None:
+                v = _floats(m.groups(), path, lineno, "the slope")
+                if all(np.isfinite(v)) and v[1] >= 0:
+                    slopes[comp] = tuple(v)
+            continue
+        w = s.split()
+        if len(w) < 9:
+            raise _err(path, lineno,
+                       f"expected 9 columns (year, yyyy, doy, dN, dE, dU, sN, sE, sU), found {len(w)}")
+        rows.append(_floats(w[:9], path, lineno, "the numeric columns"))
+        lines.append(lineno)
     if not rows:
-        raise ValueError(f"{path}: no data records")
+        raise ReaderError(path, None, "no data records")
     a = np.asarray(rows)
     year = a[:, 0]
+    _check_times(year, lines, path, YEAR_RANGE, "decimal year")
     t = year_to_seconds(year)
     _check_increasing(t, lines, path)
     enu = a[:, [4, 3, 5]]
-    sig = a[:, [7, 6, 8]]
-    _check_sigmas(sig, lines, path)
+    sig, _, n_masked = _masked_positions(enu, a[:, [7, 6, 8]], lines, path, (PLANE_MAX_M,) * 3)
     ref = ref_s = None
     if set(slopes) == {"n", "e", "u"}:
         ref = np.array([slopes[c][0] for c in "enu"]) / YEAR
@@ -208,7 +261,8 @@ def read_neu(path) -> DailySeries:
     station = re.match(r"[A-Za-z0-9]{4}", path.name)
     return DailySeries(station=(station.group(0) if station else path.stem).upper(), path=str(path), fmt="neu",
                        t=t, year=year, enu=enu, cov=_cov(sig), origin=np.zeros(3),
-                       llh=np.full((len(t), 3), np.nan), reference_velocity=ref, reference_velocity_sigma=ref_s)
+                       llh=np.full((len(t), 3), np.nan), reference_velocity=ref, reference_velocity_sigma=ref_s,
+                       n_masked=n_masked)
 
 
 _COL_NAMES = {"ns": 1, "ew": 0, "ud": 2}
@@ -225,8 +279,9 @@ def read_col(path) -> DailySeries:
     Returns:
       :class:`DailySeries` (fmt "col"); the station is the file name before the first "_".
     Raises:
-      ValueError: naming file and line of a missing header or column, a record with the wrong
-        number of columns, a non-numeric field, a non-positive sigma or time not increasing.
+      ReaderError: naming file and line of a missing header or column, a record with the wrong
+        number of columns, a non-numeric field, a non-UTF-8 byte, an infinite or impossible value,
+        a bad sigma or time not increasing. ``nan`` positions are masked and counted.
     """
     path = pathlib.Path(path)
     header, rows, lines = None, [], []
@@ -256,26 +311,29 @@ def read_col(path) -> DailySeries:
         rows.append(_floats(w, path, lineno, "the numeric columns"))
         lines.append(lineno)
     if header is None or not rows:
-        raise ValueError(f"{path}: no header or no data records")
+        raise ReaderError(path, None, "no header or no data records")
     a = np.asarray(rows)
     year = a[:, idx["year"]]
+    _check_times(year, lines, path, YEAR_RANGE, "decimal year")
     t = year_to_seconds(year)
     _check_increasing(t, lines, path)
     enu = np.stack([a[:, idx[k]] * scale[k] for k in ("ew", "ns", "ud")], axis=1)
     sig = np.stack([a[:, idx[k]] * scale[k] for k in ("sew", "sns", "sud")], axis=1)
-    _check_sigmas(sig, lines, path)
+    sig, _, n_masked = _masked_positions(enu, sig, lines, path, (PLANE_MAX_M,) * 3)
     return DailySeries(station=path.name.split("_")[0].split(".")[0].upper(), path=str(path), fmt="col", t=t,
-                       year=year, enu=enu, cov=_cov(sig), origin=np.zeros(3), llh=np.full((len(t), 3), np.nan))
+                       year=year, enu=enu, cov=_cov(sig), origin=np.zeros(3), llh=np.full((len(t), 3), np.nan),
+                       n_masked=n_masked)
 
 
 def read_daily(path) -> DailySeries:
     """Read a daily series, choosing the reader by suffix: ``.tenv3``, ``.neu``, ``.col``.
 
     Raises:
-      ValueError: unknown suffix (naming the file), or any reader error.
+      ReaderError: unknown suffix (naming the file), or any reader error.
     """
     path = pathlib.Path(path)
     readers = {".tenv3": read_tenv3, ".neu": read_neu, ".col": read_col}
     if path.suffix.lower() not in readers:
-        raise ValueError(f"{path}: unknown daily-series format {path.suffix!r}; expected one of {sorted(readers)}")
+        raise ReaderError(path, None, f"unknown daily-series format {path.suffix!r}; expected one of "
+                                      f"{sorted(readers)}")
     return readers[path.suffix.lower()](path)

@@ -40,7 +40,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from jaxnav.io._rtklib import GPS_EPOCH
+from jaxnav.io._errors import ReaderError
+from jaxnav.io._rtklib import GPS_EPOCH, GPST_RANGE_S
 
 STANDARD_GRAVITY = 9.80665
 """m/s^2 per g (standard gravity, CGPM 1901), the unit of the logs' accelerometer columns."""
@@ -52,6 +53,12 @@ GPS_EPOCH_UNIX = (GPS_EPOCH - _dt.datetime(1970, 1, 1)).total_seconds()
 TAG_HEADER_MAGIC = b"TIMETAG RTKLIB"
 TAG_HEADER_LEN = 60  # text part; tick_f follows at 60, the start time at 64 and 68
 TAG_DATA_START = 76
+#: the largest |specific force| a record may give, m/s^2 (about 100 g: beyond any IMU's range)
+ACCEL_MAX = 1000.0
+#: the largest |angular rate| a record may give, rad/s (about 11 500 deg/s)
+GYRO_MAX = 200.0
+#: counters accepted (non-negative, well inside int64)
+COUNTER_MAX = 2**62
 _TIMINGS = ("counter", "arrival", "endpoints")
 
 
@@ -110,8 +117,8 @@ def _decode_tag_records(buf, path, fpos_bytes):
     rec = 4 + fpos_bytes
     n = (len(buf) - TAG_DATA_START) // rec
     if (len(buf) - TAG_DATA_START) % rec:
-        raise ValueError(f"{path}: {len(buf) - TAG_DATA_START} bytes of records is not a whole number of "
-                         f"{rec}-byte (uint32 tick, uint{8 * fpos_bytes} position) records")
+        raise ReaderError(path, None, f"{len(buf) - TAG_DATA_START} bytes of records is not a whole number of "
+                                      f"{rec}-byte (uint32 tick, uint{8 * fpos_bytes} position) records")
     dt = np.dtype([("tick", "<u4"), ("fpos", "<u4" if fpos_bytes == 4 else "<u8")])
     r = np.frombuffer(buf, dtype=dt, count=n, offset=TAG_DATA_START)
     tick, fpos = r["tick"].astype(np.int64), r["fpos"].astype(np.int64)
@@ -119,8 +126,9 @@ def _decode_tag_records(buf, path, fpos_bytes):
         bad = np.flatnonzero(np.diff(a) < 0)
         if bad.size:
             k = int(bad[0]) + 1
-            raise ValueError(f"{path}: record {k} (file offset {TAG_DATA_START + k * rec}): {name} {a[k]} is "
-                             f"smaller than the previous {a[k - 1]}; not a {rec}-byte-record RTKLIB tag file")
+            raise ReaderError(path, None, f"record {k} (file offset {TAG_DATA_START + k * rec}): {name} {a[k]} is "
+                                          f"smaller than the previous {a[k - 1]}; not a {rec}-byte-record RTKLIB "
+                                          "tag file")
     return tick, fpos
 
 
@@ -134,23 +142,29 @@ def read_rtklib_tag(path, *, fpos_bytes=None) -> TimeTags:
     Returns:
       :class:`TimeTags`.
     Raises:
-      ValueError: naming the file, for a wrong header, a short file, a partial record, or
-        decreasing ticks/positions.
+      ReaderError: (a ValueError) naming the file, for a wrong header, a short file, a header
+        without records, a start time before 1980 or after 2100, a partial record, or decreasing
+        ticks/positions.
       FileNotFoundError: if the file does not exist.
     """
     path = pathlib.Path(path)
     buf = path.read_bytes()
     if not buf.startswith(TAG_HEADER_MAGIC):
-        raise ValueError(f"{path}: not an RTKLIB time-tag file (header {buf[:20]!r} does not start with "
-                         f"{TAG_HEADER_MAGIC.decode()!r})")
+        raise ReaderError(path, None, f"not an RTKLIB time-tag file (header {buf[:20]!r} does not start with "
+                                      f"{TAG_HEADER_MAGIC.decode()!r})")
     if len(buf) < TAG_DATA_START:
-        raise ValueError(f"{path}: {len(buf)} bytes is shorter than the {TAG_DATA_START}-byte tag header")
+        raise ReaderError(path, None, f"{len(buf)} bytes is shorter than the {TAG_DATA_START}-byte tag header")
+    if len(buf) == TAG_DATA_START:
+        raise ReaderError(path, None, "no time-tag records after the header (an empty log)")
     version = buf[len(TAG_HEADER_MAGIC):TAG_HEADER_LEN].split(b"\0", 1)[0].decode("ascii", "replace").strip()
     tick_f, time_s = struct.unpack_from("<II", buf, TAG_HEADER_LEN)
     (frac,) = struct.unpack_from("<d", buf, TAG_HEADER_LEN + 8)
     if not (0.0 <= frac < 1.0):
-        raise ValueError(f"{path}: start-time fraction {frac!r} at offset 68 is not in [0, 1)")
+        raise ReaderError(path, None, f"start-time fraction {frac!r} at offset 68 is not in [0, 1)")
     t_start = time_s - GPS_EPOCH_UNIX + frac
+    if not GPST_RANGE_S[0] <= t_start <= GPST_RANGE_S[1]:
+        raise ReaderError(path, None, f"start time {time_s} (offset 64, GPST counted like Unix time) is before "
+                                      "1980-01-06 or after 2100")
     if fpos_bytes is not None:
         if fpos_bytes not in (4, 8):
             raise ValueError(f"fpos_bytes must be 4 or 8, not {fpos_bytes!r}")
@@ -161,16 +175,20 @@ def read_rtklib_tag(path, *, fpos_bytes=None) -> TimeTags:
             try:
                 tick, fpos = _decode_tag_records(buf, path, fpos_bytes)
                 break
-            except ValueError as exc:
-                errors.append(str(exc))
+            except ReaderError as exc:
+                errors.append(exc.reason)
         else:
-            raise ValueError(" / ".join(errors))
+            raise ReaderError(path, None, " / ".join(errors))
     return TimeTags(path=str(path), version=version, tick_f=int(tick_f), t_start=float(t_start),
                     tick=tick, fpos=fpos, fpos_bytes=fpos_bytes)
 
 
-def _parse_line(s):
+def _parse_line(s, accel_scale=STANDARD_GRAVITY, gyro_scale=DEG):
     """(ax, ay, az, gx, gy, gz, counter) from one stripped CSV line, or a reason string."""
+    try:
+        s.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return f"not UTF-8 text: byte 0x{s[exc.start]:02X} at column {exc.start + 1}"
     words = s.split(b",")
     if len(words) != 7:
         return f"{len(words)} comma-separated fields, expected 7"
@@ -178,9 +196,18 @@ def _parse_line(s):
         vals = [float(w) for w in words[:6]]
         counter = int(words[6])
     except ValueError as exc:
-        return str(exc)
+        return str(exc)[:120]
     if not all(math.isfinite(v) for v in vals):
         return "non-finite value"
+    for i, v in enumerate(vals):
+        acc = i < 3
+        lim, scale = (ACCEL_MAX, accel_scale) if acc else (GYRO_MAX, gyro_scale)
+        if abs(v * scale) > lim:
+            what = "specific force" if acc else "angular rate"
+            return (f"{what} {'ax ay az gx gy gz'.split()[i]} = {v:g} ({v * scale:g} {'m/s^2' if acc else 'rad/s'}) "
+                    f"exceeds {lim:g} {'m/s^2' if acc else 'rad/s'}: not a measurement")
+    if not 0 <= counter < COUNTER_MAX:
+        return f"counter {words[6][:30].decode('ascii', 'replace')} outside [0, 2^62)"
     return vals, counter
 
 
@@ -197,10 +224,10 @@ def _logged_offsets(raw, line_ends, tags, csv_path):
     if n_bare and last == size + n_bare:
         cum = np.concatenate([[0], np.cumsum(bare)])  # bare LFs before each byte position
         return line_ends + cum[line_ends]
-    msg = f"{tags.path}: the tag file ends at byte {last} but {csv_path} has {size} bytes"
+    msg = f"the tag file ends at byte {last} but {csv_path} has {size} bytes"
     if n_bare:
         msg += f" ({size + n_bare} if logged with CRLF line ends)"
-    raise ValueError(msg + "; the tag file does not belong to this CSV (or one of them is truncated)")
+    raise ReaderError(tags.path, None, msg + "; the tag file does not belong to this CSV (or one of them is truncated)")
 
 
 def _envelope_clock(cs, arr, bin_s=1.0):
@@ -264,9 +291,12 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
     Returns:
       :class:`ImuLog`.
     Raises:
-      ValueError: naming the file (and line) for malformed lines, a bad or mismatched tag file,
-        a counter that does not increase (counter/endpoints timing), a counter whose rate is
-        more than 1 % off ``counter_unit`` against the tags, or missing timing inputs.
+      ReaderError: (a ValueError) naming the file (and line) for malformed lines (bytes that are
+        not UTF-8, non-finite values, |specific force| > :data:`ACCEL_MAX` m/s^2, |rate| >
+        :data:`GYRO_MAX` rad/s, a negative or huge counter), a bad or mismatched tag file, a
+        counter that does not increase (counter/endpoints timing), or a counter whose rate is
+        more than 1 % off ``counter_unit`` against the tags.
+      ValueError: missing or contradictory timing inputs.
       FileNotFoundError: if a file does not exist.
     """
     csv_path = pathlib.Path(csv_path)
@@ -282,6 +312,8 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
         raise ValueError(f"{csv_path}: without a tag file give t_start (GPST of the first sample)")
     if tag_path is not None and t_start is not None:
         raise ValueError("give either tag_path or t_start, not both (the tag file holds the start time)")
+    if t_start is not None and not GPST_RANGE_S[0] <= float(t_start) <= GPST_RANGE_S[1]:
+        raise ValueError(f"t_start = {t_start!r} s is not a GPST time between 1980 and 2100")
 
     raw = csv_path.read_bytes()
     tags = read_rtklib_tag(tag_path, fpos_bytes=tag_fpos_bytes) if tag_path is not None else None
@@ -301,7 +333,7 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
         if not s:
             skipped.append((lineno, "blank line"))
             continue
-        got = _parse_line(s)
+        got = _parse_line(s, accel_scale, gyro_scale)
         if isinstance(got, str):
             if i == 0 or i == n_lines - 1:
                 where = "first" if i == 0 else "last"
@@ -310,13 +342,13 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
             if bad_lines == "skip":
                 skipped.append((lineno, got))
                 continue
-            raise ValueError(f"{csv_path}:{lineno}: malformed IMU line {s[:80]!r}: {got}")
+            raise ReaderError(csv_path, lineno, f"malformed IMU line {s[:80]!r}: {got}")
         rows.append(got[0])
         counters.append(got[1])
         linenos.append(lineno)
         keep_idx.append(i)
     if not rows:
-        raise ValueError(f"{csv_path}: no IMU records")
+        raise ReaderError(csv_path, None, "no IMU records")
 
     a = np.asarray(rows, dtype=np.float64)
     counter = np.asarray(counters, dtype=np.int64)
@@ -328,8 +360,9 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
         bad = np.flatnonzero(dc <= 0)
         if bad.size:
             k = int(bad[0]) + 1
-            raise ValueError(f"{csv_path}:{lineno[k]}: counter {counter[k]} does not increase (previous "
-                             f"{counter[k - 1]} on line {lineno[k - 1]}); use timing='arrival' with a tag file")
+            raise ReaderError(csv_path, int(lineno[k]), f"counter {counter[k]} does not increase (previous "
+                                                        f"{counter[k - 1]} on line {lineno[k - 1]}); use "
+                                                        "timing='arrival' with a tag file")
         cs = np.concatenate([[0], np.cumsum(dc)]) * counter_unit  # counter seconds since the first sample
 
     if tags is None:
@@ -347,8 +380,9 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
             read = tags.tick[np.searchsorted(tags.fpos, logged_ends)] * 1e-3
             off, rate = _envelope_clock(cs, read)
             if abs(rate - 1.0) > 0.01:
-                raise ValueError(f"{csv_path}: the counter runs at {rate:.6g} x counter_unit={counter_unit} s "
-                                 f"against the tag file {tags.path}; wrong counter_unit or not a counter")
+                raise ReaderError(csv_path, None, f"the counter runs at {rate:.6g} x counter_unit={counter_unit} s "
+                                                  f"against the tag file {tags.path}; wrong counter_unit or not a "
+                                                  "counter")
             t = t0 + off + rate * cs
 
     return ImuLog(path=str(csv_path), t=t, f_b=a[:, :3] * accel_scale, w_b=a[:, 3:6] * gyro_scale,

@@ -9,8 +9,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from jaxnav.io._errors import HEIGHT_RANGE_M, ReaderError, text_lines
+
 GPS_EPOCH = _dt.datetime(1980, 1, 6)
 SECONDS_PER_WEEK = 604800.0
+#: GPST accepted, s since the GPS epoch: 1980-01-06 .. 2100-01-01 (anything else is a corrupted time)
+GPST_RANGE_S = (0.0, (_dt.datetime(2100, 1, 1) - GPS_EPOCH).total_seconds())
+#: solution quality flags RTKLIB writes
+Q_RANGE = (0, 7)
 
 
 class PosSolution(NamedTuple):
@@ -64,11 +70,42 @@ def _parse_time(words, path, lineno):
         if "/" in words[0]:
             date = _dt.datetime.strptime(words[0], "%Y/%m/%d")
             hh, mm, ss = words[1].split(":")
-            sec = (date - GPS_EPOCH).total_seconds() + int(hh) * 3600 + int(mm) * 60 + float(ss)
-            return sec, 2
-        return int(words[0]) * SECONDS_PER_WEEK + float(words[1]), 2
-    except (ValueError, IndexError) as exc:
-        raise ValueError(f"{path}:{lineno}: cannot read the GPST time from {' '.join(words[:2])!r} ({exc})") from None
+            h, m, s = int(hh), int(mm), float(ss)
+            if not (0 <= h < 24 and 0 <= m < 60 and 0.0 <= s < 61.0):
+                raise ValueError(f"time of day {words[1]} out of range")
+            sec = (date - GPS_EPOCH).total_seconds() + h * 3600 + m * 60 + s
+        else:
+            week, tow = int(words[0]), float(words[1])
+            if not 0.0 <= tow < SECONDS_PER_WEEK:
+                raise ValueError(f"seconds of week {words[1]} outside [0, 604800)")
+            sec = week * SECONDS_PER_WEEK + tow
+    except (ValueError, IndexError, OverflowError) as exc:
+        raise ReaderError(path, lineno,
+                          f"cannot read the GPST time from {' '.join(words[:2])[:60]!r} ({exc})") from None
+    if not GPST_RANGE_S[0] <= sec <= GPST_RANGE_S[1]:
+        raise ReaderError(path, lineno, f"GPST time {' '.join(words[:2])[:60]!r} is before 1980-01-06 or after 2100")
+    return sec, 2
+
+
+#: per-column checks of a record: (low, high) after reading, in the file's units
+_COLUMN_RANGES = {"latitude(deg)": (-90.0, 90.0), "longitude(deg)": (-360.0, 360.0), "height(m)": HEIGHT_RANGE_M,
+                  "Q": Q_RANGE, "ns": (0, 1000), "sdn(m)": (0.0, 1e4), "sde(m)": (0.0, 1e4), "sdu(m)": (0.0, 1e4),
+                  "sdne(m)": (-1e4, 1e4), "sdeu(m)": (-1e4, 1e4), "sdun(m)": (-1e4, 1e4), "age(s)": (-1e6, 1e6),
+                  "ratio": (0.0, 1e9), "ve(m/s)": (-1e4, 1e4), "vn(m/s)": (-1e4, 1e4), "vu(m/s)": (-1e4, 1e4),
+                  "sdvn": (0.0, 1e4), "sdve": (0.0, 1e4), "sdvu": (0.0, 1e4), "sdvne": (-1e4, 1e4),
+                  "sdveu": (-1e4, 1e4), "sdvun": (-1e4, 1e4)}
+
+
+def _check_record(vals, header, path, lineno):
+    """ReaderError naming the column of the first non-finite or impossible value of a record."""
+    for name, v in zip(header[1:], vals):
+        if not math.isfinite(v):
+            raise ReaderError(path, lineno, f"column {name} is {v} (not a finite number)")
+        rng = _COLUMN_RANGES.get(name)
+        if rng is not None and not rng[0] <= v <= rng[1]:
+            raise ReaderError(path, lineno, f"column {name} = {v:g} is outside [{rng[0]:g}, {rng[1]:g}]")
+        if name in ("Q", "ns") and v != int(v):
+            raise ReaderError(path, lineno, f"column {name} = {v:g} is not an integer")
 
 
 def read_pos(path) -> PosSolution:
@@ -83,49 +120,55 @@ def read_pos(path) -> PosSolution:
     Returns:
       :class:`PosSolution`.
     Raises:
-      ValueError: naming the file and line of any unreadable record, a record whose time is not
-        after the previous one, a missing header or header column, or a non-geodetic (e.g.
+      ReaderError: (a ValueError) naming the file and line of any unreadable record (bytes that
+        are not UTF-8 included), a non-finite or impossible value (latitude beyond 90 deg, a
+        negative standard deviation, a time before 1980 or after 2100), a record whose time is
+        not after the previous one, a missing header or header column, or a non-geodetic (e.g.
         ECEF x/y/z) solution file.
       FileNotFoundError: if the file does not exist.
     """
     path = pathlib.Path(path)
     header = None
     rows, linenos = [], []
-    with path.open("r", encoding="utf-8", errors="replace") as fh:
-        for lineno, line in enumerate(fh, start=1):
-            s = line.strip()
-            if not s:
-                continue
-            if s.startswith("%"):
-                if "GPST" in s and ("latitude" in s or "x-ecef" in s):
-                    if "x-ecef" in s:
-                        raise ValueError(f"{path}:{lineno}: ECEF (x-ecef) solutions are not supported; "
-                                         "write the solution with lat/lon/height output")
-                    header = s.lstrip("%").split()
-                    missing = [c for c in ("latitude(deg)", "longitude(deg)", "height(m)", "Q") if c not in header]
-                    if missing:
-                        raise ValueError(f"{path}:{lineno}: the header line lacks the column(s) {missing}")
-                continue
-            if header is None:
-                raise ValueError(f"{path}:{lineno}: data before the '%  GPST latitude(deg) ...' header line")
-            words = s.split()
-            t, k = _parse_time(words, path, lineno)
-            ncols = len(header) - 1  # 'GPST' is one header word but one or two data words
-            vals = words[k:]
-            if len(vals) != ncols:
-                raise ValueError(f"{path}:{lineno}: expected {ncols} values after the time, found {len(vals)}")
-            try:
-                rows.append([t] + [float(v) for v in vals])
-            except ValueError as exc:
-                raise ValueError(f"{path}:{lineno}: {exc}") from None
-            if len(rows) > 1 and not t > rows[-2][0]:
-                raise ValueError(f"{path}:{lineno}: time {' '.join(words[:2])} is not after the previous "
-                                 f"record's (line {linenos[-1]}); epochs must increase")
-            linenos.append(lineno)
+    for lineno, line in text_lines(path):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("%"):
+            if "GPST" in s and ("latitude" in s or "x-ecef" in s):
+                if "x-ecef" in s:
+                    raise ReaderError(path, lineno, "ECEF (x-ecef) solutions are not supported; "
+                                                    "write the solution with lat/lon/height output")
+                header = s.lstrip("%").split()
+                missing = [c for c in ("latitude(deg)", "longitude(deg)", "height(m)", "Q") if c not in header]
+                if missing:
+                    raise ReaderError(path, lineno, f"the header line lacks the column(s) {missing}")
+                if header[0] != "GPST" or len(set(header)) != len(header):
+                    raise ReaderError(path, lineno, "the header line must start with GPST and name each "
+                                                    "column once")
+            continue
+        if header is None:
+            raise ReaderError(path, lineno, "data before the '%  GPST latitude(deg) ...' header line")
+        words = s.split()
+        t, k = _parse_time(words, path, lineno)
+        ncols = len(header) - 1  # 'GPST' is one header word but one or two data words
+        vals = words[k:]
+        if len(vals) != ncols:
+            raise ReaderError(path, lineno, f"expected {ncols} values after the time, found {len(vals)}")
+        try:
+            nums = [float(v) for v in vals]
+        except ValueError as exc:
+            raise ReaderError(path, lineno, str(exc)[:120]) from None
+        _check_record(nums, header, path, lineno)
+        rows.append([t] + nums)
+        if len(rows) > 1 and not t > rows[-2][0]:
+            raise ReaderError(path, lineno, f"time {' '.join(words[:2])} is not after the previous "
+                                            f"record's (line {linenos[-1]}); epochs must increase")
+        linenos.append(lineno)
     if header is None:
-        raise ValueError(f"{path}: no '%  GPST latitude(deg) ...' header line found")
+        raise ReaderError(path, None, "no '%  GPST latitude(deg) ...' header line found")
     if not rows:
-        raise ValueError(f"{path}: no solution records")
+        raise ReaderError(path, None, "no solution records")
     a = np.asarray(rows, dtype=np.float64)
     col = {name: i for i, name in enumerate(header)}
 

@@ -13,6 +13,7 @@ import os
 import numpy as np
 
 from jaxnav import units
+from jaxnav.io._errors import HEIGHT_RANGE_M, SIGMA_MAX_M, ReaderError, text_lines
 from jaxnav.survey._stops import STOP_KINDS, StopList, make_stop_list  # the module, not the package: no cycle
 
 _HEADER = "# name, kind, t_start_s, t_end_s, lat_deg, lon_deg, h_m, sigma_e_m, sigma_n_m, sigma_u_m"
@@ -39,38 +40,46 @@ def read_stop_list(path) -> StopList:
     points h.
 
     Raises:
-      ValueError: naming the file and line for an unreadable line, an unknown kind, a missing
-        coordinate, or t_end <= t_start.
+      ReaderError: (a ValueError) naming the file and line for an unreadable line (bytes that are
+        not UTF-8 included), an unknown kind, a missing coordinate, an infinite or impossible
+        number (|lat| > 90 deg, a non-positive sigma), or t_end <= t_start. Unknown coordinates
+        of stops that do not need them may be ``nan``.
     """
     rows = []
     p = os.fspath(path)
-    with open(p, encoding="utf-8") as f:
-        for lineno, line in enumerate(f, 1):
-            s = line.split("#", 1)[0].strip()
-            if not s:
-                continue
-            cols = [c.strip() for c in s.split(",")]
-            if len(cols) not in (4, 7, 10):
-                raise ValueError(f"{p}, line {lineno}: expected 4, 7 or 10 comma-separated columns, got {len(cols)}")
-            name, kind = cols[0], cols[1].lower()
-            if kind not in STOP_KINDS:
-                raise ValueError(f"{p}, line {lineno}: unknown stop kind {cols[1]!r} (expected one of {STOP_KINDS})")
-            try:
-                nums = [float(c) for c in cols[2:]]
-            except ValueError:
-                raise ValueError(f"{p}, line {lineno}: non-numeric value in {cols[2:]}") from None
-            t0, t1 = nums[0], nums[1]
-            if not (math.isfinite(t0) and math.isfinite(t1) and t1 > t0):
-                raise ValueError(f"{p}, line {lineno}: stop {name!r} needs finite t_end > t_start, got {t0}, {t1}")
-            lat, lon, h = (nums[2:5] if len(nums) >= 5 else [math.nan] * 3)
-            sig = nums[5:8] if len(nums) == 8 else [0.01, 0.01, 0.01]
-            need = {"known_coordinate": (lat, lon, h), "known_position": (lat, lon), "levelling": (h,)}.get(kind, ())
-            if any(not math.isfinite(v) for v in need):
-                raise ValueError(f"{p}, line {lineno}: a {kind} stop needs its known coordinates "
-                                 f"(lat_deg, lon_deg, h_m), got {cols[4:7] if len(cols) > 4 else 'none'}")
-            rows.append((name, STOP_KINDS.index(kind), t0, t1, units.deg_to_rad(lat), units.deg_to_rad(lon), h, *sig))
+    for lineno, line in text_lines(p):
+        s = line.split("#", 1)[0].strip()
+        if not s:
+            continue
+        cols = [c.strip() for c in s.split(",")]
+        if len(cols) not in (4, 7, 10):
+            raise ReaderError(p, lineno, f"expected 4, 7 or 10 comma-separated columns, got {len(cols)}")
+        name, kind = cols[0], cols[1].lower()
+        if kind not in STOP_KINDS:
+            raise ReaderError(p, lineno, f"unknown stop kind {cols[1][:40]!r} (expected one of {STOP_KINDS})")
+        try:
+            nums = [float(c) for c in cols[2:]]
+        except ValueError:
+            raise ReaderError(p, lineno, f"non-numeric value in {cols[2:]}"[:200]) from None
+        t0, t1 = nums[0], nums[1]
+        if not (math.isfinite(t0) and math.isfinite(t1) and t1 > t0 and max(abs(t0), abs(t1)) <= 1e10):
+            raise ReaderError(p, lineno, f"stop {name!r} needs finite t_end > t_start (|t| <= 1e10 s), got {t0}, {t1}")
+        lat, lon, h = (nums[2:5] if len(nums) >= 5 else [math.nan] * 3)
+        sig = nums[5:8] if len(nums) == 8 else [0.01, 0.01, 0.01]
+        for v, what, lo, hi in ((lat, "lat_deg", -90.0, 90.0), (lon, "lon_deg", -360.0, 360.0),
+                                (h, "h_m", *HEIGHT_RANGE_M)):
+            if not math.isnan(v) and not lo <= v <= hi:
+                raise ReaderError(p, lineno, f"{what} = {v:g} is not finite or outside [{lo:g}, {hi:g}]")
+        for v, what in zip(sig, ("sigma_e_m", "sigma_n_m", "sigma_u_m")):
+            if not 0.0 < v <= SIGMA_MAX_M:
+                raise ReaderError(p, lineno, f"{what} = {v:g} must be positive, finite and <= {SIGMA_MAX_M:g} m")
+        need = {"known_coordinate": (lat, lon, h), "known_position": (lat, lon), "levelling": (h,)}.get(kind, ())
+        if any(not math.isfinite(v) for v in need):
+            raise ReaderError(p, lineno, f"a {kind} stop needs its known coordinates "
+                                         f"(lat_deg, lon_deg, h_m), got {cols[4:7] if len(cols) > 4 else 'none'}")
+        rows.append((name, STOP_KINDS.index(kind), t0, t1, units.deg_to_rad(lat), units.deg_to_rad(lon), h, *sig))
     if not rows:
-        raise ValueError(f"{p}: no stops in the file")
+        raise ReaderError(p, None, "no stops in the file")
     name = tuple(r[0] for r in rows)
     a = np.array([r[1:] for r in rows], float)
     return make_stop_list(a[:, 1], a[:, 2], a[:, 0].astype(int), a[:, 3:6], a[:, 6:9], name)

@@ -62,17 +62,26 @@ class StationVelocity(NamedTuple):
 def weighted_slope(t, y, sigma):
     """Weighted least-squares line y = a + b t; returns (b, std of b) per column.
 
+    Rows whose y or sigma is not finite (missing values) are left out of that column's fit; a
+    column with fewer than 2 usable rows gives NaN.
+
     Args:
       t: (N,) s.  y: (N, k) m.  sigma: (N, k) m.
     """
     t = np.asarray(t, float)
-    tc = t - t.mean()
+    y, sigma = np.asarray(y, float), np.asarray(sigma, float)
     out, sd = [], []
     for j in range(y.shape[1]):
-        w = 1.0 / sigma[:, j] ** 2
+        ok = np.isfinite(y[:, j]) & np.isfinite(sigma[:, j]) & (sigma[:, j] > 0)
+        if ok.sum() < 2:
+            out.append(np.nan)
+            sd.append(np.nan)
+            continue
+        tc = t[ok] - t[ok].mean()
+        w = 1.0 / sigma[ok, j] ** 2
         A = np.stack([np.ones_like(tc), tc], axis=1)
         N = A.T @ (A * w[:, None])
-        b = np.linalg.solve(N, A.T @ (w * y[:, j]))
+        b = np.linalg.solve(N, A.T @ (w * y[ok, j]))
         out.append(b[1])
         sd.append(np.sqrt(np.linalg.inv(N)[1, 1]))
     return np.array(out), np.array(sd)
@@ -96,10 +105,13 @@ _SAVE = ("means", "pred_means", "factors", "noise", "covs", "pred_covs")
 
 
 def _ar1_factor(res, sig):
-    """sqrt(chi^2/dof) * sqrt((1 + rho)/(1 - rho)) per column of normalised residuals."""
+    """sqrt(chi^2/dof) * sqrt((1 + rho)/(1 - rho)) per column of normalised residuals (missing
+    values, NaN, left out; lag-one pairs with a missing member too)."""
     r = res / sig
-    chi = np.sqrt(np.sum(r**2, axis=0) / max(len(r) - 2, 1))
-    rc = r - r.mean(axis=0)
+    ok = np.isfinite(r)
+    n = ok.sum(axis=0)
+    chi = np.sqrt(np.nansum(np.where(ok, r, 0.0) ** 2, axis=0) / np.maximum(n - 2, 1))
+    rc = np.where(ok, r - np.nanmean(np.where(ok, r, np.nan), axis=0), 0.0)
     rho = np.sum(rc[1:] * rc[:-1], axis=0) / np.sum(rc**2, axis=0)
     rho = np.clip(rho, 0.0, 0.99)
     return chi * np.sqrt((1.0 + rho) / (1.0 - rho))

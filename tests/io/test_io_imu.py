@@ -177,9 +177,10 @@ def test_counter_clock_fit_on_realistic_arrivals(tmp_path):
     last = np.r_[idx[1:] - 1, n - 1]
     recs = b"".join(struct.pack("<II", k, int(ends[j])) for k, j in zip(ticks, last))
     (tmp_path / "r.csv").write_bytes(data)
-    (tmp_path / "r.csv.tag").write_bytes(b"TIMETAG RTKLIB EX".ljust(60, b"\0") + struct.pack("<IId", 1, 0, 0.0) + recs)
+    start = struct.pack("<IId", 1, int(GPS_EPOCH_UNIX), 0.0)  # the GPS epoch (Unix time 0 is refused)
+    (tmp_path / "r.csv.tag").write_bytes(b"TIMETAG RTKLIB EX".ljust(60, b"\0") + start + recs)
     log = read_rtklib_imu(tmp_path / "r.csv", tmp_path / "r.csv.tag")
-    err = log.t - (t_true - GPS_EPOCH_UNIX)
+    err = log.t - t_true
     assert np.all(err > 0) and err.max() - err.min() < 2e-3  # a constant latency, no rate error
     assert err.mean() < 0.012
 

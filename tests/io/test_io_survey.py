@@ -15,7 +15,8 @@ def test_epoch_log_round_trip(tmp_path):
     point = np.array(["A"] * 3 + ["B"] * 4)
     t = np.array([0.0, 2.0, 4.0, 100.0, 102.0, 104.0, 106.0])
     lat, lon = np.radians(32.8 + rng.uniform(0, 0.01, n)), np.radians(116.8 + rng.uniform(0, 0.01, n))
-    x, y, h, H = (rng.uniform(0, 1e6, n) for _ in range(4))
+    x, y = (rng.uniform(0, 1e6, n) for _ in range(2))
+    h, H = (rng.uniform(0, 3e3, n) for _ in range(2))  # heights on Earth: the reader refuses impossible ones
     sig = rng.uniform(0.005, 0.02, (n, 3))
     f = io.write_epoch_log(tmp_path / "e.csv", point, t, x, y, h, lat, lon, H, sig)
     log = io.read_epoch_log(f)
@@ -47,8 +48,8 @@ def test_epoch_log_iso_time_sigma_plane_and_nan(tmp_path):
     (HEAD + ROW.format(t=0) + ROW.format(t=2).replace("P01", "P02") + ROW.format(t=4),
      r"e.csv:4: point 'P01' continues after other points"),
     (HEAD + ROW.format(t="yesterday"), r"e.csv:2: column 'time'"),
-    (HEAD + ROW.format(t=0).replace("0.0150", "-0.01"), r"e.csv:2: column 'sigma_h' must be positive"),
-    (HEAD + ROW.format(t=0).replace("32.81", "132.81"), r"e.csv:2: latitude B = 132.81"),
+    (HEAD + ROW.format(t=0).replace("0.0150", "-0.01"), r"e.csv:2: column 'sigma_h': -0.01 is outside \[0, 10000\]"),
+    (HEAD + ROW.format(t=0).replace("32.81", "132.81"), r"e.csv:2: column 'B': 132.81 is outside \[-90, 90\]"),
     ("# only a comment\n", r"e.csv: empty file"),
     (HEAD, r"e.csv: no epochs"),
 ])

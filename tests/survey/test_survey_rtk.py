@@ -148,8 +148,12 @@ def test_errors(survey):
 def test_cli_on_simulated_survey(survey, tmp_path):
     from jaxnav.cli import main
 
-    main(["rtk", "--simulate", "0", "--out", str(tmp_path)])
-    summary = json.loads((tmp_path / "rtk_results.json").read_text())
+    assert main(["rtk", "--simulate", "0", "--out", str(tmp_path)]) == 0
+
+    def no_constants(name):
+        raise AssertionError(f"{name} token in rtk_results.json")  # strict JSON: null + reason instead
+
+    summary = json.loads((tmp_path / "rtk_results.json").read_text(), parse_constant=no_constants)
     res = survey[4]
     assert summary["n_points"] == 45 and (tmp_path / "rtk.png").stat().st_size > 20_000
     f = summary["levelling_filtered"]

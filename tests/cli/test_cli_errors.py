@@ -1,0 +1,298 @@
+"""Bad command lines, configs and files through ``jaxnav.cli.main(argv)`` (in process, fast): each
+ends with exit status 2 and exactly one stderr line ``jaxnav CMD: ...`` naming the option, file
+(and line) or config key, no traceback, and before any computation (no output written). Plus the
+--debug and internal-error paths, strict JSON, and two real subprocess runs."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from jaxnav.cli import main
+from jaxnav.experiments import EXPERIMENT
+from jaxnav.io import json_ready, write_json
+
+from _paths import ROOT
+
+EPOCHS = ("point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h\n"
+          + "".join(f"P{p},{2 * k},3631500.{k:04d},39486000.5,22.1,32.81,116.85,18.6,0.008,0.008,0.015\n"
+                    for p in range(2) for k in range(5)))
+CONTROL = ("point,B,L,H,x,y,h\n"
+           + "".join(f"K{i},{32.80 + 0.001 * i:.6f},{116.84 + 0.001 * i:.6f},18.0,{3631000 + 100 * i},"
+                     f"{39486000 + 90 * i},21.5\n" for i in range(6)))
+TENV3 = ("site YYMMMDD yyyy.yyyy __MJD week d reflon _e0(m) __east(m) ____n0(m) _north(m) u0(m) ____up(m) _ant(m) "
+         "sig_e(m) sig_n(m) sig_u(m) __corr_en __corr_eu __corr_nu _latitude(deg) _longitude(deg) __height(m)\n"
+         + "".join(f"LHAS 95MAY{19 + k} {1995.3785 + k / 365.25:.4f} {49856 + k}  801 5   91.1    385  0.888603   "
+                   f"3282129  0.602585  3624  0.707878  0.0000 0.002231 0.001932 0.008643 -0.009728 -0.044382 "
+                   f"-0.198749  29.6573392384 -268.8960142076  3624.70788\n" for k in range(6)))
+
+
+def _s0_config(tmp_path, name, old, new):
+    text = EXPERIMENT.read_text()
+    assert old in text
+    f = tmp_path / name
+    f.write_text(text.replace(old, new, 1))
+    return f
+
+
+def _tune_config(tmp_path, name, extra_or_replace):
+    base = (ROOT / "jaxnav/experiments/configs/s0_b.toml").read_text()
+    if isinstance(extra_or_replace, tuple):
+        old, new = extra_or_replace
+        assert old in base
+        base = base.replace(old, new, 1)
+    else:
+        base += extra_or_replace
+    f = tmp_path / name
+    f.write_text(base)
+    return f
+
+
+def _files(tmp_path):
+    """The files the cases name: good and bad inputs, an existing file to misuse as --out."""
+    d = {}
+    (tmp_path / "ep.csv").write_text(EPOCHS)
+    d["ep"] = tmp_path / "ep.csv"
+    (tmp_path / "cp_inf.csv").write_text(CONTROL.replace("K2,32.802000", "K2,inf"))
+    d["cp_inf"] = tmp_path / "cp_inf.csv"
+    (tmp_path / "ep_e9.csv").write_bytes(EPOCHS.encode().replace(b"P1,2,", b"P1\xe9,2,"))
+    d["ep_e9"] = tmp_path / "ep_e9.csv"
+    (tmp_path / "lev_nan.csv").write_text("point,height\nP0,nan\n")
+    d["lev_nan"] = tmp_path / "lev_nan.csv"
+    (tmp_path / "bad.tenv3").write_text(TENV3.replace("3282129  0.602585", "3282129  inf", 1))
+    d["tenv3_inf"] = tmp_path / "bad.tenv3"
+    (tmp_path / "lat.tenv3").write_text(TENV3.replace("29.6573392384", "129.6573392384", 1))
+    d["tenv3_lat"] = tmp_path / "lat.tenv3"
+    (tmp_path / "a_file").write_text("not a folder")
+    d["a_file"] = tmp_path / "a_file"
+    d["b15"] = _s0_config(tmp_path, "b15.toml", "b = 0.254", "b = 1.5")
+    d["bneg"] = _s0_config(tmp_path, "bneg.toml", "b = 0.254", "b = -0.1")
+    d["seeds0"] = _s0_config(tmp_path, "seeds0.toml", "seeds = 32", "seeds = 0")
+    d["unknown_key"] = _s0_config(tmp_path, "unk.toml", "fading_window = 10", "fading_window = 10\nfadng = 3")
+    d["missing_key"] = _s0_config(tmp_path, "miss.toml", "fading_window = 10", "")
+    d["syntax"] = _s0_config(tmp_path, "syntax.toml", "q_scale = 1.0", "q_scale = = 1.0")
+    d["states"] = _s0_config(tmp_path, "states.toml", "inflate_states = [0, 1, 3, 4, 5, 6, 7, 8]",
+                             "inflate_states = [0, 99]")
+    d["nstates"] = _s0_config(tmp_path, "nstates.toml", "n_states = 18", "n_states = 17")
+    d["qneg"] = _s0_config(tmp_path, "qneg.toml", "q_scale = 1.0", "q_scale = -1.0")
+    d["bool_seeds"] = _s0_config(tmp_path, "bool.toml", "seeds = 32", "seeds = true")
+    (tmp_path / "latin1.toml").write_bytes(EXPERIMENT.read_bytes().replace(b"# The S0", b"# The S0 \xe9", 1))
+    d["latin1"] = tmp_path / "latin1.toml"
+    d["t_seeds0"] = _tune_config(tmp_path, "t_seeds0.toml", ("seeds = 8", "seeds = 0"))
+    d["t_init"] = _tune_config(tmp_path, "t_init.toml", ("init = 0.5", "init = 1.5"))
+    d["t_num0"] = _tune_config(tmp_path, "t_num0.toml", ("num = 100", "num = 0"))
+    d["t_steps0"] = _tune_config(tmp_path, "t_steps0.toml", ("steps = 12", "steps = 0"))
+    d["t_lr"] = _tune_config(tmp_path, "t_lr.toml", ("learning_rate = 0.5", "learning_rate = -0.5"))
+    d["t_mode"] = _tune_config(tmp_path, "t_mode.toml", ('mode = "forward"', 'mode = "sideways"'))
+    d["t_unknown"] = _tune_config(tmp_path, "t_unk.toml", ("[tune]", "[tune]\nmomentum = 0.9"))
+    d["t_param"] = _tune_config(tmp_path, "t_param.toml", ("[params.b]\ninit = 0.5", "[params.b]\ninit = true"))
+    d["t_dur"] = _tune_config(tmp_path, "t_dur.toml", ("duration = 2000.0", "duration = -5.0"))
+    d["stops_bad"] = tmp_path / "stops.csv"
+    d["stops_bad"].write_text("K0, known_coordinate, 0, 10, 132.0, 118.0, 10.0\n")
+    return d
+
+
+#: (case id, argv with {name} placeholders for _files, strings the one stderr line must contain)
+CASES = [
+    ("no command", [], ["jaxnav:", "command"]),
+    ("unknown command", ["fly"], ["jaxnav:", "'fly'"]),
+    ("unknown option", ["demo", "--frobnicate"], ["--frobnicate"]),
+    ("demo seeds 0", ["demo", "--seeds", "0"], ["jaxnav demo:", "--seeds", "[1, 100000]", "got 0"]),
+    ("demo seeds -1", ["demo", "--seeds", "-1"], ["--seeds", "got -1"]),
+    ("demo seeds text", ["demo", "--seeds", "many"], ["--seeds", "'many'"]),
+    ("demo seeds float", ["demo", "--seeds", "2.5"], ["--seeds", "'2.5'"]),
+    ("demo sweep-points 0", ["demo", "--sweep-points", "0"], ["--sweep-points", ">= 1"]),
+    ("demo config missing", ["demo", "--config", "{tmp}/nope.toml"], ["nope.toml", "no such file", "--config"]),
+    ("demo config b=1.5", ["demo", "--config", "{b15}"], ["b15.toml", "filter.b = 1.5", "[0, 1)"]),
+    ("demo config b=-0.1", ["demo", "--config", "{bneg}"], ["bneg.toml", "filter.b = -0.1"]),
+    ("demo config seeds=0", ["demo", "--config", "{seeds0}"], ["seeds0.toml", "monte_carlo.seeds = 0"]),
+    ("demo config unknown key", ["demo", "--config", "{unknown_key}"], ["unk.toml", "unknown key filter.fadng"]),
+    ("demo config missing key", ["demo", "--config", "{missing_key}"],
+     ["miss.toml", "missing key filter.fading_window"]),
+    ("demo config syntax", ["demo", "--config", "{syntax}"], ["syntax.toml", "invalid TOML", "line"]),
+    ("demo config states", ["demo", "--config", "{states}"], ["states.toml", "filter.inflate_states", "[0, 17]"]),
+    ("demo config n_states", ["demo", "--config", "{nstates}"], ["nstates.toml", "filter.n_states must be 15 or 18"]),
+    ("demo config q_scale<0", ["demo", "--config", "{qneg}"], ["qneg.toml", "filter.q_scale = -1.0"]),
+    ("demo config bool seeds", ["demo", "--config", "{bool_seeds}"], ["bool.toml", "monte_carlo.seeds must be int"]),
+    ("demo config latin-1", ["demo", "--config", "{latin1}"], ["latin1.toml:", "not UTF-8", "0xE9"]),
+    ("demo out is a file", ["demo", "--out", "{a_file}"], ["a_file", "--out", "existing file"]),
+    ("demo out under a file", ["demo", "--out", "{a_file}/sub"], ["a_file/sub", "cannot write the output folder"]),
+    ("demo-filters b 1.5", ["demo-filters", "--b", "1.5"], ["jaxnav demo-filters:", "--b", "[0, 1)"]),
+    ("demo-filters b -0.1", ["demo-filters", "--b", "-0.1"], ["--b", "got -0.1"]),
+    ("demo-filters b nan", ["demo-filters", "--b", "nan"], ["--b", "finite"]),
+    ("demo-filters b inf", ["demo-filters", "--b", "inf"], ["--b", "finite"]),
+    ("demo-filters epochs 0", ["demo-filters", "--epochs", "0"], ["--epochs", "[100, 1e+06]"]),
+    ("demo-filters seeds 0", ["demo-filters", "--seeds", "0"], ["--seeds"]),
+    ("demo-filters out is a file", ["demo-filters", "--out", "{a_file}"], ["a_file", "existing file"]),
+    ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
+    ("rtk nothing", ["rtk"], ["jaxnav rtk:", "give FILES or --simulate"]),
+    ("rtk missing file", ["rtk", "{tmp}/none.pos"], ["none.pos", "no such file"]),
+    ("rtk control K2,inf", ["rtk", "{ep}", "--control", "{cp_inf}", "--out", "{tmp}/o"],
+     ["cp_inf.csv:4:", "column 'B'", "'inf' is not a finite number"]),
+    ("rtk epoch log 0xE9", ["rtk", "{ep_e9}", "--out", "{tmp}/o"], ["ep_e9.csv:8:", "not UTF-8", "0xE9 at column 3"]),
+    ("rtk levelling nan", ["rtk", "{ep}", "--levelling", "{lev_nan}", "--out", "{tmp}/o"],
+     ["lev_nan.csv:2:", "column 'height'", "not a finite number"]),
+    ("rtk control missing", ["rtk", "{ep}", "--control", "{tmp}/cp.csv"], ["cp.csv", "no such file", "--control"]),
+    ("rtk step 0", ["rtk", "{ep}", "--step", "0"], ["--step", "(0, 86400]", "got 0"]),
+    ("rtk window 0", ["rtk", "{ep}", "--window", "0"], ["--window", "[1, 1e+06]"]),
+    ("rtk min-epochs > window", ["rtk", "{ep}", "--min-epochs", "90"], ["--min-epochs 90", "--window 60"]),
+    ("rtk lon0 1000", ["rtk", "{ep}", "--lon0", "1000"], ["--lon0", "[-180, 360]"]),
+    ("rtk zone width 4", ["rtk", "{ep}", "--zone-width", "4"], ["--zone-width", "invalid choice"]),
+    ("rtk simulate -1", ["rtk", "--simulate", "-1"], ["--simulate", "got -1"]),
+    ("rtk out is a file", ["rtk", "{ep}", "--out", "{a_file}"], ["a_file", "--out"]),
+    ("monitor nothing", ["monitor"], ["jaxnav monitor:", "give daily series files"]),
+    ("monitor missing file", ["monitor", "{tmp}/x.neu"], ["x.neu", "no such file"]),
+    ("monitor tenv3 inf", ["monitor", "{tenv3_inf}", "--out", "{tmp}/o"],
+     ["bad.tenv3:2:", "north = inf m", "not finite"]),
+    ("monitor tenv3 latitude", ["monitor", "{tenv3_lat}", "--out", "{tmp}/o"], ["lat.tenv3:2:", "latitude", "90"]),
+    ("monitor unknown suffix", ["monitor", "{ep}", "--out", "{tmp}/o"], ["ep.csv", "unknown daily-series format"]),
+    ("monitor period 0", ["monitor", "{tenv3_inf}", "--period", "0"], ["--period", ">= 1"]),
+    ("monitor gross 2", ["monitor", "--simulate", "--gross", "2"], ["--gross", "[0, 1]"]),
+    ("monitor stations 0", ["monitor", "--simulate", "--stations", "0"], ["--stations"]),
+    ("monitor epochs 1", ["monitor", "--simulate", "--epochs", "1"], ["--epochs"]),
+    ("monitor seed -1", ["monitor", "--simulate", "--seed", "-1"], ["--seed"]),
+    ("monitor files and simulate", ["monitor", "--simulate", "{tenv3_inf}"], ["not both"]),
+    ("sweep missing config", ["sweep", "{tmp}/none.toml"], ["jaxnav sweep:", "none.toml", "no such config"]),
+    ("sweep seeds 0", ["sweep", "{t_seeds0}"], ["t_seeds0.toml", "problem.seeds = 0"]),
+    ("sweep init 1.5", ["sweep", "{t_init}"], ["t_init.toml", "params.b.init = 1.5"]),
+    ("sweep num 0", ["sweep", "{t_num0}"], ["t_num0.toml", "sweep.b.num = 0"]),
+    ("sweep duration < 0", ["sweep", "{t_dur}"], ["t_dur.toml", "problem.duration = -5.0"]),
+    ("sweep bool init", ["sweep", "{t_param}"], ["t_param.toml", "params.b.init = True"]),
+    ("sweep out is a file", ["sweep", "s0_b", "--out", "{a_file}"], ["a_file", "existing file"]),
+    ("sweep out under a file", ["sweep", "s0_b", "--out", "{a_file}/x"], ["cannot write the output folder"]),
+    ("tune steps 0", ["tune", "{t_steps0}"], ["jaxnav tune:", "tune.steps = 0"]),
+    ("tune learning rate < 0", ["tune", "{t_lr}"], ["tune.learning_rate = -0.5"]),
+    ("tune mode", ["tune", "{t_mode}"], ["tune.mode must be one of"]),
+    ("tune unknown key", ["tune", "{t_unknown}"], ["unknown key tune.momentum"]),
+    ("tune out under a file", ["tune", "cv_noise", "--out", "{a_file}/x"], ["cannot write the output folder"]),
+    ("cadastral seeds 0", ["cadastral", "--out", "{tmp}/c", "--seeds", "0"], ["jaxnav cadastral:", "--seeds"]),
+    ("cadastral chunk 0", ["cadastral", "--out", "{tmp}/c", "--chunk", "0"], ["--chunk"]),
+    ("cadastral legs 0", ["cadastral", "--out", "{tmp}/c", "--legs", "0"], ["--legs"]),
+    ("cadastral no out", ["cadastral"], ["--out"]),
+    ("cadastral grade", ["cadastral", "--out", "{tmp}/c", "--grade", "navy"], ["--grade 'navy'", "tactical"]),
+    ("cadastral config missing", ["cadastral", "--out", "{tmp}/c", "--config", "{tmp}/c.toml"], ["c.toml", "no such"]),
+    ("cadastral stops latitude", ["cadastral", "--out", "{tmp}/c", "--stops", "{stops_bad}"],
+     ["stops.csv:1:", "lat_deg = 132"]),
+    ("cadastral out is a file", ["cadastral", "--out", "{a_file}"], ["a_file", "existing file"]),
+]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cli")
+    d = _files(tmp)
+    d["tmp"] = tmp
+    return d
+
+
+@pytest.mark.parametrize("case,argv,needles", CASES, ids=[c[0] for c in CASES])
+def test_bad_input_is_one_line_exit_2(case, argv, needles, files, capsys, monkeypatch):
+    monkeypatch.delenv("JAXNAV_DATA", raising=False)
+    monkeypatch.chdir(files["tmp"])  # default --out folders land in the temporary folder
+    before = set(files["tmp"].rglob("*"))
+    rc = main([a.format(**files) for a in argv])
+    out, err = capsys.readouterr()
+    assert rc == 2, (case, rc, err)
+    assert err.endswith("\n") and err.count("\n") == 1, err  # exactly one line
+    assert err.startswith("jaxnav"), err
+    assert "Traceback" not in err and "internal error" not in err, err
+    for s in needles:
+        assert s.format(**files) in err, (s, err)
+    created = {p for p in set(files["tmp"].rglob("*")) - before if p.is_file()}
+    assert not created, created  # nothing computed or written
+
+
+def test_debug_shows_the_traceback(files, capsys):
+    with pytest.raises(ValueError, match=r"b15\.toml: filter\.b = 1\.5"):
+        main(["--debug", "demo", "--config", str(files["b15"])])
+    from jaxnav.cli._common import CommandError
+
+    with pytest.raises(CommandError, match="none.csv: no such file"):  # --debug after the command works too
+        main(["rtk", str(files["ep"]), "--control", str(files["tmp"] / "none.csv"), "--debug"])
+
+
+def test_internal_error_says_so_and_points_to_debug(monkeypatch, capsys):
+    import jaxnav.cli.walk as walk
+
+    def broken(args):
+        raise TypeError("unsupported operand type(s)")
+
+    monkeypatch.setattr(walk, "run", broken)
+    rc = main(["walk", "--data", "."])
+    err = capsys.readouterr().err
+    assert rc == 3 and err.count("\n") == 1
+    assert "internal error: TypeError: unsupported operand" in err and "--debug" in err
+    with pytest.raises(TypeError):
+        main(["walk", "--data", ".", "--debug"])
+
+
+def test_json_is_strict_with_null_reasons(tmp_path):
+    data = {"rms": float("nan"), "per_seed": np.array([1.0, np.inf, np.nan]), "inner": {"x": -math.inf, "ok": 2},
+            "n": np.int64(3), "flag": np.bool_(True), "ok": [1.5]}
+    p = write_json(tmp_path / "r.json", data)
+
+    def no_constants(name):
+        raise AssertionError(f"{name} token in JSON")
+
+    back = json.loads(p.read_text(), parse_constant=no_constants)
+    assert back["rms"] is None and back["rms_null_reason"] == "nan"
+    assert back["per_seed"] == [1.0, None, None] and back["per_seed_null_reason"].startswith("2 of 3 values not finite")
+    assert back["inner"]["x"] is None and back["inner"]["x_null_reason"] == "-inf" and back["inner"]["ok"] == 2
+    assert back["n"] == 3 and back["flag"] is True and back["ok"] == [1.5] and "ok_null_reason" not in back
+    assert json_ready({"a": 1.0})[1] == {}
+
+
+def _run(args, tmp_path):
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env.pop("JAXNAV_DATA", None)
+    return subprocess.run([sys.executable, "-m", "jaxnav", *args], capture_output=True, text=True, cwd=tmp_path,
+                          env=env, timeout=120)
+
+
+def test_subprocess_bad_seeds_and_bad_control_file(files):
+    r = _run(["demo", "--seeds", "0"], files["tmp"])
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--seeds" in r.stderr and "Traceback" not in r.stderr
+    r = _run(["rtk", str(files["ep"]), "--control", str(files["cp_inf"]), "--out", str(files["tmp"] / "s")],
+             files["tmp"])
+    assert r.returncode == 2 and r.stderr == f"jaxnav rtk: {files['cp_inf']}:4: column 'B': 'inf' is not a finite " \
+                                            f"number\n", r.stderr
+
+
+def test_monitor_masks_and_reports_a_nan_east_value(tmp_path, capsys):
+    """A ``nan`` east value in a real tenv3 file: exit 0, counted in monitor.json and the printout,
+    finite velocities and LS slope, strict JSON."""
+    from _paths import DATA_ROOT
+
+    src = DATA_ROOT / "gnss_daily_timeseries/LHAS.tenv3"
+    if not src.exists():
+        pytest.skip("shared data not present")
+    lines = src.read_text().splitlines()[:400]
+    w = lines[50].split()
+    w[8] = "nan"  # east fraction
+    lines[50] = " ".join(w)
+    f = tmp_path / "LHAS.tenv3"
+    f.write_text("\n".join(lines) + "\n")
+    assert main(["monitor", str(f), "--out", str(tmp_path / "o"), "--period", "100"]) == 0
+    assert "1 position value(s) given as nan" in capsys.readouterr().out
+
+    def no_constants(name):
+        raise AssertionError(f"{name} token in monitor.json")
+
+    st = json.loads((tmp_path / "o/monitor.json").read_text(), parse_constant=no_constants)["stations"]["LHAS"]
+    assert st["masked_values"] == 1
+    assert all(v is not None and math.isfinite(v) for v in st["velocity_mm_per_yr"] + st["ls_slope_mm_per_yr"])
+
+
+def test_a_value_error_from_inside_numpy_is_internal(monkeypatch, capsys):
+    """Only jaxnav's own checks make exit status 2; a ValueError raised inside numpy is a bug (3)."""
+    import jaxnav.cli.walk as walk
+
+    monkeypatch.setattr(walk, "run", lambda args: np.ones(3) + np.ones(4))
+    assert main(["walk", "--data", "."]) == 3
+    assert "internal error: ValueError: operands could not be broadcast" in capsys.readouterr().err
