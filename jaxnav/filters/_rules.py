@@ -95,8 +95,9 @@ class Attenuated:
       weights old *measurements* down, so with no measurement there is nothing to forget. Counting
       predictions instead would multiply P by up to 1/(1 - b) per empty epoch: a 60-epoch gap
       with b = 0.254 inflates the variance by 1.34^60 = 4e7 (sigma 185 m against 4.5 mm for the
-      classic filter on the 3 mm constant-velocity model). After a gap the sequence continues
-      S_{k+1}, S_{k+2}, ... where it stopped.
+      classic filter on the 3 mm constant-velocity model; in a 60 s INS/GNSS outage with the
+      navigation states inflated, sigma 1e5 m and a smoothed RMS of 189 m, now 17 m and 0.7 m).
+      After a gap the sequence continues S_{k+1}, S_{k+2}, ... where it stopped.
 
     Attributes:
       b: scalar array in [0, 1), the attenuation factor (S0 used 0.254 chosen by trial and error);
