@@ -240,7 +240,8 @@ class SageHusa:
       RMS 2.3 m against 2.2 cm for the classic filter; merely clipping R at 100 R_model still
       gave 1.3-4 m (the filter never caught up), restarting gives 3.0 cm. The default range
       [0.01, 100] lets the estimated standard deviations move by a factor 10 either way from
-      the model's; widen it when the model's R is only a rough guess.
+      the model's; widen it when the model's R is only a rough guess. The bound acts after an
+      update and its flag is raised with the next epoch's noise (not after the last epoch).
 
     Attributes:
       b: scalar array in (0, 1), forgetting factor (larger = longer memory).
