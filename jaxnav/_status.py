@@ -53,7 +53,8 @@ _MESSAGES = {
                             "range of the model's): the data disagree with the model by more than that factor, e.g. an "
                             "unmodelled change of dynamics was being attributed to the measurement noise",
     INFLATION_CAPPED: "an adaptive prior-inflation factor reached its cap (fading lambda_k = max_factor): the "
-                      "innovations were far larger than the model explains and the filter was diverging",
+                      "innovations were far larger than the model explains (a diverging filter or model "
+                      "mismatch); the factor was limited there",
     ROBUST_LOCKOUT: "a robust estimator rejected every valid measurement component for many consecutive epochs "
                     "(IGG-III lock-out): the filter coasted on its prediction and may have lost the truth; use "
                     "max_run to accept persistent changes",

@@ -159,11 +159,12 @@ class Fading:
       expected. ``smooth`` replaces max(1, .) by 1 + tau softplus((x - 1)/tau) so that gradients
       are continuous; the hard max has gradient 0 where lambda_k = 1.
 
-      lambda_k is capped at ``max_factor`` (default 1e4, a factor of 100 on the standard
-      deviations in one epoch) and the epoch is flagged INFLATION_CAPPED. Eq. (14) is unbounded:
-      when M_k is tiny (a converged filter with little process noise) any mismatch of R makes
-      |tr N / tr M| huge (1.8e14 was seen with the printed |.|, where an R larger than the true
-      noise makes tr N negative), and one such epoch wipes out the filter's memory.
+      lambda_k is capped at ``max_factor`` (default 1e6, as Yang's factor; a factor of 1000 on
+      the standard deviations in one epoch) and the epoch is flagged INFLATION_CAPPED: eq. (14)
+      itself is unbounded (1.8e14 was reported for a diverging run). Large single-epoch values
+      can be legitimate: the first GNSS fix after a 60 s outage of the S0-type INS/GNSS filter
+      gives 4.7e5 with all 18 states inflated (22 with the navigation states only), which is
+      why the default cap is not lower.
 
     Attributes:
       rho: None or scalar array > 0, the recursive estimator's weight.
@@ -180,7 +181,7 @@ class Fading:
 
     rho: Any = None
     smooth: Any = None
-    max_factor: Any = 1e4
+    max_factor: Any = 1e6
     window: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
     absolute: bool = dataclasses.field(default=True, metadata=dict(static=True))
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
@@ -315,7 +316,7 @@ def attenuated(b, *, states=None) -> Attenuated:
 
 
 def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True,
-           max_factor=1e4, states=None) -> Fading:
+           max_factor=1e6, states=None) -> Fading:
     """Fading-memory rule lambda_k (S0 eqs. (13)-(17)); see :class:`Fading`.
 
     Args:
@@ -323,7 +324,7 @@ def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: boo
       rho: scalar > 0 for the recursive estimator C_k = (rho C_{k-1} + v v^T)/(1 + rho).
       smooth: optional temperature tau > 0 of a smooth surrogate of max(1, .).
       absolute: use |tr N / tr M| as printed (True) or tr N / tr M (False).
-      max_factor: scalar >= 1, cap of lambda_k (default 1e4; reaching it sets INFLATION_CAPPED).
+      max_factor: scalar >= 1, cap of lambda_k (default 1e6; reaching it sets INFLATION_CAPPED).
       states: optional indices (or a slice) of the states to inflate (default all); M_k is then
         taken over the inflated block of F P F^T.
     With neither ``window`` nor ``rho`` the single-epoch estimator (n = 1) is used.
