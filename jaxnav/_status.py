@@ -21,6 +21,10 @@ DISCRETIZATION_INACCURATE = 256  # a truncated Taylor discretisation had not con
 COVARIANCE_INDEFINITE = 512  # an adaptive filter's covariance lost positive semi-definiteness (diverged)
 IMU_INCREMENT_TOO_LARGE = 1024  # a rotation increment above pi rad in one sample (nav_every > 1)
 BATCH_MASK_WIDENED = 2048  # a finite measurement was masked because another sequence of the batch had NaN/inf there
+PARAMETER_OUT_OF_RANGE = 4096  # a plug-in parameter (traced, so not checked by its constructor) was outside its range
+NOISE_ESTIMATE_BOUNDED = 8192  # an adaptive noise estimate (Sage-Husa R or Q) reached its bound around the model's
+INFLATION_CAPPED = 16384  # an adaptive inflation factor (fading lambda_k) reached its cap
+ROBUST_LOCKOUT = 32768  # a robust estimator rejected every valid measurement over many consecutive epochs
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -42,6 +46,18 @@ _MESSAGES = {
     BATCH_MASK_WIDENED: "finite measurements were left out because another sequence of the batch had NaN/inf at "
                         "the same element (kalman_filter_batch shares one covariance recursion); for sequences "
                         "with gaps of their own use jax.vmap(kalman_filter)",
+    PARAMETER_OUT_OF_RANGE: "a filter plug-in parameter was outside its documented range (a traced value, e.g. "
+                            "under vmap/grad, that the constructor could not check): the results are not those of "
+                            "the documented filter",
+    NOISE_ESTIMATE_BOUNDED: "an adaptive noise estimate reached its bound (Sage-Husa R or Q outside the documented factor "
+                            "range of the model's): the data disagree with the model by more than that factor, e.g. an "
+                            "unmodelled change of dynamics was being attributed to the measurement noise",
+    INFLATION_CAPPED: "an adaptive prior-inflation factor reached its cap (fading lambda_k = max_factor): the "
+                      "innovations were far larger than the model explains (a diverging filter or model "
+                      "mismatch); the factor was limited there",
+    ROBUST_LOCKOUT: "a robust estimator rejected every valid measurement component for many consecutive epochs "
+                    "(IGG-III lock-out): the filter coasted on its prediction and may have lost the truth; use "
+                    "max_run to accept persistent changes",
 }
 
 #: flags that are reported but are not errors by default

@@ -64,7 +64,14 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
       mask: optional (T,) or (T, m) bool, True where a measurement is used.
       save: tuple of per-epoch outputs to keep (subset of ``ALL_OUTPUTS``); static.
       unroll: ``lax.scan`` unroll factor; static.
-      allow_float32: opt in to computing in float32; static.
+      allow_float32: opt in to computing in float32; static. The classic filter and the
+        data-independent rules (constant, attenuated) keep the variances to ~1e-6 relative at any
+        horizon (200k epochs measured): their covariance recursion never sees the data. Data-dependent
+        plug-ins (fading, Sage-Husa, variance compensation, IGG-III, Yang) compute lambda_k or the
+        noise from float32 innovations, whose rounding grows with the size of z: the relative
+        variance error is about 6e-7 |z|/sigma for fading and 7e-8 |z|/sigma for Sage-Husa, so
+        keep z within ~100 sigma of the origin (local offsets) or use float64 (a 200k-epoch track
+        drifting to 5 km put fading's variances 50 % off).
       check_finite: static. True (default) masks NaN/inf measurement elements and counts them.
         False trusts the data: NaN/inf are still counted and raise the NONFINITE_UNMASKED error
         flag, but are not masked (they propagate into the estimate).

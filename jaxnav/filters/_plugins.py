@@ -35,10 +35,14 @@ For example, an inflation that grows linearly with the epoch number up to a cap:
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar, NamedTuple, Optional, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+from jaxnav import _status
 
 
 class StepContext(NamedTuple):
@@ -111,8 +115,9 @@ class InflationRule(Protocol):
     def init(self, n: int, m: int, p: int, dtype) -> Any:
         """Initial rule state (a pytree) for n states, m measurements, p process noises."""
 
-    def factor(self, state, ctx: StepContext) -> tuple[Any, Any]:
-        """(scalar factor f_k, new state) for the epoch described by ``ctx``."""
+    def factor(self, state, ctx: StepContext) -> tuple[Any, ...]:
+        """(scalar factor f_k, new state) for the epoch described by ``ctx``, optionally followed by
+        int32 status flags (:mod:`jaxnav._status`, e.g. a parameter out of range or a capped factor)."""
 
 
 @runtime_checkable
@@ -188,3 +193,70 @@ class NoEstimator:
 def data_independent(*plugins) -> bool:
     """Whether every plug-in (None = the default) leaves the covariance recursion independent of the data."""
     return all(p is None or p.data_independent for p in plugins)
+
+
+# --------------------------------------------------------------------------------------------
+# parameter ranges: checked by the constructors when concrete, flagged at run time when traced
+# --------------------------------------------------------------------------------------------
+
+
+class Range(NamedTuple):
+    """The documented range of a plug-in parameter: lo <= x <= hi, with open ends where said."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = True
+
+    def text(self) -> str:
+        """The interval in mathematical notation, e.g. ``[0, 1)``."""
+        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+
+    def holds(self, x):
+        """Elementwise bool: x in the range (NaN is outside); numpy for concrete values, jax for traced."""
+        lo = (x > self.lo) if self.lo_open else (x >= self.lo)
+        hi = (x < self.hi) if self.hi_open else (x <= self.hi)
+        return lo & hi
+
+
+def concrete_value(x):
+    """A concrete parameter as a float64 numpy array, or None for a traced value (checked at run time)."""
+    if x is None or isinstance(x, jax.core.Tracer):
+        return None
+    try:
+        return np.asarray(x, dtype=np.float64)
+    except (TypeError, jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return None
+
+
+def check_ranges(where: str, ranges: dict, **values) -> None:
+    """Raise ``ValueError`` naming the range if a concrete value lies outside it (traced values pass).
+
+    Args:
+      where: the constructor's name, for the message.  ranges: {name: :class:`Range`}.
+      values: the parameters by name (None: not given).
+    """
+    for name, x in values.items():
+        a = concrete_value(x)
+        if a is not None and not bool(np.all(ranges[name].holds(a))):
+            raise ValueError(f"{where}: {name} must be in {ranges[name].text()}, got {x!r}")
+
+
+def range_flags(plugin, ranges: dict):
+    """int32 PARAMETER_OUT_OF_RANGE when any of the plug-in's parameters (its attributes named in
+    ``ranges``, None skipped) is outside its range at run time, else 0."""
+    ok = jnp.ones((), bool)
+    for name, rng in ranges.items():
+        x = getattr(plugin, name)
+        if x is not None:
+            ok = ok & jnp.all(rng.holds(jnp.asarray(x)))
+    return jnp.where(ok, 0, _status.PARAMETER_OUT_OF_RANGE).astype(jnp.int32)
+
+
+def rule_factor(rule, state, ctx):
+    """(factor, new state, int32 flags) of a rule, whether its ``factor`` returns flags or not."""
+    out = rule.factor(state, ctx)
+    if len(out) == 3:
+        return out
+    f, st = out
+    return f, st, jnp.zeros((), jnp.int32)

@@ -16,8 +16,16 @@ from typing import Any, ClassVar, NamedTuple, Optional
 import jax
 import jax.numpy as jnp
 
+from jaxnav import _status
 from jaxnav._numerics import as_leaf, smooth_max1
-from jaxnav.filters._plugins import NoInflation, StepContext  # noqa: F401  (StepContext: the rules' input)
+from jaxnav.filters._plugins import (  # noqa: F401  (StepContext: the rules' input)
+    NoInflation,
+    Range,
+    StepContext,
+    check_ranges,
+    range_flags,
+    rule_factor,
+)
 
 
 def state_mask(n, states):
@@ -55,10 +63,12 @@ class Constant:
     """Constant inflation S >= 1 (S0 eq. (10)); equals filterpy's fading ``alpha`` with S = alpha^2.
 
     Attributes:
-      S: scalar array, the factor applied to F P F^T at every epoch.
+      S: scalar array in [1, inf), the factor applied to F P F^T at every epoch (out of range at
+        run time: PARAMETER_OUT_OF_RANGE in ``status``).
     """
 
     data_independent: ClassVar[bool] = True
+    ranges: ClassVar[dict] = {"S": Range(1.0)}
 
     S: Any
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
@@ -67,31 +77,54 @@ class Constant:
         return ()
 
     def factor(self, state, ctx):
-        return jnp.asarray(self.S, ctx.FPF.dtype), state
+        return jnp.asarray(self.S, ctx.FPF.dtype), state, range_flags(self, self.ranges)
 
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Attenuated:
-    """Attenuated memory S_k = (1 - b^k) / (1 - b), 0 <= b < 1 (S0 eqs. (11)-(12)).
+    """Attenuated memory S_k = (1 - b^k) / (1 - b), 0 <= b < 1, k counting filter updates (S0 eqs. (11)-(12)).
 
     S_1 = 1 and S_k rises monotonically towards 1 / (1 - b); b = 0 is the classic filter.
 
+    Notes:
+      k is the number of filter *updates*, not of predictions: it advances only at epochs with at
+      least one valid measurement component, and an epoch without any applies the factor 1
+      (the classic prediction, as the fading rule's lambda_k = 1 there). S0 derives eq. (12) for a
+      filter that updates at every epoch, where the two counts agree; the attenuated memory
+      weights old *measurements* down, so with no measurement there is nothing to forget. Counting
+      predictions instead would multiply P by up to 1/(1 - b) per empty epoch: a 60-epoch gap
+      with b = 0.254 inflates the variance by 1.34^60 = 4e7 (sigma 185 m against 4.5 mm for the
+      classic filter on the 3 mm constant-velocity model; in a 60 s INS/GNSS outage with the
+      navigation states inflated, sigma 1e5 m and a smoothed RMS of 189 m, now 17 m and 0.7 m).
+      After a gap the sequence continues S_{k+1}, S_{k+2}, ... where it stopped.
+
     Attributes:
-      b: scalar array in [0, 1), the attenuation factor (S0 used 0.254 chosen by trial and error).
+      b: scalar array in [0, 1), the attenuation factor (S0 used 0.254 chosen by trial and error);
+        out of range at run time: PARAMETER_OUT_OF_RANGE in ``status``.
     """
 
-    data_independent: ClassVar[bool] = True
+    data_independent: ClassVar[bool] = True  # the factor depends on the mask only, not on the values
+    ranges: ClassVar[dict] = {"b": Range(0.0, 1.0)}
 
     b: Any
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
 
     def init(self, n, m, p, dtype):
-        return ()
+        return AttenuatedState(updates=jnp.zeros((), dtype))
 
     def factor(self, state, ctx):
-        b = jnp.asarray(self.b, ctx.FPF.dtype)
-        return (1.0 - b ** ctx.k) / (1.0 - b), state
+        dt = ctx.FPF.dtype
+        b = jnp.asarray(self.b, dt)
+        k = state.updates + ctx.observed.astype(dt)
+        S_k = (1.0 - b ** jnp.maximum(k, 1.0)) / (1.0 - b)  # k >= 1 keeps d/db finite at b = 0
+        return jnp.where(ctx.observed, S_k, 1.0), AttenuatedState(updates=k), range_flags(self, self.ranges)
+
+
+class AttenuatedState(NamedTuple):
+    """Filter updates counted by the attenuated-memory rule (the k of S_k)."""
+
+    updates: Any  # scalar float, epochs with at least one valid measurement so far
 
 
 class FadingState(NamedTuple):
@@ -126,17 +159,29 @@ class Fading:
       expected. ``smooth`` replaces max(1, .) by 1 + tau softplus((x - 1)/tau) so that gradients
       are continuous; the hard max has gradient 0 where lambda_k = 1.
 
+      lambda_k is capped at ``max_factor`` (default 1e6, as Yang's factor; a factor of 1000 on
+      the standard deviations in one epoch) and the epoch is flagged INFLATION_CAPPED: eq. (14)
+      itself is unbounded (1.8e14 was reported for a diverging run). Large single-epoch values
+      can be legitimate: the first GNSS fix after a 60 s outage of the S0-type INS/GNSS filter
+      gives 4.7e5 with all 18 states inflated (22 with the navigation states only), which is
+      why the default cap is not lower.
+
     Attributes:
       rho: None or scalar array > 0, the recursive estimator's weight.
       smooth: None or scalar array tau > 0, temperature of the smooth surrogate.
+      max_factor: scalar array >= 1, cap of lambda_k.
       window: static int or None, the window length n.
       absolute: static bool, take |tr N / tr M| as printed in S0 eq. (14).
     """
 
     data_independent: ClassVar[bool] = False
 
+    ranges: ClassVar[dict] = {"rho": Range(0.0, lo_open=True), "smooth": Range(0.0, lo_open=True),
+                              "max_factor": Range(1.0)}
+
     rho: Any = None
     smooth: Any = None
+    max_factor: Any = 1e6
     window: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
     absolute: bool = dataclasses.field(default=True, metadata=dict(static=True))
     states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
@@ -182,8 +227,11 @@ class Fading:
             lam = jnp.maximum(1.0, ratio)
         else:
             lam = smooth_max1(ratio, jnp.asarray(self.smooth, ctx.FPF.dtype))
-        lam = jnp.where(obs, lam, 1.0)
-        return lam, new
+        cap = jnp.asarray(self.max_factor, ctx.FPF.dtype)
+        capped = obs & ~(lam <= cap)  # NaN counts as capped
+        lam = jnp.where(obs, jnp.minimum(lam, cap), 1.0)
+        flags = range_flags(self, self.ranges) | jnp.where(capped, _status.INFLATION_CAPPED, 0).astype(jnp.int32)
+        return lam, new, flags
 
 
 @jax.tree_util.register_dataclass
@@ -198,7 +246,8 @@ class Switch:
     (a few traces of small products).
 
     Attributes:
-      index: integer-valued scalar array (float accepted, rounded), clipped to the rules.
+      index: integer-valued scalar array (float accepted, rounded), clipped to the rules. The
+        status flags are those of the chosen rule.
       rules: tuple of rules (:class:`NoInflation`, :class:`Constant`, :class:`Attenuated`,
         :class:`Fading`, ...) inflating the same states.
     """
@@ -219,10 +268,11 @@ class Switch:
         return tuple(r.init(n, m, p, dtype) for r in self.rules)
 
     def factor(self, state, ctx):
-        out = [r.factor(s, ctx) for r, s in zip(self.rules, state)]
-        factors = jnp.stack([jnp.asarray(f, ctx.FPF.dtype) for f, _ in out])
+        out = [rule_factor(r, s, ctx) for r, s in zip(self.rules, state)]
+        factors = jnp.stack([jnp.asarray(f, ctx.FPF.dtype) for f, _, _ in out])
+        flags = jnp.stack([jnp.asarray(g, jnp.int32) for _, _, g in out])
         i = jnp.clip(jnp.round(jnp.asarray(self.index)).astype(jnp.int32), 0, len(self.rules) - 1)
-        return factors[i], tuple(s for _, s in out)
+        return factors[i], tuple(s for _, s, _ in out), flags[i]
 
 
 def _states(states):
@@ -242,22 +292,31 @@ def constant(S, *, states=None) -> Constant:
     """Constant prior inflation S (S0 eq. (10)); filterpy's ``alpha`` is sqrt(S).
 
     ``states``: optional indices (or a slice) of the states to inflate (default all).
+
+    Raises:
+      ValueError: a concrete S outside [1, inf) (a traced S is flagged in ``status`` instead).
     """
+    check_ranges("constant()", Constant.ranges, S=S)
     return Constant(S=as_leaf(S), states=_states(states))
 
 
 def attenuated(b, *, states=None) -> Attenuated:
-    """Attenuated-memory rule S_k = (1 - b^k) / (1 - b) (S0 eqs. (11)-(12)); b an array leaf.
+    """Attenuated-memory rule S_k = (1 - b^k) / (1 - b), k = filter updates (S0 eqs. (11)-(12)); b an array leaf.
 
+    Epochs without a valid measurement get the factor 1 and do not advance k (see :class:`Attenuated`).
     ``states``: optional indices (or a slice) of the states to inflate (default all). Inflating
     states that have no process noise and are weakly observable (sensor random constants in
     INS/GNSS) makes their variance grow like S^k: restrict the rule to the navigation states there.
+
+    Raises:
+      ValueError: a concrete b outside [0, 1) (a traced b is flagged in ``status`` instead).
     """
+    check_ranges("attenuated()", Attenuated.ranges, b=b)
     return Attenuated(b=as_leaf(b), states=_states(states))
 
 
 def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True,
-           states=None) -> Fading:
+           max_factor=1e6, states=None) -> Fading:
     """Fading-memory rule lambda_k (S0 eqs. (13)-(17)); see :class:`Fading`.
 
     Args:
@@ -265,20 +324,24 @@ def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: boo
       rho: scalar > 0 for the recursive estimator C_k = (rho C_{k-1} + v v^T)/(1 + rho).
       smooth: optional temperature tau > 0 of a smooth surrogate of max(1, .).
       absolute: use |tr N / tr M| as printed (True) or tr N / tr M (False).
+      max_factor: scalar >= 1, cap of lambda_k (default 1e6; reaching it sets INFLATION_CAPPED).
       states: optional indices (or a slice) of the states to inflate (default all); M_k is then
         taken over the inflated block of F P F^T.
     With neither ``window`` nor ``rho`` the single-epoch estimator (n = 1) is used.
 
     Raises:
-      ValueError: both window and rho given, or window < 1.
+      ValueError: both window and rho given, window < 1, or concrete rho, smooth outside
+        (0, inf), max_factor outside [1, inf) (traced values are flagged in ``status`` instead).
     """
     if window is not None and rho is not None:
         raise ValueError("fading(): give either window=n or rho=..., not both")
     if window is not None and (int(window) != window or window < 1):
         raise ValueError(f"fading(): window must be a positive integer, got {window!r}")
+    check_ranges("fading()", Fading.ranges, rho=rho, smooth=smooth, max_factor=max_factor)
     return Fading(
         rho=None if rho is None else as_leaf(rho),
         smooth=None if smooth is None else as_leaf(smooth),
+        max_factor=as_leaf(max_factor),
         window=None if window is None else int(window),
         absolute=bool(absolute),
         states=_states(states),

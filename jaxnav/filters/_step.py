@@ -25,7 +25,7 @@ from jaxnav._numerics import (
     whiten,
 )
 from jaxnav.filters._model import LinearGaussian, check_shapes
-from jaxnav.filters._plugins import NoEstimator, NoInflation, PostUpdate, StepContext, data_independent
+from jaxnav.filters._plugins import NoEstimator, NoInflation, PostUpdate, StepContext, data_independent, rule_factor
 from jaxnav.filters._rules import inflation_scale
 
 #: every per-epoch output a filter run can save
@@ -222,7 +222,7 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
                       FPF=FPF, GQG=GQG, R_used=R)
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
     ctx = ctx._replace(GQG=GQG, R_used=R_used)
-    factor, rule_state = rule.factor(state.rule, ctx)
+    factor, rule_state, rule_flag = rule_factor(rule, state.rule, ctx)
     if rule.states is not None:  # partial inflation: scale the block of the inflated states
         d = inflation_scale(factor, n, rule.states)
         FPF = d[:, None] * FPF * d[None, :]
@@ -238,7 +238,7 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
     # status flags and counts
     n_bad = jnp.sum(inp.mask & ~finite).astype(jnp.int32)
     bad_flag = _status.NONFINITE_MEASUREMENT if check_finite else _status.NONFINITE_UNMASKED
-    flags = est_flag | jnp.where(n_bad > 0, bad_flag, 0)
+    flags = est_flag | rule_flag | jnp.where(n_bad > 0, bad_flag, 0)
     flags = flags | jnp.where(observed & ~up.ok, _status.CHOLESKY_FAILED, 0)
     finite_state = jnp.all(jnp.isfinite(up.x)) & jnp.all(jnp.isfinite(up.P))
     flags = flags | jnp.where(finite_state, 0, _status.NONFINITE_STATE)

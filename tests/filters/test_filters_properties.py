@@ -62,7 +62,9 @@ def test_covariances_stay_symmetric_psd(seed, kind, log_q, log_r, nan_frac):
     zs[rng.uniform(size=zs.shape) < nan_frac] = np.nan
     P0 = random_spd(rng, N, 1.0, cond=1e4)
     r = jf.kalman_filter(model, rng.normal(size=N), P0, zs, **KINDS[kind])
-    failed = bool(int(r.status) & (_status.CHOLESKY_FAILED | _status.NONFINITE_STATE | _status.COVARIANCE_INDEFINITE))
+    # any error flag (not the informational ones) excuses the PSD check: e.g. INFLATION_CAPPED, since
+    # fading caps lambda_k at 1e6, is now what the diverging example 6322 raises
+    failed = bool(int(r.status) & ~_status.INFO_FLAGS)
     _psd(r.covs, psd=not failed)
     _psd(r.pred_covs, psd=not failed)
     if (seed, kind) == (6322, "fading+vc"):

@@ -144,7 +144,7 @@ def test_yang_factor_follows_change_of_dynamics():
 
 def test_persistent_step_is_accepted_after_max_run(cv_data):
     """A step in the series (e.g. an antenna change) is a change, not a gross error: after max_run
-    rejections IGG-III accepts it and the filter follows; pure IGG-III (max_run=None) keeps rejecting
+    down-weighted epochs IGG-III accepts it and the filter follows; pure IGG-III (max_run=None) keeps rejecting
     it until the predicted covariance has grown (for ever when the process noise is tiny, as in S1)."""
     model, x0, P0, xs, zs = cv_data
     step = jnp.where(jnp.arange(T)[:, None] >= 200, 30 * SIG, 0.0)
@@ -153,13 +153,14 @@ def test_persistent_step_is_accepted_after_max_run(cv_data):
     off = jf.yang_factor(1e12, 3e12)  # same structure as the runs above: no new compilation
     r = jf.kalman_filter(model, x0, P0, zstep, estimator=jf.igg3(), inflation=off)
     rej = np.asarray(r.noise.rejected)
-    assert rej[200:205].all() and not rej[205].any()  # 5 rejections, then accepted
+    assert rej[200:202].all() and not rej[202].any()  # max_run = 2 down-weighted epochs, then accepted
     assert rej[200:300].sum(axis=0).max() <= 15 and not rej[250:].any()  # an overshoot, then settled
     e = np.abs(np.asarray(r.means[300:, :3] - truth[300:]))
     assert e.max() < 5 * SIG
     pure = jf.kalman_filter(model, x0, P0, zstep, estimator=jf.igg3(max_run=None), inflation=off)
     prej = np.asarray(pure.noise.rejected)
     assert prej[200:230].all()  # pure IGG-III keeps rejecting the new level until P has grown enough
+    assert int(pure.status) & _status.ROBUST_LOCKOUT and not int(r.status) & _status.ROBUST_LOCKOUT
     err = lambda res: np.sqrt(np.mean(np.asarray(res.means[210:240, :3] - truth[210:240]) ** 2))  # noqa: E731
     assert err(pure) > 2 * err(r)
 

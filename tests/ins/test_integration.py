@@ -232,6 +232,8 @@ def test_filter_family_plugins_and_15_states(outage_run, kind):
     f = np.asarray(res.epochs.factors)
     if kind == "attenuated":
         np.testing.assert_allclose(f[:3], [1.0, 1.254, 1 + 0.254 + 0.254**2])
+        t = np.asarray(res.epochs.t)  # S_k counts updates: factor 1 in the outage (P grew by 1.34 per epoch there)
+        np.testing.assert_array_equal(f[(t >= 150) & (t < 210)], 1.0)
     elif kind == "fading":
         assert f.min() >= 1.0 and f.max() > 1.0
     else:

@@ -26,7 +26,7 @@ from typing import Optional
 import numpy as np
 
 __all__ = [
-    "RefResult", "attenuated_factors", "inflated_kf", "classic_kf", "constant_kf", "attenuated_kf",
+    "RefResult", "attenuated_factors", "attenuated_update_factors", "inflated_kf", "classic_kf", "constant_kf", "attenuated_kf",
     "fading_kf", "variance_compensation_kf", "sage_husa_kf",
 ]
 
@@ -173,9 +173,26 @@ def constant_kf(model, x0, P0, zs, S) -> RefResult:
     return inflated_kf(model, x0, P0, zs, np.full(np.shape(zs)[0], float(S)))
 
 
+def attenuated_update_factors(b, zs):
+    """The attenuated-memory factor of each epoch when k counts filter updates (S0 eq. (11)).
+
+    k advances only at an observed epoch (a measurement row that is all finite), which gets
+    S_k = (1 - b^k) / (1 - b); an epoch without a measurement gets 1 and leaves k unchanged.
+    """
+    f, k = [], 0
+    for z in np.asarray(zs, dtype=np.float64):
+        if _observed(z):
+            k += 1
+            f.append((1.0 - float(b) ** k) / (1.0 - float(b)))
+        else:
+            f.append(1.0)
+    return np.array(f)
+
+
 def attenuated_kf(model, x0, P0, zs, b) -> RefResult:
-    """Attenuated-memory filter, S0 eqs. (11)-(12): S_k counts every prediction (k = t + 1)."""
-    return inflated_kf(model, x0, P0, zs, attenuated_factors(b, np.shape(zs)[0]))
+    """Attenuated-memory filter, S0 eqs. (11)-(12): S_k counts filter updates (epochs with a
+    measurement); the prediction into an epoch without one uses the factor 1 (classic, eq. (8))."""
+    return inflated_kf(model, x0, P0, zs, attenuated_update_factors(b, zs))
 
 
 # --------------------------------------------------------------------------------------------
@@ -184,7 +201,7 @@ def attenuated_kf(model, x0, P0, zs, b) -> RefResult:
 
 
 def fading_kf(model, x0, P0, zs, *, window: Optional[int] = None, rho=None, absolute=True,
-              smooth=None) -> RefResult:
+              smooth=None, max_factor=None) -> RefResult:
     """Fading-memory filter, S0 eqs. (13)-(17).
 
     lambda_k = max{1, |tr N_k / tr M_k|}                       (14)  (no |.| if absolute=False)
@@ -196,6 +213,7 @@ def fading_kf(model, x0, P0, zs, *, window: Optional[int] = None, rho=None, abso
 
     Skipped epochs: lambda_k = 1 and the innovation statistics are left unchanged.
     ``smooth=tau`` replaces max(1, x) by 1 + tau * log(1 + exp((x - 1) / tau)).
+    ``max_factor``: lambda_k = min(lambda_k, max_factor) (None: uncapped, eq. (14) as printed).
     """
     if window is not None and rho is not None:
         raise ValueError("window or rho, not both")
@@ -232,6 +250,8 @@ def fading_kf(model, x0, P0, zs, *, window: Optional[int] = None, rho=None, abso
             else:
                 tau = float(smooth)
                 lam = 1.0 + tau * np.logaddexp(0.0, (ratio - 1.0) / tau)
+            if max_factor is not None:
+                lam = min(lam, float(max_factor))
         P_pred = lam * FPF + GQG  # (13)
         x, P, v, S, obs = _step_update(x_pred, P_pred, zs[t], H, R)
         rec.add(x, P, x_pred, P_pred, v, S, lam, obs, trN=trN, trM=trM)
@@ -329,7 +349,7 @@ def variance_compensation_kf(model, x0, P0, zs, *, window=30, horizon=1, floor=0
 # --------------------------------------------------------------------------------------------
 
 
-def sage_husa_kf(model, x0, P0, zs, *, b=0.95, estimate="R", eig_floor=0.0) -> RefResult:
+def sage_husa_kf(model, x0, P0, zs, *, b=0.95, estimate="R", eig_floor=0.0, r_min=1e-2, r_max=1e2) -> RefResult:
     """Sage-Husa adaptive filter as documented in ``jaxnav.filters.SageHusa``.
 
     Start: Qhat_0 = Gamma Q Gamma^T, Rhat_0 = R (the model's, used at the first epoch).
@@ -337,7 +357,9 @@ def sage_husa_kf(model, x0, P0, zs, *, b=0.95, estimate="R", eig_floor=0.0) -> R
         Rhat_c = (1 - d_c) Rhat_{c-1} + d_c (eps eps^T + H P_k H^T),   eps = Z_k - H X_k
         Qhat_c = (1 - d_c) Qhat_{c-1}
                  + d_c [K v v^T K^T + P_k - (P_{k,k-1} - Qhat_{c-1})]_+ (eigenvalues >= eig_floor)
-    and the estimates are used in the next epoch's prediction / update.
+    and the estimates are used in the next epoch's prediction / update. Then each variance of Rhat
+    is bounded by the model's R_ii: if some Rhat_ii > r_max R_ii, Rhat restarts as the model's R;
+    else a variance below r_min R_ii is raised to it by Rhat <- D Rhat D, D_ii = sqrt(r_min R_ii / Rhat_ii).
 
     ``extra['Q']`` (T, n, n) and ``extra['R']`` (T, m, m): the noise used at each epoch.
     """
@@ -364,6 +386,12 @@ def sage_husa_kf(model, x0, P0, zs, *, b=0.95, estimate="R", eig_floor=0.0) -> R
             if "R" in estimate:
                 eps = zs[t] - H @ x
                 Rhat = (1.0 - d) * Rhat + d * (np.outer(eps, eps) + H @ P @ H.T)
+                ratio = np.diag(Rhat) / np.diag(R)
+                if np.any(ratio > r_max):
+                    Rhat = np.array(R, np.float64)
+                else:
+                    D = np.diag(np.sqrt(np.maximum(ratio, r_min) / ratio))
+                    Rhat = D @ Rhat @ D
             if "Q" in estimate:
                 Kv = K @ v
                 inc = np.outer(Kv, Kv) + P - (P_pred - Qhat)
