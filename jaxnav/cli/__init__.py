@@ -23,7 +23,7 @@ import sys
 from jaxnav.cli._common import CommandError, UsageError
 
 #: the command modules, in the order of ``jaxnav --help``
-COMMANDS = ("demo", "demo_filters", "walk", "rtk", "cadastral", "monitor", "sweep", "tune")
+COMMANDS = ("demo", "demo_filters", "ins", "walk", "rtk", "cadastral", "monitor", "sweep", "tune")
 #: exit status of an error the user must fix (bad option, value, file or config)
 EXIT_USAGE = 2
 #: exit status of an internal error (a bug: please report it with the ``--debug`` traceback)

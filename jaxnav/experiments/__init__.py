@@ -15,7 +15,10 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
   (``jaxnav rtk``): :func:`run_rtk`, :func:`write_simulated_survey`.
 * :mod:`~jaxnav.experiments.s3`: S3 cadastral survey over Monte Carlo seeds (``jaxnav cadastral``):
   :func:`run_cadastral`, :func:`grade_params`, :func:`walk_detection`.
-* :mod:`~jaxnav.experiments.walk`: real IMU + RTK walk with simulated GNSS outages (``jaxnav walk``):
+* :mod:`~jaxnav.experiments.ins_config`, :mod:`~jaxnav.experiments.ins_run`,
+  :mod:`~jaxnav.experiments.ins_output`: INS/GNSS post-processing of a recording from a config
+  (``jaxnav ins``): :func:`load_ins_config`, :func:`prepare`, :func:`run_ins`, :func:`tune_noise`, :func:`process`.
+* :mod:`~jaxnav.experiments.walk`: the walk set as the shipped ``walk_0827`` config (``jaxnav walk``):
   :func:`run_walk`, :func:`frame_check`.
 """
 
@@ -52,9 +55,12 @@ from jaxnav.experiments.tuning import CONFIGS, Problem, format_sweep, format_tun
 from jaxnav.experiments.s2 import format_rtk, run_rtk, write_simulated_survey
 from jaxnav.experiments.s3 import (ar_identification, detector_params_for, format_cadastral, grade_params,
                                    preprocessing_check, run_cadastral, survey_monte_carlo, walk_detection)
-from jaxnav.experiments.walk import (WALK_LEVER_RFU, WALK_SENSOR_TO_BODY, OutageScores, WalkNoise, format_walk,
-                                     frame_check, outage_windows, run_walk, walk_measurements, walk_params,
-                                     write_walk_scores)
+from jaxnav.experiments.ins_config import InsConfig, load_ins_config
+from jaxnav.experiments.ins_output import format_ins, process
+from jaxnav.experiments.ins_run import (InsRun, OutageScores, gnss_measurements, outage_windows, prepare, run_ins,
+                                        score_outages, tune_noise)
+from jaxnav.experiments.walk import (WALK_LEVER_RFU, WALK_SENSOR_TO_BODY, format_walk, frame_check, run_walk,
+                                     walk_config, write_walk_scores)
 
 __all__ = [
     "CONFIGS", "EXPERIMENT", "FILTERS", "Problem", "S0Setup", "S0_FILTERS", "S0_LOSSES", "S0_PARAMS", "S1Settings",
@@ -67,6 +73,8 @@ __all__ += [
     "format_rtk", "run_rtk", "write_simulated_survey",
     "ar_identification", "detector_params_for", "format_cadastral", "grade_params", "preprocessing_check",
     "run_cadastral", "survey_monte_carlo", "walk_detection",
-    "WALK_LEVER_RFU", "WALK_SENSOR_TO_BODY", "OutageScores", "WalkNoise", "format_walk", "frame_check",
-    "outage_windows", "run_walk", "walk_measurements", "walk_params", "write_walk_scores",
+    "WALK_LEVER_RFU", "WALK_SENSOR_TO_BODY", "OutageScores", "format_walk", "frame_check",
+    "outage_windows", "run_walk", "walk_config", "write_walk_scores",
+    "InsConfig", "InsRun", "format_ins", "gnss_measurements", "load_ins_config", "prepare", "process", "run_ins",
+    "score_outages", "tune_noise",
 ]

@@ -19,34 +19,25 @@ a 180 deg rotation about the sensor z axis (:data:`WALK_SENSOR_TO_BODY`). Checke
 ~1 deg), and among the four yaw mountings about z that keep z up, diag(-1, -1, 1) gives the best
 GNSS innovation log-likelihood over the walk (the forward axis is the walking direction).
 
-Host-side glue (numpy) around :func:`jaxnav.io.load_walk`, :func:`jaxnav.ins.coarse_alignment`,
-:func:`jaxnav.ins.loosely_coupled` and :func:`jaxnav.ins.smooth`; the figure is
-:func:`jaxnav.plot.plot_walk`.
+The run itself is the shipped ``jaxnav ins`` config ``walk_0827``
+(``jaxnav/experiments/configs/ins/walk_0827.toml``, processed by :mod:`jaxnav.experiments.ins_run`);
+this module keeps the walk-specific checks (:func:`frame_check`) and a programmatic entry point
+(:func:`run_walk`) over an already loaded :class:`jaxnav.io.WalkData`.
 """
 
 from __future__ import annotations
 
 import math
 import pathlib
-import time
-from typing import Any, NamedTuple, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
-from jaxnav.io import write_json
-from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins import (
-    LCParams,
-    PVMeasurements,
-    SensorBiases,
-    coarse_alignment,
-    error_model_Qc15,
-    loosely_coupled,
-    sensor_to_body_from_upstream,
-    smooth,
-)
-from jaxnav.ins.attitude import quat_to_dcm, quat_to_euler
-from jaxnav.io import WalkData, imu_increments, load_walk
+from jaxnav.experiments.ins_config import load_ins_config
+from jaxnav.experiments.ins_run import OutageScores, filter_params, gnss_measurements, prepare, run_ins
+from jaxnav.ins import SensorBiases, coarse_alignment, loosely_coupled, sensor_to_body_from_upstream
+from jaxnav.ins.attitude import quat_to_euler
+from jaxnav.io import WalkData, imu_increments, load_walk, write_json
 from jaxnav.plot import plot_walk
 
 #: Upstream walk_0827 IMU orientation (roll, pitch, yaw), deg, relative to a forward-right-down body frame.
@@ -58,225 +49,37 @@ WALK_LEVER_RFU = (-0.05, 0.0, 0.0)
 WALK_SENSOR_TO_BODY = sensor_to_body_from_upstream(*WALK_UPSTREAM_ORIENTATION_DEG)
 
 
-def outage_windows(t_start: float, t_end: float, *, convergence_s: float = 40.0, off_s: float = 15.0,
-                   on_s: float = 15.0) -> np.ndarray:
-    """(K, 2) GNSS outage windows [a, b), s: the first at ``t_start + convergence_s``, then every
-    ``off_s + on_s`` seconds; only windows that end before ``t_end`` are kept."""
-    out = []
-    a = t_start + convergence_s
-    while a + off_s <= t_end:
-        out.append((a, a + off_s))
-        a += off_s + on_s
-    return np.array(out, float).reshape(-1, 2)
+#: the shipped ``jaxnav ins`` config of this recording
+WALK_CONFIG = "walk_0827"
 
 
-def walk_measurements(pos_sol, t_imu, outages=(), *, lever=WALK_LEVER_RFU, pos_sigma_floor: float = 0.02,
-                      vel_sigma_floor: float = 0.05, use_velocity: bool = True, qualities=(1, 2)):
-    """GNSS position/velocity measurements inside the IMU span, masked inside the outage windows.
-
-    Epochs inside an outage are kept with an all-False mask, so the filter reports its free-inertial
-    prediction there (and the smoother its estimate). Position covariance: the ``.pos`` ENU covariance
-    with the standard deviations floored at ``pos_sigma_floor`` (m; handheld antenna, time-tag error);
-    velocity: the ``.pos`` velocity covariance floored at ``vel_sigma_floor`` (m/s).
-
-    Args:
-      pos_sol: :class:`jaxnav.io.PosSolution`.  t_imu: (N,) IMU times, s.  outages: (K, 2) windows, s.
-      lever: (3,) antenna lever arm, body frame, m.  qualities: ``.pos`` Q values used.
-    Returns:
-      (:class:`jaxnav.ins.PVMeasurements`, index (M,) of the kept .pos epochs, withheld (M,) bool).
-    """
-    t_imu = np.asarray(t_imu, float)
-    gt = np.asarray(pos_sol.t, float)
-    dt0 = t_imu[1] - t_imu[0]
-    keep = np.nonzero((gt > t_imu[0] - dt0 + 1e-6) & (gt <= t_imu[-1]))[0]
-    t = gt[keep]
-    M = keep.size
-    pos = np.stack([np.asarray(pos_sol.lat)[keep], np.asarray(pos_sol.lon)[keep], np.asarray(pos_sol.h)[keep]], -1)
-    vel = np.asarray(pos_sol.v_enu, float)[keep]
-    R = np.zeros((M, 6, 6))
-
-    def floored(c, floor):
-        c = np.array(c, float)
-        d = np.sqrt(np.clip(np.diagonal(c, axis1=-2, axis2=-1), 0, None))
-        s = np.maximum(d, floor) / np.where(d > 0, d, 1.0)
-        c = c * s[:, :, None] * s[:, None, :]
-        for i in range(3):
-            c[:, i, i] = np.maximum(c[:, i, i], floor**2)
-        return c
-
-    R[:, :3, :3] = floored(np.asarray(pos_sol.cov_enu)[keep], pos_sigma_floor)
-    vc = np.asarray(pos_sol.vcov_enu, float)[keep]
-    R[:, 3:, 3:] = floored(np.where(np.isfinite(vc), vc, 1.0), vel_sigma_floor)
-    q = np.asarray(pos_sol.q)[keep]
-    ok = np.isin(q, np.asarray(qualities))
-    withheld = np.zeros(M, bool)
-    for a, b in np.asarray(outages, float).reshape(-1, 2):
-        withheld |= (t >= a) & (t < b)
-    mask = np.zeros((M, 6), bool)
-    mask[:, :3] = (ok & ~withheld)[:, None]
-    if use_velocity:
-        mask[:, 3:] = (ok & ~withheld)[:, None] & np.isfinite(vel)
-    vel = np.where(np.isfinite(vel), vel, 0.0)
-    lev = np.broadcast_to(np.asarray(lever, float), (M, 3)).copy()
-    return PVMeasurements(t=t, pos=pos, vel=vel, R=R, mask=mask, lever=lev), keep, withheld
+def walk_config(data_root=None):
+    """The checked ``walk_0827`` config; ``data_root`` (the folder holding ``rtklibexplorer-gnss-imu/``) stands
+    in for ``${JAXNAV_DATA}`` when given."""
+    return load_ins_config(WALK_CONFIG, variables=None if data_root is None else {"JAXNAV_DATA": str(data_root)})
 
 
-class WalkNoise(NamedTuple):
-    """15-state noise settings for the walk's consumer MEMS IMU (all SI).
-
-    Defaults, and why:
-      gyro_arw 1e-3 rad/sqrt(s) (3.4 deg/sqrt(h)): the sensor's white noise at rest is ~0.2 deg/sqrt(h)
-        (0.0005 rad/s std at 160 Hz); the 15-state model has no bias random walk, so the density is
-        inflated ~15x to cover the in-run bias instability of a consumer gyro and handheld vibration.
-      accel_vrw 0.02 m/s/sqrt(s) (1.2 m/s/sqrt(h)): white noise at rest ~0.001 m/s/sqrt(s), inflated
-        for walking vibration, scale-factor error (|f| = 9.92 at rest vs g = 9.80) and bias drift.
-      att0: [roll/pitch, yaw] initial 1-sigma, rad: 1 deg from levelling (0.1 m/s^2 accel bias ~
-        0.6 deg), 10 deg for the GNSS-course heading of a handheld device.
-      vel0 0.1 m/s; pos0 0.05 m (the first RTK fix);
-      gyro_bias0 0.002 rad/s (0.11 deg/s): residual after the static-start estimate (consumer
-        gyros shift by this much with motion/temperature).
-      accel_bias0 0.15 m/s^2: consumer accelerometer bias + the 1.2 % excess at rest.
-    """
-
-    gyro_arw: float = 1e-3
-    accel_vrw: float = 0.02
-    att0: tuple = (math.radians(1.0), math.radians(10.0))
-    vel0: float = 0.1
-    pos0: float = 0.05
-    gyro_bias0: float = 0.002
-    accel_bias0: float = 0.15
-
-
-def walk_params(nav0, noise: WalkNoise = WalkNoise()):
-    """:class:`jaxnav.ins.LCParams` (15 states) from :class:`WalkNoise` at the start position ``nav0.pos`` (3,)."""
-    sd = np.concatenate([
-        [noise.att0[0], noise.att0[0], noise.att0[1]],
-        [noise.vel0] * 3,
-        np.asarray(enu_to_curvilinear(np.asarray(nav0.pos, float), np.full(3, noise.pos0))),
-        [noise.gyro_bias0] * 3,
-        [noise.accel_bias0] * 3,
-    ])
-    return LCParams(P0=np.diag(sd**2), Qc=np.asarray(error_model_Qc15(noise.gyro_arw, noise.accel_vrw)),
-                    tau_markov=300.0, R_scale=1.0)
-
-
-class OutageScores(NamedTuple):
-    """Scores of one run against the withheld RTK-fixed positions (horizontal, m).
-
-    Attributes:
-      windows: (K, 2) outage windows, s (GPST).  n_ref: (K,) fixed epochs scored per window.
-      fwd_max, sm_max: (K,) max horizontal error per outage (NaN where no fixed epoch).
-      fwd_rms, sm_rms: (K,) RMS horizontal error per outage.
-      fwd_rms_all, sm_rms_all: RMS over all scored epochs of all outages.
-      fwd_max_mean, sm_max_mean: mean of the per-outage maxima.
-      fwd_rms_outside: RMS horizontal error of the forward filter against fixed epochs *outside*
-        the outages (sanity: should be cm-level).
-      t, err_fwd, err_sm: (M,) epoch times and horizontal errors (NaN where not a fixed reference).
-      withheld: (M,) bool.  runtime_s: wall time of filter + smoother (incl. compilation).
-      figure: path of the figure, or None.  n_nonfinite_nav: NaN count in the navigation outputs.
-    """
-
-    windows: Any
-    n_ref: Any
-    fwd_max: Any
-    sm_max: Any
-    fwd_rms: Any
-    sm_rms: Any
-    fwd_rms_all: float
-    sm_rms_all: float
-    fwd_max_mean: float
-    sm_max_mean: float
-    fwd_rms_outside: float
-    t: Any
-    err_fwd: Any
-    err_sm: Any
-    withheld: Any
-    runtime_s: float
-    figure: Optional[str]
-    n_nonfinite_nav: int
-
-
-def _antenna_enu(nav, t_nav, t, lever, pos0):
-    """(M, 3) antenna ENU (m, around pos0 (3,)) of per-epoch nav states extrapolated to the epoch times."""
-    pos = np.asarray(nav.pos)
-    enu = np.asarray(curvilinear_to_enu(pos0, pos - pos0))
-    C = np.asarray(quat_to_dcm(np.asarray(nav.q_bn)))
-    v = np.asarray(nav.v_n)
-    return enu + (np.asarray(t) - np.asarray(t_nav))[:, None] * v + np.einsum("mij,mj->mi", C, lever)
-
-
-def run_walk(data, *, C_bs=WALK_SENSOR_TO_BODY, noise: WalkNoise = WalkNoise(), convergence_s: float = 40.0,
-             off_s: float = 15.0, on_s: float = 15.0, outages=None, lever=WALK_LEVER_RFU,
-             use_velocity: bool = True, out_dir=None, fig_name: str = "walk_outages.png") -> tuple[OutageScores, dict]:
-    """Run the 15-state LC filter and the RTS smoother on the walk with simulated outages; score them.
+def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None) -> tuple[OutageScores, dict]:
+    """The shipped ``walk_0827`` config (15-state LC filter + RTS, simulated 15 s outages) on loaded data.
 
     Args:
       data: :class:`jaxnav.io.WalkData` (or a directory for :func:`jaxnav.io.load_walk`).
-      C_bs: (3, 3) sensor -> body DCM.  noise: :class:`WalkNoise`.
-      convergence_s, off_s, on_s: outage protocol (:func:`outage_windows` from the IMU start), s, unless
-        ``outages`` (K, 2) is given explicitly.
-      out_dir: if given, the figure (:func:`jaxnav.plot.plot_walk`) is written there.
+      out_dir: if given, the track/outage figure (:func:`jaxnav.plot.plot_walk`) is written there.
+      cfg: a config to use instead of the shipped one (:func:`walk_config`).
     Returns:
-      (:class:`OutageScores`, extras dict with "alignment", "result", "meas", "smoothed_nav", "enu_ref").
+      (:class:`jaxnav.experiments.ins_run.OutageScores`, extras dict with "alignment", "result", "meas",
+      "smoothed_nav", "smoothed_biases", "enu_fwd", "enu_sm", "enu_ref", "fixed", "run").
     """
     if not isinstance(data, WalkData):
         data = load_walk(data)
-    t, dth, dv, dt = imu_increments(data.imu, C_bs)
-    align = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], data.pos)
-    if outages is None:
-        outages = outage_windows(t[0], t[-1], convergence_s=convergence_s, off_s=off_s, on_s=on_s)
-    outages = np.asarray(outages, float).reshape(-1, 2)
-    meas, keep, withheld = walk_measurements(data.pos, t, outages, lever=lever, use_velocity=use_velocity)
-    params = walk_params(align.nav0, noise)
-    z3 = np.zeros(3)
-    b0 = SensorBiases(gyro=np.asarray(align.gyro_bias), markov=z3, accel=z3)
-    t_run = time.perf_counter()
-    res = loosely_coupled(align.nav0, t, dth, dv, meas, params, dt_imu=dt, biases0=b0, n_states=15,
-                          save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections"))
-    sm_nav, sm_b, sm_P = smooth(res, n_states=15)
-    np.asarray(sm_nav.pos)
-    runtime = time.perf_counter() - t_run
-    ep = res.epochs
-    pos0 = np.array([float(x) for x in align.nav0.pos])
-    lev = np.asarray(meas.lever)
-    enu_f = _antenna_enu(ep.nav, ep.t_nav, meas.t, lev, pos0)
-    enu_s = _antenna_enu(sm_nav, ep.t_nav, meas.t, lev, pos0)
-    ps = data.pos
-    pos_ref = np.stack([np.asarray(ps.lat)[keep], np.asarray(ps.lon)[keep], np.asarray(ps.h)[keep]], -1)
-    enu_ref = np.asarray(curvilinear_to_enu(pos0, pos_ref - pos0))
-    fixed = np.asarray(ps.q)[keep] == 1
-    e_f = np.hypot(*(enu_f - enu_ref)[:, :2].T)
-    e_s = np.hypot(*(enu_s - enu_ref)[:, :2].T)
-    e_f = np.where(fixed, e_f, np.nan)
-    e_s = np.where(fixed, e_s, np.nan)
-    K = outages.shape[0]
-    n_ref = np.zeros(K, int)
-    stats = {k: np.full(K, np.nan) for k in ("fm", "sm", "fr", "sr")}
-    for k, (a, b) in enumerate(outages):
-        s = (meas.t >= a) & (meas.t < b) & fixed
-        n_ref[k] = int(s.sum())
-        if n_ref[k]:
-            stats["fm"][k], stats["sm"][k] = e_f[s].max(), e_s[s].max()
-            stats["fr"][k] = math.sqrt(np.mean(e_f[s] ** 2))
-            stats["sr"][k] = math.sqrt(np.mean(e_s[s] ** 2))
-    sc = withheld & fixed
-    out_fixed = ~withheld & fixed
-    nonfinite = int(sum(np.count_nonzero(~np.isfinite(np.asarray(a))) for a in (*ep.nav, *sm_nav)))
-
-    def _rms(x):
-        return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
-
-    scores = OutageScores(
-        windows=outages, n_ref=n_ref, fwd_max=stats["fm"], sm_max=stats["sm"], fwd_rms=stats["fr"],
-        sm_rms=stats["sr"], fwd_rms_all=_rms(e_f[sc]), sm_rms_all=_rms(e_s[sc]),
-        fwd_max_mean=float(np.nanmean(stats["fm"])) if np.any(n_ref) else float("nan"),
-        sm_max_mean=float(np.nanmean(stats["sm"])) if np.any(n_ref) else float("nan"),
-        fwd_rms_outside=_rms(e_f[out_fixed]), t=np.asarray(meas.t), err_fwd=e_f, err_sm=e_s, withheld=withheld,
-        runtime_s=runtime, figure=None, n_nonfinite_nav=nonfinite)
-    extras = dict(alignment=align, result=res, meas=meas, smoothed_nav=sm_nav, smoothed_biases=sm_b,
-                  enu_fwd=enu_f, enu_sm=enu_s, enu_ref=enu_ref, fixed=fixed)
+    cfg = walk_config(pathlib.Path(data.imu.path).resolve().parent.parent.parent) if cfg is None else cfg
+    run = run_ins(prepare(cfg, imu=data.imu, pos=data.pos, progress=None))
+    extras = dict(alignment=run.prep.alignment, result=run.result, meas=run.prep.meas, smoothed_nav=run.smoothed_nav,
+                  smoothed_biases=run.smoothed_biases, enu_fwd=run.enu_fwd, enu_sm=run.enu_sm, enu_ref=run.enu_ref,
+                  fixed=run.fixed, run=run)
+    scores = run.scores
     if out_dir is not None:
-        fig = plot_walk(scores, extras, pathlib.Path(out_dir) / fig_name)
+        fig = plot_walk(scores, extras, pathlib.Path(out_dir) / fig_name, title=cfg.name)
         scores = scores._replace(figure=str(fig))
     return scores, extras
 
@@ -300,7 +103,7 @@ def format_walk(scores: OutageScores) -> str:
 
 
 def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180.0, 270.0),
-                C_bs=WALK_SENSOR_TO_BODY, until_s: float = 40.0) -> dict:
+                C_bs=WALK_SENSOR_TO_BODY, until_s: float = 40.0, cfg=None) -> dict:
     """Check a sensor -> body rotation on the data.
 
     Returns the specific force at rest in the body frame (m/s^2; must be ~ +g on up) and the innovation
@@ -310,6 +113,11 @@ def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180
     """
     if not isinstance(data, WalkData):
         data = load_walk(data)
+    if cfg is None:
+        cfg = walk_config(pathlib.Path(data.imu.path).resolve().parent.parent.parent)
+    from jaxnav.experiments.ins_run import densities
+
+    noise = densities(cfg)
     t0 = float(np.asarray(data.imu.t)[0])
     st = np.asarray(data.imu.t) <= t0 + 1.5
     f_rest = np.asarray(C_bs) @ np.asarray(data.imu.f_b)[st].mean(0)
@@ -342,9 +150,9 @@ def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180
         n = t <= t0 + until_s
         t, dth, dv, dt = t[n], dth[n], dv[n], dt[n]
         al = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], data.pos)
-        meas, _, _ = walk_measurements(data.pos, t)
+        meas, _, _ = gnss_measurements(data.pos, t, lever_rfu=WALK_LEVER_RFU)
         z3 = np.zeros(3)
-        res = loosely_coupled(al.nav0, t, dth, dv, meas, walk_params(al.nav0), dt_imu=dt,
+        res = loosely_coupled(al.nav0, t, dth, dv, meas, filter_params(noise, al.nav0.pos, 15), dt_imu=dt,
                               biases0=SensorBiases(np.asarray(al.gyro_bias), z3, z3), n_states=15, save=("nav",))
         out["loglik"][yaw] = float(res.loglik)
         # converged device heading minus the velocity course while walking (median over epochs after

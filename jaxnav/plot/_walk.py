@@ -11,14 +11,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def plot_walk(scores, extras: dict, path) -> pathlib.Path:
+def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathlib.Path:
     """Track with outage windows (left) and horizontal error inside each outage (right).
 
     Args:
       scores: :class:`jaxnav.experiments.walk.OutageScores` (windows (K, 2) s, t (M,) s, err_fwd/err_sm (M,) m,
         n_ref/fwd_max/sm_max (K,), fwd_rms_all/sm_rms_all m).
       extras: dict with "enu_ref", "enu_fwd", "enu_sm": (M, 3) local ENU, m.
-      path: the PNG written (folders created).
+      path: the PNG written (folders created).  title: name of the recording in the left title.
     Returns:
       The path written.
     """
@@ -42,7 +42,7 @@ def plot_walk(scores, extras: dict, path) -> pathlib.Path:
     a.set_ylabel("north, m")
     a.axis("equal")
     a.legend(fontsize=8)
-    a.set_title("walk_0827: track, GNSS withheld on the outage windows")
+    a.set_title(f"{title}: track, GNSS withheld on the outage windows")
     b = ax[1]
     for k, (ta, tb) in enumerate(scores.windows):
         w = (t >= ta) & (t < tb)

@@ -93,6 +93,15 @@ def _files(tmp_path):
     d["t_unknown"] = _tune_config(tmp_path, "t_unk.toml", ("[tune]", "[tune]\nmomentum = 0.9"))
     d["t_param"] = _tune_config(tmp_path, "t_param.toml", ("[params.b]\ninit = 0.5", "[params.b]\ninit = true"))
     d["t_dur"] = _tune_config(tmp_path, "t_dur.toml", ("duration = 2000.0", "duration = -5.0"))
+    ins = '[imu]\nfile = "imu.csv"\ntag = "imu.csv.tag"\n[gnss]\nfile = "sol.pos"\n[noise]\ngrade = "consumer"\n'
+    (tmp_path / "ins_nofile.toml").write_text(ins)
+    d["ins_nofile"] = tmp_path / "ins_nofile.toml"
+    (tmp_path / "ins_badkey.toml").write_text(ins + "[evaluate]\noutage = 15\n")
+    d["ins_badkey"] = tmp_path / "ins_badkey.toml"
+    (tmp_path / "ins_pos.toml").write_text(ins.replace('file = "imu.csv"', f'file = "{d["a_file"]}"')
+                                           .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
+                                           .replace('file = "sol.pos"', f'file = "{d["a_file"]}"'))
+    d["ins_pos"] = tmp_path / "ins_pos.toml"
     d["stops_bad"] = tmp_path / "stops.csv"
     d["stops_bad"].write_text("K0, known_coordinate, 0, 10, 132.0, 118.0, 10.0\n")
     return d
@@ -130,6 +139,12 @@ CASES = [
     ("demo-filters epochs 0", ["demo-filters", "--epochs", "0"], ["--epochs", "[100, 1e+06]"]),
     ("demo-filters seeds 0", ["demo-filters", "--seeds", "0"], ["--seeds"]),
     ("demo-filters out is a file", ["demo-filters", "--out", "{a_file}"], ["a_file", "existing file"]),
+    ("ins config missing", ["ins", "{tmp}/nope.toml"], ["jaxnav ins:", "nope.toml", "no such config file"]),
+    ("ins not shipped", ["ins", "no_such_name"], ["jaxnav ins:", "not a shipped config", "walk_0827"]),
+    ("ins data file missing", ["ins", "{ins_nofile}", "--out", "{tmp}/o"], ["imu.csv", "no such file", "imu.file"]),
+    ("ins unknown key", ["ins", "{ins_badkey}"], ["ins_badkey.toml", "evaluate has unknown key(s) ['outage']"]),
+    ("ins unreadable files", ["ins", "{ins_pos}", "--out", "{tmp}/o"], ["a_file"]),
+    ("ins data folder missing", ["ins", "walk_0827", "--data", "{tmp}/no_data"], ["no_data", "no such data folder"]),
     ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
     ("rtk nothing", ["rtk"], ["jaxnav rtk:", "give FILES or --simulate"]),
     ("rtk missing file", ["rtk", "{tmp}/none.pos"], ["none.pos", "no such file"]),

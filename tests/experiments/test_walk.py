@@ -3,7 +3,7 @@
 Protocol (upstream project / KF-GINS): 40 s convergence from the IMU start, then GNSS withheld
 15 s off / 15 s on; errors scored against the withheld RTK-fixed (Q=1) positions. Only the first
 two windows contain fixed epochs (the solution is float after ~87 s); the third is unscored.
-Measured (this data, default :class:`jaxnav.experiments.walk.WalkNoise`): forward max horizontal
+Measured (this data, the shipped ``jaxnav ins`` config ``walk_0827``): forward max horizontal
 drift 5.9 / 6.1 m per outage, RTS 0.21 / 0.12 m; RMS over outages 2.67 m forward, 0.12 m RTS.
 Runtime ~15-20 s cold (compilation), < 1 s warm.
 """

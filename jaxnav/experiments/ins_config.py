@@ -1,0 +1,475 @@
+"""The ``jaxnav ins`` configuration: one TOML file describes a recording and how to process it.
+
+Every key is checked before any file is read (type, range, allowed values, unknown keys named);
+file paths are relative to the config file, and ``${JAXNAV_DATA}`` (or any ``${VAR}``) in a path
+is replaced from the environment (the shipped configs use it to find ``../shared/data``).
+Units are the datasheet units a user has at hand (deg, deg/sqrt(h), m/s/sqrt(h), deg/h, mg, s, m);
+:func:`load_ins_config` converts them to SI once, here, and the rest of the pipeline sees SI only.
+
+Frames (stated once, used everywhere):
+  vehicle frame: forward-right-down (FRD); ``lever_arm_frd_m`` is the GNSS antenna minus the IMU
+  in it; ``mounting_rpy_deg`` = (roll, pitch, yaw) is the attitude of the sensor frame in it, so
+  that C_vehicle_sensor = Rz(yaw) Ry(pitch) Rx(roll) maps a vector in sensor axes to vehicle axes.
+  Groves-style configs (e.g. the upstream project of the walk set, ``imu_misalign``) apply the
+  transpose of that product as sensor-to-body; give such angles as ``mounting_groves_rpy_deg``.
+  Inside jaxnav the body frame is right-forward-up (RFU): C_bs = C_rfu_frd C_vehicle_sensor.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pathlib
+import re
+from typing import Any, NamedTuple, Optional
+
+import numpy as np
+
+from jaxnav._config import load_toml
+from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
+
+#: folder of the shipped ``jaxnav ins`` configs (``jaxnav ins NAME`` finds ``NAME.toml`` here)
+CONFIG_DIR = pathlib.Path(__file__).with_name("configs") / "ins"
+
+IMU_FORMATS = ("rtklib-csv", "kf-gins", "csv")
+GNSS_FORMATS = ("rtklib-pos", "kf-gins", "csv")
+#: noise grades of :func:`jaxnav.ins.noise_preset`
+GRADES = ("consumer", "industrial", "tactical", "navigation")
+STATE_CHOICES = (15, 18, 21)
+#: parameters ``--tune`` can estimate (``[tune] params``): noise densities, a factor on the GNSS
+#: position sigmas, the lever arm
+TUNABLE = ("arw", "vrw", "gyro_bias_instability", "pos_sigma_scale", "lever_arm")
+
+_NUM = (int, float)
+
+
+class ConfigError(ValueError):
+    """A config problem; the text names the file and the key (``FILE: section.key ...``)."""
+
+
+class ImuSection(NamedTuple):
+    """[imu], SI. ``mounting``: (3, 3) C_vehicle_sensor (FRD vehicle <- sensor)."""
+
+    file: pathlib.Path
+    format: str
+    tag: Optional[pathlib.Path]
+    columns: Optional[dict]
+    units: Optional[dict]
+    mounting: Any
+    mounting_source: str
+    time_offset_s: Any  # float (s) or "estimate"
+    time_offset_search_s: float
+
+
+class GnssSection(NamedTuple):
+    """[gnss], SI. ``lever_arm_frd``: (3,) antenna minus IMU, FRD vehicle frame, m."""
+
+    file: pathlib.Path
+    format: str
+    columns: Optional[dict]
+    units: Optional[dict]
+    lever_arm_frd: Any
+    use_velocity: bool
+    fixed_only: bool
+    pos_sigma_floor: float
+    vel_sigma_floor: float
+    gate_probability: Optional[float]
+
+
+class NoiseSection(NamedTuple):
+    """[noise], SI; None where the grade's preset value is used.
+
+    Densities: arw rad/sqrt(s), vrw m/s/sqrt(s), bias instabilities rad/s and m/s^2 with their
+    correlation time s, bias random walks rad/s/sqrt(s) and m/s^2/sqrt(s).
+    Initial 1-sigma: attitude (roll/pitch, heading) rad, velocity m/s, position m, biases rad/s, m/s^2.
+    """
+
+    grade: Optional[str]
+    states: int
+    arw: Optional[float]
+    vrw: Optional[float]
+    gyro_bias_instability: Optional[float]
+    accel_bias_instability: Optional[float]
+    bias_correlation_time: Optional[float]
+    gyro_bias_rw: Optional[float]
+    accel_bias_rw: Optional[float]
+    init_attitude: tuple
+    init_velocity: float
+    init_position: float
+    init_gyro_bias: Optional[float]
+    init_accel_bias: Optional[float]
+
+
+class AlignmentSection(NamedTuple):
+    """[alignment]: static window s, heading ("gnss" | "gyrocompass" | a value in rad), speed m/s."""
+
+    static_s: float
+    heading: Any
+    min_speed: float
+    course_s: float
+    attitude: Any  # None or (3,) roll, pitch, yaw rad of the body (RFU) in ENU, as given
+
+
+class ConstraintSection(NamedTuple):
+    """[constraints]: ZUPT ("auto" | False), NHC, their sigmas (m/s) and the standstill detector settings."""
+
+    zupt: Any
+    zupt_sigma: float
+    zaru: bool
+    nhc: bool
+    nhc_sigma: float
+    detector_window: int
+    detector_threshold: Optional[float]
+
+
+class EvaluateSection(NamedTuple):
+    """[evaluate]: simulated outages of ``outage_s`` from ``first_s`` after the start, GNSS back on for
+    ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s)."""
+
+    outage_s: float
+    first_s: float
+    gap_s: float
+    end_margin_s: float
+
+
+class TuneSection(NamedTuple):
+    """[tune]: parameters tuned by ``--tune`` (names of :data:`TUNABLE`), optimiser steps, learning rate."""
+
+    params: tuple
+    steps: int
+    learning_rate: float
+    mode: str
+
+
+class InsConfig(NamedTuple):
+    """A checked ``jaxnav ins`` configuration (SI units).
+
+    Attributes:
+      path: the config file.  name: a title for outputs (``[run] name``, default: the file stem).
+      imu, gnss, noise, alignment, constraints: the sections.  evaluate: None or the outage protocol.
+      tune: the ``--tune`` settings.  raw: the TOML as read (echoed into results.json).
+    """
+
+    path: pathlib.Path
+    name: str
+    imu: ImuSection
+    gnss: GnssSection
+    noise: NoiseSection
+    alignment: AlignmentSection
+    constraints: ConstraintSection
+    evaluate: Optional[EvaluateSection]
+    tune: TuneSection
+    raw: dict
+
+
+def rpy_to_dcm(roll, pitch, yaw) -> np.ndarray:
+    """C = Rz(yaw) Ry(pitch) Rx(roll) (rad): the DCM of a frame with that (roll, pitch, yaw) attitude.
+
+    Used for the mounting convention of this module's docstring; (3, 3) numpy.
+    """
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
+                              math.sin(yaw))
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+#: DCM from forward-right-down to jaxnav's right-forward-up body axes
+C_RFU_FRD = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def sensor_to_body(mounting) -> np.ndarray:
+    """C_bs (sensor -> jaxnav RFU body) from C_vehicle_sensor (sensor -> FRD vehicle), (3, 3)."""
+    C = C_RFU_FRD @ np.asarray(mounting, float)
+    C[np.abs(C) < 1e-12] = 0.0
+    return C
+
+
+_VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
+
+
+class _Reader:
+    """Typed access to one section with file/key named errors and unknown-key detection."""
+
+    def __init__(self, path, d: dict, section: str, variables=None):
+        self.path, self.section, self.variables = path, section, dict(variables or {})
+        if not isinstance(d, dict):
+            self.fail(None, f"must be a section [{section}], got {d!r}")
+        self.d, self.used = d, set()
+
+    def fail(self, key, msg):
+        where = self.section if key is None else f"{self.section}.{key}"
+        raise ConfigError(f"{self.path}: {where} {msg}")
+
+    def has(self, key):
+        return key in self.d
+
+    def get(self, key, kind, default=..., *, lo=None, hi=None, lo_open=False, choices=None):
+        self.used.add(key)
+        if key not in self.d:
+            if default is ...:
+                self.fail(key, "is required")
+            return default
+        v = self.d[key]
+        if kind is float:
+            if isinstance(v, bool) or not isinstance(v, _NUM):
+                self.fail(key, f"must be a number, got {v!r}")
+            v = float(v)
+            if not math.isfinite(v):
+                self.fail(key, f"must be finite, got {v!r}")
+        elif kind is int:
+            if isinstance(v, bool) or not isinstance(v, int):
+                self.fail(key, f"must be an integer, got {v!r}")
+        elif kind is bool:
+            if not isinstance(v, bool):
+                self.fail(key, f"must be true or false, got {v!r}")
+        elif kind is str:
+            if not isinstance(v, str):
+                self.fail(key, f"must be a string, got {v!r}")
+        elif kind == "vec3":
+            if (not isinstance(v, list) or len(v) != 3
+                    or not all(isinstance(x, _NUM) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
+                self.fail(key, f"must be a list of 3 finite numbers, got {v!r}")
+            return np.asarray(v, float)
+        if choices is not None and v not in choices:
+            self.fail(key, f"must be one of {list(choices)}, got {v!r}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            self.fail(key, f"= {v!r} must be {'>' if lo_open else '>='} {lo:g}")
+        if hi is not None and v > hi:
+            self.fail(key, f"= {v!r} must be <= {hi:g}")
+        return v
+
+    def file(self, key, required=True):
+        v = self.get(key, str, ... if required else None)
+        if v is None:
+            return None
+
+        def sub(m):
+            name = m.group(1)
+            if name in self.variables:
+                return self.variables[name]
+            if name not in os.environ:
+                self.fail(key, f"uses ${{{name}}}, which is not set in the environment (set it, or pass --data)")
+            return os.environ[name]
+
+        p = pathlib.Path(os.path.expanduser(_VAR.sub(sub, v)))
+        return p if p.is_absolute() else (self.path.parent / p)
+
+    def table(self, key):
+        self.used.add(key)
+        v = self.d.get(key)
+        if v is not None and not isinstance(v, dict):
+            self.fail(key, f"must be a table, got {v!r}")
+        return v
+
+    def done(self, allowed=None):
+        unknown = sorted(set(self.d) - self.used)
+        if unknown:
+            self.fail(None, f"has unknown key(s) {unknown}; expected some of {sorted(self.used)}")
+
+
+_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "evaluate", "tune")
+
+
+def _imu(path, d, variables=None) -> ImuSection:
+    r = _Reader(path, d, "imu", variables)
+    fmt = r.get("format", str, "rtklib-csv", choices=IMU_FORMATS)
+    f = r.file("file")
+    tag = r.file("tag", required=False)
+    if tag is not None and fmt != "rtklib-csv":
+        r.fail("tag", f"is only used with format = 'rtklib-csv', not {fmt!r}")
+    cols, units = r.table("columns"), r.table("units")
+    if fmt == "csv" and cols is None:
+        r.fail("columns", "is required for format = 'csv' (a table like {t = 0, gx = 1, ...})")
+    given = [k for k in ("mounting_rpy_deg", "mounting_groves_rpy_deg", "mounting_dcm") if k in d]
+    if len(given) > 1:
+        r.fail(given[1], f"conflicts with {given[0]}: give the mounting once")
+    if "mounting_dcm" in d:
+        r.used.add("mounting_dcm")
+        v = d["mounting_dcm"]
+        try:
+            C = np.asarray(v, float)
+        except (TypeError, ValueError):
+            C = np.zeros(0)
+        if C.shape != (3, 3) or not np.all(np.isfinite(C)):
+            r.fail("mounting_dcm", f"must be a 3x3 list of numbers, got {v!r}")
+        if np.max(np.abs(C @ C.T - np.eye(3))) > 1e-6 or abs(np.linalg.det(C) - 1.0) > 1e-6:
+            r.fail("mounting_dcm", "must be a rotation (orthonormal, determinant +1) to 1e-6")
+        mounting, src = C, "mounting_dcm (C_vehicle_sensor, FRD)"
+    elif "mounting_groves_rpy_deg" in d:
+        a = r.get("mounting_groves_rpy_deg", "vec3") * DEG
+        mounting, src = rpy_to_dcm(*a).T, "mounting_groves_rpy_deg (Groves Euler_to_CTM, transposed)"
+    else:
+        a = r.get("mounting_rpy_deg", "vec3", np.zeros(3)) * DEG
+        mounting, src = rpy_to_dcm(*a), "mounting_rpy_deg (Rz Ry Rx, FRD vehicle <- sensor)"
+    off = d.get("time_offset_s", 0.0)
+    r.used.add("time_offset_s")
+    if off != "estimate":
+        off = r.get("time_offset_s", float, 0.0, lo=-10.0, hi=10.0)
+    search = r.get("time_offset_search_s", float, 0.5, lo=0.0, lo_open=True, hi=10.0)
+    r.done()
+    return ImuSection(file=f, format=fmt, tag=tag, columns=cols, units=units, mounting=mounting,
+                      mounting_source=src, time_offset_s=off, time_offset_search_s=search)
+
+
+def _gnss(path, d, variables=None) -> GnssSection:
+    r = _Reader(path, d, "gnss", variables)
+    fmt = r.get("format", str, "rtklib-pos", choices=GNSS_FORMATS)
+    f = r.file("file")
+    cols, units = r.table("columns"), r.table("units")
+    if fmt == "csv" and cols is None:
+        r.fail("columns", "is required for format = 'csv'")
+    lever = r.get("lever_arm_frd_m", "vec3", np.zeros(3))
+    if np.max(np.abs(lever)) > 100.0:
+        r.fail("lever_arm_frd_m", f"= {lever.tolist()} m: a lever arm beyond 100 m is not plausible")
+    gate = d.get("gate_probability", 0.9999)
+    r.used.add("gate_probability")
+    if gate is not False:
+        gate = r.get("gate_probability", float, 0.9999, lo=0.5, hi=1.0 - 1e-12)
+    else:
+        gate = None
+    g = GnssSection(file=f, format=fmt, columns=cols, units=units, lever_arm_frd=lever,
+                    use_velocity=r.get("use_velocity", bool, True), fixed_only=r.get("fixed_only", bool, False),
+                    pos_sigma_floor=r.get("pos_sigma_floor_m", float, 0.02, lo=0.0),
+                    vel_sigma_floor=r.get("vel_sigma_floor_m_s", float, 0.05, lo=0.0), gate_probability=gate)
+    r.done()
+    return g
+
+
+def _noise(path, d) -> NoiseSection:
+    r = _Reader(path, d, "noise")
+    grade = r.get("grade", str, None, choices=GRADES)
+    states = r.get("states", int, 15, choices=STATE_CHOICES)
+
+    def opt(key, scale):
+        v = r.get(key, float, None, lo=0.0, lo_open=True)
+        return None if v is None else v * scale
+
+    n = NoiseSection(
+        grade=grade, states=states,
+        arw=opt("arw_deg_per_sqrt_h", DEG_PER_SQRT_HOUR),
+        vrw=opt("vrw_m_per_s_per_sqrt_h", 1.0 / math.sqrt(HOUR)),
+        gyro_bias_instability=opt("gyro_bias_instability_deg_per_h", DEG_PER_HOUR),
+        accel_bias_instability=opt("accel_bias_instability_mg", MG),
+        bias_correlation_time=opt("bias_correlation_time_s", 1.0),
+        gyro_bias_rw=opt("gyro_bias_rw_deg_per_h_per_sqrt_h", DEG_PER_HOUR / math.sqrt(HOUR)),
+        accel_bias_rw=opt("accel_bias_rw_mg_per_sqrt_h", MG / math.sqrt(HOUR)),
+        init_attitude=tuple(float(x) * DEG for x in _pair(r, "init_attitude_deg", (1.0, 10.0))),
+        init_velocity=r.get("init_velocity_m_s", float, 0.1, lo=0.0, lo_open=True),
+        init_position=r.get("init_position_m", float, 0.05, lo=0.0, lo_open=True),
+        init_gyro_bias=opt("init_gyro_bias_deg_per_s", DEG),
+        init_accel_bias=opt("init_accel_bias_mg", MG))
+    if grade is None and (n.arw is None or n.vrw is None):
+        r.fail("grade", "is required unless arw_deg_per_sqrt_h and vrw_m_per_s_per_sqrt_h are both given")
+    r.done()
+    return n
+
+
+def _pair(r: _Reader, key, default):
+    r.used.add(key)
+    v = r.d.get(key, list(default))
+    if (not isinstance(v, list) or len(v) != 2
+            or not all(isinstance(x, _NUM) and not isinstance(x, bool) and 0 < x < 360 for x in v)):
+        r.fail(key, f"must be [roll/pitch, heading] 1-sigma in deg, each in (0, 360), got {v!r}")
+    return v
+
+
+def _alignment(path, d) -> AlignmentSection:
+    r = _Reader(path, d, "alignment")
+    h = d.get("heading", "gnss")
+    r.used.add("heading")
+    if isinstance(h, str):
+        if h not in ("gnss", "gyrocompass"):
+            r.fail("heading", f"must be 'gnss', 'gyrocompass' or a heading in deg, got {h!r}")
+    else:
+        h = r.get("heading", float, lo=-360.0, hi=360.0) * DEG
+    att = r.get("attitude_rpy_deg", "vec3", None)
+    a = AlignmentSection(static_s=r.get("static_s", float, 1.5, lo=0.0, lo_open=True, hi=3600.0), heading=h,
+                         min_speed=r.get("min_speed_m_s", float, 0.5, lo=0.0, lo_open=True),
+                         course_s=r.get("course_s", float, 2.0, lo=0.0, lo_open=True),
+                         attitude=None if att is None else att * DEG)
+    r.done()
+    return a
+
+
+def _constraints(path, d) -> ConstraintSection:
+    r = _Reader(path, d, "constraints")
+    z = d.get("zupt", False)
+    r.used.add("zupt")
+    if z not in ("auto", False):
+        r.fail("zupt", f"must be 'auto' or false, got {z!r}")
+    c = ConstraintSection(zupt=z, zupt_sigma=r.get("zupt_sigma_m_s", float, 0.02, lo=0.0, lo_open=True),
+                          zaru=r.get("zaru", bool, False), nhc=r.get("nhc", bool, False),
+                          nhc_sigma=r.get("nhc_sigma_m_s", float, 0.1, lo=0.0, lo_open=True),
+                          detector_window=r.get("detector_window", int, 20, lo=2, hi=100_000),
+                          detector_threshold=r.get("detector_threshold", float, None, lo=0.0, lo_open=True))
+    r.done()
+    return c
+
+
+def _evaluate(path, d) -> EvaluateSection:
+    r = _Reader(path, d, "evaluate")
+    e = EvaluateSection(outage_s=r.get("outage_s", float, 15.0, lo=0.0, lo_open=True),
+                        first_s=r.get("first_s", float, 40.0, lo=0.0),
+                        gap_s=r.get("gap_s", float, 45.0, lo=0.0, lo_open=True),
+                        end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0))
+    r.done()
+    return e
+
+
+def _tune(path, d) -> TuneSection:
+    r = _Reader(path, d, "tune")
+    r.used.add("params")
+    ps = d.get("params", ["arw", "vrw"])
+    if not isinstance(ps, list) or not ps or not all(p in TUNABLE for p in ps) or len(set(ps)) != len(ps):
+        r.fail("params", f"must be a non-empty list of distinct names from {list(TUNABLE)}, got {ps!r}")
+    t = TuneSection(params=tuple(ps), steps=r.get("steps", int, 25, lo=1, hi=10_000),
+                    learning_rate=r.get("learning_rate", float, 0.1, lo=0.0, lo_open=True, hi=10.0),
+                    mode=r.get("mode", str, "reverse", choices=("reverse", "forward")))
+    r.done()
+    return t
+
+
+def find_config(spec) -> pathlib.Path:
+    """The config file of ``spec``: a path, or the name of a shipped config (``walk_0827``)."""
+    p = pathlib.Path(spec)
+    if p.suffix == ".toml" or p.exists():
+        if not p.is_file():
+            raise ConfigError(f"{p}: no such config file")
+        return p
+    shipped = CONFIG_DIR / f"{spec}.toml"
+    if shipped.is_file():
+        return shipped
+    names = sorted(q.stem for q in CONFIG_DIR.glob("*.toml"))
+    raise ConfigError(f"{spec}: no such config file, and not a shipped config (shipped: {', '.join(names)})")
+
+
+def load_ins_config(spec, *, variables=None) -> InsConfig:
+    """Read and check a ``jaxnav ins`` TOML (a path or a shipped name); see the module docstring.
+
+    Args:
+      spec: a path, or the name of a shipped config.
+      variables: optional mapping for ``${NAME}`` in paths, used before the environment.
+
+    Raises:
+      ConfigError (a ValueError): naming the file and the key: unknown section or key, wrong
+        type, a value out of range, conflicting keys, an unset ``${VAR}`` in a path.
+    """
+    path = find_config(spec)
+    d = load_toml(path)
+    for sec in d:
+        if sec not in _SECTIONS:
+            raise ConfigError(f"{path}: unknown section [{sec}]; expected some of {list(_SECTIONS)}")
+    for sec in ("imu", "gnss"):
+        if sec not in d:
+            raise ConfigError(f"{path}: missing section [{sec}]")
+    run = _Reader(path, d.get("run", {}), "run")
+    name = run.get("name", str, path.stem)
+    run.done()
+    return InsConfig(path=path, name=name, imu=_imu(path, d["imu"], variables), gnss=_gnss(path, d["gnss"], variables),
+                     noise=_noise(path, d.get("noise", {"grade": "consumer"})),
+                     alignment=_alignment(path, d.get("alignment", {})),
+                     constraints=_constraints(path, d.get("constraints", {})),
+                     evaluate=_evaluate(path, d["evaluate"]) if "evaluate" in d else None,
+                     tune=_tune(path, d.get("tune", {})), raw=d)

@@ -1,0 +1,316 @@
+"""Files written by ``jaxnav ins``: trajectory CSV, RTKLIB-style ``.pos``, GeoJSON, KML, results.json.
+
+All times GPST (seconds since 1980-01-06 and calendar); positions WGS-84 geodetic (the GNSS
+solution's datum), ellipsoidal heights; attitude of the vehicle frame (forward-right-down):
+roll, pitch, heading (clockwise from north), deg. Sigmas are the solution's own 1-sigma.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import pathlib
+
+import numpy as np
+
+from jaxnav.experiments.ins_run import InsRun, position_sigmas_enu
+from jaxnav.ins.attitude import quat_to_euler
+from jaxnav.io import GPS_EPOCH
+
+#: trajectory CSV columns with their units (the header says the same)
+TRAJECTORY_COLUMNS = (
+    ("gpst_s", "s"), ("gpst_iso", "GPST"), ("lat_deg", "deg"), ("lon_deg", "deg"), ("h_m", "m"),
+    ("ve_m_s", "m/s"), ("vn_m_s", "m/s"), ("vu_m_s", "m/s"), ("roll_deg", "deg"), ("pitch_deg", "deg"),
+    ("heading_deg", "deg"), ("sigma_e_m", "m"), ("sigma_n_m", "m"), ("sigma_u_m", "m"), ("sigma_ve_m_s", "m/s"),
+    ("sigma_vn_m_s", "m/s"), ("sigma_vu_m_s", "m/s"), ("sigma_tilt_e_deg", "deg"), ("sigma_tilt_n_deg", "deg"),
+    ("sigma_heading_deg", "deg"), ("gnss_used", "0/1"))
+
+
+def gpst_iso(t, *, date_sep="-", sep="T") -> str:
+    """GPST seconds since 1980-01-06 -> 'YYYY-MM-DDTHH:MM:SS.sss' (GPST calendar, no leap seconds; rounded to ms)."""
+    d = GPS_EPOCH + _dt.timedelta(milliseconds=round(float(t) * 1000.0))
+    return d.strftime(f"%Y{date_sep}%m{date_sep}%d{sep}%H:%M:%S.") + f"{d.microsecond // 1000:03d}"
+
+
+def _solution(run: InsRun, which: str):
+    ep = run.result.epochs
+    if which == "smoothed":
+        nav, P = run.smoothed_nav, run.smoothed_covs
+    else:
+        nav, P = ep.nav, ep.covs
+    pos = np.asarray(nav.pos)
+    v = np.asarray(nav.v_n)
+    att = np.asarray(quat_to_euler(np.asarray(nav.q_bn)))  # [pitch, roll, yaw], body RFU in ENU
+    heading = np.mod(-np.degrees(att[:, 2]), 360.0)
+    sd = np.sqrt(np.clip(np.diagonal(np.asarray(P), axis1=-2, axis2=-1), 0.0, None))
+    return dict(t=np.asarray(ep.t_nav, float), pos=pos, v=v, roll=np.degrees(att[:, 1]), pitch=np.degrees(att[:, 0]),
+                heading=heading, sig_enu=position_sigmas_enu(P, pos), sig_v=sd[:, 3:6], sig_att=np.degrees(sd[:, 0:3]),
+                used=np.asarray(run.prep.meas.mask)[:, :3].any(-1))
+
+
+def write_trajectory_csv(path, run: InsRun, which: str = "smoothed") -> pathlib.Path:
+    """Write the smoothed (or ``which="forward"``) solution at the filter epochs as CSV with a units header."""
+    s = _solution(run, which)
+    path = pathlib.Path(path)
+    with path.open("w", encoding="utf-8") as f:
+        f.write(f"# jaxnav ins: {which} solution of {run.prep.cfg.name}; time GPST, WGS-84 geodetic, ellipsoidal height;\n"
+                "# attitude of the forward-right-down vehicle frame (roll, pitch, heading clockwise from north);\n"
+                "# sigma_tilt_e/n and sigma_heading are 1-sigma misalignments about east, north and up;\n"
+                "# units: " + ", ".join(f"{n} [{u}]" for n, u in TRAJECTORY_COLUMNS) + "\n")
+        f.write(",".join(n for n, _ in TRAJECTORY_COLUMNS) + "\n")
+        for k in range(s["t"].size):
+            row = [f"{s['t'][k]:.3f}", gpst_iso(s["t"][k]), f"{math.degrees(s['pos'][k, 0]):.9f}",
+                   f"{math.degrees(s['pos'][k, 1]):.9f}", f"{s['pos'][k, 2]:.4f}",
+                   *(f"{x:.4f}" for x in s["v"][k]), f"{s['roll'][k]:.4f}", f"{s['pitch'][k]:.4f}",
+                   f"{s['heading'][k]:.4f}", *(f"{x:.4f}" for x in s["sig_enu"][k]),
+                   *(f"{x:.4f}" for x in s["sig_v"][k]), *(f"{x:.4f}" for x in s["sig_att"][k]),
+                   str(int(s["used"][k]))]
+            f.write(",".join(row) + "\n")
+    return path
+
+
+def write_pos(path, run: InsRun, which: str = "smoothed") -> pathlib.Path:
+    """Write the solution as an RTKLIB-style ``.pos`` (readable by :func:`jaxnav.io.read_pos` and RTKLIB tools).
+
+    Q is the GNSS quality of the epoch where GNSS was used, 0 where the solution is inertial only
+    (outage, masked, gated); ns is 0; sdne/sdeu/sdun are 0 (the ENU cross terms are not written).
+    """
+    s = _solution(run, which)
+    q = np.where(s["used"], np.asarray(run.prep.pos.q)[run.prep.keep], 0)
+    path = pathlib.Path(path)
+    with path.open("w", encoding="utf-8") as f:
+        f.write(f"% program   : jaxnav ins ({which} INS/GNSS solution)\n% config    : {run.prep.cfg.path}\n")
+        f.write("% Q         : GNSS quality used at the epoch (0: inertial only)\n")
+        f.write("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+                "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)      sdvn     sdve     sdvu"
+                "    sdvne    sdveu    sdvun\n")
+        for k in range(s["t"].size):
+            tt = gpst_iso(s["t"][k], date_sep="/", sep=" ")
+            e, n, u = s["sig_enu"][k]
+            ve, vn, vu = s["v"][k]
+            sve, svn, svu = s["sig_v"][k]
+            f.write(f"{tt} {math.degrees(s['pos'][k, 0]):14.9f} {math.degrees(s['pos'][k, 1]):14.9f} "
+                    f"{s['pos'][k, 2]:10.4f} {int(q[k]):3d} {0:3d} {n:8.4f} {e:8.4f} {u:8.4f} {0:8.4f} {0:8.4f} "
+                    f"{0:8.4f} {0:6.2f} {0:6.1f} {vn:10.5f} {ve:10.5f} {vu:10.5f} {svn:9.5f} {sve:9.5f} {svu:9.5f} "
+                    f"{0:8.5f} {0:8.5f} {0:8.5f}\n")
+    return path
+
+
+def _lonlath(pos):
+    return [(math.degrees(p[1]), math.degrees(p[0]), float(p[2])) for p in np.asarray(pos)]
+
+
+def write_geojson(path, run: InsRun) -> pathlib.Path:
+    """Write ``track.geojson``: the smoothed and forward tracks and the outage windows as LineStrings (lon, lat, h)."""
+    import geojson
+
+    sm = np.asarray(run.smoothed_nav.pos)
+    fw = np.asarray(run.result.epochs.nav.pos)
+    feats = [geojson.Feature(geometry=geojson.LineString(_lonlath(sm)), properties={"name": "RTS smoothed"}),
+             geojson.Feature(geometry=geojson.LineString(_lonlath(fw)), properties={"name": "forward filter"})]
+    t = np.asarray(run.prep.meas.t)
+    for k, (a, b) in enumerate(run.prep.outages):
+        w = (t >= a) & (t < b)
+        if w.sum() >= 2:
+            feats.append(geojson.Feature(geometry=geojson.LineString(_lonlath(sm[w])),
+                                         properties={"name": f"simulated outage {k + 1}", "gpst_start_s": float(a),
+                                                     "gpst_end_s": float(b)}))
+    path = pathlib.Path(path)
+    path.write_text(geojson.dumps(geojson.FeatureCollection(feats), allow_nan=False) + "\n", encoding="utf-8")
+    return path
+
+
+def write_kml(path, run: InsRun) -> pathlib.Path:
+    """Write ``track.kml`` (Google Earth): smoothed track, forward track and outage windows."""
+    import simplekml
+
+    kml = simplekml.Kml(name=f"jaxnav ins: {run.prep.cfg.name}")
+    for name, pos, color in (("RTS smoothed", run.smoothed_nav.pos, simplekml.Color.orange),
+                             ("forward filter", run.result.epochs.nav.pos, simplekml.Color.blue)):
+        ls = kml.newlinestring(name=name, coords=_lonlath(pos))
+        ls.altitudemode = simplekml.AltitudeMode.clamptoground
+        ls.style.linestyle.color, ls.style.linestyle.width = color, 2
+    t = np.asarray(run.prep.meas.t)
+    sm = np.asarray(run.smoothed_nav.pos)
+    for k, (a, b) in enumerate(run.prep.outages):
+        w = (t >= a) & (t < b)
+        if w.sum() >= 2:
+            ls = kml.newlinestring(name=f"simulated outage {k + 1}", coords=_lonlath(sm[w]))
+            ls.style.linestyle.color, ls.style.linestyle.width = simplekml.Color.red, 4
+    path = pathlib.Path(path)
+    kml.save(str(path))
+    return path
+
+
+def _evaluation(sc) -> dict:
+    if sc is None:
+        return None
+    per = []
+    for k, (a, b) in enumerate(sc.windows):
+        w = (sc.t >= a) & (sc.t < b) & np.isfinite(sc.err_fwd)
+        per.append({"window": k + 1, "gpst_start_s": float(a), "gpst_end_s": float(b), "n_fixed_epochs": int(sc.n_ref[k]),
+                    "forward_rms_h_m": float(sc.fwd_rms[k]), "forward_max_h_m": float(sc.fwd_max[k]),
+                    "smoothed_rms_h_m": float(sc.sm_rms[k]), "smoothed_max_h_m": float(sc.sm_max[k]),
+                    "forward_sigma_h_at_end_m": float(sc.sig_fwd[w][-1]) if w.any() else float("nan"),
+                    "smoothed_sigma_h_max_m": float(np.max(sc.sig_sm[w])) if w.any() else float("nan")})
+    sc_w = sc.withheld & np.isfinite(sc.err_fwd)
+    # consistency: share of scored outage epochs whose horizontal error is within 3 of its own sigma
+    # (the horizontal sigma sqrt(var_E + var_N); for a circular 2-D Gaussian P(r < 3 sigma_h / sqrt 2) = 98.9 %)
+    within_f = float(np.mean(sc.err_fwd[sc_w] <= 3 * sc.sig_fwd[sc_w])) if sc_w.any() else float("nan")
+    within_s = float(np.mean(sc.err_sm[sc_w] <= 3 * sc.sig_sm[sc_w])) if sc_w.any() else float("nan")
+    return {"forward_rms_h_m": sc.fwd_rms_all, "forward_max_h_m": float(np.nanmax(sc.fwd_max)) if np.any(sc.n_ref) else float("nan"),
+            "smoothed_rms_h_m": sc.sm_rms_all, "smoothed_max_h_m": float(np.nanmax(sc.sm_max)) if np.any(sc.n_ref) else float("nan"),
+            "forward_rms_h_outside_outages_m": sc.fwd_rms_outside,
+            "forward_share_within_3_sigma_h": within_f, "smoothed_share_within_3_sigma_h": within_s,
+            "n_windows": int(len(sc.windows)), "n_scored_windows": int(np.count_nonzero(sc.n_ref)), "windows": per}
+
+
+def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
+    """The four figures of a run into ``out``: track + outage errors, differences to GNSS, attitude, biases."""
+    from jaxnav.plot import plot_ins_attitude, plot_ins_biases, plot_ins_differences, plot_walk
+
+    out = pathlib.Path(out)
+    name = run.prep.cfg.name
+    paths = []
+    if run.scores is not None:
+        paths.append(plot_walk(run.scores, {"enu_ref": run.enu_ref, "enu_fwd": run.enu_fwd, "enu_sm": run.enu_sm},
+                               out / f"track_outages.{fmt}", title=name))
+    ep = run.result.epochs
+    t = np.asarray(run.prep.meas.t)
+    f = _solution(run, "forward")
+    s = _solution(run, "smoothed")
+    from jaxnav.experiments.ins_run import _mask_without_outages
+
+    m = _mask_without_outages(run.prep)  # the GNSS epochs usable, withheld ones included
+    d_pos = np.where(m[:, :3], run.enu_fwd - run.enu_ref, np.nan)
+    v_ref = np.asarray(run.prep.pos.v_enu, float)[run.prep.keep]
+    d_vel = np.where(m[:, 3:], np.asarray(ep.nav.v_n) - v_ref, np.nan)
+    paths.append(plot_ins_differences(t, d_pos, f["sig_enu"], d_vel, f["sig_v"], run.prep.outages,
+                                      out / f"differences_to_gnss.{fmt}",
+                                      title=f"{name}: forward filter minus GNSS (antenna position, velocity) with the filter's "
+                                            "+-3 sigma; GNSS withheld in the grey windows"))
+    paths.append(plot_ins_attitude(t, np.stack([f["roll"], f["pitch"], f["heading"]], -1),
+                                   np.stack([s["roll"], s["pitch"], s["heading"]], -1), s["sig_att"],
+                                   run.prep.outages, out / f"attitude.{fmt}", title=f"{name}: attitude of the vehicle frame"))
+    from jaxnav.ins import error_model_for
+    from jaxnav.units import DEG_PER_HOUR, MG
+
+    n = run.prep.cfg.noise.states
+    idx = error_model_for(n).idx
+    fb, sb = ep.biases, run.smoothed_biases
+    sd = np.sqrt(np.clip(np.diagonal(np.asarray(ep.covs), axis1=-2, axis2=-1), 0.0, None))
+    gyro_f = (np.asarray(fb.gyro) + np.asarray(fb.markov)) / DEG_PER_HOUR
+    gyro_s = (np.asarray(sb.gyro) + np.asarray(sb.markov)) / DEG_PER_HOUR
+    paths.append(plot_ins_biases(t, gyro_f, sd[:, idx.eps_b] / DEG_PER_HOUR, np.asarray(fb.accel) / MG,
+                                 sd[:, idx.nabla] / MG, run.prep.outages, out / f"biases.{fmt}",
+                                 title=f"{name}: estimated sensor biases ({n}-state model)", gyro_sm=gyro_s,
+                                 accel_sm=np.asarray(sb.accel) / MG))
+    return [str(p) for p in paths]
+
+
+def _densities_dict(d) -> dict:
+    from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
+
+    return {"arw_deg_per_sqrt_h": float(d.arw) / DEG_PER_SQRT_HOUR,
+            "vrw_m_per_s_per_sqrt_h": float(d.vrw) * math.sqrt(HOUR),
+            "gyro_bias_instability_deg_per_h": float(d.gyro_markov) / DEG_PER_HOUR,
+            "bias_correlation_time_s": float(d.tau), "init_gyro_bias_deg_per_s": float(d.init_gyro_bias) / DEG,
+            "init_accel_bias_mg": float(d.init_accel_bias) / MG, "pos_sigma_scale": float(d.pos_sigma_scale)}
+
+
+def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) -> dict:
+    """The whole ``jaxnav ins`` job: run (and with ``tune`` tune, then rerun), write every output into ``out``.
+
+    Returns:
+      the ``results.json`` dict (also written), with "files" listing everything written.
+    """
+    import jaxnav
+    from jaxnav.experiments.ins_run import prepare, run_ins, tune_noise
+    from jaxnav.io import write_json
+
+    out = pathlib.Path(out)
+    say = progress or (lambda *_: None)
+    say(f"reading {cfg.imu.file.name} and {cfg.gnss.file.name}")
+    prep = prepare(cfg, progress=progress)
+    say(f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
+        f"running the filter and the smoother")
+    run = run_ins(prep)
+    results = {"jaxnav_version": jaxnav.__version__, "command": command,
+               "date_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+               "config_file": str(cfg.path), "config": cfg.raw,
+               "mounting": {"source": cfg.imu.mounting_source,
+                            "C_vehicle_sensor": np.asarray(cfg.imu.mounting).tolist(),
+                            "C_body_rfu_sensor": np.asarray(prep.C_bs).tolist()},
+               "time_offset_s": prep.time_offset, "time_offset": prep.time_offset_info,
+               "alignment": {"roll_deg": math.degrees(float(prep.alignment.att0[1])),
+                             "pitch_deg": math.degrees(float(prep.alignment.att0[0])),
+                             "heading_deg": (-math.degrees(float(prep.alignment.att0[2]))) % 360.0,
+                             "heading_method": "GNSS course carried back by the gyro",
+                             "static_window_end_gpst_s": prep.alignment.t_static,
+                             "gyro_bias_deg_per_s": np.degrees(np.asarray(prep.alignment.gyro_bias)).tolist()},
+               "n_states": cfg.noise.states, "noise": _densities_dict(run.densities),
+               "imu": {"file": str(cfg.imu.file), "n_samples": int(prep.t.size),
+                       "n_skipped_lines": int(getattr(prep.imu, "n_skipped_lines", 0)),
+                       "gpst_start_s": float(prep.t[0]), "gpst_end_s": float(prep.t[-1])},
+               "gnss": {"file": str(cfg.gnss.file), "n_epochs_in_imu_span": int(prep.meas.t.size),
+                        "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
+                        "n_withheld": int(np.count_nonzero(prep.withheld))},
+               "status": int(run.result.status), "n_nonfinite": int(run.result.n_nonfinite),
+               "n_skipped_updates": int(run.result.n_skipped), "loglik": float(run.result.loglik),
+               "runtime_s": run.runtime_s, "evaluation": _evaluation(run.scores)}
+    if tune:
+        say(f"tuning {', '.join(cfg.tune.params)} by the innovation likelihood (L-BFGS, {cfg.tune.steps} evaluations)")
+        rep = tune_noise(prep, cfg.tune.params, max_evals=cfg.tune.steps, mode=cfg.tune.mode)
+        tuned_prep = prep._replace(lever_rfu=rep.lever_rfu, meas=prep.meas._replace(
+            lever=np.broadcast_to(rep.lever_rfu, np.shape(prep.meas.lever)).copy()))
+        run_t = run_ins(tuned_prep, rep.densities)
+        results["tune"] = {"params": list(cfg.tune.params), "before_si": rep.before, "after_si": rep.after,
+                           "loglik_before": rep.loglik_before, "loglik_after": rep.loglik_after,
+                           "n_evals": rep.n_evals, "wall_time_s": rep.wall_time_s,
+                           "noise_after": _densities_dict(rep.densities),
+                           "evaluation_before": results["evaluation"], "evaluation_after": _evaluation(run_t.scores)}
+        run = run_t
+    files = []
+    for nm, fn in (("trajectory.csv", lambda p: write_trajectory_csv(p, run)),
+                   ("trajectory_forward.csv", lambda p: write_trajectory_csv(p, run, "forward")),
+                   (f"{cfg.name}_ins.pos", lambda p: write_pos(p, run)),
+                   ("track.geojson", lambda p: write_geojson(p, run)), ("track.kml", lambda p: write_kml(p, run))):
+        files.append(str(fn(out / nm)))
+    files += write_figures(run, out)
+    results["files"] = files + [str(out / "results.json")]
+    write_json(out / "results.json", results)
+    return results
+
+
+def format_ins(results: dict) -> str:
+    """Summary of :func:`process` with units."""
+    r = results
+    lines = [f"jaxnav ins: {r['config_file']}",
+             f"  IMU {r['imu']['n_samples']} samples, GNSS {r['gnss']['n_epochs_used']} of "
+             f"{r['gnss']['n_epochs_in_imu_span']} epochs used ({r['gnss']['n_withheld']} withheld on simulated outages)",
+             f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "
+             f"({r['time_offset']['source']}); initial heading {r['alignment']['heading_deg']:.1f} deg",
+             f"  {r['n_states']}-state filter + RTS: status {r['status']}, log-likelihood {r['loglik']:.1f}, "
+             f"{r['n_skipped_updates']} skipped updates, {r['runtime_s']:.1f} s"]
+
+    def ev(e, tag=""):
+        if e is None:
+            return
+        lines.append(f"  outages{tag}: {e['n_scored_windows']} of {e['n_windows']} windows scored; horizontal RMS "
+                     f"forward {e['forward_rms_h_m']:.2f} m (max {e['forward_max_h_m']:.2f} m), smoothed "
+                     f"{e['smoothed_rms_h_m']:.2f} m (max {e['smoothed_max_h_m']:.2f} m); within 3 sigma: "
+                     f"forward {100 * e['forward_share_within_3_sigma_h']:.0f} %, smoothed "
+                     f"{100 * e['smoothed_share_within_3_sigma_h']:.0f} %")
+
+    ev(r.get("evaluation"))
+    if "tune" in r:
+        t = r["tune"]
+        lines.append(f"  --tune: log-likelihood {t['loglik_before']:.1f} -> {t['loglik_after']:.1f} "
+                     f"({t['n_evals']} evaluations, {t['wall_time_s']:.1f} s); "
+                     + ", ".join(f"{k} {_fmt(t['before_si'][k])} -> {_fmt(t['after_si'][k])}" for k in t["params"]))
+        ev(t["evaluation_after"], " after tuning")
+    return "\n".join(lines)
+
+
+def _fmt(v):
+    return ("[" + ", ".join(f"{x:.4g}" for x in v) + "]") if isinstance(v, list) else f"{v:.4g}"

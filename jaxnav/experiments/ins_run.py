@@ -1,0 +1,525 @@
+"""``jaxnav ins CONFIG``: post-process a real IMU + GNSS recording from a config file alone.
+
+Pipeline (host-side glue around the pure, jitted library functions):
+
+1. read the IMU and GNSS files (:func:`read_inputs`; formats of :mod:`jaxnav.io`), apply the
+   mounting (:func:`jaxnav.experiments.ins_config.sensor_to_body`) and the IMU-GNSS time offset;
+2. align (:func:`jaxnav.ins.coarse_alignment`), build the GNSS measurements with the lever arm
+   (:func:`gnss_measurements`) and the filter's noise (:func:`filter_params`);
+3. run the loosely coupled filter (:func:`jaxnav.ins.loosely_coupled`) and the RTS smoother
+   (:func:`jaxnav.ins.smooth`);
+4. optionally withhold GNSS on simulated outages and score forward and smoothed solutions
+   against the withheld RTK-fixed epochs (:func:`outage_windows`, :func:`score_outages`);
+5. optionally tune the noise densities by maximum likelihood (:func:`tune_noise`): gradient of
+   the GNSS innovation negative log-likelihood over the whole run.
+
+Outputs are written by :mod:`jaxnav.experiments.ins_output`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxnav.experiments.ins_config import InsConfig, sensor_to_body
+from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
+from jaxnav.ins import LCParams, PVMeasurements, SensorBiases, coarse_alignment, error_model_Qc, loosely_coupled, smooth
+from jaxnav.ins.attitude import quat_to_dcm
+from jaxnav.io import imu_increments, read_pos, read_rtklib_imu
+from jaxnav.ins.error_model import ERROR_MODEL_15
+
+
+def read_inputs(cfg: InsConfig):
+    """(:class:`jaxnav.io.ImuLog`, :class:`jaxnav.io.PosSolution`) of the config's files (SI, sensor axes).
+
+    Raises:
+      jaxnav.io.ReaderError: naming file and line of anything unreadable.
+      FileNotFoundError: a missing file (named).
+    """
+    imu_c, g = cfg.imu, cfg.gnss
+    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag")):
+        if p is not None and not p.is_file():
+            raise FileNotFoundError(f"{p}: no such file ({cfg.path}: {key})")
+    if imu_c.format == "rtklib-csv":
+        imu = read_rtklib_imu(imu_c.file, imu_c.tag)
+    else:
+        raise ValueError(f"{cfg.path}: imu.format = {imu_c.format!r} is not readable yet")
+    if g.format == "rtklib-pos":
+        pos = read_pos(g.file)
+    else:
+        raise ValueError(f"{cfg.path}: gnss.format = {g.format!r} is not readable yet")
+    return imu, pos
+
+
+def outage_windows(t_start: float, t_end: float, *, first_s: float = 40.0, outage_s: float = 15.0,
+                   gap_s: float = 45.0, end_margin_s: float = 30.0) -> np.ndarray:
+    """(K, 2) simulated GNSS outage windows [a, b), s.
+
+    The first starts ``first_s`` after ``t_start``; GNSS is back for ``gap_s`` between windows;
+    a window is kept if it ends at least ``end_margin_s`` before ``t_end``.
+    """
+    out, a = [], t_start + first_s
+    while a + outage_s <= t_end - end_margin_s:
+        out.append((a, a + outage_s))
+        a += outage_s + gap_s
+    return np.array(out, float).reshape(-1, 2)
+
+
+def _floored(c, floor):
+    """Covariances (M, 3, 3) with standard deviations raised to ``floor`` (correlations kept)."""
+    c = np.array(c, float)
+    d = np.sqrt(np.clip(np.diagonal(c, axis1=-2, axis2=-1), 0, None))
+    s = np.maximum(d, floor) / np.where(d > 0, d, 1.0)
+    c = c * s[:, :, None] * s[:, None, :]
+    for i in range(3):
+        c[:, i, i] = np.maximum(c[:, i, i], floor**2)
+    return c
+
+
+def gnss_measurements(pos_sol, t_imu, outages=(), *, lever_rfu=(0.0, 0.0, 0.0), pos_sigma_floor: float = 0.02,
+                      vel_sigma_floor: float = 0.05, use_velocity: bool = True, qualities=(1, 2)):
+    """GNSS position/velocity measurements inside the IMU span, masked inside the outage windows.
+
+    Epochs inside an outage keep an all-False mask, so the filter reports its free-inertial
+    prediction there (and the smoother its estimate). Covariances: the solution's ENU position
+    and velocity covariances with the standard deviations floored at ``pos_sigma_floor`` (m) and
+    ``vel_sigma_floor`` (m/s); a missing velocity covariance counts as 1 (m/s)^2.
+
+    Args:
+      pos_sol: :class:`jaxnav.io.PosSolution`.  t_imu: (N,) IMU times, s.  outages: (K, 2) windows, s.
+      lever_rfu: (3,) antenna minus IMU in jaxnav's right-forward-up body frame, m.
+      qualities: solution qualities (``.pos`` Q: 1 fix, 2 float, ...) used.
+    Returns:
+      (:class:`jaxnav.ins.PVMeasurements`, index (M,) of the kept solution epochs, withheld (M,) bool).
+    """
+    t_imu = np.asarray(t_imu, float)
+    gt = np.asarray(pos_sol.t, float)
+    dt0 = t_imu[1] - t_imu[0]
+    keep = np.nonzero((gt > t_imu[0] - dt0 + 1e-6) & (gt <= t_imu[-1]))[0]
+    if keep.size < 2:
+        raise ValueError(f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
+                         f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s")
+    t = gt[keep]
+    M = keep.size
+    pos = np.stack([np.asarray(pos_sol.lat)[keep], np.asarray(pos_sol.lon)[keep], np.asarray(pos_sol.h)[keep]], -1)
+    vel = np.asarray(pos_sol.v_enu, float)[keep]
+    R = np.zeros((M, 6, 6))
+    R[:, :3, :3] = _floored(np.asarray(pos_sol.cov_enu)[keep], pos_sigma_floor)
+    vc = np.asarray(pos_sol.vcov_enu, float)[keep]
+    R[:, 3:, 3:] = _floored(np.where(np.isfinite(vc), vc, 1.0), vel_sigma_floor)
+    ok = np.isin(np.asarray(pos_sol.q)[keep], np.asarray(qualities))
+    withheld = np.zeros(M, bool)
+    for a, b in np.asarray(outages, float).reshape(-1, 2):
+        withheld |= (t >= a) & (t < b)
+    mask = np.zeros((M, 6), bool)
+    mask[:, :3] = (ok & ~withheld)[:, None]
+    if use_velocity:
+        mask[:, 3:] = (ok & ~withheld)[:, None] & np.isfinite(vel)
+    vel = np.where(np.isfinite(vel), vel, 0.0)
+    lev = np.broadcast_to(np.asarray(lever_rfu, float), (M, 3)).copy()
+    return PVMeasurements(t=t, pos=pos, vel=vel, R=R, mask=mask, lever=lev), keep, withheld
+
+
+class Densities(NamedTuple):
+    """Noise densities and initial sigmas of a run (SI; array leaves, so ``--tune`` differentiates them).
+
+    arw rad/sqrt(s); vrw m/s/sqrt(s); gyro_markov rad/s (stationary sigma of the 18-state gyro drift)
+    with tau s; init_att (2,) rad (roll/pitch, heading); init_vel m/s; init_pos m; init_gyro_bias rad/s;
+    init_accel_bias m/s^2; pos_sigma_scale: factor on the GNSS position sigmas.
+    """
+
+    arw: Any
+    vrw: Any
+    gyro_markov: Any
+    tau: Any
+    init_att: Any
+    init_vel: Any
+    init_pos: Any
+    init_gyro_bias: Any
+    init_accel_bias: Any
+    pos_sigma_scale: Any = 1.0
+
+
+def densities(cfg: InsConfig) -> Densities:
+    """The run's :class:`Densities` from ``[noise]`` (values given there, else the grade's preset)."""
+    n = cfg.noise
+    preset = _preset(n.grade) if n.grade else {}
+
+    def pick(name, key=None):
+        v = getattr(n, name)
+        return preset[key or name] if v is None else v
+
+    return Densities(arw=pick("arw"), vrw=pick("vrw"),
+                     gyro_markov=n.gyro_bias_instability if n.gyro_bias_instability is not None
+                     else preset.get("gyro_bias_instability", 0.0),
+                     tau=n.bias_correlation_time if n.bias_correlation_time is not None
+                     else preset.get("bias_correlation_time", 300.0),
+                     init_att=np.asarray(n.init_attitude, float), init_vel=n.init_velocity, init_pos=n.init_position,
+                     init_gyro_bias=pick("init_gyro_bias"), init_accel_bias=pick("init_accel_bias"))
+
+
+def _preset(grade):
+    from jaxnav.ins import noise_preset  # provided by the noise-grade presets
+
+    p = noise_preset(grade)
+    return {"arw": p.gyro_arw, "vrw": p.accel_vrw, "gyro_bias_instability": p.gyro_bias_instability,
+            "bias_correlation_time": p.bias_correlation_time, "init_gyro_bias": p.gyro_bias_initial,
+            "init_accel_bias": p.accel_bias_initial}
+
+
+def filter_params(d: Densities, pos0, n_states: int) -> LCParams:
+    """:class:`jaxnav.ins.LCParams` (15 or 18 states) from :class:`Densities` at position ``pos0`` (3,) rad, rad, m."""
+    att = jnp.asarray(d.init_att)
+    sd = jnp.concatenate([
+        jnp.stack([att[0], att[0], att[1]]),
+        jnp.full(3, d.init_vel),
+        jnp.asarray(enu_to_curvilinear(jnp.asarray(pos0, float), jnp.full(3, 1.0))) * d.init_pos,
+        jnp.full(3, d.init_gyro_bias),
+        *([jnp.full(3, jnp.maximum(d.gyro_markov, 1e-12))] if n_states == 18 else []),
+        jnp.full(3, d.init_accel_bias),
+    ])
+    Qc = error_model_Qc(d.arw, jnp.maximum(d.gyro_markov, 1e-12), d.tau, d.vrw)
+    if n_states == 15:
+        Qc = ERROR_MODEL_15.Qc(Qc)
+    return LCParams(P0=jnp.diag(sd**2), Qc=Qc, tau_markov=d.tau, R_scale=1.0)
+
+
+class Prepared(NamedTuple):
+    """Everything a run needs, made once from the config (host side)."""
+
+    cfg: Any
+    imu: Any
+    pos: Any
+    C_bs: Any
+    lever_rfu: Any
+    time_offset: float
+    time_offset_info: dict
+    t: Any
+    dth: Any
+    dv: Any
+    dt: Any
+    alignment: Any
+    outages: Any
+    meas: Any
+    keep: Any
+    withheld: Any
+    densities: Densities
+
+
+def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
+    """Read, mount, time-shift and align; build the measurements with the ``[evaluate]`` outages."""
+    if imu is None or pos is None:
+        imu, pos = read_inputs(cfg)
+    C_bs = sensor_to_body(cfg.imu.mounting)
+    lever_rfu = sensor_to_body(np.eye(3)) @ np.asarray(cfg.gnss.lever_arm_frd, float)
+    off_info: dict = {"source": "config"}
+    off = cfg.imu.time_offset_s
+    if off == "estimate":
+        off, off_info = estimate_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
+    imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
+    t, dth, dv, dt = imu_increments(imu, C_bs)
+    a = cfg.alignment
+    align = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], pos, static_s=a.static_s,
+                             min_speed=a.min_speed, course_s=a.course_s)
+    ev = cfg.evaluate
+    outages = np.zeros((0, 2)) if ev is None else outage_windows(
+        t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
+    meas, keep, withheld = gnss_measurements(
+        pos, t, outages, lever_rfu=lever_rfu, pos_sigma_floor=cfg.gnss.pos_sigma_floor,
+        vel_sigma_floor=cfg.gnss.vel_sigma_floor, use_velocity=cfg.gnss.use_velocity,
+        qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))
+    return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
+                    time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
+                    meas=meas, keep=keep, withheld=withheld, densities=densities(cfg))
+
+
+_SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
+
+
+def run_filter(prep: Prepared, d: Optional[Densities] = None, *, meas=None, save=_SAVE):
+    """The loosely coupled filter on a prepared recording; returns :class:`jaxnav.ins.LCResult`."""
+    d = prep.densities if d is None else d
+    n = prep.cfg.noise.states
+    params = filter_params(d, prep.alignment.nav0.pos, n)
+    m = prep.meas if meas is None else meas
+    m = m._replace(R=m.R.at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)) if isinstance(m.R, jax.Array)
+                   else jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
+    z3 = np.zeros(3)
+    b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
+    return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
+                           n_states=n, save=save)
+
+
+def antenna_enu(nav, t_nav, t, lever, pos0):
+    """(M, 3) antenna ENU (m, around ``pos0`` (3,)) of per-epoch nav states extrapolated to times ``t`` (M,)."""
+    pos = np.asarray(nav.pos)
+    enu = np.asarray(curvilinear_to_enu(pos0, pos - pos0))
+    C = np.asarray(quat_to_dcm(np.asarray(nav.q_bn)))
+    v = np.asarray(nav.v_n)
+    return enu + (np.asarray(t) - np.asarray(t_nav))[:, None] * v + np.einsum("mij,mj->mi", C, lever)
+
+
+class OutageScores(NamedTuple):
+    """Scores of a run against the withheld RTK-fixed positions (horizontal, m).
+
+    Attributes:
+      windows: (K, 2) outage windows, s (GPST).  n_ref: (K,) fixed epochs scored per window.
+      fwd_max, sm_max: (K,) max horizontal error per outage (NaN where no fixed epoch).
+      fwd_rms, sm_rms: (K,) RMS horizontal error per outage.
+      fwd_rms_all, sm_rms_all: RMS over all scored epochs of all outages.
+      fwd_max_mean, sm_max_mean: mean of the per-outage maxima.
+      fwd_rms_outside: RMS horizontal error of the forward filter against fixed epochs *outside*
+        the outages (sanity: should be cm-level).
+      t, err_fwd, err_sm: (M,) epoch times and horizontal errors (NaN where not a fixed reference).
+      sig_fwd, sig_sm: (M,) the solutions' own horizontal 1-sigma (sqrt of the east + north variances), m.
+      withheld: (M,) bool.  runtime_s: wall time of filter + smoother (incl. compilation).
+      figure: path of the figure, or None.  n_nonfinite_nav: NaN count in the navigation outputs.
+    """
+
+    windows: Any
+    n_ref: Any
+    fwd_max: Any
+    sm_max: Any
+    fwd_rms: Any
+    sm_rms: Any
+    fwd_rms_all: float
+    sm_rms_all: float
+    fwd_max_mean: float
+    sm_max_mean: float
+    fwd_rms_outside: float
+    t: Any
+    err_fwd: Any
+    err_sm: Any
+    withheld: Any
+    runtime_s: float
+    figure: Optional[str]
+    n_nonfinite_nav: int
+    sig_fwd: Any = None
+    sig_sm: Any = None
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def score_outages(t, err_f, err_s, fixed, withheld, outages, *, runtime_s=float("nan"), n_nonfinite=0,
+                  sig_f=None, sig_s=None) -> OutageScores:
+    """Per-window and overall horizontal error statistics (m) at the fixed epochs inside the outages."""
+    e_f = np.where(fixed, err_f, np.nan)
+    e_s = np.where(fixed, err_s, np.nan)
+    K = outages.shape[0]
+    n_ref = np.zeros(K, int)
+    st = {k: np.full(K, np.nan) for k in ("fm", "sm", "fr", "sr")}
+    for k, (a, b) in enumerate(outages):
+        s = (t >= a) & (t < b) & fixed
+        n_ref[k] = int(s.sum())
+        if n_ref[k]:
+            st["fm"][k], st["sm"][k] = e_f[s].max(), e_s[s].max()
+            st["fr"][k], st["sr"][k] = _rms(e_f[s]), _rms(e_s[s])
+    sc = withheld & fixed
+    return OutageScores(
+        windows=outages, n_ref=n_ref, fwd_max=st["fm"], sm_max=st["sm"], fwd_rms=st["fr"], sm_rms=st["sr"],
+        fwd_rms_all=_rms(e_f[sc]), sm_rms_all=_rms(e_s[sc]),
+        fwd_max_mean=float(np.nanmean(st["fm"])) if np.any(n_ref) else float("nan"),
+        sm_max_mean=float(np.nanmean(st["sm"])) if np.any(n_ref) else float("nan"),
+        fwd_rms_outside=_rms(e_f[~withheld & fixed]), t=np.asarray(t), err_fwd=e_f, err_sm=e_s, withheld=withheld,
+        runtime_s=runtime_s, figure=None, n_nonfinite_nav=n_nonfinite, sig_fwd=sig_f, sig_sm=sig_s)
+
+
+class InsRun(NamedTuple):
+    """One processed recording.
+
+    Attributes:
+      prep: :class:`Prepared`.  result: the forward :class:`jaxnav.ins.LCResult`.
+      smoothed_nav, smoothed_biases, smoothed_covs: RTS solution at the epochs ((M, ...), (M, n, n)).
+      enu_ref, enu_fwd, enu_sm: (M, 3) antenna ENU of GNSS, forward and smoothed solutions around the
+        start, m.  fixed: (M,) bool fixed-quality epochs.  scores: :class:`OutageScores` or None.
+      runtime_s: filter + smoother wall time (incl. compilation), s.  densities: those used.
+    """
+
+    prep: Prepared
+    result: Any
+    smoothed_nav: Any
+    smoothed_biases: Any
+    smoothed_covs: Any
+    enu_ref: Any
+    enu_fwd: Any
+    enu_sm: Any
+    fixed: Any
+    scores: Optional[OutageScores]
+    runtime_s: float
+    densities: Densities
+
+
+def position_sigmas_enu(covs, pos):
+    """(M, 3) east, north, up 1-sigma, m, from error covariances (M, n, n) whose states 6:9 are (dlat, dlon, dh)."""
+    P = np.asarray(covs)
+    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1)[:, 6:9], 0.0, None))
+    return np.abs(np.asarray(curvilinear_to_enu(np.asarray(pos), sd)))
+
+
+def horizontal_sigma(covs, pos):
+    """(M,) horizontal 1-sigma sqrt(var_E + var_N), m; see :func:`position_sigmas_enu`."""
+    s = position_sigmas_enu(covs, pos)
+    return np.hypot(s[:, 0], s[:, 1])
+
+
+def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
+    """Forward filter + RTS smoother on a prepared recording, scored on its outages if it has any."""
+    d = prep.densities if d is None else d
+    t0 = time.perf_counter()
+    res = run_filter(prep, d)
+    sm_nav, sm_b, sm_P = smooth(res, n_states=prep.cfg.noise.states)
+    jax.block_until_ready(sm_nav.pos)
+    runtime = time.perf_counter() - t0
+    ep, meas = res.epochs, prep.meas
+    pos0 = np.array([float(x) for x in prep.alignment.nav0.pos])
+    lev = np.asarray(meas.lever)
+    enu_f = antenna_enu(ep.nav, ep.t_nav, meas.t, lev, pos0)
+    enu_s = antenna_enu(sm_nav, ep.t_nav, meas.t, lev, pos0)
+    enu_ref = np.asarray(curvilinear_to_enu(pos0, np.asarray(meas.pos) - pos0))
+    fixed = np.asarray(prep.pos.q)[prep.keep] == 1
+    nonfinite = int(sum(np.count_nonzero(~np.isfinite(np.asarray(a))) for a in (*ep.nav, *sm_nav)))
+    scores = None
+    if prep.outages.shape[0]:
+        e_f = np.hypot(*(enu_f - enu_ref)[:, :2].T)
+        e_s = np.hypot(*(enu_s - enu_ref)[:, :2].T)
+        scores = score_outages(np.asarray(meas.t), e_f, e_s, fixed, prep.withheld, prep.outages, runtime_s=runtime,
+                               n_nonfinite=nonfinite, sig_f=horizontal_sigma(ep.covs, ep.nav.pos),
+                               sig_s=horizontal_sigma(sm_P, sm_nav.pos))
+    return InsRun(prep=prep, result=res, smoothed_nav=sm_nav, smoothed_biases=sm_b, smoothed_covs=sm_P,
+                  enu_ref=enu_ref, enu_fwd=enu_f, enu_sm=enu_s, fixed=fixed, scores=scores, runtime_s=runtime,
+                  densities=d)
+
+
+def estimate_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
+    """IMU-GNSS time offset (s, added to IMU times): innovation likelihood over a grid around a first guess.
+
+    The first guess is 0 (or the cross-correlation estimate where one is available); the filter runs
+    on every offset of a 10 ms grid within +-``imu.time_offset_search_s`` of it (no outages), and a
+    parabola through the three best log-likelihoods refines the maximum.
+
+    Returns:
+      (offset s, info dict with the grid, its log-likelihoods and the method).
+    """
+    guess, info = 0.0, {"source": "estimate", "first_guess": "0"}
+    try:
+        from jaxnav.ins import estimate_time_offset as xcorr  # yaw rate vs GNSS course rate
+    except ImportError:
+        xcorr = None
+    if xcorr is not None:
+        t, dth, dv, dt = imu_increments(imu, C_bs)
+        est = xcorr(t, dth / dt[:, None], pos)
+        guess = float(est.offset)
+        info["first_guess"] = "yaw rate vs GNSS course rate cross-correlation"
+        info["first_guess_s"] = guess
+    span = cfg.imu.time_offset_search_s
+    grid = guess + np.arange(-span, span + 1e-9, 0.01 if span <= 0.3 else 0.02)
+    no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0))
+    ll = []
+    for k, off in enumerate(grid):
+        p = prepare(no_eval, imu=imu._replace(t=np.asarray(imu.t, float) + off - 0.0), pos=pos, progress=None)
+        ll.append(float(run_filter(p, save=("nav",)).loglik))
+        if progress and (k % 10 == 0 or k == len(grid) - 1):
+            progress(f"time offset: {k + 1}/{len(grid)} offsets tried")
+    ll = np.asarray(ll)
+    j = int(np.nanargmax(ll))
+    best = float(grid[j])
+    if 0 < j < len(grid) - 1:
+        y0, y1, y2 = ll[j - 1:j + 2]
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            best += 0.5 * (y0 - y2) / den * (grid[1] - grid[0])
+    at_edge = j in (0, len(grid) - 1)
+    info.update(method="innovation log-likelihood on a grid, parabolic refinement", grid_s=grid, loglik=ll,
+                offset_s=best, at_search_edge=at_edge)
+    return best, info
+
+
+def _densities_with(d: Densities, p: dict) -> Densities:
+    return d._replace(**{k: p[k] for k in ("arw", "vrw", "gyro_markov", "pos_sigma_scale") if k in p})
+
+
+#: ``[tune] params`` name -> (Densities field or "lever_arm", bijector)
+_TUNE_MAP = {"arw": ("arw", "log"), "vrw": ("vrw", "log"), "gyro_bias_instability": ("gyro_markov", "log"),
+             "pos_sigma_scale": ("pos_sigma_scale", "log"), "lever_arm": ("lever_arm", "real")}
+
+
+class TuneReport(NamedTuple):
+    """``--tune`` result: parameters before/after (SI), innovation log-likelihood before/after, evaluations, time."""
+
+    before: dict
+    after: dict
+    loglik_before: float
+    loglik_after: float
+    n_evals: int
+    wall_time_s: float
+    densities: Densities
+    lever_rfu: Any
+
+
+def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse") -> TuneReport:
+    """Maximum-likelihood tuning of noise densities (and the lever arm) over the whole run.
+
+    Minimises the negative GNSS innovation log-likelihood of the forward filter (all GNSS epochs,
+    no simulated outages) by L-BFGS (:func:`jaxnav.tune.minimize_lbfgs`) with gradients through the
+    complete filter (reverse or forward mode); densities are tuned on a log scale.
+
+    Args:
+      prep: :class:`Prepared` (its outages are ignored here).  names: parameters from ``_TUNE_MAP``.
+      max_evals: loss evaluations at most.  mode: "reverse" or "forward".
+    """
+    from jaxnav.tune import Space, minimize_lbfgs
+
+    unknown = [n for n in names if n not in _TUNE_MAP]
+    if unknown:
+        raise ValueError(f"cannot tune {unknown}; tunable: {sorted(_TUNE_MAP)}")
+    if "gyro_bias_instability" in names and prep.cfg.noise.states != 18:
+        raise ValueError("gyro_bias_instability is a parameter of the 18-state model (noise.states = 18)")
+    all_gnss = prep.meas._replace(mask=_mask_without_outages(prep))
+    d0 = prep.densities
+    lever0 = jnp.asarray(prep.lever_rfu, float)
+    p0 = {}
+    for n in names:
+        field, _ = _TUNE_MAP[n]
+        p0[n] = lever0 if field == "lever_arm" else jnp.asarray(getattr(d0, field), float)
+    space = Space({n: _TUNE_MAP[n][1] for n in names})
+
+    def unpack(p):
+        d = d0._replace(**{_TUNE_MAP[n][0]: p[n] for n in names if _TUNE_MAP[n][0] != "lever_arm"})
+        lev = p.get("lever_arm", lever0)
+        return d, lev
+
+    def loss(p):
+        d, lev = unpack(p)
+        m = all_gnss._replace(lever=jnp.broadcast_to(lev, all_gnss.lever.shape))
+        return -run_filter(prep, d, meas=m, save=("nav",)).loglik
+
+    t0 = time.perf_counter()
+    ll0 = -float(loss(p0))
+    res = minimize_lbfgs(loss, p0, space, max_evals=max_evals, mode=mode)
+    d1, lev1 = unpack(res.params)
+    ll1 = -float(res.loss)
+    si = {n: np.asarray(v).tolist() for n, v in p0.items()}
+    so = {n: np.asarray(v).tolist() for n, v in res.params.items()}
+    return TuneReport(before=si, after=so, loglik_before=ll0, loglik_after=ll1, n_evals=int(res.n_evals),
+                      wall_time_s=time.perf_counter() - t0, densities=d1, lever_rfu=np.asarray(lev1))
+
+
+def _mask_without_outages(prep: Prepared):
+    """The measurement mask with the simulated outages put back (qualities and velocity rules kept)."""
+    ok = np.asarray(prep.meas.mask).copy()
+    w = np.asarray(prep.withheld)
+    if w.any():
+        full = gnss_measurements(prep.pos, prep.t, (), lever_rfu=prep.lever_rfu,
+                                 pos_sigma_floor=prep.cfg.gnss.pos_sigma_floor,
+                                 vel_sigma_floor=prep.cfg.gnss.vel_sigma_floor,
+                                 use_velocity=prep.cfg.gnss.use_velocity,
+                                 qualities=(1,) if prep.cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))[0]
+        ok = np.asarray(full.mask)
+    return ok

@@ -1,0 +1,121 @@
+"""Figures of ``jaxnav ins``: differences to GNSS with 3-sigma bands, attitude, sensor-bias estimates."""
+
+from __future__ import annotations
+
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def _shade_outages(ax, windows, t0):
+    for k, (a, b) in enumerate(windows):
+        ax.axvspan(a - t0, b - t0, color="0.85", zorder=0, label="simulated GNSS outage" if k == 0 else None)
+
+
+def plot_ins_differences(t, d_pos, sig_pos, d_vel, sig_vel, windows, path, *, title: str) -> pathlib.Path:
+    """Forward-filter minus GNSS position (E, N, U, m) and velocity (m/s) with the filter's +-3 sigma.
+
+    Inside the outage windows GNSS was withheld from the filter, so the difference there is the
+    free-inertial drift; the y axes are symmetric-log (linear within the median 3 sigma).
+
+    Args:
+      t: (M,) epoch times, s.  d_pos, sig_pos: (M, 3) antenna position difference and 1-sigma, m.
+      d_vel, sig_vel: (M, 3) velocity difference and 1-sigma, m/s (NaN where GNSS has no velocity).
+      windows: (K, 2) outage windows, s.  path: file written.  title: figure title.
+    """
+    path = pathlib.Path(path)
+    t0 = float(t[0])
+    fig, ax = plt.subplots(2, 3, figsize=(14, 6.5), sharex=True)
+    for row, (d, s, unit, what) in enumerate(((d_pos, sig_pos, "m", "position"), (d_vel, sig_vel, "m/s", "velocity"))):
+        for c, comp in enumerate("ENU"):
+            a = ax[row, c]
+            _shade_outages(a, windows, t0)
+            a.fill_between(t - t0, -3 * s[:, c], 3 * s[:, c], color="C1", alpha=0.25, lw=0, label="filter +-3 sigma")
+            a.plot(t - t0, d[:, c], ".", ms=2, color="C0", label="filter - GNSS")
+            a.set_title(f"{what} {comp}")
+            a.set_ylabel(f"difference, {unit}")
+            a.grid(alpha=0.3)
+            # symmetric log scale: cm-level agreement with GNSS and metre-level drift in outages both visible
+            lin = float(np.nanmedian(3 * s[:, c])) if np.any(np.isfinite(s[:, c])) else 0.1
+            lin = 10.0 ** np.ceil(np.log10(max(lin, 1e-3)))  # a power of ten: ticks 0, +-lin, +-10 lin
+            a.set_yscale("symlog", linthresh=lin)
+    for a in ax[1]:
+        a.set_xlabel("time since start, s")
+    ax[0, 0].legend(fontsize=8, loc="upper left")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_ins_attitude(t, fwd, sm, sig, windows, path, *, title: str) -> pathlib.Path:
+    """Roll, pitch, heading (deg) of the forward and smoothed solutions, and their 1-sigma (deg).
+
+    Args:
+      t: (M,) s.  fwd, sm: (M, 3) roll, pitch, heading, deg.  sig: (M, 3) smoothed 1-sigma misalignment
+      about east, north, up, deg.  windows: (K, 2) s.
+    """
+    path = pathlib.Path(path)
+    t0 = float(t[0])
+    fig, ax = plt.subplots(2, 3, figsize=(14, 6.5), sharex=True)
+    for c, name in enumerate(("roll", "pitch", "heading")):
+        a = ax[0, c]
+        _shade_outages(a, windows, t0)
+        f_c, s_c = fwd[:, c].astype(float), sm[:, c].astype(float)
+        if name == "heading":  # break the lines where the heading wraps through north
+            f_c = np.where(np.abs(np.diff(f_c, prepend=f_c[0])) > 180, np.nan, f_c)
+            s_c = np.where(np.abs(np.diff(s_c, prepend=s_c[0])) > 180, np.nan, s_c)
+        a.plot(t - t0, f_c, "-", lw=1, color="C0", label="forward")
+        a.plot(t - t0, s_c, "-", lw=1, color="C1", label="RTS smoothed")
+        a.set_title(name)
+        a.set_ylabel(f"{name}, deg")
+        a.grid(alpha=0.3)
+        b = ax[1, c]
+        _shade_outages(b, windows, t0)
+        b.semilogy(t - t0, sig[:, c], color="C1", label="smoothed 1-sigma")
+        b.set_ylabel(f"1-sigma {('tilt about east', 'tilt about north', 'heading')[c]}, deg")
+        b.set_xlabel("time since start, s")
+        b.grid(alpha=0.3, which="both")
+    ax[0, 0].legend(fontsize=8)
+    ax[1, 0].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title: str, gyro_sm=None,
+                    accel_sm=None) -> pathlib.Path:
+    """Estimated gyro (deg/h) and accelerometer (mg) biases, body axes x/y/z (right, forward, up), +-1 sigma.
+
+    Args:
+      t: (M,) s.  gyro, gyro_sig: (M, 3) forward estimate and 1-sigma, deg/h.  accel, accel_sig: (M, 3) mg.
+      windows: (K, 2) s.  gyro_sm, accel_sm: optional (M, 3) smoothed estimates (dashed).
+    """
+    path = pathlib.Path(path)
+    t0 = float(t[0])
+    fig, ax = plt.subplots(1, 2, figsize=(13, 4.8), sharex=True)
+    for a, val, sig, sm, unit, what in ((ax[0], gyro, gyro_sig, gyro_sm, "deg/h", "gyro bias"),
+                                        (ax[1], accel, accel_sig, accel_sm, "mg", "accelerometer bias")):
+        _shade_outages(a, windows, t0)
+        for c, axis in enumerate(("x (right)", "y (forward)", "z (up)")):
+            a.plot(t - t0, val[:, c], color=f"C{c}", lw=1, label=f"{axis}, forward +-1 sigma")
+            a.fill_between(t - t0, val[:, c] - sig[:, c], val[:, c] + sig[:, c], color=f"C{c}", alpha=0.15, lw=0)
+            if sm is not None:
+                a.plot(t - t0, sm[:, c], "--", color=f"C{c}", lw=1, label=f"{axis}, RTS smoothed")
+        a.set_title(what)
+        a.set_ylabel(f"{what}, {unit}")
+        a.set_xlabel("time since start, s")
+        a.grid(alpha=0.3)
+        a.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
