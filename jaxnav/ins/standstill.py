@@ -48,13 +48,23 @@ class StandstillParams(NamedTuple):
     g: Any = G0
 
 
+def _shift_sum(x, before: int, after: int):
+    """sum_{j = n - before}^{n + after} x_j (clamped at the ends) and the sample count, per n; by
+    cumulative sums and static slices (no index constants: compile time does not grow with N)."""
+    N = x.shape[0]
+    before, after = min(before, N), min(after, N - 1)
+    c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)  # (N + 1,)
+    hi = jnp.concatenate([c[after + 1:], jnp.repeat(c[-1:], after, axis=0)], 0)  # c[min(n + after + 1, N)]
+    lo = jnp.concatenate([jnp.repeat(c[:1], before, axis=0), c[:N - before]], 0)  # c[max(n - before, 0)]
+    n = jnp.arange(N)
+    cnt = jnp.minimum(n + after + 1, N) - jnp.maximum(n - before, 0)
+    return hi - lo, cnt
+
+
 def _centred_sum(x, window: int):
     """Sum over a centred window of ``window`` samples (clamped at the ends) and the sample count."""
-    N = x.shape[0]
-    c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)
-    lo = np.clip(np.arange(N) - (window - 1) // 2, 0, N)
-    hi = np.clip(np.arange(N) + window // 2 + 1, 0, N)
-    return c[hi] - c[lo], jnp.asarray(hi - lo, x.dtype)
+    s, cnt = _shift_sum(x, (window - 1) // 2, window // 2)
+    return s, cnt.astype(x.dtype)
 
 
 def _check(f_b, w_b, window):
@@ -88,14 +98,10 @@ def _min_run(d, m: int):
     """Keep only runs of True at least ``m`` samples long (binary opening with a length-m segment)."""
     if m <= 1:
         return d
-    N = d.shape[0]
-    c = jnp.concatenate([jnp.zeros(1, jnp.int32), jnp.cumsum(d.astype(jnp.int32))])
-    start = np.arange(N)
-    end = np.minimum(start + m, N)
-    full = (c[end] - c[start]) == m  # the m samples from n on are all True (erosion)
-    f = jnp.concatenate([jnp.zeros(1, jnp.int32), jnp.cumsum(full.astype(jnp.int32))])
-    lo = np.maximum(start - m + 1, 0)
-    return (f[start + 1] - f[lo]) > 0  # some full run starts within the m samples up to n (dilation)
+    ahead, _ = _shift_sum(d.astype(jnp.int32), 0, m - 1)  # True samples among n .. n+m-1
+    full = ahead == m  # erosion: a full run of m starts at n (counts are clamped at the end)
+    behind, _ = _shift_sum(full.astype(jnp.int32), m - 1, 0)  # dilation: one starts in n-m+1 .. n
+    return behind > 0
 
 
 @partial(jax.jit, static_argnames=("window", "min_samples"))
