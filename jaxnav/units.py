@@ -52,3 +52,62 @@ def mg_to_mps2(x):
 def mps_to_mm_per_year(x):
     """Velocity in m/s -> mm/yr (Julian year)."""
     return x / MM_PER_YEAR
+
+
+# ----------------------------------------------------------------------------- IMU datasheet units (issue 18)
+SQRT_HOUR = math.sqrt(HOUR)  # sqrt(s) per sqrt(h)
+MPS_PER_SQRT_HOUR = 1.0 / SQRT_HOUR  # m/s/sqrt(s) per m/s/sqrt(h) (velocity random walk)
+DEG_PER_HOUR_PER_SQRT_HOUR = DEG_PER_HOUR / SQRT_HOUR  # rad/s/sqrt(s) per deg/h/sqrt(h) (gyro bias random walk)
+DEG_PER_SEC_PER_SQRT_HZ = DEG  # rad/sqrt(s) per deg/s/sqrt(Hz) (gyro noise density = angle random walk)
+UG_PER_SQRT_HZ = UG  # m/s/sqrt(s) per ug/sqrt(Hz) (accelerometer noise density = velocity random walk)
+PPM = 1e-6  # dimensionless per part per million (scale factors)
+
+
+def deg_per_sqrt_hour_to_rad_per_sqrt_s(x):
+    """Angle random walk in deg/sqrt(h) -> rad/sqrt(s)."""
+    return x * DEG_PER_SQRT_HOUR
+
+
+def rad_per_sqrt_s_to_deg_per_sqrt_hour(x):
+    """Angle random walk in rad/sqrt(s) -> deg/sqrt(h)."""
+    return x / DEG_PER_SQRT_HOUR
+
+
+def mps_per_sqrt_hour_to_mps_per_sqrt_s(x):
+    """Velocity random walk in m/s/sqrt(h) -> m/s/sqrt(s)."""
+    return x * MPS_PER_SQRT_HOUR
+
+
+def mps_per_sqrt_s_to_mps_per_sqrt_hour(x):
+    """Velocity random walk in m/s/sqrt(s) -> m/s/sqrt(h)."""
+    return x / MPS_PER_SQRT_HOUR
+
+
+def rad_per_s_to_deg_per_hour(x):
+    """Gyro drift in rad/s -> deg/h."""
+    return x / DEG_PER_HOUR
+
+
+def mps2_to_mg(x):
+    """Accelerometer bias in m/s^2 -> milli-g."""
+    return x / MG
+
+
+def ug_to_mps2(x):
+    """Accelerometer bias in micro-g -> m/s^2."""
+    return x * UG
+
+
+def mps2_to_ug(x):
+    """Accelerometer bias in m/s^2 -> micro-g."""
+    return x / UG
+
+
+def ppm_to_ratio(x):
+    """Scale factor in parts per million -> dimensionless."""
+    return x * PPM
+
+
+def ratio_to_ppm(x):
+    """Dimensionless scale factor -> parts per million."""
+    return x / PPM

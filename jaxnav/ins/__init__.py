@@ -5,7 +5,29 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 """
 
 from jaxnav.ins import attitude, earth, error_model, integration
-from jaxnav.ins.alignment import Alignment, coarse_alignment, sensor_to_body_from_upstream
+from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
+from jaxnav.ins.mounting import (  # issue 18: IMU mounting (sensor -> FRD vehicle -> RFU body)
+    C_RFU_FRD,
+    mounting_from_dcm,
+    mounting_from_groves,
+    mounting_from_groves_deg,
+    mounting_from_rpy,
+    mounting_from_rpy_deg,
+    mounting_to_rpy,
+    sensor_to_body,
+    sensor_to_body_from_upstream,
+)
+from jaxnav.ins.noise import NOISE_GRADES, ImuNoise, imu_noise_from_datasheet, imu_noise_to_datasheet, noise_preset
+from jaxnav.ins.standstill import (
+    DetectionScores,
+    StandstillParams,
+    detect_standstill,
+    detection_scores,
+    shoe_statistic,
+    standstill_intervals,
+    threshold_standstill,
+)
+from jaxnav.ins.timing import TimeOffset, estimate_time_offset
 from jaxnav.ins.earth import EarthParams, earth_params, gravity_minus_coriolis, normal_gravity, position_rate
 from jaxnav.ins.error_model import (
     ERROR_MODEL_15,
@@ -62,4 +84,10 @@ __all__ = [
     "EarthParams", "ImuSample", "MechParams", "MechResult", "MechState", "NavState", "attitude",
     "check_imu", "earth", "earth_params", "mech_step", "mechanize", "mechanize_backward",
     "normal_gravity", "position_rate", "Alignment", "coarse_alignment", "sensor_to_body_from_upstream",
+    # issue 18, inputs: mounting, alignment, time offset, standstill, noise grades
+    "HEADING_METHODS", "C_RFU_FRD", "mounting_from_dcm", "mounting_from_groves", "mounting_from_groves_deg",
+    "mounting_from_rpy", "mounting_from_rpy_deg", "mounting_to_rpy", "sensor_to_body",
+    "NOISE_GRADES", "ImuNoise", "imu_noise_from_datasheet", "imu_noise_to_datasheet", "noise_preset",
+    "DetectionScores", "StandstillParams", "detect_standstill", "detection_scores", "shoe_statistic",
+    "standstill_intervals", "threshold_standstill", "TimeOffset", "estimate_time_offset",
 ]

@@ -34,6 +34,9 @@ class PosSolution(NamedTuple):
       age: (N,) differential age, s (NaN if absent).  ratio: (N,) ambiguity ratio (NaN if absent).
       v_enu: (N, 3) velocity east, north, up, m/s (NaN if the file has no velocity columns).
       vcov_enu: (N, 3, 3) velocity covariance, (m/s)^2 (NaN if absent).
+      n_masked: number of missing (``nan``) values the file gave: epochs without a position are
+        dropped, missing velocities are NaN rows of ``v_enu`` (the KF-GINS and CSV readers; 0 for
+        ``.pos``, which has no missing values).
     """
 
     path: str
@@ -48,6 +51,7 @@ class PosSolution(NamedTuple):
     ratio: Any
     v_enu: Any
     vcov_enu: Any
+    n_masked: int = 0
 
 
 def _signed_sq(s):

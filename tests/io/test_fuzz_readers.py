@@ -85,6 +85,41 @@ def _stop_fixture():
     return ("\n".join(rows) + "\n").encode()
 
 
+def _kfgins_imu_fixture():
+    rng = np.random.default_rng(4)
+    return "".join(f"{456250.0 + 0.005 * k:.3f} " + " ".join(f"{x: .9e}" for x in rng.normal(0, 1e-3, 3)) + " "
+                   + " ".join(f"{x: .9e}" for x in rng.normal(0, 1e-3, 2)) + f" {-0.049 + rng.normal(0, 1e-4): .9e}\n"
+                   for k in range(1, 121)).encode()
+
+
+def _kfgins_gnss_fixture():
+    rng = np.random.default_rng(5)
+    rows = []
+    for k in range(80):
+        rows.append(f"{456250 + k:.3f} {30.4447858 + 1e-6 * k:.10f} {114.4718661 + 1e-6 * k:.10f} "
+                    f"{21.09 + rng.normal(0, .01):.3f} {0.1 * k:.3f} {0.2:.3f} {-0.01:.3f} 0.010 0.009 0.019 "
+                    "0.020 0.020 0.030")
+    return ("\n".join(rows) + "\n").encode()
+
+
+def _csv_imu_fixture():
+    rng = np.random.default_rng(6)
+    rows = ["# generic IMU log", "time_ms,gx,gy,gz,ax,ay,az"]
+    for k in range(120):
+        g = rng.normal(0, 2, 3)
+        a = rng.normal(0, .05, 3) + [0, 0, 1]
+        rows.append(f"{1.4e12 + 10 * k:.1f},{g[0]:.6f},{g[1]:.6f},{g[2]:.6f},{a[0]:.6f},{a[1]:.6f},{a[2]:.6f}")
+    return ("\n".join(rows) + "\n").encode()
+
+
+def _csv_gnss_fixture():
+    rows = ["t,lat,lon,h,sd_e,sd_n,sd_u,ve,vn,vu,q"]
+    for k in range(80):
+        rows.append(f"{1.4e9 + 0.2 * k:.1f},{52.1 + 1e-7 * k:.10f},{13.4 + 1e-7 * k:.10f},{40 + 0.01 * k:.3f},"
+                    f"0.02,0.02,0.04,{0.5:.3f},{0.4:.3f},0.0,{1 + k % 2}")
+    return ("\n".join(rows) + "\n").encode()
+
+
 # ----------------------------------------------------------------------------- output checks
 
 def _finite(*arrays):
@@ -105,6 +140,26 @@ def _check_imu(s):
     assert np.all(np.abs(s.f_b) <= 1000.0) and np.all(np.diff(s.t) > 0)
     assert s.n_skipped_lines == len(s.skipped)
     return s.n_skipped_lines
+
+
+def _check_pos_masked(s):
+    """KF-GINS / CSV GNSS: positions finite; NaN velocity rows only as counted missing values."""
+    assert _finite(s.t, s.lat, s.lon, s.h, s.cov_enu, s.q, s.ns) and np.all(np.diff(s.t) > 0)
+    v = np.asarray(s.v_enu, float)
+    assert not np.any(np.isinf(v))
+    nan_rows = int(np.any(np.isnan(v), axis=1).sum())
+    assert nan_rows == len(s.t) or nan_rows <= s.n_masked  # no velocity columns, or masked ones
+    return s.n_masked
+
+
+def _read_csv_imu(p):
+    cols = {"t": "time_ms", "gx": "gx", "gy": "gy", "gz": "gz", "ax": "ax", "ay": "ay", "az": "az"}
+    return io.read_csv_imu(p, cols, {"t": "ms", "gyro": "deg/s", "accel": "g"})
+
+
+def _read_csv_gnss(p):
+    cols = {k: k for k in ("t", "lat", "lon", "h", "sd_e", "sd_n", "sd_u", "ve", "vn", "vu", "q")}
+    return io.read_csv_gnss(p, cols)
 
 
 def _check_tag(s):
@@ -181,6 +236,10 @@ READERS = {
     "levelling": (_levelling_fixture, ".csv", io.read_levelling, _check_levelling, b","),
     "stop_list": (_stop_fixture, ".csv", io.read_stop_list, _check_stops, b","),
     "s0_experiment_toml": (_experiment_source, ".toml", _read_experiment, _check_experiment, b"="),
+    "kfgins_imu": (_kfgins_imu_fixture, ".txt", io.read_kfgins_imu, _check_imu, None),
+    "kfgins_gnss": (_kfgins_gnss_fixture, ".txt", io.read_kfgins_gnss, _check_pos_masked, None),
+    "csv_imu": (_csv_imu_fixture, ".csv", _read_csv_imu, _check_imu, b","),
+    "csv_gnss": (_csv_gnss_fixture, ".csv", _read_csv_gnss, _check_pos_masked, b","),
 }
 
 

@@ -1,0 +1,173 @@
+"""Standstill (zero-velocity) detection on the IMU alone: the SHOE GLRT and a threshold detector.
+
+Both return a boolean per IMU sample for ZUPT / zero-angular-rate updates. Pure jnp (jit, vmap;
+the noise levels and the threshold are array leaves of :class:`StandstillParams`); the window
+and the minimum run length are static sample counts. :func:`detection_scores` and
+:func:`standstill_intervals` are host-side helpers for reports.
+
+SHOE detector (Skog, Händel, Nilsson, Rantakokko, "Zero-velocity detection -- an algorithm
+evaluation", IEEE Trans. Biomed. Eng. 57(11), 2010, eq. 8-10): for the window Omega_n of W samples
+
+    T_n = 1/W sum_{k in Omega_n} ( |f_k - g mean(f)/|mean(f)||^2 / sigma_a^2 + |w_k|^2 / sigma_w^2 ),
+
+the generalized likelihood ratio of "at rest" (specific force of magnitude g along a fixed
+direction, zero rate, white noise sigma_a, sigma_w per sample) against "moving"; at rest its
+expected value is about (6 W - 2) / W ~ 6 (six unit-variance noise terms per sample, two degrees
+of freedom absorbed by the estimated direction of gravity), so a threshold of a few tens
+separates rest from walking or driving when the sigmas are the sensor's. Here the window is centred on the sample, clamped at the ends.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+#: standard gravity, m/s^2 (the default magnitude; pass the local normal gravity for better)
+G0 = 9.80665
+
+
+class StandstillParams(NamedTuple):
+    """Settings of :func:`shoe_statistic` / :func:`detect_standstill` (array leaves).
+
+    Attributes:
+      sigma_a: accelerometer white-noise std per sample at rest, m/s^2 (VRW / sqrt(dt), plus the
+        vibration of a parked engine if any).
+      sigma_w: gyro white-noise std per sample, rad/s (ARW / sqrt(dt)).
+      threshold: the test threshold gamma on T_n (dimensionless); rest where T_n < gamma.
+      g: gravity magnitude, m/s^2 (an accelerometer scale error shows as motion: use the
+        measured |f| at rest, or the local normal gravity).
+    """
+
+    sigma_a: Any = 0.05
+    sigma_w: Any = 0.01
+    threshold: Any = 30.0
+    g: Any = G0
+
+
+def _shift_sum(x, before: int, after: int):
+    """sum_{j = n - before}^{n + after} x_j (clamped at the ends) and the sample count, per n; by
+    cumulative sums and static slices (no index constants: compile time does not grow with N)."""
+    N = x.shape[0]
+    before, after = min(before, N), min(after, N - 1)
+    c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)  # (N + 1,)
+    hi = jnp.concatenate([c[after + 1:], jnp.repeat(c[-1:], after, axis=0)], 0)  # c[min(n + after + 1, N)]
+    lo = jnp.concatenate([jnp.repeat(c[:1], before, axis=0), c[:N - before]], 0)  # c[max(n - before, 0)]
+    n = jnp.arange(N)
+    cnt = jnp.minimum(n + after + 1, N) - jnp.maximum(n - before, 0)
+    return hi - lo, cnt
+
+
+def _centred_sum(x, window: int):
+    """Sum over a centred window of ``window`` samples (clamped at the ends) and the sample count."""
+    s, cnt = _shift_sum(x, (window - 1) // 2, window // 2)
+    return s, cnt.astype(x.dtype)
+
+
+def _check(f_b, w_b, window):
+    if jnp.ndim(f_b) != 2 or jnp.shape(f_b)[1] != 3 or jnp.shape(f_b) != jnp.shape(w_b):
+        raise ValueError(f"f_b {jnp.shape(f_b)} and w_b {jnp.shape(w_b)} must both be (N, 3)")
+    if int(window) < 1:
+        raise ValueError(f"window must be >= 1 sample, got {window}")
+
+
+@partial(jax.jit, static_argnames=("window",))
+def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20):
+    """SHOE GLRT statistic T_n per sample (module docstring; Skog et al. 2010).
+
+    Args:
+      f_b: (N, 3) specific force, m/s^2.  w_b: (N, 3) angular rate, rad/s (any body axes).
+      params: :class:`StandstillParams`.  window: W, samples (static).
+    Returns:
+      (N,) T_n, dimensionless (rest where below ``params.threshold``).
+    """
+    _check(f_b, w_b, window)
+    sf, n = _centred_sum(f_b, window)
+    sff, _ = _centred_sum(jnp.sum(f_b * f_b, 1), window)
+    sww, _ = _centred_sum(jnp.sum(w_b * w_b, 1), window)
+    g = jnp.asarray(params.g, f_b.dtype)
+    # sum |f_k - g u|^2 = sum |f_k|^2 - 2 g |sum f_k| + n g^2  (u = sum f / |sum f|)
+    acc = jnp.maximum(sff - 2.0 * g * jnp.linalg.norm(sf, axis=1) + n * g * g, 0.0)
+    return (acc / params.sigma_a**2 + sww / params.sigma_w**2) / n
+
+
+def _min_run(d, m: int):
+    """Keep only runs of True at least ``m`` samples long (binary opening with a length-m segment)."""
+    if m <= 1:
+        return d
+    ahead, _ = _shift_sum(d.astype(jnp.int32), 0, m - 1)  # True samples among n .. n+m-1
+    full = ahead == m  # erosion: a full run of m starts at n (counts are clamped at the end)
+    behind, _ = _shift_sum(full.astype(jnp.int32), m - 1, 0)  # dilation: one starts in n-m+1 .. n
+    return behind > 0
+
+
+@partial(jax.jit, static_argnames=("window", "min_samples"))
+def detect_standstill(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20,
+                      min_samples: int = 1):
+    """Boolean standstill flag per IMU sample: SHOE T_n < threshold, runs shorter than ``min_samples`` dropped.
+
+    Args:
+      f_b, w_b: (N, 3) m/s^2, rad/s.  params: :class:`StandstillParams`.
+      window: SHOE window, samples.  min_samples: shortest standstill kept, samples.
+    Returns:
+      (N,) bool.
+    """
+    return _min_run(shoe_statistic(f_b, w_b, params, window=window) < params.threshold, int(min_samples))
+
+
+@partial(jax.jit, static_argnames=("window", "min_samples"))
+def threshold_standstill(f_b, w_b, accel_std_max, gyro_max, *, window: int = 20, min_samples: int = 1):
+    """Threshold detector: moving std of |f| below ``accel_std_max`` (m/s^2) and moving RMS of |w|
+    below ``gyro_max`` (rad/s), over a centred window of ``window`` samples; runs shorter than
+    ``min_samples`` dropped (the magnitude/variance tests of Skog et al. 2010, sect. II).
+
+    Args:
+      f_b, w_b: (N, 3) m/s^2, rad/s.  accel_std_max: m/s^2.  gyro_max: rad/s.
+    Returns:
+      (N,) bool.
+    """
+    _check(f_b, w_b, window)
+    a = jnp.linalg.norm(f_b, axis=1)
+    s1, n = _centred_sum(a, window)
+    s2, _ = _centred_sum(a * a, window)
+    var = jnp.maximum(s2 / n - (s1 / n) ** 2, 0.0)
+    ww, _ = _centred_sum(jnp.sum(w_b * w_b, 1), window)
+    d = (var < jnp.square(accel_std_max)) & (ww / n < jnp.square(gyro_max))
+    return _min_run(d, int(min_samples))
+
+
+def standstill_intervals(t, detected):
+    """(K, 2) [t_start, t_end] of the runs of a per-sample flag (host side; a run covers the sample
+    times from its first to its last sample)."""
+    d = np.asarray(detected, bool)
+    t = np.asarray(t, float)
+    e = np.diff(np.concatenate([[0], d.astype(np.int8), [0]]))
+    a, b = np.flatnonzero(e == 1), np.flatnonzero(e == -1) - 1
+    return np.stack([t[a], t[b]], 1) if a.size else np.zeros((0, 2))
+
+
+class DetectionScores(NamedTuple):
+    """Per-sample scores of a detector: precision = TP / (TP + FP), recall = TP / (TP + FN)
+    (NaN when undefined), and the counts."""
+
+    precision: float
+    recall: float
+    tp: int
+    fp: int
+    fn: int
+    tn: int
+
+
+def detection_scores(detected, truth) -> DetectionScores:
+    """Per-sample precision and recall of ``detected`` (N,) bool against ``truth`` (N,) bool (host side)."""
+    d = np.asarray(detected, bool)
+    s = np.asarray(truth, bool)
+    if d.shape != s.shape:
+        raise ValueError(f"detected {d.shape} and truth {s.shape} must have the same shape")
+    tp, fp = int(np.sum(d & s)), int(np.sum(d & ~s))
+    fn, tn = int(np.sum(~d & s)), int(np.sum(~d & ~s))
+    return DetectionScores(precision=tp / (tp + fp) if tp + fp else float("nan"),
+                           recall=tp / (tp + fn) if tp + fn else float("nan"), tp=tp, fp=fp, fn=fn, tn=tn)
