@@ -26,7 +26,10 @@ from typing import Any, NamedTuple, Optional
 import numpy as np
 
 from jaxnav._config import load_toml
+from jaxnav.ins.mounting import C_RFU_FRD, mounting_from_dcm, mounting_from_groves_deg, mounting_from_rpy_deg, sensor_to_body
 from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
+
+__all__ = ["C_RFU_FRD", "CONFIG_DIR", "ConfigError", "InsConfig", "find_config", "load_ins_config", "sensor_to_body"]
 
 #: folder of the shipped ``jaxnav ins`` configs (``jaxnav ins NAME`` finds ``NAME.toml`` here)
 CONFIG_DIR = pathlib.Path(__file__).with_name("configs") / "ins"
@@ -59,6 +62,8 @@ class ImuSection(NamedTuple):
     mounting_source: str
     time_offset_s: Any  # float (s) or "estimate"
     time_offset_search_s: float
+    gps_week: Optional[int] = None
+    delimiter: Optional[str] = ","
 
 
 class GnssSection(NamedTuple):
@@ -74,6 +79,9 @@ class GnssSection(NamedTuple):
     pos_sigma_floor: float
     vel_sigma_floor: float
     gate_probability: Optional[float]
+    gps_week: Optional[int] = None
+    delimiter: Optional[str] = ","
+    sigma_m: Any = None
 
 
 class NoiseSection(NamedTuple):
@@ -101,13 +109,14 @@ class NoiseSection(NamedTuple):
 
 
 class AlignmentSection(NamedTuple):
-    """[alignment]: static window s, heading ("gnss" | "gyrocompass" | a value in rad), speed m/s."""
+    """[alignment]: static window s, heading ("gnss" | "gyrocompass" | "auto" | a value in rad), speed m/s;
+    ``attitude``: None or (3,) [roll, pitch, heading] rad of the vehicle at the start, as given."""
 
     static_s: float
     heading: Any
     min_speed: float
     course_s: float
-    attitude: Any  # None or (3,) roll, pitch, yaw rad of the body (RFU) in ENU, as given
+    attitude: Any
 
 
 class ConstraintSection(NamedTuple):
@@ -160,30 +169,6 @@ class InsConfig(NamedTuple):
     evaluate: Optional[EvaluateSection]
     tune: TuneSection
     raw: dict
-
-
-def rpy_to_dcm(roll, pitch, yaw) -> np.ndarray:
-    """C = Rz(yaw) Ry(pitch) Rx(roll) (rad): the DCM of a frame with that (roll, pitch, yaw) attitude.
-
-    Used for the mounting convention of this module's docstring; (3, 3) numpy.
-    """
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw),
-                              math.sin(yaw))
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return rz @ ry @ rx
-
-
-#: DCM from forward-right-down to jaxnav's right-forward-up body axes
-C_RFU_FRD = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-
-
-def sensor_to_body(mounting) -> np.ndarray:
-    """C_bs (sensor -> jaxnav RFU body) from C_vehicle_sensor (sensor -> FRD vehicle), (3, 3)."""
-    C = C_RFU_FRD @ np.asarray(mounting, float)
-    C[np.abs(C) < 1e-12] = 0.0
-    return C
 
 
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -269,6 +254,16 @@ class _Reader:
             self.fail(None, f"has unknown key(s) {unknown}; expected some of {sorted(self.used)}")
 
 
+def _delimiter(r: "_Reader"):
+    """``delimiter``: a one-character string, or "whitespace" (blanks, tabs and commas), default ","."""
+    v = r.get("delimiter", str, ",")
+    if v == "whitespace":
+        return None
+    if len(v) != 1:
+        r.fail("delimiter", f"must be one character or 'whitespace', got {v!r}")
+    return v
+
+
 _SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "evaluate", "tune")
 
 
@@ -282,6 +277,10 @@ def _imu(path, d, variables=None) -> ImuSection:
     cols, units = r.table("columns"), r.table("units")
     if fmt == "csv" and cols is None:
         r.fail("columns", "is required for format = 'csv' (a table like {t = 0, gx = 1, ...})")
+    if fmt != "csv" and (cols is not None or units is not None):
+        r.fail("columns" if cols is not None else "units", f"is only used with format = 'csv', not {fmt!r}")
+    week = r.get("gps_week", int, None, lo=0, hi=5000)
+    delim = _delimiter(r)
     given = [k for k in ("mounting_rpy_deg", "mounting_groves_rpy_deg", "mounting_dcm") if k in d]
     if len(given) > 1:
         r.fail(given[1], f"conflicts with {given[0]}: give the mounting once")
@@ -294,15 +293,17 @@ def _imu(path, d, variables=None) -> ImuSection:
             C = np.zeros(0)
         if C.shape != (3, 3) or not np.all(np.isfinite(C)):
             r.fail("mounting_dcm", f"must be a 3x3 list of numbers, got {v!r}")
-        if np.max(np.abs(C @ C.T - np.eye(3))) > 1e-6 or abs(np.linalg.det(C) - 1.0) > 1e-6:
-            r.fail("mounting_dcm", "must be a rotation (orthonormal, determinant +1) to 1e-6")
-        mounting, src = C, "mounting_dcm (C_vehicle_sensor, FRD)"
+        try:
+            mounting = mounting_from_dcm(C)
+        except ValueError as exc:
+            r.fail("mounting_dcm", f"must be a rotation (orthonormal, determinant +1): {exc}")
+        src = "mounting_dcm (C_vehicle_sensor, FRD)"
     elif "mounting_groves_rpy_deg" in d:
-        a = r.get("mounting_groves_rpy_deg", "vec3") * DEG
-        mounting, src = rpy_to_dcm(*a).T, "mounting_groves_rpy_deg (Groves Euler_to_CTM, transposed)"
+        mounting = mounting_from_groves_deg(*r.get("mounting_groves_rpy_deg", "vec3"))
+        src = "mounting_groves_rpy_deg (Groves Euler_to_CTM, transposed)"
     else:
-        a = r.get("mounting_rpy_deg", "vec3", np.zeros(3)) * DEG
-        mounting, src = rpy_to_dcm(*a), "mounting_rpy_deg (Rz Ry Rx, FRD vehicle <- sensor)"
+        mounting = mounting_from_rpy_deg(*r.get("mounting_rpy_deg", "vec3", np.zeros(3)))
+        src = "mounting_rpy_deg (Rz Ry Rx, FRD vehicle <- sensor)"
     off = d.get("time_offset_s", 0.0)
     r.used.add("time_offset_s")
     if off != "estimate":
@@ -310,7 +311,8 @@ def _imu(path, d, variables=None) -> ImuSection:
     search = r.get("time_offset_search_s", float, 0.5, lo=0.0, lo_open=True, hi=10.0)
     r.done()
     return ImuSection(file=f, format=fmt, tag=tag, columns=cols, units=units, mounting=mounting,
-                      mounting_source=src, time_offset_s=off, time_offset_search_s=search)
+                      mounting_source=src, time_offset_s=off, time_offset_search_s=search, gps_week=week,
+                      delimiter=delim)
 
 
 def _gnss(path, d, variables=None) -> GnssSection:
@@ -320,6 +322,13 @@ def _gnss(path, d, variables=None) -> GnssSection:
     cols, units = r.table("columns"), r.table("units")
     if fmt == "csv" and cols is None:
         r.fail("columns", "is required for format = 'csv'")
+    if fmt != "csv" and (cols is not None or units is not None):
+        r.fail("columns" if cols is not None else "units", f"is only used with format = 'csv', not {fmt!r}")
+    week = r.get("gps_week", int, None, lo=0, hi=5000)
+    delim = _delimiter(r)
+    sig = r.get("sigma_enu_m", "vec3", None)
+    if sig is not None and (fmt != "csv" or np.any(sig <= 0)):
+        r.fail("sigma_enu_m", "is only used with format = 'csv' and must be 3 positive numbers (m)")
     lever = r.get("lever_arm_frd_m", "vec3", np.zeros(3))
     if np.max(np.abs(lever)) > 100.0:
         r.fail("lever_arm_frd_m", f"= {lever.tolist()} m: a lever arm beyond 100 m is not plausible")
@@ -332,7 +341,8 @@ def _gnss(path, d, variables=None) -> GnssSection:
     g = GnssSection(file=f, format=fmt, columns=cols, units=units, lever_arm_frd=lever,
                     use_velocity=r.get("use_velocity", bool, True), fixed_only=r.get("fixed_only", bool, False),
                     pos_sigma_floor=r.get("pos_sigma_floor_m", float, 0.02, lo=0.0),
-                    vel_sigma_floor=r.get("vel_sigma_floor_m_s", float, 0.05, lo=0.0), gate_probability=gate)
+                    vel_sigma_floor=r.get("vel_sigma_floor_m_s", float, 0.05, lo=0.0), gate_probability=gate,
+                    gps_week=week, delimiter=delim, sigma_m=sig)
     r.done()
     return g
 
@@ -380,11 +390,11 @@ def _alignment(path, d) -> AlignmentSection:
     h = d.get("heading", "gnss")
     r.used.add("heading")
     if isinstance(h, str):
-        if h not in ("gnss", "gyrocompass"):
-            r.fail("heading", f"must be 'gnss', 'gyrocompass' or a heading in deg, got {h!r}")
+        if h not in ("gnss", "gyrocompass", "auto"):
+            r.fail("heading", f"must be 'gnss', 'gyrocompass', 'auto' or a heading in deg, got {h!r}")
     else:
         h = r.get("heading", float, lo=-360.0, hi=360.0) * DEG
-    att = r.get("attitude_rpy_deg", "vec3", None)
+    att = r.get("attitude_deg", "vec3", None)  # [roll, pitch, heading] of the vehicle at the start
     a = AlignmentSection(static_s=r.get("static_s", float, 1.5, lo=0.0, lo_open=True, hi=3600.0), heading=h,
                          min_speed=r.get("min_speed_m_s", float, 0.5, lo=0.0, lo_open=True),
                          course_s=r.get("course_s", float, 2.0, lo=0.0, lo_open=True),

@@ -26,11 +26,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.experiments.ins_config import InsConfig, sensor_to_body
+from jaxnav.experiments.ins_config import InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins import LCParams, PVMeasurements, SensorBiases, coarse_alignment, error_model_Qc, loosely_coupled, smooth
+from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, coarse_alignment, error_model_Qc, loosely_coupled,
+                        noise_preset, sensor_to_body, smooth)
 from jaxnav.ins.attitude import quat_to_dcm
-from jaxnav.io import imu_increments, read_pos, read_rtklib_imu
+from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_kfgins_gnss, read_kfgins_imu, read_pos,
+                       read_rtklib_imu)
 from jaxnav.ins.error_model import ERROR_MODEL_15
 
 
@@ -47,13 +49,30 @@ def read_inputs(cfg: InsConfig):
             raise FileNotFoundError(f"{p}: no such file ({cfg.path}: {key})")
     if imu_c.format == "rtklib-csv":
         imu = read_rtklib_imu(imu_c.file, imu_c.tag)
+    elif imu_c.format == "kf-gins":
+        imu = read_kfgins_imu(imu_c.file, gps_week=imu_c.gps_week)
     else:
-        raise ValueError(f"{cfg.path}: imu.format = {imu_c.format!r} is not readable yet")
+        imu = _csv(cfg, "imu", lambda: read_csv_imu(imu_c.file, imu_c.columns, imu_c.units, delimiter=imu_c.delimiter))
     if g.format == "rtklib-pos":
         pos = read_pos(g.file)
+    elif g.format == "kf-gins":
+        pos = read_kfgins_gnss(g.file, gps_week=g.gps_week)
     else:
-        raise ValueError(f"{cfg.path}: gnss.format = {g.format!r} is not readable yet")
+        pos = _csv(cfg, "gnss", lambda: read_csv_gnss(g.file, g.columns, g.units, delimiter=g.delimiter,
+                                                       sigma_m=g.sigma_m))
     return imu, pos
+
+
+def _csv(cfg, section, read):
+    """A csv reader's ValueError about the column map or units (not a ReaderError) names the config keys."""
+    from jaxnav.io import ReaderError
+
+    try:
+        return read()
+    except ReaderError:
+        raise
+    except ValueError as exc:
+        raise ValueError(f"{cfg.path}: {section}.columns / {section}.units: {exc}") from None
 
 
 def outage_windows(t_start: float, t_end: float, *, first_s: float = 40.0, outage_s: float = 15.0,
@@ -164,12 +183,11 @@ def densities(cfg: InsConfig) -> Densities:
 
 
 def _preset(grade):
-    from jaxnav.ins import noise_preset  # provided by the noise-grade presets
-
+    """The grade's :func:`jaxnav.ins.noise_preset` values under the names of :class:`Densities` (SI)."""
     p = noise_preset(grade)
-    return {"arw": p.gyro_arw, "vrw": p.accel_vrw, "gyro_bias_instability": p.gyro_bias_instability,
-            "bias_correlation_time": p.bias_correlation_time, "init_gyro_bias": p.gyro_bias_initial,
-            "init_accel_bias": p.accel_bias_initial}
+    return {"arw": float(p.gyro_arw), "vrw": float(p.accel_vrw), "gyro_bias_instability": float(p.gyro_bias_instability),
+            "bias_correlation_time": float(p.gyro_bias_tau), "init_gyro_bias": float(p.gyro_bias_initial),
+            "init_accel_bias": float(p.accel_bias_initial)}
 
 
 def filter_params(d: Densities, pos0, n_states: int) -> LCParams:
@@ -224,8 +242,11 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
     a = cfg.alignment
+    dens = densities(cfg)
+    att = None if a.attitude is None else np.array([a.attitude[1], a.attitude[0], -a.attitude[2]])
     align = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], pos, static_s=a.static_s,
-                             min_speed=a.min_speed, course_s=a.course_s)
+                             min_speed=a.min_speed, course_s=a.course_s, heading=a.heading, attitude=att,
+                             gyro_arw=float(dens.arw), gyro_bias_sigma=float(dens.gyro_markov))
     ev = cfg.evaluate
     outages = np.zeros((0, 2)) if ev is None else outage_windows(
         t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
@@ -235,7 +256,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))
     return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
                     time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
-                    meas=meas, keep=keep, withheld=withheld, densities=densities(cfg))
+                    meas=meas, keep=keep, withheld=withheld, densities=dens)
 
 
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
@@ -400,26 +421,39 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
 def estimate_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
     """IMU-GNSS time offset (s, added to IMU times): innovation likelihood over a grid around a first guess.
 
-    The first guess is 0 (or the cross-correlation estimate where one is available); the filter runs
-    on every offset of a 10 ms grid within +-``imu.time_offset_search_s`` of it (no outages), and a
-    parabola through the three best log-likelihoods refines the maximum.
+    The first guess is the cross-correlation of the yaw rate with the GNSS course rate
+    (:func:`jaxnav.ins.estimate_time_offset`); the filter then runs (no outages) on every offset of a
+    10 ms grid within +-max(50 ms, 3 sigma) of it (+-``imu.time_offset_search_s`` around zero in steps of
+    20 ms when the correlation is not usable: too few turns), and a parabola through the three best
+    log-likelihoods refines the maximum.
 
     Returns:
       (offset s, info dict with the grid, its log-likelihoods and the method).
     """
-    guess, info = 0.0, {"source": "estimate", "first_guess": "0"}
+    from jaxnav.ins import estimate_time_offset as xcorr  # yaw rate vs GNSS course rate
+
+    t, dth, dv, dt = imu_increments(imu, C_bs)
+    llh = np.stack([np.asarray(pos.lat), np.asarray(pos.lon), np.asarray(pos.h)], -1)
+    v = np.asarray(pos.v_enu, float)
+    info = {"source": "estimate"}
     try:
-        from jaxnav.ins import estimate_time_offset as xcorr  # yaw rate vs GNSS course rate
-    except ImportError:
-        xcorr = None
-    if xcorr is not None:
-        t, dth, dv, dt = imu_increments(imu, C_bs)
-        est = xcorr(t, dth / dt[:, None], pos)
-        guess = float(est.offset)
-        info["first_guess"] = "yaw rate vs GNSS course rate cross-correlation"
-        info["first_guess_s"] = guess
-    span = cfg.imu.time_offset_search_s
-    grid = guess + np.arange(-span, span + 1e-9, 0.01 if span <= 0.3 else 0.02)
+        est = xcorr(t, dth / dt[:, None], np.asarray(pos.t, float), v if np.all(np.isfinite(v)) else None, llh=llh,
+                    f_b=dv / dt[:, None], max_offset_s=max(1.0, cfg.imu.time_offset_search_s + 0.5))
+        guess = float(est.offset_s)
+        info.update(first_guess="yaw rate vs GNSS course rate cross-correlation", first_guess_s=guess,
+                    first_guess_sigma_s=float(est.sigma_s), first_guess_corr=float(est.corr),
+                    first_guess_epochs=int(est.n_epochs))
+        if not est.corr > 0.5:
+            raise ValueError(f"weak correlation {est.corr:.2f}")
+    except ValueError as exc:  # too few turns or epochs: search around zero
+        guess = 0.0
+        info.update(first_guess=f"0 (cross-correlation not usable: {exc})")
+    if "first_guess_sigma_s" in info and info.get("first_guess_corr", 0) > 0.5:
+        span = min(cfg.imu.time_offset_search_s, max(0.05, 3.0 * info["first_guess_sigma_s"]))
+        step = 0.01
+    else:
+        span, step = cfg.imu.time_offset_search_s, 0.02
+    grid = guess + np.arange(-span, span + 1e-9, step)
     no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0))
     ll = []
     for k, off in enumerate(grid):

@@ -35,7 +35,7 @@ import numpy as np
 
 from jaxnav.experiments.ins_config import load_ins_config
 from jaxnav.experiments.ins_run import OutageScores, filter_params, gnss_measurements, prepare, run_ins
-from jaxnav.ins import SensorBiases, coarse_alignment, loosely_coupled, sensor_to_body_from_upstream
+from jaxnav.ins import SensorBiases, coarse_alignment, loosely_coupled, mounting_from_groves_deg, sensor_to_body
 from jaxnav.ins.attitude import quat_to_euler
 from jaxnav.io import WalkData, imu_increments, load_walk, write_json
 from jaxnav.plot import plot_walk
@@ -46,7 +46,7 @@ WALK_UPSTREAM_ORIENTATION_DEG = (180.0, 0.0, -90.0)
 #: (fwd, right, down) = (0, 0.05, 0) m with a zero GNSS offset gives (0, -0.05, 0) FRD = (-0.05, 0, 0) RFU.
 WALK_LEVER_RFU = (-0.05, 0.0, 0.0)
 #: C_bs of walk_0827 = diag(-1, -1, 1) (see the module docstring).
-WALK_SENSOR_TO_BODY = sensor_to_body_from_upstream(*WALK_UPSTREAM_ORIENTATION_DEG)
+WALK_SENSOR_TO_BODY = sensor_to_body(mounting_from_groves_deg(*WALK_UPSTREAM_ORIENTATION_DEG))
 
 
 #: the shipped ``jaxnav ins`` config of this recording

@@ -1,0 +1,133 @@
+"""A simulated car recording written as files, for ``jaxnav ins`` tests with known truth.
+
+The IMU log is in the KF-GINS text format (GPS seconds of week, angle and velocity increments in the
+*sensor* axes), the GNSS solution in the KF-GINS GNSS format (lat, lon, h, sigmas N/E/D), with a
+known mounting (sensor attitude in the FRD vehicle frame), antenna lever arm and IMU time-tag error.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import jax
+import numpy as np
+
+from jaxnav import sim
+from jaxnav.geodesy import enu_to_curvilinear
+from jaxnav.ins import C_RFU_FRD, mounting_from_rpy_deg
+from jaxnav.ins.attitude import quat_to_dcm
+
+WEEK = 2380
+SOW0 = 345_600.0  # Thursday 00:00 GPST
+
+
+class Recording(NamedTuple):
+    imu_file: Any
+    gnss_file: Any
+    truth: Any  # sim.Trajectory (body = RFU vehicle frame)
+    t_gnss: Any  # (M,) true GNSS epochs, s since the start
+    tag_error_s: float  # IMU time tags = true time + tag_error_s
+
+
+def car_spec():
+    """A 200 s drive: 20 s standing, accelerations, turns both ways, a stop-and-go."""
+    S = sim.Segment
+    r = math.radians
+    segs = (S("rest", duration=20.0), S("accelerate", duration=8.0, dspeed=12.0), S("cruise", hold=10.0),
+            S("turn", duration=8.0, dheading=r(90.0)), S("cruise", hold=12.0), S("turn", duration=6.0, dheading=r(-60.0)),
+            S("cruise", hold=10.0), S("accelerate", duration=6.0, dspeed=-12.0), S("rest", duration=8.0),
+            S("accelerate", duration=6.0, dspeed=10.0), S("turn", duration=10.0, dheading=r(-120.0)),
+            S("cruise", hold=14.0), S("turn", duration=8.0, dheading=r(75.0)), S("cruise", hold=20.0),
+            S("turn", duration=6.0, dheading=r(40.0)), S("cruise", hold=48.0))
+    return sim.TrajectorySpec(lat=r(40.1), lon=r(-105.2), h=1600.0, heading=r(30.0), speed=0.0, segments=segs)
+
+
+def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=(0.6, 0.3, -1.4),
+              tag_error_s=-0.15, imu_rate=100.0, gnss_rate=2.0, pos_sigma=0.02, vel_sigma=0.03) -> Recording:
+    """Simulate the car (industrial-grade IMU errors, RTK-level GNSS) and write ``imu.txt`` / ``gnss.txt``."""
+    truth = sim.generate_trajectory(car_spec(), imu_rate_hz=imu_rate)
+    dt = float(truth.dt)
+    model_g = sim.SensorErrorModel(bias_sigma=math.radians(5.0) / 3600, white=math.radians(0.15) / 60)
+    model_a = sim.SensorErrorModel(bias_sigma=2e-3 * 9.81, white=0.04 / 60)
+    kg, ka, kn = jax.random.split(jax.random.PRNGKey(seed), 3)
+    dth = np.asarray(sim.corrupt_increments(kg, truth.dtheta, dt, model_g)[0])
+    dv = np.asarray(sim.corrupt_increments(ka, truth.dv, dt, model_a)[0])
+    # body (RFU vehicle) -> FRD vehicle -> sensor: v_s = C_vs^T C_frd_rfu v_b
+    C_vs = mounting_from_rpy_deg(*mounting_rpy_deg)
+    C_sb = C_vs.T @ C_RFU_FRD
+    dth_s, dv_s = dth @ C_sb.T, dv @ C_sb.T
+    t = np.asarray(truth.t)[1:]
+    folder.mkdir(parents=True, exist_ok=True)
+    imu_file = folder / "imu.txt"
+    rows = np.column_stack([SOW0 + t + tag_error_s, dth_s, dv_s])
+    np.savetxt(imu_file, rows, fmt=["%.4f"] + ["%.12e"] * 6)
+    # GNSS antenna: truth position + C_bn lever (RFU body), noise; at the GNSS rate from 1 s on
+    step = int(round(1.0 / (gnss_rate * dt)))
+    idx = np.arange(step, t.size + 1, step)
+    pos = np.asarray(truth.pos)[idx]
+    C = np.asarray(quat_to_dcm(np.asarray(truth.q_bn)[idx]))
+    lever_b = C_RFU_FRD @ np.asarray(lever_frd, float)
+    rng = np.random.default_rng(seed)
+    enu = np.einsum("mij,j->mi", C, lever_b) + rng.normal(0.0, pos_sigma, (idx.size, 3))
+    ant = pos + np.asarray(enu_to_curvilinear(pos, enu))
+    w = np.asarray(truth.dtheta)[idx - 1] / dt
+    v_ant = np.asarray(truth.v_n)[idx] + np.einsum("mij,mj->mi", C, np.cross(w, lever_b))
+    v_ant = v_ant + rng.normal(0.0, vel_sigma, (idx.size, 3))
+    gnss_file = folder / "gnss.txt"
+    tg = np.asarray(truth.t)[idx]
+    sd = np.tile([pos_sigma, pos_sigma, pos_sigma], (idx.size, 1))
+    vsd = np.tile([vel_sigma] * 3, (idx.size, 1))
+    # 13 columns: sow, lat, lon, h, vN, vE, vD, sdN, sdE, sdD, sdvN, sdvE, sdvD
+    g = np.column_stack([SOW0 + tg, np.degrees(ant[:, 0]), np.degrees(ant[:, 1]), ant[:, 2], v_ant[:, 1], v_ant[:, 0],
+                         -v_ant[:, 2], sd, vsd])
+    np.savetxt(gnss_file, g, fmt=["%.4f", "%.10f", "%.10f", "%.4f"] + ["%.5f"] * 9)
+    return Recording(imu_file=imu_file, gnss_file=gnss_file, truth=truth, t_gnss=tg, tag_error_s=tag_error_s)
+
+
+def car_config(rec: Recording, folder, *, time_offset="estimate", extra="") -> str:
+    """A ``jaxnav ins`` TOML for the recording (paths relative to ``folder``)."""
+    text = f"""
+[run]
+name = "simulated car"
+
+[imu]
+file = "{rec.imu_file.name}"
+format = "kf-gins"
+gps_week = {WEEK}
+mounting_rpy_deg = [3.0, -4.0, 100.0]
+time_offset_s = {time_offset if isinstance(time_offset, float) else '"' + time_offset + '"'}
+time_offset_search_s = 0.3
+
+[gnss]
+file = "{rec.gnss_file.name}"
+format = "kf-gins"
+gps_week = {WEEK}
+lever_arm_frd_m = [0.6, 0.3, -1.4]
+pos_sigma_floor_m = 0.02
+vel_sigma_floor_m_s = 0.03
+
+[noise]
+grade = "industrial"
+states = 15
+arw_deg_per_sqrt_h = 0.15
+vrw_m_per_s_per_sqrt_h = 0.04
+init_gyro_bias_deg_per_s = 0.01
+init_accel_bias_mg = 5.0
+init_attitude_deg = [1.0, 5.0]
+
+[alignment]
+static_s = 15.0
+heading = "gnss"
+min_speed_m_s = 3.0
+
+[evaluate]
+first_s = 60.0
+outage_s = 20.0
+gap_s = 40.0
+end_margin_s = 10.0
+{extra}
+"""
+    p = folder / "car.toml"
+    p.write_text(text, encoding="utf-8")
+    return p
