@@ -4,16 +4,20 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 :mod:`jaxnav.ins.attitude` for the Euler-angle convention.
 """
 
-from jaxnav.ins import attitude, earth, error_model, integration
+from jaxnav.ins import attitude, earth, error_model, integration, measurements
 from jaxnav.ins.alignment import Alignment, coarse_alignment, sensor_to_body_from_upstream
 from jaxnav.ins.earth import EarthParams, earth_params, gravity_minus_coriolis, normal_gravity, position_rate
 from jaxnav.ins.error_model import (
     ERROR_MODEL_15,
+    ERROR_MODEL_15GM,
     ERROR_MODEL_18,
+    ERROR_MODEL_21,
     IDX15,
     IDX18,
+    IDX21,
     STATE_NAMES15,
     STATE_NAMES18,
+    STATE_NAMES21,
     ErrorModel,
     discretize_series,
     discretize_taylor,
@@ -24,6 +28,10 @@ from jaxnav.ins.error_model import (
     error_model_G15,
     error_model_Qc,
     error_model_Qc15,
+    error_model_Qc21,
+    error_model_F21,
+    error_model_G21,
+    error_model_P0,
     error_model_for,
     markov_psd,
     nav_error_F,
@@ -35,10 +43,22 @@ from jaxnav.ins.integration import (
     LCResult,
     PVMeasurements,
     SensorBiases,
+    chi2_quantile,
     loosely_coupled,
     measurement_model,
     segment_imu,
     smooth,
+)
+from jaxnav.ins.measurements import (
+    Aid,
+    MeasContext,
+    MeasRows,
+    MeasurementModel,
+    heading,
+    nhc,
+    odometer,
+    zaru,
+    zupt,
 )
 from jaxnav.ins.mechanization import (
     ImuSample,
@@ -62,4 +82,7 @@ __all__ = [
     "EarthParams", "ImuSample", "MechParams", "MechResult", "MechState", "NavState", "attitude",
     "check_imu", "earth", "earth_params", "mech_step", "mechanize", "mechanize_backward",
     "normal_gravity", "position_rate", "Alignment", "coarse_alignment", "sensor_to_body_from_upstream",
+    "ERROR_MODEL_15GM", "ERROR_MODEL_21", "IDX21", "STATE_NAMES21", "error_model_Qc21", "error_model_F21",
+    "error_model_G21", "error_model_P0", "chi2_quantile", "measurements", "Aid", "MeasContext", "MeasRows",
+    "MeasurementModel", "heading", "nhc", "odometer", "zaru", "zupt",
 ]
