@@ -25,6 +25,7 @@ PARAMETER_OUT_OF_RANGE = 4096  # a plug-in parameter (traced, so not checked by 
 NOISE_ESTIMATE_BOUNDED = 8192  # an adaptive noise estimate (Sage-Husa R or Q) reached its bound around the model's
 INFLATION_CAPPED = 16384  # an adaptive inflation factor (fading lambda_k) reached its cap
 ROBUST_LOCKOUT = 32768  # a robust estimator rejected every valid measurement over many consecutive epochs
+GNSS_GATED = 65536  # a GNSS epoch failed the chi-square innovation gate and was skipped (information)
 
 _MESSAGES = {
     NONFINITE_MEASUREMENT: "non-finite measurements were masked (updates skipped for them)",
@@ -58,10 +59,11 @@ _MESSAGES = {
     ROBUST_LOCKOUT: "a robust estimator rejected every valid measurement component for many consecutive epochs "
                     "(IGG-III lock-out): the filter coasted on its prediction and may have lost the truth; use "
                     "max_run to accept persistent changes",
+    GNSS_GATED: "GNSS epochs failed the chi-square innovation gate and were skipped (counted in n_gated)",
 }
 
 #: flags that are reported but are not errors by default
-INFO_FLAGS = NONFINITE_MEASUREMENT | ESTIMATOR_FALLBACK
+INFO_FLAGS = NONFINITE_MEASUREMENT | ESTIMATOR_FALLBACK | GNSS_GATED
 
 
 class StatusError(RuntimeError):

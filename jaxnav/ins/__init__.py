@@ -4,7 +4,7 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 :mod:`jaxnav.ins.attitude` for the Euler-angle convention.
 """
 
-from jaxnav.ins import attitude, earth, error_model, integration
+from jaxnav.ins import attitude, earth, error_model, integration, measurements
 from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
 from jaxnav.ins.mounting import (  # issue 18: IMU mounting (sensor -> FRD vehicle -> RFU body)
     C_RFU_FRD,
@@ -31,11 +31,15 @@ from jaxnav.ins.timing import TimeOffset, estimate_time_offset
 from jaxnav.ins.earth import EarthParams, earth_params, gravity_minus_coriolis, normal_gravity, position_rate
 from jaxnav.ins.error_model import (
     ERROR_MODEL_15,
+    ERROR_MODEL_15GM,
     ERROR_MODEL_18,
+    ERROR_MODEL_21,
     IDX15,
     IDX18,
+    IDX21,
     STATE_NAMES15,
     STATE_NAMES18,
+    STATE_NAMES21,
     ErrorModel,
     discretize_series,
     discretize_taylor,
@@ -46,6 +50,10 @@ from jaxnav.ins.error_model import (
     error_model_G15,
     error_model_Qc,
     error_model_Qc15,
+    error_model_Qc21,
+    error_model_F21,
+    error_model_G21,
+    error_model_P0,
     error_model_for,
     markov_psd,
     nav_error_F,
@@ -57,10 +65,22 @@ from jaxnav.ins.integration import (
     LCResult,
     PVMeasurements,
     SensorBiases,
+    chi2_quantile,
     loosely_coupled,
     measurement_model,
     segment_imu,
     smooth,
+)
+from jaxnav.ins.measurements import (
+    Aid,
+    MeasContext,
+    MeasRows,
+    MeasurementModel,
+    heading,
+    nhc,
+    odometer,
+    zaru,
+    zupt,
 )
 from jaxnav.ins.mechanization import (
     ImuSample,
@@ -90,4 +110,7 @@ __all__ = [
     "NOISE_GRADES", "ImuNoise", "imu_noise_from_datasheet", "imu_noise_to_datasheet", "noise_preset",
     "DetectionScores", "StandstillParams", "detect_standstill", "detection_scores", "shoe_statistic",
     "standstill_intervals", "threshold_standstill", "TimeOffset", "estimate_time_offset",
+    "ERROR_MODEL_15GM", "ERROR_MODEL_21", "IDX21", "STATE_NAMES21", "error_model_Qc21", "error_model_F21",
+    "error_model_G21", "error_model_P0", "chi2_quantile", "measurements", "Aid", "MeasContext", "MeasRows",
+    "MeasurementModel", "heading", "nhc", "odometer", "zaru", "zupt",
 ]

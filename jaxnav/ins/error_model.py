@@ -18,8 +18,27 @@ Process noise (S0 eq. 19), 9 components::
 
 The 15-state subset drops eps_r (and w_b): X15 = [phi, dV, dpos, eps_b, nabla], W15 = [w_g, w_a].
 Each model is an :class:`ErrorModel` record (:data:`ERROR_MODEL_18`, :data:`ERROR_MODEL_15`,
-:func:`error_model_for`) chosen once by its user; the 15-state one is derived from the 18-state
-one by :meth:`ErrorModel.drop` (rows and columns deleted), as larger models can be reduced.
+:data:`ERROR_MODEL_21`, :data:`ERROR_MODEL_15GM`, :func:`error_model_for`) chosen once by its user;
+the 15-state one is derived from the 18-state one by :meth:`ErrorModel.drop` (rows and columns
+deleted), as larger models can be reduced.
+
+The 21-state model (issue 18; the layout of KF-GINS-style loosely coupled filters) takes the
+sensor errors as a datasheet states them::
+
+    X21 = [phi (3), dV (3), dpos (3), eps_b (3), nabla (3), s_g (3), s_a (3)]
+    W21 = [w_g (3) ARW, w_a (3) VRW, w_bg (3), w_ba (3) bias driving noises, w_sg (3), w_sa (3) scale-factor noises]
+
+    eps_b_dot = -eps_b / tau_g + w_bg,  nabla_dot = -nabla / tau_a + w_ba     (first-order Gauss-Markov;
+                                                                               tau = inf: random walk)
+    s_g_dot = w_sg,  s_a_dot = w_sa                                          (random constants, optional random walk)
+    phi_dot += -C_bn (eps_b + diag(w_ib_b) s_g),  dV_dot += C_bn (nabla + diag(f_b) s_a)
+
+s_g, s_a are the scale-factor errors (measured = (1 + s) true + bias, dimensionless). The bias
+instability sigma with its correlation time tau and the bias random walk K of a datasheet enter
+the bias driving density as q = 2 sigma^2 / tau + K^2 (:func:`error_model_Qc21`). The gyro Markov
+drift eps_r of S0 is not a separate state here (a second first-order process per axis would make
+27 states): the bias state is itself the Gauss-Markov process. :data:`ERROR_MODEL_15GM` is this
+model without the scale factors (15 states, Gauss-Markov / random-walk biases).
 
 Conventions (jaxnav-wide): navigation frame n = ENU, body frame b = right-forward-up,
 ``C_bn`` = body -> nav DCM, ``pos = [lat rad, lon rad, h m]``.
@@ -53,7 +72,8 @@ from jaxnav.ins.attitude import skew
 
 
 class ErrorStateIndex(NamedTuple):
-    """Slices of the error-state components (``eps_r`` is None in the 15-state model)."""
+    """Slices of the error-state components (None for blocks a model lacks: ``eps_r`` in the 15- and
+    21-state models, the scale factors ``s_g``, ``s_a`` outside the 21-state model)."""
 
     phi: slice
     dv: slice
@@ -61,6 +81,8 @@ class ErrorStateIndex(NamedTuple):
     eps_b: slice
     eps_r: slice | None
     nabla: slice
+    s_g: slice | None = None
+    s_a: slice | None = None
 
 
 #: Layout of the 18-state vector (S0 eq. 18).
@@ -73,6 +95,11 @@ STATE_NAMES18 = ("phi_E", "phi_N", "phi_U", "dV_E", "dV_N", "dV_U", "dlat", "dlo
                  "eps_bx", "eps_by", "eps_bz", "eps_rx", "eps_ry", "eps_rz", "nabla_x", "nabla_y", "nabla_z")
 #: Names of the 15 error states, in order.
 STATE_NAMES15 = STATE_NAMES18[:12] + STATE_NAMES18[15:]
+#: Layout of the 21-state vector [phi, dV, dpos, eps_b, nabla, s_g, s_a].
+IDX21 = ErrorStateIndex(slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), None, slice(12, 15),
+                        slice(15, 18), slice(18, 21))
+#: Names of the 21 error states, in order.
+STATE_NAMES21 = STATE_NAMES15 + ("s_gx", "s_gy", "s_gz", "s_ax", "s_ay", "s_az")
 
 
 def _vec3(x, dtype):
@@ -321,6 +348,124 @@ def error_model_Qc15(gyro_arw, accel_vrw):
     return ERROR_MODEL_15.Qc(error_model_Qc(gyro_arw, 0.0, 1.0, accel_vrw))
 
 
+def error_model_F21(pos, v_n, f_n, C_bn, tau, *, Cw=None, Cf=None, ellipsoid: Ellipsoid = WGS84,
+                    earth_rate_sign=1.0):
+    """Continuous-time system matrix F (21x21) of the 21-state model (module docstring, :data:`IDX21`).
+
+    Navigation block of :func:`nav_error_F`; phi_dot += -C_bn eps_b - Cw s_g; dV_dot += C_bn nabla + Cf s_a;
+    eps_b_dot = -eps_b / tau_g; nabla_dot = -nabla / tau_a; s_g_dot = s_a_dot = 0 (plus noise, :func:`error_model_G21`).
+
+    Args:
+      pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
+      f_n: (3,) specific force in n, m/s^2.  C_bn: (3, 3) body -> nav DCM.
+      tau: scalar or (6,) correlation times [gyro bias (3), accelerometer bias (3)], s; ``inf`` makes
+        the bias a random walk (F entry 0).
+      Cw: (3, 3) C_bn diag(w_ib_b) (rad/s; over an interval its time average), the gyro scale-factor
+        coupling; None: zeros.  Cf: (3, 3) C_bn diag(f_b) (m/s^2), the accelerometer one; None: zeros.
+      ellipsoid: static Earth model.  earth_rate_sign: +1, or -1 for reverse navigation.
+    Returns:
+      (21, 21) F.
+    """
+    Fn = nav_error_F(pos, v_n, f_n, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
+    dtype = Fn.dtype
+    C = jnp.asarray(C_bn, dtype)
+    tau = jnp.broadcast_to(jnp.asarray(tau, dtype), (6,))
+    z33 = jnp.zeros((3, 3), dtype)
+    Cw = z33 if Cw is None else jnp.asarray(Cw, dtype)
+    Cf = z33 if Cf is None else jnp.asarray(Cf, dtype)
+    F = jnp.zeros((21, 21), dtype)
+    F = F.at[0:9, 0:9].set(Fn)
+    F = F.at[IDX21.phi, IDX21.eps_b].set(-C).at[IDX21.dv, IDX21.nabla].set(C)
+    F = F.at[IDX21.phi, IDX21.s_g].set(-Cw).at[IDX21.dv, IDX21.s_a].set(Cf)
+    F = F.at[IDX21.eps_b, IDX21.eps_b].set(jnp.diag(-1.0 / tau[:3]))
+    F = F.at[IDX21.nabla, IDX21.nabla].set(jnp.diag(-1.0 / tau[3:]))
+    return F
+
+
+def error_model_G21(C_bn):
+    """Noise input matrix G (21x18) of the 21-state model for W21 = [w_g, w_a, w_bg, w_ba, w_sg, w_sa].
+
+    phi_dot gets -C_bn w_g, dV_dot gets C_bn w_a; the bias and scale-factor states get their driving
+    noises directly (body frame).
+
+    Args:
+      C_bn: (3, 3) body -> nav DCM.
+    Returns:
+      (21, 18) G.
+    """
+    C = jnp.asarray(C_bn)
+    I3 = jnp.eye(3, dtype=C.dtype)
+    G = jnp.zeros((21, 18), C.dtype)
+    G = G.at[IDX21.phi, 0:3].set(-C).at[IDX21.dv, 3:6].set(C)
+    G = G.at[IDX21.eps_b, 6:9].set(I3).at[IDX21.nabla, 9:12].set(I3)
+    G = G.at[IDX21.s_g, 12:15].set(I3).at[IDX21.s_a, 15:18].set(I3)
+    return G
+
+
+def error_model_Qc21(gyro_arw, accel_vrw, *, gyro_bias_sigma=0.0, gyro_bias_tau=jnp.inf, accel_bias_sigma=0.0,
+                     accel_bias_tau=jnp.inf, gyro_bias_rw=0.0, accel_bias_rw=0.0, gyro_scale_rw=0.0,
+                     accel_scale_rw=0.0):
+    """Continuous noise density Qc (18x18, diagonal) of W21 from datasheet values (all SI, scalar or (3,)).
+
+    Qc = diag(ARW^2, VRW^2, 2 sg^2 / tau_g + Kg^2, 2 sa^2 / tau_a + Ka^2, rw_sg^2, rw_sa^2) (x3 each):
+    the bias instability sigma with its correlation time is a first-order Gauss-Markov process of
+    that stationary std (:func:`markov_psd`); the bias random walk K adds its density (with tau = inf
+    only K remains). Use the same taus in ``LCParams.tau_markov`` = [tau_g (3), tau_a (3)].
+
+    Args:
+      gyro_arw: angle random walk, rad/sqrt(s).  accel_vrw: velocity random walk, m/s/sqrt(s).
+      gyro_bias_sigma: gyro bias instability (Gauss-Markov std), rad/s; gyro_bias_tau: its correlation time, s.
+      accel_bias_sigma: m/s^2; accel_bias_tau: s.
+      gyro_bias_rw: gyro bias random walk, rad/s/sqrt(s).  accel_bias_rw: m/s^2/sqrt(s).
+      gyro_scale_rw, accel_scale_rw: scale-factor random walk, 1/sqrt(s).
+    Returns:
+      (18, 18) Qc.
+    """
+    dtype = jnp.result_type(gyro_arw, accel_vrw, float)
+    v = lambda x: _vec3(x, dtype)  # noqa: E731
+
+    def gm(sigma, tau):
+        tau = v(tau)
+        return jnp.where(jnp.isinf(tau), 0.0, 2.0 * jnp.square(v(sigma)) / jnp.where(jnp.isinf(tau), 1.0, tau))
+
+    q = jnp.concatenate([
+        jnp.square(v(gyro_arw)), jnp.square(v(accel_vrw)),
+        gm(gyro_bias_sigma, gyro_bias_tau) + jnp.square(v(gyro_bias_rw)),
+        gm(accel_bias_sigma, accel_bias_tau) + jnp.square(v(accel_bias_rw)),
+        jnp.square(v(gyro_scale_rw)), jnp.square(v(accel_scale_rw)),
+    ])
+    return jnp.diag(q)
+
+
+def error_model_P0(model: "ErrorModel", pos, *, att, vel, pos_enu, gyro_bias, accel_bias, gyro_markov=0.0,
+                   gyro_scale=0.0, accel_scale=0.0):
+    """Diagonal initial covariance (n, n) of ``model`` from 1-sigma values (SI; scalars or (3,)).
+
+    Args:
+      model: :class:`ErrorModel`.  pos: (3,) [lat rad, lon rad, h m] where the ENU position sigmas
+        are converted to latitude/longitude.
+      att: attitude (phi E, N, U), rad.  vel: ENU velocity, m/s.  pos_enu: ENU position, m.
+      gyro_bias: rad/s.  accel_bias: m/s^2.  gyro_markov: Markov drift (18-state model only), rad/s.
+      gyro_scale, accel_scale: scale-factor errors (21-state model only), dimensionless.
+    Returns:
+      (n, n) diagonal P0 in the order of ``model.names``.
+    """
+    pos = jnp.asarray(pos)
+    dtype = jnp.result_type(pos, float)
+    v = lambda x: _vec3(x, dtype)  # noqa: E731
+    lat, h = pos[0], pos[2]
+    pe = v(pos_enu)
+    dpos = jnp.stack([pe[1] / (meridian_radius(lat) + h), pe[0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)),
+                      pe[2]])
+    blocks = dict(phi=v(att), dv=v(vel), dpos=dpos, eps_b=v(gyro_bias), eps_r=v(gyro_markov), nabla=v(accel_bias),
+                  s_g=v(gyro_scale), s_a=v(accel_scale))
+    sd = jnp.zeros(model.n, dtype)
+    for name, sl in model.idx._asdict().items():
+        if sl is not None:
+            sd = sd.at[sl].set(blocks[name])
+    return jnp.diag(sd * sd)
+
+
 def discretize_van_loan(F, G, Qc, dt):
     """Exact discretisation of X_dot = F X + G W (F, G, Qc constant over dt) by Van Loan's method.
 
@@ -439,6 +584,9 @@ class ErrorModel:
       build_F: (pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid, earth_rate_sign) -> (n, n).
       build_G: (C_bn) -> (n, p).
       noise_keep: slices of the parent model's noise inputs kept (None: all), for :meth:`Qc`.
+      bias_gm: the bias states are first-order Gauss-Markov processes whose correlation times are
+        the ``tau`` argument, (6,) = [gyro (3), accelerometer (3)] (the 21-state family); False:
+        random constants, and ``tau`` (3,) is the gyro Markov drift's (18-state model) or unused.
     """
 
     names: tuple
@@ -447,6 +595,17 @@ class ErrorModel:
     build_F: Callable
     build_G: Callable
     noise_keep: Optional[tuple] = None
+    bias_gm: bool = False
+
+    @property
+    def scale_factors(self) -> bool:
+        """Whether the model has gyro/accelerometer scale-factor states (then F needs ``Cw``, ``Cf``)."""
+        return self.idx.s_g is not None
+
+    @property
+    def tau_size(self) -> int:
+        """Length of the ``tau`` argument: 6 for Gauss-Markov biases, else 3."""
+        return 6 if self.bias_gm else 3
 
     @property
     def n(self) -> int:
@@ -458,9 +617,13 @@ class ErrorModel:
         """Number of noise inputs (the size of Qc)."""
         return len(self.noise_names)
 
-    def F(self, pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
-        """Continuous system matrix (n, n); arguments as :func:`error_model_F` (tau unused without Markov states)."""
-        return self.build_F(pos, v_n, f_n, C_bn, tau_markov, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
+    def F(self, pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0,
+          Cw=None, Cf=None):
+        """Continuous system matrix (n, n); arguments as :func:`error_model_F` (tau unused without Markov
+        states) and, for models with scale factors, ``Cw``, ``Cf`` of :func:`error_model_F21`."""
+        kw = dict(Cw=Cw, Cf=Cf) if self.scale_factors else {}
+        return self.build_F(pos, v_n, f_n, C_bn, tau_markov, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign,
+                            **kw)
 
     def G(self, C_bn):
         """Noise input matrix (n, p) for C_bn (3, 3)."""
@@ -495,7 +658,7 @@ class ErrorModel:
 
         return ErrorModel(names=tuple(self.names[i] for i in keep),
                           noise_names=tuple(self.noise_names[i] for i in nkeep), idx=idx, build_F=build_F,
-                          build_G=build_G, noise_keep=rn)
+                          build_G=build_G, noise_keep=rn, bias_gm=self.bias_gm)
 
 
 #: Names of the 9 noise inputs of the 18-state model (S0 eq. 19).
@@ -507,11 +670,22 @@ ERROR_MODEL_18 = ErrorModel(names=STATE_NAMES18, noise_names=NOISE_NAMES18, idx=
 #: The 15-state model: the 18-state one without the gyro Markov drift eps_r and its driving noise w_b.
 ERROR_MODEL_15 = ERROR_MODEL_18.drop(STATE_NAMES18[12:15], NOISE_NAMES18[3:6], IDX15)
 
-_MODELS = {18: ERROR_MODEL_18, 15: ERROR_MODEL_15}
+#: Names of the 18 noise inputs of the 21-state model.
+NOISE_NAMES21 = ("w_gx", "w_gy", "w_gz", "w_ax", "w_ay", "w_az", "w_bgx", "w_bgy", "w_bgz", "w_bax", "w_bay", "w_baz",
+                 "w_sgx", "w_sgy", "w_sgz", "w_sax", "w_say", "w_saz")
+#: The 21-state model: Gauss-Markov / random-walk biases and scale factors (module docstring).
+ERROR_MODEL_21 = ErrorModel(names=STATE_NAMES21, noise_names=NOISE_NAMES21, idx=IDX21, build_F=error_model_F21,
+                            build_G=error_model_G21, bias_gm=True)
+#: The 21-state model without the scale factors: 15 states [phi, dV, dpos, eps_b, nabla] with Gauss-Markov /
+#: random-walk biases (tau (6,)), noise [w_g, w_a, w_bg, w_ba] (12).
+ERROR_MODEL_15GM = ERROR_MODEL_21.drop(STATE_NAMES21[15:], NOISE_NAMES21[12:], IDX15)
+
+_MODELS = {18: ERROR_MODEL_18, 15: ERROR_MODEL_15, 21: ERROR_MODEL_21}
 
 
 def error_model_for(n_states: int) -> ErrorModel:
-    """The :class:`ErrorModel` with ``n_states`` states (18: S0's model; 15: without the Markov drift).
+    """The :class:`ErrorModel` with ``n_states`` states (18: S0's model; 15: without the Markov drift;
+    21: Gauss-Markov / random-walk biases and scale factors).
 
     Raises:
       ValueError: no such model.
@@ -522,7 +696,8 @@ def error_model_for(n_states: int) -> ErrorModel:
 
 
 __all__ = [
-    "ERROR_MODEL_15", "ERROR_MODEL_18", "ErrorModel", "NOISE_NAMES18", "error_model_for",
+    "ERROR_MODEL_15", "ERROR_MODEL_15GM", "ERROR_MODEL_18", "ERROR_MODEL_21", "ErrorModel", "IDX21", "NOISE_NAMES21",
+    "STATE_NAMES21", "error_model_F21", "error_model_G21", "error_model_Qc21", "error_model_P0", "NOISE_NAMES18", "error_model_for",
     "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "ErrorStateIndex", "discretize_series",
     "discretize_taylor", "discretize_van_loan", "error_model_F", "error_model_F15", "error_model_G", "error_model_G15",
     "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",

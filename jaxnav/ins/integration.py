@@ -16,7 +16,7 @@ IMU samples between them. Each epoch is four pure steps:
 * feedback (:func:`_feedback`): the estimate is fed back (attitude, velocity, position reset;
   sensor-error estimates accumulated and applied to the IMU) and the error state restarts at zero.
 
-The error-state model (18 or 15 states) is an :class:`jaxnav.ins.ErrorModel` chosen once per run.
+The error-state model (15, 18 or 21 states) is an :class:`jaxnav.ins.ErrorModel` chosen once per run.
 
 With ``nav_every > 1`` the inner loop is replaced by the two-speed mechanization of
 :func:`jaxnav.ins.mechanize` (array operations over the epoch's samples, one navigation-frame
@@ -27,18 +27,25 @@ structure carries GNSS fixes and pseudo-measurements (ZUPT: velocity 0; known po
 height: only the up component), selected per component by a mask. Epochs are matched to the
 IMU by time, not index: an epoch between two IMU samples is compared with the INS state
 extrapolated from the last sample to the epoch time.
+
+Further measurements come through the general interface of :mod:`jaxnav.ins.measurements`
+(``aids=``: ZUPT, ZARU, non-holonomic constraint, odometer, heading, or a user's model): the
+filter's epochs are then the GNSS epochs merged with the IMU samples where an aid applies, and
+each epoch stacks the rows of every model into one masked update. GNSS epochs can be gated by
+their normalised innovation squared against a chi-square quantile (``gate_prob=``).
 """
 
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple, Optional, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxnav import _status
+from jaxnav._numerics import masked_measurement, safe_cholesky, whiten
 from jaxnav.filters import (
     FilterParams,
     FilterState,
@@ -52,8 +59,7 @@ from jaxnav.filters import (
     rts_smoother,
 )
 from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat, skew
-from jaxnav.ins.earth import earth_params, position_rate
+from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat
 from jaxnav.ins.error_model import ErrorModel, discretize_taylor, discretize_van_loan, error_model_for
 from jaxnav.ins.mechanization import (
     ImuSample,
@@ -67,11 +73,12 @@ from jaxnav.ins.mechanization import (
     _TwoSpeed,
     mech_step,
 )
+from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows, measurement_model  # noqa: F401
 
 
 #: per-epoch outputs that :func:`loosely_coupled` can save
 LC_OUTPUTS = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs",
-              "nis", "factors", "noise", "valid")
+              "nis", "factors", "noise", "valid", "gated", "gnss_nis")
 
 
 class PVMeasurements(NamedTuple):
@@ -98,10 +105,13 @@ class LCParams(NamedTuple):
     """Tunable array parameters of the integration filter (all leaves reach ``vmap``/``grad``).
 
     Attributes:
-      P0: (n, n) initial error covariance (n = 18 or 15, order of :data:`jaxnav.ins.IDX18`).
+      P0: (n, n) initial error covariance (n = 18, 15 or 21, order of the model's names;
+        :func:`jaxnav.ins.error_model_P0` builds a diagonal one).
       Qc: (p, p) continuous noise density (9 x 9 from :func:`jaxnav.ins.error_model_Qc`, 6 x 6
-        from :func:`jaxnav.ins.error_model_Qc15`).
-      tau_markov: scalar or (3,) gyro Markov correlation time, s (unused for 15 states).
+        from :func:`jaxnav.ins.error_model_Qc15`, 18 x 18 from :func:`jaxnav.ins.error_model_Qc21`).
+      tau_markov: scalar or (3,) gyro Markov correlation time, s (unused for 15 states); for models
+        with Gauss-Markov biases (21 states, ``ERROR_MODEL_15GM``) scalar or (6,) correlation times
+        [gyro bias (3), accelerometer bias (3)], s, ``inf`` for a random walk.
       R_scale: scalar multiplying every measurement covariance (assumed-noise mismatch studies).
     """
 
@@ -115,13 +125,17 @@ class SensorBiases(NamedTuple):
     """Accumulated sensor-error corrections applied to the raw IMU (body frame).
 
     Attributes:
-      gyro: (3,) gyro random constant, rad/s.  markov: (3,) gyro Markov drift (decays with tau), rad/s.
-      accel: (3,) accelerometer random constant, m/s^2.
+      gyro: (3,) gyro bias, rad/s.  markov: (3,) gyro Markov drift (decays with tau), rad/s.
+      accel: (3,) accelerometer bias, m/s^2.
+      gyro_scale, accel_scale: (3,) scale-factor errors (dimensionless), or None for models without
+        them. The raw increments are corrected as (raw - bias dt) / (1 + scale).
     """
 
     gyro: Any
     markov: Any
     accel: Any
+    gyro_scale: Any = None
+    accel_scale: Any = None
 
 
 class LCEpochs(NamedTuple):
@@ -133,6 +147,11 @@ class LCEpochs(NamedTuple):
       covs: (M, n, n) error covariance after the update.  pred_covs: (M, n, n) prior (after inflation).
       Phi: (M, n, n) transition from the previous epoch.  corrections: (M, n) estimate fed back.
       innovations, innov_covs, nis, factors, noise, valid: as :class:`jaxnav.filters.KalmanResult`.
+      gated: (M,) bool, the epoch's GNSS components were rejected by the chi-square gate.
+      gnss_nis: (M,) NIS of the epoch's valid GNSS components against the prior (0 where none;
+        computed only with gating on, else None).
+      gnss_row: (M,) int, the row of the run's :class:`PVMeasurements` at each epoch (-1: an epoch of
+        pseudo-measurements only); always filled.
     """
 
     t: Any = None
@@ -149,6 +168,9 @@ class LCEpochs(NamedTuple):
     factors: Any = None
     noise: Any = None
     valid: Any = None
+    gated: Any = None
+    gnss_nis: Any = None
+    gnss_row: Any = None
 
 
 class LCResult(NamedTuple):
@@ -159,6 +181,7 @@ class LCResult(NamedTuple):
       final_biases: :class:`SensorBiases`.  loglik: innovation log-likelihood.
       n_nonfinite: NaN/inf measurement components masked.  n_skipped: epochs without any update.
       status: int32 flags.  imu_nav: per-sample :class:`NavState` every ``save_imu_every`` samples, or None.
+      n_gated: int32, GNSS epochs rejected by the chi-square gate (0 without gating).
     """
 
     epochs: LCEpochs
@@ -169,6 +192,7 @@ class LCResult(NamedTuple):
     n_skipped: Any
     status: Any
     imu_nav: Any = None
+    n_gated: Any = None
 
 
 class Segments(NamedTuple):
@@ -215,39 +239,14 @@ def segment_imu(t_imu, t_meas, dt_imu) -> Segments:
     return Segments(idx=idx, use=use, t_last=t_imu[ends - 1], K=K)
 
 
-def measurement_model(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid: Ellipsoid = WGS84):
-    """Predicted antenna position/velocity and H (6 x n) of the PV measurement.
-
-    z = [D (pos_ins_ant - pos_meas) (ENU m), v_ins_ant - v_meas (ENU m/s)] with
-    pos_ant = pos + C_bn l, v_ant = v + C_bn (w_nb^b x l). With the phi-angle convention
-    (C_computed = (I - [phi x]) C_true): dz_pos = D dpos + [(C_bn l) x] phi,
-    dz_vel = dV + [(C_bn (w x l)) x] phi.
-
-    Returns:
-      (pos_ant (3,), v_ant (3,), H (6, n)).
-    """
-    C = quat_to_dcm(nav.q_bn)
-    e = earth_params(nav.pos, nav.v_n, ellipsoid)
-    w_nb_b = w_ib_b - C.T @ e.w_in_n
-    l_n = C @ lever_b
-    lv_n = C @ jnp.cross(w_nb_b, lever_b)
-    pos_ant = nav.pos + enu_to_curvilinear(nav.pos, l_n, ellipsoid)
-    v_ant = nav.v_n + lv_n
-    # D: rows E, N, U; columns dlat, dlon, dh. s: metres per rad of dlon (E), per rad of dlat (N), per m of dh
-    s = curvilinear_to_enu(nav.pos, jnp.ones(3, nav.pos.dtype), ellipsoid)
-    D = jnp.array([[0.0, s[0], 0.0], [s[1], 0.0, 0.0], [0.0, 0.0, 1.0]])
-    H = jnp.zeros((6, n_states), nav.v_n.dtype)
-    H = H.at[0:3, 0:3].set(skew(l_n)).at[0:3, 6:9].set(D)
-    H = H.at[3:6, 0:3].set(skew(lv_n)).at[3:6, 3:6].set(jnp.eye(3, dtype=H.dtype))
-    return pos_ant, v_ant, H
-
-
 def _apply_correction(nav: NavState, biases: SensorBiases, x, idx):
-    """Feed an error estimate back: q <- rv2q(phi) (x) q, v -= dV, pos -= dpos, biases += estimates."""
+    """Feed an error estimate back: q <- rv2q(phi) (x) q, v -= dV, pos -= dpos, sensor errors += estimates."""
     q = quat_normalize(quat_mul(rv_to_quat(x[idx.phi]), nav.q_bn))
     nav = NavState(q_bn=q, v_n=nav.v_n - x[idx.dv], pos=nav.pos - x[idx.dpos])
     markov = biases.markov + (x[idx.eps_r] if idx.eps_r is not None else 0.0)
-    biases = SensorBiases(gyro=biases.gyro + x[idx.eps_b], markov=markov, accel=biases.accel + x[idx.nabla])
+    biases = biases._replace(gyro=biases.gyro + x[idx.eps_b], markov=markov, accel=biases.accel + x[idx.nabla])
+    if idx.s_g is not None:
+        biases = biases._replace(gyro_scale=biases.gyro_scale + x[idx.s_g], accel_scale=biases.accel_scale + x[idx.s_a])
     return nav, biases
 
 
@@ -258,6 +257,7 @@ class _Carry(NamedTuple):
     biases: SensorBiases
     kf: FilterState
     G_prev: Any = None  # two-speed mechanization: the last block's gravity minus Coriolis (else None)
+    n_gated: Any = None  # int32 count of gated GNSS epochs
 
 
 class _Sums(NamedTuple):
@@ -271,6 +271,8 @@ class _Sums(NamedTuple):
     v: Any  # (3,) sum v_n dt, m
     f: Any  # (3,) sum C_bn dv = integral of f_n dt, m/s
     C: Any  # (3, 3) sum C_bn dt, s
+    Cw: Any = None  # (3, 3) sum C_bn diag(dtheta) = integral of C_bn diag(w_ib_b) dt (scale-factor models)
+    Cf: Any = None  # (3, 3) sum C_bn diag(dv) = integral of C_bn diag(f_b) dt (scale-factor models)
 
 
 class _Propagated(NamedTuple):
@@ -288,42 +290,65 @@ def _where_tree(c, a, b):
     return jax.tree_util.tree_map(lambda x, y: jnp.where(c, x, y), a, b)
 
 
-def _zero_sums(dtype):
-    z3 = jnp.zeros(3, dtype)
-    return _Sums(z3, z3, z3, jnp.zeros((3, 3), dtype))
+def _zero_sums(dtype, scale=False):
+    z3, z33 = jnp.zeros(3, dtype), jnp.zeros((3, 3), dtype)
+    return _Sums(z3, z3, z3, z33, z33 if scale else None, z33 if scale else None)
 
 
-def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipsoid, hold_height, save_imu_every):
+def _correct(dth_raw, dv_raw, dt, biases: SensorBiases, markov):
+    """Sensor-error correction of raw increments: (raw - bias dt) / (1 + scale) (scale only if present)."""
+    dth = dth_raw - (biases.gyro + markov) * dt
+    dvc = dv_raw - biases.accel * dt
+    if biases.gyro_scale is not None:
+        dth = dth / (1.0 + biases.gyro_scale)
+        dvc = dvc / (1.0 + biases.accel_scale)
+    return dth, dvc
+
+
+def _decay_gm(biases: SensorBiases, T, tau_b):
+    """Gauss-Markov biases: the applied estimates decay like the mean of the process, exp(-T / tau)."""
+    if tau_b is None:
+        return biases
+    return biases._replace(gyro=biases.gyro * jnp.exp(-T / tau_b[:3]), accel=biases.accel * jnp.exp(-T / tau_b[3:]))
+
+
+def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipsoid, hold_height, save_imu_every,
+                       tau_b=None):
     """The IMU samples of one epoch interval, one :func:`mech_step` each, with the sensor-error correction.
 
     Args:
       rows: (raw dtheta (K, 3) rad, raw dv (K, 3) m/s, dt (K,) s, use (K,) bool); unused samples
         (padding) leave everything as it is.
+      tau: (3,) Markov drift correlation times, s.  tau_b: (6,) Gauss-Markov bias correlation times
+        (models with ``bias_gm``), else None.
     Returns:
       (:class:`_Propagated`, NavState every ``save_imu_every``-th sample or None).
     """
     dtype = mech.nav.v_n.dtype
     mparams = MechParams(earth_rate_sign=1.0)
 
+    scale = biases.gyro_scale is not None
+
     def step(c, x):
         (mech, biases, sums, T, w_last), (dth_raw, dv_raw, dt, use) = c, x
-        dth = dth_raw - (biases.gyro + biases.markov) * dt
-        dvc = dv_raw - biases.accel * dt
+        dth, dvc = _correct(dth_raw, dv_raw, dt, biases, biases.markov)
         new_mech, nav = mech_step(mech, ImuSample(dth, dvc, dt), mparams, ellipsoid=ellipsoid,
                                   hold_height=hold_height)
         C = quat_to_dcm(nav.q_bn)
-        sums = _Sums(sums.pos + nav.pos * dt, sums.v + nav.v_n * dt, sums.f + C @ dvc, sums.C + C * dt)
+        sums = _Sums(sums.pos + nav.pos * dt, sums.v + nav.v_n * dt, sums.f + C @ dvc, sums.C + C * dt,
+                     sums.Cw + C * dth[None, :] if scale else None, sums.Cf + C * dvc[None, :] if scale else None)
         new = (new_mech, biases._replace(markov=biases.markov * jnp.exp(-dt / tau)), sums, T + dt, dth / dt)
         return _where_tree(use, new, c), (nav if save_imu_every else None)
 
-    init = (mech, biases, _zero_sums(dtype), jnp.zeros((), dtype), jnp.zeros(3, dtype))
+    init = (mech, biases, _zero_sums(dtype, scale), jnp.zeros((), dtype), jnp.zeros(3, dtype))
     (mech, biases, sums, T, w_last), navs = jax.lax.scan(step, init, rows)
     if save_imu_every:
         navs = jax.tree_util.tree_map(lambda a: a[save_imu_every - 1::save_imu_every], navs)
-    return _Propagated(mech, biases, sums, T, w_last, None), navs
+    return _Propagated(mech, _decay_gm(biases, T, tau_b), sums, T, w_last, None), navs
 
 
-def _propagate_blocks(mech: MechState, biases: SensorBiases, G_prev, rows, tau, M: int, ellipsoid, hold_height):
+def _propagate_blocks(mech: MechState, biases: SensorBiases, G_prev, rows, tau, M: int, ellipsoid, hold_height,
+                      tau_b=None):
     """The IMU samples of one epoch interval by the two-speed mechanization (:func:`jaxnav.ins.mechanize`'s
     ``nav_every``), with the sensor-error correction and F's sums.
 
@@ -344,29 +369,39 @@ def _propagate_blocks(mech: MechState, biases: SensorBiases, G_prev, rows, tau, 
     K = dt.shape[0]
     dtu = jnp.where(use, dt, 0.0)
     decay_before = jnp.exp(-(jnp.cumsum(dtu) - dtu)[:, None] / tau)  # Markov factor at each sample
-    dth = jnp.where(use[:, None], dth_raw - (biases.gyro + biases.markov * decay_before) * dtu[:, None], 0.0)
-    dvc = jnp.where(use[:, None], dv_raw - biases.accel * dtu[:, None], 0.0)
+    dth, dvc = _correct(dth_raw, dv_raw, dtu[:, None], biases, biases.markov * decay_before)
+    dth = jnp.where(use[:, None], dth, 0.0)
+    dvc = jnp.where(use[:, None], dvc, 0.0)
+    scale = biases.gyro_scale is not None
     nb = -(-K // M)
     padn = nb * M - K
     pad = lambda a: jnp.concatenate([a, jnp.zeros((padn,) + a.shape[1:], dtype)]) if padn else a  # noqa: E731
     blk, pre = _body_blocks(pad(dth), pad(dvc), pad(dtu), mech.dtheta_prev, mech.dv_prev, M, True, prefix=True)
     Bq = jnp.stack(pre.B, axis=-1)  # (nb, M, 4) body rotation to the end of each sample
     f_b = jnp.sum(quat_rotate(Bq, pad(dvc).reshape(nb, M, 3)), axis=1)  # (nb, 3)
-    C_b = jnp.sum(quat_to_dcm(Bq) * pad(dtu).reshape(nb, M)[..., None, None], axis=1)  # (nb, 3, 3)
+    Cq = quat_to_dcm(Bq)  # (nb, M, 3, 3)
+    C_b = jnp.sum(Cq * pad(dtu).reshape(nb, M)[..., None, None], axis=1)  # (nb, 3, 3)
+    if scale:  # block sums of C diag(dtheta), C diag(dv) in the block's start frame
+        Cw_b = jnp.sum(Cq * pad(dth).reshape(nb, M, 1, 3), axis=1)
+        Cf_b = jnp.sum(Cq * pad(dvc).reshape(nb, M, 1, 3), axis=1)
+        xs = (f_b, C_b, Cw_b, Cf_b)
+    else:
+        xs = (f_b, C_b)
 
     def add(sums, start, fr, T, x):
-        fb, Cb = x
         C0 = quat_to_dcm(start.q_bn)
-        return _Sums(sums.pos + fr.pos_mid * T, sums.v + fr.v_mid * T, sums.f + C0 @ fb, sums.C + C0 @ Cb)
+        Cw = sums.Cw + C0 @ x[2] if scale else None
+        Cf = sums.Cf + C0 @ x[3] if scale else None
+        return _Sums(sums.pos + fr.pos_mid * T, sums.v + fr.v_mid * T, sums.f + C0 @ x[0], sums.C + C0 @ x[1], Cw, Cf)
 
     two, sums, _ = _scan_blocks(_TwoSpeed(mech.nav, mech.a_prev, G_prev), blk, 1.0, ellipsoid, hold_height,
-                                acc=_zero_sums(dtype), accumulate=add, xs=(f_b, C_b), skip_empty=True)
+                                acc=_zero_sums(dtype, scale), accumulate=add, xs=xs, skip_empty=True)
     last = jnp.maximum(jnp.sum(use) - 1, 0)
     flags = _imu_flags(dth, dvc, jnp.where(use, dt, 1.0), series=True)
     new_mech = MechState(nav=two.nav, dtheta_prev=dth[last], dv_prev=dvc[last], a_prev=two.a_prev,
                          status=mech.status | flags)
     T = jnp.sum(dtu)
-    new_biases = biases._replace(markov=biases.markov * jnp.exp(-T / tau))
+    new_biases = _decay_gm(biases._replace(markov=biases.markov * jnp.exp(-T / tau)), T, tau_b)
     return _Propagated(new_mech, new_biases, sums, T, dth[last] / dt[last], two.G)
 
 
@@ -377,7 +412,9 @@ def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, method, o
       (Phi (n, n), Qd (n, n), int32 flag: DISCRETIZATION_INACCURATE if the Taylor series had not converged).
     """
     Tsafe = jnp.maximum(p.T, 1e-300)
-    F = model.F(*(a / Tsafe for a in p.sums), tau, ellipsoid=ellipsoid)
+    s = p.sums
+    avg = lambda a: None if a is None else a / Tsafe  # noqa: E731
+    F = model.F(avg(s.pos), avg(s.v), avg(s.f), avg(s.C), tau, ellipsoid=ellipsoid, Cw=avg(s.Cw), Cf=avg(s.Cf))
     G = model.G(quat_to_dcm(p.mech.nav.q_bn))
     if method == "van_loan":
         Phi, Qd = discretize_van_loan(F, G, Qc, p.T)
@@ -386,15 +423,56 @@ def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, method, o
     return Phi, Qd, jnp.where(err > 1e-10, _status.DISCRETIZATION_INACCURATE, 0).astype(jnp.int32)
 
 
-def _measure(nav: NavState, w_last, dtx, m: PVMeasurements, R_scale, n: int, ellipsoid):
-    """z (6,), H (6, n), R (6, 6) of one epoch's PV measurement (m: its row of :class:`PVMeasurements`).
+def _measure(ctx: MeasContext, m: PVMeasurements, R_scale, n: int, ellipsoid) -> MeasRows:
+    """z (6,), H (6, n), R (6, 6), mask (6,) of one epoch's PV measurement (m: its row of :class:`PVMeasurements`)
+    through :data:`jaxnav.ins.measurements.GNSS_PV`.
 
-    The INS state is extrapolated from its last IMU sample by dtx = t_epoch - t_sample (s).
+    The INS state is extrapolated from its last IMU sample by ctx.dtx = t_epoch - t_sample (s).
     """
-    nav_x = nav._replace(pos=nav.pos + dtx * position_rate(nav.pos, nav.v_n, ellipsoid))
-    pos_ant, v_ant, H = measurement_model(nav_x, w_last, m.lever, n, ellipsoid)
-    z = jnp.concatenate([curvilinear_to_enu(nav_x.pos, pos_ant - m.pos, ellipsoid), v_ant - m.vel])
-    return z, H, R_scale * m.R
+    return GNSS_PV.fn(ctx, GnssData(m.pos, m.vel, m.R, m.mask, m.lever), R_scale, None, n, ellipsoid)
+
+
+def _mean_rate(rows, still, biases: SensorBiases):
+    """Mean corrected angular rate (3,) over the interval's samples flagged ``still`` (K,), and their time (s)."""
+    dth_raw, _, dt, use = rows
+    w = still & use
+    T = jnp.sum(jnp.where(w, dt, 0.0))
+    sdth = jnp.sum(jnp.where(w[:, None], dth_raw, 0.0), axis=0)
+    w_raw = sdth / jnp.maximum(T, 1e-300)
+    wm = w_raw - (biases.gyro + biases.markov)
+    if biases.gyro_scale is not None:
+        wm = wm / (1.0 + biases.gyro_scale)
+    return jnp.where(T > 0, wm, 0.0), T
+
+
+def _gate(rows: MeasRows, Phi, Qd, P, thresholds):
+    """Chi-square gate of one epoch's GNSS rows against the prior of the feedback filter (x = 0).
+
+    S = (H Phi) P (H Phi)^T + H Qd H^T + R over the valid components; NIS = z^T S^-1 z is compared
+    with ``thresholds[dof]`` (dof = number of valid components, thresholds[0] unused).
+
+    Returns:
+      (gated bool, nis scalar (0 where no valid component)).
+    """
+    valid = rows.mask & jnp.isfinite(rows.z)
+    HPhi = rows.H @ Phi
+    S = HPhi @ P @ HPhi.T + rows.H @ Qd @ rows.H.T + rows.R
+    _, Sm = masked_measurement(rows.H, 0.5 * (S + S.T), valid)
+    L, ok = safe_cholesky(Sm)
+    w = whiten(L, jnp.where(valid, rows.z, 0.0))
+    nis = jnp.sum(w * w)
+    dof = jnp.sum(valid)
+    gated = (dof > 0) & ok & (nis > thresholds[dof])
+    return gated, jnp.where(dof > 0, nis, 0.0)
+
+
+def _stack(parts):
+    """One measurement from several :class:`MeasRows`: rows concatenated, R block-diagonal."""
+    if len(parts) == 1:
+        return parts[0]
+    return MeasRows(z=jnp.concatenate([r.z for r in parts]), H=jnp.concatenate([r.H for r in parts]),
+                    R=jax.scipy.linalg.block_diag(*[r.R for r in parts]),
+                    mask=jnp.concatenate([r.mask for r in parts]))
 
 
 def _feedback(p: _Propagated, kf: FilterState, idx, flag) -> _Carry:
@@ -407,41 +485,76 @@ def _feedback(p: _Propagated, kf: FilterState, idx, flag) -> _Carry:
 _STEP_OUTPUTS = ("means", "covs", "pred_covs", "innovations", "innov_covs", "nis", "factors", "noise", "valid")
 
 
-@partial(jax.jit, static_argnames=("n_states", "save", "ellipsoid", "hold_height", "check_finite",
-                                   "save_imu_every", "remat", "discretization", "taylor_order", "nav_every"))
+class _AidEpochs(NamedTuple):
+    """Per-epoch inputs of the aids (leading axis M'): data (tuple of pytrees or None), active (M', A) bool,
+    still (M', K) bool rows of the mean-rate aid or None."""
+
+    data: Any
+    active: Any
+    still: Any
+
+
+@partial(jax.jit, static_argnames=("model", "save", "ellipsoid", "hold_height", "check_finite",
+                                   "save_imu_every", "remat", "discretization", "taylor_order", "nav_every",
+                                   "aid_models"))
 def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last, meas, params, inflation,
-             estimator, n_states, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False,
-             discretization="taylor", taylor_order=8, nav_every=1):
+             estimator, model, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False,
+             discretization="taylor", taylor_order=8, nav_every=1, aid_models=(), aid_epochs=None, aid_params=(),
+             gate_thresholds=None):
     dtype = nav0.v_n.dtype
-    model = error_model_for(n_states)
-    tau = jnp.broadcast_to(jnp.asarray(params.tau_markov, dtype), (3,))
+    tau_all = jnp.broadcast_to(jnp.asarray(params.tau_markov, dtype), (model.tau_size,))
+    tau = jnp.full(3, jnp.inf, dtype) if model.bias_gm else tau_all  # the Markov drift's (none with GM biases)
+    tau_b = tau_all if model.bias_gm else None
     Qc, R_scale = jnp.asarray(params.Qc, dtype), jnp.asarray(params.R_scale, dtype)
     fparams = FilterParams(model=LinearGaussian(None, None, None, None, None),
                            inflation=NoInflation() if inflation is None else inflation,
                            estimator=NoEstimator() if estimator is None else estimator)
+    gate = gate_thresholds is not None
+    m_total = 6 + sum(am.size for am in aid_models)
 
     def outer(carry: _Carry, inp):
-        rows, t_meas, t_nav, m = inp
+        rows, t_meas, t_nav, m, ae = inp
         if nav_every > 1:
-            p = _propagate_blocks(carry.mech, carry.biases, carry.G_prev, rows, tau, nav_every, ellipsoid, hold_height)
+            p = _propagate_blocks(carry.mech, carry.biases, carry.G_prev, rows, tau, nav_every, ellipsoid, hold_height,
+                                  tau_b)
             navs = None
         else:
-            p, navs = _propagate_samples(carry.mech, carry.biases, rows, tau, ellipsoid, hold_height, save_imu_every)
-        Phi, Qd, flag = _discretise(model, p, tau, Qc, ellipsoid, discretization, taylor_order)
-        z, H, R = _measure(p.mech.nav, p.w_last, t_meas - t_nav, m, R_scale, model.n, ellipsoid)
+            p, navs = _propagate_samples(carry.mech, carry.biases, rows, tau, ellipsoid, hold_height, save_imu_every,
+                                         tau_b)
+        Phi, Qd, flag = _discretise(model, p, tau_all, Qc, ellipsoid, discretization, taylor_order)
+        z0 = jnp.zeros((), dtype)
+        if ae is not None and ae.still is not None:
+            w_mean, T_mean = _mean_rate(rows, ae.still, carry.biases)
+        else:
+            w_mean, T_mean = jnp.zeros(3, dtype), z0
+        ctx = MeasContext(nav=p.mech.nav, w_ib_b=p.w_last, w_mean_b=w_mean, T_mean=T_mean, dtx=t_meas - t_nav)
+        gnss = _measure(ctx, m, R_scale, model.n, ellipsoid)
+        gated, gnss_nis = jnp.zeros((), bool), z0
+        if gate:
+            gated, gnss_nis = _gate(gnss, Phi, Qd, carry.kf.P, gate_thresholds)
+            gnss = gnss._replace(mask=gnss.mask & ~(gated & jnp.isfinite(gnss.z)))
+            flag = flag | jnp.where(gated, _status.GNSS_GATED, 0).astype(jnp.int32)
+        parts = [gnss]
+        for i, am in enumerate(aid_models):
+            data_i = None if ae.data[i] is None else ae.data[i]
+            r = am.fn(ctx, data_i, aid_params[i], model.idx, model.n, ellipsoid)
+            parts.append(r._replace(mask=r.mask & ae.active[i]))
+        z, H, R, mask = _stack(parts)
         # x is zero after every feedback; the literal zero lets XLA drop the products F x and H x
         kf_prior = carry.kf._replace(x=jnp.zeros(model.n, dtype))
-        kf, info = filter_step(kf_prior, StepInput(z=z, mask=m.mask, F=Phi, H=H, Q=Qd, R=R), fparams,
+        kf, info = filter_step(kf_prior, StepInput(z=z, mask=mask, F=Phi, H=H, Q=Qd, R=R), fparams,
                                save=_STEP_OUTPUTS, check_finite=check_finite)
         new = _feedback(p, kf, model.idx, flag)
+        new = new._replace(n_gated=carry.n_gated + gated.astype(jnp.int32))
         allv = dict(nav=new.mech.nav, biases=new.biases, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi,
                     corrections=kf.x, innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
-                    factors=info.factors, noise=info.noise, valid=info.valid)
+                    factors=info.factors, noise=info.noise, valid=info.valid, gated=gated,
+                    gnss_nis=gnss_nis if gate else None)
         return new, (LCEpochs(t=t_meas, t_nav=t_nav, **{k: allv[k] for k in save}), navs)
 
     z3 = jnp.zeros(3, dtype)
     mech0 = MechState(nav=nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3, status=jnp.zeros((), jnp.int32))
-    kf0 = init_state(jnp.zeros(model.n, dtype), params.P0, 6, inflation=inflation, estimator=estimator)
+    kf0 = init_state(jnp.zeros(model.n, dtype), params.P0, m_total, inflation=inflation, estimator=estimator)
     G0 = _two_speed_start(nav0, z3, 1.0, ellipsoid).G if nav_every > 1 else None
     if remat:
         # reverse mode keeps only the per-epoch carries and recomputes each epoch's IMU samples
@@ -451,14 +564,91 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
     # and are skipped by the ``use`` mask (no dynamic indexing inside the scan)
     dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (dtheta.shape[0],))
     rows = (dtheta[seg_idx], dv[seg_idx], jnp.where(seg_use, dt_all[seg_idx], 1.0), seg_use)
-    final, (ep, navs) = jax.lax.scan(outer, _Carry(mech0, biases0, kf0, G0), (rows, meas.t, t_last, meas))
+    carry0 = _Carry(mech0, biases0, kf0, G0, jnp.zeros((), jnp.int32))
+    final, (ep, navs) = jax.lax.scan(outer, carry0, (rows, meas.t, t_last, meas, aid_epochs))
     return LCResult(epochs=ep, final_nav=final.mech.nav, final_biases=final.biases, loglik=final.kf.loglik,
                     n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped,
-                    status=final.kf.status | final.mech.status, imu_nav=navs if save_imu_every else None)
+                    status=final.kf.status | final.mech.status, imu_nav=navs if save_imu_every else None,
+                    n_gated=final.n_gated)
+
+
+def chi2_quantile(prob: float, dof: int) -> float:
+    """Quantile of the chi-square distribution with integer ``dof`` (host side, float64 bisection).
+
+    CDF by the closed forms for integer degrees of freedom (Abramowitz & Stegun 26.4.4-26.4.5):
+    even k = 2m: 1 - exp(-x/2) sum_{i<m} (x/2)^i / i!;  odd k = 2m + 1:
+    erf(sqrt(x/2)) - sqrt(2/pi) exp(-x/2) sum_{i=1..m} x^(i - 1/2) / (1 3 5 ... (2i - 1)).
+
+    Raises:
+      ValueError: prob outside (0, 1) or dof < 1.
+    """
+    import math
+
+    if not (0.0 < prob < 1.0):
+        raise ValueError(f"gate probability must be in (0, 1), got {prob!r}")
+    if int(dof) != dof or dof < 1:
+        raise ValueError(f"dof must be a positive integer, got {dof!r}")
+    k = int(dof)
+
+    def cdf(x):
+        if x <= 0:
+            return 0.0
+        if k % 2 == 0:
+            term, tot = 1.0, 1.0
+            for i in range(1, k // 2):
+                term *= (x / 2) / i
+                tot += term
+            return 1.0 - math.exp(-x / 2) * tot
+        tot, term = 0.0, 0.0
+        for i in range(1, (k - 1) // 2 + 1):
+            term = math.sqrt(x) if i == 1 else term * x / (2 * i - 1)
+            tot += term
+        return math.erf(math.sqrt(x / 2)) - math.sqrt(2 / math.pi) * math.exp(-x / 2) * tot
+
+    lo, hi = 0.0, 1.0
+    while cdf(hi) < prob:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cdf(mid) < prob else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def _merge_epochs(t_imu, meas: PVMeasurements, active):
+    """Host side: the filter's epochs = GNSS epochs merged with the IMU samples where an aid applies.
+
+    Args:
+      t_imu: (N,) IMU times.  meas: the GNSS :class:`PVMeasurements` (times concrete).
+      active: (A, N) bool, thinned aid masks.
+    Returns:
+      (merged :class:`PVMeasurements` (M',...), gnss_row (M',) int (-1: no GNSS), sample (M',) int: the last
+      IMU sample at or before each epoch).
+    """
+    t_g = np.asarray(meas.t, float)
+    L = np.searchsorted(t_imu, t_g + 1e-9, side="right") - 1
+    aid_k = np.nonzero(np.any(active, axis=0))[0]
+    aid_k = aid_k[~np.isin(aid_k, L)]
+    t_all = np.concatenate([t_g, t_imu[aid_k]])
+    row = np.concatenate([np.arange(t_g.size), np.full(aid_k.size, -1)])
+    order = np.argsort(t_all, kind="stable")
+    t_all, row = t_all[order], row[order]
+    sample = np.searchsorted(t_imu, t_all + 1e-9, side="right") - 1
+    # rows without GNSS take a neighbouring fix's values with an all-False mask
+    fill = np.maximum.accumulate(np.where(row >= 0, row, -1))
+    fill = np.where(fill < 0, 0, fill)
+    src = np.where(row >= 0, row, fill)
+    has = jnp.asarray(row >= 0)
+    take = lambda a: jnp.asarray(a)[src]  # noqa: E731
+    merged = PVMeasurements(t=t_all, pos=take(meas.pos), vel=jnp.where(has[:, None], take(meas.vel), 0.0),
+                            R=take(meas.R), mask=take(meas.mask) & has[:, None],
+                            lever=jnp.where(has[:, None], take(meas.lever), 0.0))
+    return merged, row, sample
 
 
 def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, params: LCParams, *,
-                    dt_imu=None, biases0: Optional[SensorBiases] = None, n_states: int = 18, inflation=None,
+                    dt_imu=None, biases0: Optional[SensorBiases] = None, n_states: int = 18,
+                    error_model: Optional[ErrorModel] = None, aids: Sequence[Aid] = (),
+                    gate_prob: Optional[float] = None, inflation=None,
                     estimator=None, save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections",
                                           "innovations", "nis", "factors", "valid"),
                     ellipsoid: Ellipsoid = WGS84, hold_height: bool = False, check_finite: bool = True,
@@ -474,8 +664,22 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
         ``max_sigma`` (m or m/s) or NaN are masked and counted.
       params: :class:`LCParams` (array leaves: P0, Qc, tau, R scale).
       dt_imu: scalar or (N,) sample intervals (default: from ``t_imu``, the first copied).
-      biases0: initial :class:`SensorBiases` (default zeros).
-      n_states: static 18 (S0) or 15 (no Markov drift).
+      biases0: initial :class:`SensorBiases` (default zeros; scale factors default to zeros for
+        models that have them).
+      n_states: static 18 (S0), 15 (no Markov drift) or 21 (Gauss-Markov / random-walk biases and
+        scale factors, :data:`jaxnav.ins.ERROR_MODEL_21`).
+      error_model: static :class:`jaxnav.ins.ErrorModel` (overrides ``n_states``; e.g.
+        :data:`jaxnav.ins.ERROR_MODEL_15GM`).
+      aids: :class:`jaxnav.ins.measurements.Aid` s (ZUPT, ZARU, NHC, odometer, heading, or one's
+        own :class:`~jaxnav.ins.measurements.MeasurementModel`); their ``active`` masks are
+        concrete (they set the epochs), their data and parameters may be traced. The filter's
+        epochs become the GNSS epochs merged with the IMU samples where an aid applies (after
+        thinning to its ``rate_hz``); ``result.epochs.gnss_row`` maps them back to ``meas``.
+        An aid active at the sample of a GNSS epoch is applied in that epoch's update.
+      gate_prob: None (default) or a probability in (0, 1): GNSS epochs whose NIS (valid
+        components, against the un-inflated prior) exceeds the chi-square quantile of that
+        probability for their number of valid components are rejected (their GNSS components
+        masked, the epoch's aids kept), counted in ``n_gated`` and flagged GNSS_GATED.
       inflation, estimator: plug-ins of :mod:`jaxnav.filters` (classic when None).
       save: static per-epoch outputs (subset of ``LC_OUTPUTS``).
       ellipsoid, hold_height: static, as :func:`jaxnav.ins.mechanize`.
@@ -498,14 +702,19 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     Returns:
       :class:`LCResult`.
     Raises:
-      ValueError: shapes, non-increasing times, IMU/measurement spans that do not overlap.
+      ValueError: shapes, non-increasing times, IMU/measurement spans that do not overlap, aid
+        masks of the wrong length, more than one mean-rate (ZARU) aid, a gate probability outside (0, 1).
     """
-    model = error_model_for(n_states)  # raises ValueError for other sizes
+    model = error_model_for(n_states) if error_model is None else error_model  # raises ValueError for other sizes
+    if not isinstance(model, ErrorModel):
+        raise ValueError(f"error_model must be an ErrorModel, got {type(model).__name__}")
     if discretization not in ("taylor", "van_loan"):
         raise ValueError(f"discretization must be 'taylor' or 'van_loan', got {discretization!r}")
     unknown = [s for s in save if s not in LC_OUTPUTS]
     if unknown:
         raise ValueError(f"unknown outputs {unknown}; choose from {LC_OUTPUTS}")
+    if "gnss_nis" in save and gate_prob is None:
+        raise ValueError("the output 'gnss_nis' needs gate_prob (it is the gate's statistic)")
     N = np.shape(t_imu)[0]
     if jnp.shape(dtheta) != (N, 3) or jnp.shape(dv) != (N, 3):
         raise ValueError(f"dtheta {jnp.shape(dtheta)} and dv {jnp.shape(dv)} must be ({N}, 3) to match t_imu")
@@ -516,7 +725,13 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     n, p = model.n, model.p
     if jnp.shape(params.P0) != (n, n) or jnp.shape(params.Qc) != (p, p):
         raise ValueError(f"params.P0 {jnp.shape(params.P0)} / Qc {jnp.shape(params.Qc)} must be "
-                         f"({n}, {n}) / ({p}, {p}) for n_states={n_states}")
+                         f"({n}, {n}) / ({p}, {p}) for the {n}-state model")
+    if jnp.ndim(params.tau_markov) > 0 and jnp.shape(params.tau_markov) not in ((3,), (model.tau_size,)):
+        raise ValueError(f"params.tau_markov has shape {jnp.shape(params.tau_markov)}; expected () or "
+                         f"({model.tau_size},) for the {n}-state model")
+    if jnp.ndim(params.tau_markov) > 0 and jnp.shape(params.tau_markov)[0] != model.tau_size:
+        raise ValueError(f"params.tau_markov has shape {jnp.shape(params.tau_markov)}; the model with Gauss-Markov "
+                         f"biases needs ({model.tau_size},) = [gyro bias taus (3), accelerometer bias taus (3)]")
     check_float64(nav0.pos, meas.pos, what="absolute positions")
     if isinstance(t_imu, jax.core.Tracer) or isinstance(meas.t, jax.core.Tracer):
         raise ValueError("t_imu and meas.t must be concrete arrays (they set the scan's shapes); close over "
@@ -525,25 +740,73 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     if dt_imu is None:
         d = np.diff(t_imu)
         dt_imu = np.concatenate([d[:1], d])
-    seg = segment_imu(t_imu, np.asarray(meas.t, float), dt_imu)
     sig = jnp.sqrt(jnp.diagonal(meas.R, axis1=1, axis2=2))
     mask = jnp.asarray(meas.mask, bool) & (sig <= max_sigma)
-    meas = meas._replace(mask=mask, t=jnp.asarray(meas.t, jnp.float64))
+    meas = meas._replace(mask=mask, t=np.asarray(meas.t, float))
+    aids = tuple(aids)
+    for a in aids:
+        if not isinstance(a, Aid):
+            raise ValueError(f"aids must be Aid records (jaxnav.ins.measurements), got {type(a).__name__}")
+    gnss_row = np.arange(M)
+    aid_epochs = None
+    if aids:
+        dtm = float(np.median(np.broadcast_to(np.asarray(dt_imu, float), (N,))))
+        raw, thinned = [], []
+        for i, a in enumerate(aids):
+            act = np.ones(N, bool) if a.active is None else np.asarray(a.active)
+            if act.shape != (N,) or act.dtype != bool:
+                raise ValueError(f"aids[{i}] ({a.model.name}): active must be a ({N},) bool array, got "
+                                 f"{act.dtype} {act.shape}")
+            raw.append(act)
+            if a.rate_hz is not None:
+                k = max(1, int(round(1.0 / (a.rate_hz * dtm))))
+                act = act & ((np.arange(N) + 1) % k == 0)
+            thinned.append(act)
+        meas, gnss_row, sample = _merge_epochs(t_imu, meas, np.stack(thinned))
+        M = gnss_row.size
+        mean_aids = [i for i, a in enumerate(aids) if a.model.needs_mean_rate]
+        if len(mean_aids) > 1:
+            raise ValueError("at most one aid may use the interval's mean angular rate (ZARU)")
+    seg = segment_imu(t_imu, np.asarray(meas.t, float), dt_imu)
+    if aids:
+        for i, a in enumerate(aids):
+            if a.data is not None:
+                for leaf in jax.tree_util.tree_leaves(a.data):
+                    if jnp.shape(leaf)[:1] != (N,):
+                        raise ValueError(f"aids[{i}] ({a.model.name}): data leaves must have {N} rows (one per "
+                                         f"IMU sample), got {jnp.shape(leaf)}")
+        data = tuple(None if a.data is None else jax.tree_util.tree_map(lambda x: jnp.asarray(x)[sample], a.data)
+                     for a in aids)
+        active = jnp.asarray(np.stack([t[sample] for t in thinned], axis=-1))
+        still = jnp.asarray(raw[mean_aids[0]][seg.idx] & seg.use) if mean_aids else None
+        aid_epochs = _AidEpochs(data=data, active=active, still=still)
+    thresholds = None
+    if gate_prob is not None:
+        thresholds = jnp.asarray([np.inf] + [chi2_quantile(float(gate_prob), k) for k in range(1, 7)])
+    meas = meas._replace(t=jnp.asarray(meas.t, jnp.float64))
     z3 = jnp.zeros(3, jnp.asarray(nav0.v_n).dtype)
     biases0 = SensorBiases(z3, z3, z3) if biases0 is None else biases0
+    if model.scale_factors:
+        biases0 = biases0._replace(gyro_scale=z3 if biases0.gyro_scale is None else biases0.gyro_scale,
+                                   accel_scale=z3 if biases0.accel_scale is None else biases0.accel_scale)
+    else:
+        biases0 = biases0._replace(gyro_scale=None, accel_scale=None)
     if not isinstance(nav_every, (int, np.integer)) or nav_every < 1:
         raise ValueError(f"nav_every={nav_every!r} must be an integer >= 1")
     if nav_every > 1 and save_imu_every:
         raise ValueError("save_imu_every needs the per-sample loop: use nav_every=1")
     if save_imu_every and seg.K % save_imu_every:
         raise ValueError(f"save_imu_every={save_imu_every} must divide the samples per epoch interval ({seg.K})")
-    return _lc_core(nav0, biases0, jnp.asarray(dtheta), jnp.asarray(dv), dt_imu, t_imu, seg.idx, seg.use,
-                    seg.t_last, meas, params, inflation, estimator, n_states, tuple(save), ellipsoid,
-                    hold_height, check_finite, int(save_imu_every), bool(remat), discretization, int(taylor_order),
-                    int(nav_every))
+    res = _lc_core(nav0, biases0, jnp.asarray(dtheta), jnp.asarray(dv), dt_imu, t_imu, seg.idx, seg.use,
+                   seg.t_last, meas, params, inflation, estimator, model, tuple(save), ellipsoid,
+                   hold_height, check_finite, int(save_imu_every), bool(remat), discretization, int(taylor_order),
+                   int(nav_every), tuple(a.model for a in aids), aid_epochs, tuple(a.params for a in aids),
+                   thresholds)
+    return res._replace(epochs=res.epochs._replace(gnss_row=gnss_row))
 
 
-def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBiases, Any]:
+def smooth(result: LCResult, *, n_states: int = 18,
+           error_model: Optional[ErrorModel] = None) -> tuple[NavState, SensorBiases, Any]:
     """RTS smoothing of a feedback filter over its saved epoch moments, applied to the navigation solution.
 
     Take each epoch's post-feedback state as the reference. There the filtered error mean is
@@ -555,6 +818,8 @@ def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBia
 
     Args:
       result: :class:`LCResult` saved with "nav", "biases", "covs", "pred_covs", "Phi", "corrections".
+      n_states: the run's model size (15, 18, 21).  error_model: the run's :class:`ErrorModel` if it
+        was given to :func:`loosely_coupled` (overrides ``n_states``).
     Returns:
       (smoothed :class:`NavState` (M, ...), smoothed :class:`SensorBiases`, smoothed covariances (M, n, n)).
     """
@@ -563,11 +828,12 @@ def smooth(result: LCResult, *, n_states: int = 18) -> tuple[NavState, SensorBia
         if getattr(ep, name) is None:
             raise ValueError(f"smooth() needs the per-epoch output '{name}' (add it to save=)")
     M, n = ep.covs.shape[:2]
-    if n != n_states:
-        raise ValueError(f"the result has {n} states; pass n_states={n}")
+    model = error_model_for(n_states) if error_model is None else error_model
+    if n != model.n:
+        raise ValueError(f"the result has {n} states; pass n_states={n} (or its error_model)")
     zeros = jnp.zeros((M, n), ep.covs.dtype)
     filt = KalmanResult(means=zeros, covs=ep.covs, pred_means=-ep.corrections, pred_covs=ep.pred_covs)
     sm = rts_smoother(LinearGaussian(F=ep.Phi, H=None, Q=None, R=None), filt)
-    idx = error_model_for(n).idx
+    idx = model.idx
     nav, biases = jax.vmap(lambda nv, b, x: _apply_correction(nv, b, x, idx))(ep.nav, ep.biases, sm.means)
     return nav, biases, sm.covs
