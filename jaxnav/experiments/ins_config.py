@@ -88,7 +88,9 @@ class NoiseSection(NamedTuple):
     """[noise], SI; None where the grade's preset value is used.
 
     Densities: arw rad/sqrt(s), vrw m/s/sqrt(s), bias instabilities rad/s and m/s^2 with their
-    correlation time s, bias random walks rad/s/sqrt(s) and m/s^2/sqrt(s).
+    correlation times s (``bias_correlation_time``: gyro, and accelerometer unless
+    ``bias_correlation_time_accel`` is given), bias random walks rad/s/sqrt(s) and m/s^2/sqrt(s),
+    initial scale-factor sigmas (dimensionless; 21 states).
     Initial 1-sigma: attitude (roll/pitch, heading) rad, velocity m/s, position m, biases rad/s, m/s^2.
     """
 
@@ -106,6 +108,9 @@ class NoiseSection(NamedTuple):
     init_position: float
     init_gyro_bias: Optional[float]
     init_accel_bias: Optional[float]
+    bias_correlation_time_accel: Optional[float] = None
+    init_gyro_scale: Optional[float] = None
+    init_accel_scale: Optional[float] = None
 
 
 class AlignmentSection(NamedTuple):
@@ -120,15 +125,23 @@ class AlignmentSection(NamedTuple):
 
 
 class ConstraintSection(NamedTuple):
-    """[constraints]: ZUPT ("auto" | False), NHC, their sigmas (m/s) and the standstill detector settings."""
+    """[constraints]: ZUPT ("auto" | False) with ZARU, NHC, their sigmas and rates, and the standstill
+    detector (SHOE GLRT, :func:`jaxnav.ins.detect_standstill`) settings, SI."""
 
     zupt: Any
     zupt_sigma: float
+    zupt_rate_hz: float
     zaru: bool
+    zaru_density: float
     nhc: bool
     nhc_sigma: float
+    nhc_rate_hz: float
+    nhc_lever_frd: Any
     detector_window: int
-    detector_threshold: Optional[float]
+    detector_threshold: float
+    detector_sigma_a: float
+    detector_sigma_w: float
+    detector_min_s: float
 
 
 class EvaluateSection(NamedTuple):
@@ -369,7 +382,9 @@ def _noise(path, d) -> NoiseSection:
         init_velocity=r.get("init_velocity_m_s", float, 0.1, lo=0.0, lo_open=True),
         init_position=r.get("init_position_m", float, 0.05, lo=0.0, lo_open=True),
         init_gyro_bias=opt("init_gyro_bias_deg_per_s", DEG),
-        init_accel_bias=opt("init_accel_bias_mg", MG))
+        init_accel_bias=opt("init_accel_bias_mg", MG),
+        bias_correlation_time_accel=opt("accel_bias_correlation_time_s", 1.0),
+        init_gyro_scale=opt("init_gyro_scale_ppm", 1e-6), init_accel_scale=opt("init_accel_scale_ppm", 1e-6))
     if grade is None and (n.arw is None or n.vrw is None):
         r.fail("grade", "is required unless arw_deg_per_sqrt_h and vrw_m_per_s_per_sqrt_h are both given")
     r.done()
@@ -409,11 +424,20 @@ def _constraints(path, d) -> ConstraintSection:
     r.used.add("zupt")
     if z not in ("auto", False):
         r.fail("zupt", f"must be 'auto' or false, got {z!r}")
-    c = ConstraintSection(zupt=z, zupt_sigma=r.get("zupt_sigma_m_s", float, 0.02, lo=0.0, lo_open=True),
-                          zaru=r.get("zaru", bool, False), nhc=r.get("nhc", bool, False),
-                          nhc_sigma=r.get("nhc_sigma_m_s", float, 0.1, lo=0.0, lo_open=True),
-                          detector_window=r.get("detector_window", int, 20, lo=2, hi=100_000),
-                          detector_threshold=r.get("detector_threshold", float, None, lo=0.0, lo_open=True))
+    pos = dict(lo=0.0, lo_open=True)
+    c = ConstraintSection(zupt=z, zupt_sigma=r.get("zupt_sigma_m_s", float, 0.02, **pos),
+                          zupt_rate_hz=r.get("zupt_rate_hz", float, 5.0, **pos),
+                          zaru=r.get("zaru", bool, False),
+                          zaru_density=r.get("zaru_density_deg_per_sqrt_h", float, 1.0, **pos) * DEG_PER_SQRT_HOUR,
+                          nhc=r.get("nhc", bool, False),
+                          nhc_sigma=r.get("nhc_sigma_m_s", float, 0.1, **pos),
+                          nhc_rate_hz=r.get("nhc_rate_hz", float, 10.0, **pos),
+                          nhc_lever_frd=r.get("nhc_lever_frd_m", "vec3", np.zeros(3)),
+                          detector_window=r.get("detector_window", int, 31, lo=3, hi=100_000),
+                          detector_threshold=r.get("detector_threshold", float, 100.0, **pos),
+                          detector_sigma_a=r.get("detector_sigma_a_m_s2", float, 0.05, **pos),
+                          detector_sigma_w=r.get("detector_sigma_w_deg_s", float, 0.57, **pos) * DEG,
+                          detector_min_s=r.get("detector_min_s", float, 0.5, lo=0.0))
     r.done()
     return c
 

@@ -11,6 +11,7 @@ import datetime as _dt
 import math
 import pathlib
 
+import jax
 import numpy as np
 
 from jaxnav.experiments.ins_run import InsRun, position_sigmas_enu
@@ -43,13 +44,21 @@ def _solution(run: InsRun, which: str):
     att = np.asarray(quat_to_euler(np.asarray(nav.q_bn)))  # [pitch, roll, yaw], body RFU in ENU
     heading = np.mod(-np.degrees(att[:, 2]), 360.0)
     sd = np.sqrt(np.clip(np.diagonal(np.asarray(P), axis1=-2, axis2=-1), 0.0, None))
+    row = np.asarray(ep.gnss_row)
+    mask = np.asarray(run.prep.meas.mask)[:, :3].any(-1)
+    used = np.where(row >= 0, mask[np.maximum(row, 0)], False)
+    q = np.where(used, np.asarray(run.prep.pos.q)[run.prep.keep][np.maximum(row, 0)], 0)
     return dict(t=np.asarray(ep.t_nav, float), pos=pos, v=v, roll=np.degrees(att[:, 1]), pitch=np.degrees(att[:, 0]),
                 heading=heading, sig_enu=position_sigmas_enu(P, pos), sig_v=sd[:, 3:6], sig_att=np.degrees(sd[:, 0:3]),
-                used=np.asarray(run.prep.meas.mask)[:, :3].any(-1))
+                used=used, q=q)
 
 
 def write_trajectory_csv(path, run: InsRun, which: str = "smoothed") -> pathlib.Path:
-    """Write the smoothed (or ``which="forward"``) solution at the filter epochs as CSV with a units header."""
+    """Write the smoothed (or ``which="forward"``) solution at the filter epochs as CSV with a units header.
+
+    The filter's epochs are the GNSS epochs and, with ``[constraints]``, the pseudo-measurement
+    (ZUPT / NHC) epochs; ``gnss_used`` says where GNSS entered.
+    """
     s = _solution(run, which)
     path = pathlib.Path(path)
     with path.open("w", encoding="utf-8") as f:
@@ -76,7 +85,7 @@ def write_pos(path, run: InsRun, which: str = "smoothed") -> pathlib.Path:
     (outage, masked, gated); ns is 0; sdne/sdeu/sdun are 0 (the ENU cross terms are not written).
     """
     s = _solution(run, which)
-    q = np.where(s["used"], np.asarray(run.prep.pos.q)[run.prep.keep], 0)
+    q = s["q"]
     path = pathlib.Path(path)
     with path.open("w", encoding="utf-8") as f:
         f.write(f"% program   : jaxnav ins ({which} INS/GNSS solution)\n% config    : {run.prep.cfg.path}\n")
@@ -108,7 +117,7 @@ def write_geojson(path, run: InsRun) -> pathlib.Path:
     fw = np.asarray(run.result.epochs.nav.pos)
     feats = [geojson.Feature(geometry=geojson.LineString(_lonlath(sm)), properties={"name": "RTS smoothed"}),
              geojson.Feature(geometry=geojson.LineString(_lonlath(fw)), properties={"name": "forward filter"})]
-    t = np.asarray(run.prep.meas.t)
+    t = np.asarray(run.result.epochs.t)
     for k, (a, b) in enumerate(run.prep.outages):
         w = (t >= a) & (t < b)
         if w.sum() >= 2:
@@ -130,7 +139,7 @@ def write_kml(path, run: InsRun) -> pathlib.Path:
         ls = kml.newlinestring(name=name, coords=_lonlath(pos))
         ls.altitudemode = simplekml.AltitudeMode.clamptoground
         ls.style.linestyle.color, ls.style.linestyle.width = color, 2
-    t = np.asarray(run.prep.meas.t)
+    t = np.asarray(run.result.epochs.t)
     sm = np.asarray(run.smoothed_nav.pos)
     for k, (a, b) in enumerate(run.prep.outages):
         w = (t >= a) & (t < b)
@@ -175,10 +184,11 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     if run.scores is not None:
         paths.append(plot_walk(run.scores, {"enu_ref": run.enu_ref, "enu_fwd": run.enu_fwd, "enu_sm": run.enu_sm},
                                out / f"track_outages.{fmt}", title=name))
-    ep = run.result.epochs
+    g = run.gnss_epochs
+    ep = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], run.result.epochs)
     t = np.asarray(run.prep.meas.t)
-    f = _solution(run, "forward")
-    s = _solution(run, "smoothed")
+    f = {k: v[g] for k, v in _solution(run, "forward").items()}
+    s = {k: v[g] for k, v in _solution(run, "smoothed").items()}
     from jaxnav.experiments.ins_run import _mask_without_outages
 
     m = _mask_without_outages(run.prep)  # the GNSS epochs usable, withheld ones included
@@ -197,7 +207,7 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
 
     n = run.prep.cfg.noise.states
     idx = error_model_for(n).idx
-    fb, sb = ep.biases, run.smoothed_biases
+    fb, sb = ep.biases, jax.tree_util.tree_map(lambda a: np.asarray(a)[g], run.smoothed_biases)
     sd = np.sqrt(np.clip(np.diagonal(np.asarray(ep.covs), axis1=-2, axis2=-1), 0.0, None))
     gyro_f = (np.asarray(fb.gyro) + np.asarray(fb.markov)) / DEG_PER_HOUR
     gyro_s = (np.asarray(sb.gyro) + np.asarray(sb.markov)) / DEG_PER_HOUR
@@ -216,6 +226,24 @@ def _densities_dict(d) -> dict:
             "gyro_bias_instability_deg_per_h": float(d.gyro_markov) / DEG_PER_HOUR,
             "bias_correlation_time_s": float(d.tau), "init_gyro_bias_deg_per_s": float(d.init_gyro_bias) / DEG,
             "init_accel_bias_mg": float(d.init_accel_bias) / MG, "pos_sigma_scale": float(d.pos_sigma_scale)}
+
+
+def _constraints(prep, run) -> dict:
+    """What the pseudo-measurements did: standstill detection, ZUPT/ZARU/NHC epochs."""
+    from jaxnav.ins import standstill_intervals
+
+    c = prep.cfg.constraints
+    d = {"zupt": c.zupt, "zaru": c.zaru, "nhc": c.nhc,
+         "n_filter_epochs": int(np.asarray(run.result.epochs.t).size), "n_gnss_epochs": int(prep.meas.t.size)}
+    if prep.standstill is not None:
+        iv = np.asarray(standstill_intervals(prep.t, prep.standstill)).reshape(-1, 2)
+        d.update(standstill_samples=int(np.count_nonzero(prep.standstill)), standstill_intervals=int(iv.shape[0]),
+                 standstill_s=float(np.sum(iv[:, 1] - iv[:, 0])) if iv.size else 0.0,
+                 standstill_intervals_gpst_s=iv.tolist(),
+                 detector={"kind": "SHOE GLRT", "window": c.detector_window, "threshold": c.detector_threshold,
+                           "sigma_a_m_s2": c.detector_sigma_a, "sigma_w_rad_s": c.detector_sigma_w,
+                           "min_s": c.detector_min_s})
+    return d
 
 
 def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) -> dict:
@@ -255,7 +283,9 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                "gnss": {"file": str(cfg.gnss.file), "n_epochs_in_imu_span": int(prep.meas.t.size),
                         "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
                         "n_withheld": int(np.count_nonzero(prep.withheld))},
+               "constraints": _constraints(prep, run),
                "status": int(run.result.status), "n_nonfinite": int(run.result.n_nonfinite),
+               "n_gated_gnss_epochs": int(run.result.n_gated) if run.result.n_gated is not None else 0,
                "n_skipped_updates": int(run.result.n_skipped), "loglik": float(run.result.loglik),
                "runtime_s": run.runtime_s, "evaluation": _evaluation(run.scores)}
     if tune:
@@ -291,7 +321,14 @@ def format_ins(results: dict) -> str:
              f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "
              f"({r['time_offset']['source']}); initial heading {r['alignment']['heading_deg']:.1f} deg",
              f"  {r['n_states']}-state filter + RTS: status {r['status']}, log-likelihood {r['loglik']:.1f}, "
-             f"{r['n_skipped_updates']} skipped updates, {r['runtime_s']:.1f} s"]
+             f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
+             f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s"]
+    c = r.get("constraints", {})
+    if "standstill_intervals" in c:
+        lines.append(f"  standstill: {c['standstill_intervals']} intervals, {c['standstill_s']:.1f} s (SHOE GLRT) -> "
+                     f"ZUPT{' + ZARU' if c['zaru'] else ''} updates")
+    if c.get("nhc"):
+        lines.append("  non-holonomic constraint on (lateral and vertical velocity zero while moving)")
 
     def ev(e, tag=""):
         if e is None:

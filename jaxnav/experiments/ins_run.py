@@ -28,8 +28,9 @@ import numpy as np
 
 from jaxnav.experiments.ins_config import InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, coarse_alignment, error_model_Qc, loosely_coupled,
-                        noise_preset, sensor_to_body, smooth)
+from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, StandstillParams, coarse_alignment, detect_standstill,
+                        error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
+                        noise_preset, sensor_to_body, smooth, zaru, zupt)
 from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_kfgins_gnss, read_kfgins_imu, read_pos,
                        read_rtklib_imu)
@@ -147,9 +148,16 @@ def gnss_measurements(pos_sol, t_imu, outages=(), *, lever_rfu=(0.0, 0.0, 0.0), 
 class Densities(NamedTuple):
     """Noise densities and initial sigmas of a run (SI; array leaves, so ``--tune`` differentiates them).
 
-    arw rad/sqrt(s); vrw m/s/sqrt(s); gyro_markov rad/s (stationary sigma of the 18-state gyro drift)
-    with tau s; init_att (2,) rad (roll/pitch, heading); init_vel m/s; init_pos m; init_gyro_bias rad/s;
-    init_accel_bias m/s^2; pos_sigma_scale: factor on the GNSS position sigmas.
+    arw rad/sqrt(s); vrw m/s/sqrt(s); gyro_markov rad/s and accel_markov m/s^2: bias instability
+    (stationary sigma of a first-order Gauss-Markov bias) with the correlation times tau / tau_accel s;
+    gyro_bias_rw rad/s/sqrt(s), accel_bias_rw m/s^2/sqrt(s): bias random walks (21 states);
+    init_att (2,) rad (roll/pitch, heading); init_vel m/s; init_pos m; init_gyro_bias rad/s;
+    init_accel_bias m/s^2; init_gyro_scale, init_accel_scale: scale-factor 1-sigma (21 states);
+    pos_sigma_scale: factor on the GNSS position sigmas.
+
+    Which enter the filter depends on ``noise.states``: 15 (random-constant biases: arw, vrw and the
+    initial sigmas), 18 (S0: plus the gyro Gauss-Markov drift), 21 (Gauss-Markov / random-walk gyro and
+    accelerometer biases and scale factors: every datasheet density as given).
     """
 
     arw: Any
@@ -162,6 +170,12 @@ class Densities(NamedTuple):
     init_gyro_bias: Any
     init_accel_bias: Any
     pos_sigma_scale: Any = 1.0
+    accel_markov: Any = 0.0
+    tau_accel: Any = 3600.0
+    gyro_bias_rw: Any = 0.0
+    accel_bias_rw: Any = 0.0
+    init_gyro_scale: Any = 0.0
+    init_accel_scale: Any = 0.0
 
 
 def densities(cfg: InsConfig) -> Densities:
@@ -169,42 +183,52 @@ def densities(cfg: InsConfig) -> Densities:
     n = cfg.noise
     preset = _preset(n.grade) if n.grade else {}
 
-    def pick(name, key=None):
-        v = getattr(n, name)
-        return preset[key or name] if v is None else v
+    def pick(name, default=0.0):
+        v = getattr(n, name, None)
+        return preset.get(name, default) if v is None else v
 
-    return Densities(arw=pick("arw"), vrw=pick("vrw"),
-                     gyro_markov=n.gyro_bias_instability if n.gyro_bias_instability is not None
-                     else preset.get("gyro_bias_instability", 0.0),
-                     tau=n.bias_correlation_time if n.bias_correlation_time is not None
-                     else preset.get("bias_correlation_time", 300.0),
-                     init_att=np.asarray(n.init_attitude, float), init_vel=n.init_velocity, init_pos=n.init_position,
-                     init_gyro_bias=pick("init_gyro_bias"), init_accel_bias=pick("init_accel_bias"))
+    return Densities(arw=pick("arw"), vrw=pick("vrw"), gyro_markov=pick("gyro_bias_instability"),
+                     tau=pick("bias_correlation_time", 300.0), init_att=np.asarray(n.init_attitude, float),
+                     init_vel=n.init_velocity, init_pos=n.init_position, init_gyro_bias=pick("init_gyro_bias"),
+                     init_accel_bias=pick("init_accel_bias"), accel_markov=pick("accel_bias_instability"),
+                     tau_accel=(n.bias_correlation_time_accel if n.bias_correlation_time_accel is not None
+                                else n.bias_correlation_time if n.bias_correlation_time is not None
+                                else preset.get("bias_correlation_time_accel", 3600.0)),
+                     gyro_bias_rw=pick("gyro_bias_rw"), accel_bias_rw=pick("accel_bias_rw"),
+                     init_gyro_scale=pick("init_gyro_scale"), init_accel_scale=pick("init_accel_scale"))
 
 
 def _preset(grade):
     """The grade's :func:`jaxnav.ins.noise_preset` values under the names of :class:`Densities` (SI)."""
     p = noise_preset(grade)
     return {"arw": float(p.gyro_arw), "vrw": float(p.accel_vrw), "gyro_bias_instability": float(p.gyro_bias_instability),
-            "bias_correlation_time": float(p.gyro_bias_tau), "init_gyro_bias": float(p.gyro_bias_initial),
-            "init_accel_bias": float(p.accel_bias_initial)}
+            "bias_correlation_time": float(p.gyro_bias_tau), "bias_correlation_time_accel": float(p.accel_bias_tau),
+            "accel_bias_instability": float(p.accel_bias_instability), "gyro_bias_rw": float(p.gyro_bias_rw),
+            "accel_bias_rw": float(p.accel_bias_rw), "init_gyro_bias": float(p.gyro_bias_initial),
+            "init_accel_bias": float(p.accel_bias_initial), "init_gyro_scale": float(p.gyro_sf),
+            "init_accel_scale": float(p.accel_sf)}
 
 
 def filter_params(d: Densities, pos0, n_states: int) -> LCParams:
-    """:class:`jaxnav.ins.LCParams` (15 or 18 states) from :class:`Densities` at position ``pos0`` (3,) rad, rad, m."""
+    """:class:`jaxnav.ins.LCParams` for 15, 18 or 21 states from :class:`Densities` at ``pos0`` (3,) rad, rad, m."""
     att = jnp.asarray(d.init_att)
-    sd = jnp.concatenate([
-        jnp.stack([att[0], att[0], att[1]]),
-        jnp.full(3, d.init_vel),
-        jnp.asarray(enu_to_curvilinear(jnp.asarray(pos0, float), jnp.full(3, 1.0))) * d.init_pos,
-        jnp.full(3, d.init_gyro_bias),
-        *([jnp.full(3, jnp.maximum(d.gyro_markov, 1e-12))] if n_states == 18 else []),
-        jnp.full(3, d.init_accel_bias),
-    ])
-    Qc = error_model_Qc(d.arw, jnp.maximum(d.gyro_markov, 1e-12), d.tau, d.vrw)
+    att3 = jnp.stack([att[0], att[0], att[1]])
+    tiny = 1e-12
+    model = error_model_for(n_states)
+    P0 = error_model_P0(model, jnp.asarray(pos0, float), att=att3, vel=d.init_vel, pos_enu=d.init_pos,
+                        gyro_bias=d.init_gyro_bias, accel_bias=d.init_accel_bias,
+                        gyro_markov=jnp.maximum(d.gyro_markov, tiny), gyro_scale=d.init_gyro_scale,
+                        accel_scale=d.init_accel_scale)
+    if n_states == 21:
+        Qc = error_model_Qc21(d.arw, d.vrw, gyro_bias_sigma=d.gyro_markov, gyro_bias_tau=d.tau,
+                              accel_bias_sigma=d.accel_markov, accel_bias_tau=d.tau_accel,
+                              gyro_bias_rw=d.gyro_bias_rw, accel_bias_rw=d.accel_bias_rw)
+        tau = jnp.concatenate([jnp.full(3, d.tau), jnp.full(3, d.tau_accel)])
+        return LCParams(P0=P0, Qc=Qc, tau_markov=tau, R_scale=1.0)
+    Qc = error_model_Qc(d.arw, jnp.maximum(d.gyro_markov, tiny), d.tau, d.vrw)
     if n_states == 15:
         Qc = ERROR_MODEL_15.Qc(Qc)
-    return LCParams(P0=jnp.diag(sd**2), Qc=Qc, tau_markov=d.tau, R_scale=1.0)
+    return LCParams(P0=P0, Qc=Qc, tau_markov=d.tau, R_scale=1.0)
 
 
 class Prepared(NamedTuple):
@@ -227,6 +251,38 @@ class Prepared(NamedTuple):
     keep: Any
     withheld: Any
     densities: Densities
+    standstill: Any = None  # (N,) bool per IMU sample, or None (no detection)
+    aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC)
+
+
+def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float):
+    """(N,) bool standstill per IMU sample by the SHOE GLRT with the ``[constraints]`` settings.
+
+    Gravity for the test is the mean |f| over the first ``static_s`` seconds (absorbs a scale error).
+    """
+    c = cfg.constraints
+    f = dv / dt[:, None]
+    st = t <= t[0] + static_s
+    g = float(np.mean(np.linalg.norm(f[st], axis=1)))
+    params = StandstillParams(sigma_a=c.detector_sigma_a, sigma_w=c.detector_sigma_w, threshold=c.detector_threshold,
+                              g=g)
+    m = max(1, int(round(c.detector_min_s / float(np.median(dt)))))
+    return np.asarray(detect_standstill(f, dth / dt[:, None], params, window=c.detector_window, min_samples=m))
+
+
+def build_aids(cfg: InsConfig, standstill):
+    """The ``[constraints]`` pseudo-measurements (:func:`jaxnav.ins.zupt`, ``zaru``, ``nhc``) for a run."""
+    c = cfg.constraints
+    aids = []
+    if standstill is not None and standstill.any():
+        aids.append(zupt(standstill, sigma=c.zupt_sigma, rate_hz=c.zupt_rate_hz))
+        if c.zaru:
+            aids.append(zaru(standstill, density=c.zaru_density, rate_hz=c.zupt_rate_hz))
+    if c.nhc:
+        active = None if standstill is None else ~standstill
+        aids.append(nhc(active, sigma=(c.nhc_sigma, c.nhc_sigma), lever_b=sensor_to_body(np.eye(3)) @ c.nhc_lever_frd,
+                        rate_hz=c.nhc_rate_hz))
+    return tuple(aids)
 
 
 def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
@@ -254,9 +310,11 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         pos, t, outages, lever_rfu=lever_rfu, pos_sigma_floor=cfg.gnss.pos_sigma_floor,
         vel_sigma_floor=cfg.gnss.vel_sigma_floor, use_velocity=cfg.gnss.use_velocity,
         qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))
+    standstill = detect_stops(cfg, t, dth, dv, dt, a.static_s) if cfg.constraints.zupt == "auto" else None
     return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
                     time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
-                    meas=meas, keep=keep, withheld=withheld, densities=dens)
+                    meas=meas, keep=keep, withheld=withheld, densities=dens, standstill=standstill,
+                    aids=build_aids(cfg, standstill))
 
 
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
@@ -273,7 +331,7 @@ def run_filter(prep: Prepared, d: Optional[Densities] = None, *, meas=None, save
     z3 = np.zeros(3)
     b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
     return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
-                           n_states=n, save=save)
+                           n_states=n, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability)
 
 
 def antenna_enu(nav, t_nav, t, lever, pos0):
@@ -361,6 +419,8 @@ class InsRun(NamedTuple):
       enu_ref, enu_fwd, enu_sm: (M, 3) antenna ENU of GNSS, forward and smoothed solutions around the
         start, m.  fixed: (M,) bool fixed-quality epochs.  scores: :class:`OutageScores` or None.
       runtime_s: filter + smoother wall time (incl. compilation), s.  densities: those used.
+      gnss_epochs: (M,) index of the GNSS epochs among the filter's epochs (the others are
+        pseudo-measurement epochs: ZUPT, NHC).
     """
 
     prep: Prepared
@@ -375,6 +435,7 @@ class InsRun(NamedTuple):
     scores: Optional[OutageScores]
     runtime_s: float
     densities: Densities
+    gnss_epochs: Any = None
 
 
 def position_sigmas_enu(covs, pos):
@@ -398,11 +459,16 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
     sm_nav, sm_b, sm_P = smooth(res, n_states=prep.cfg.noise.states)
     jax.block_until_ready(sm_nav.pos)
     runtime = time.perf_counter() - t0
-    ep, meas = res.epochs, prep.meas
+    meas = prep.meas
+    # the filter's epochs are the GNSS epochs merged with the pseudo-measurement (ZUPT/NHC) epochs
+    g = np.nonzero(np.asarray(res.epochs.gnss_row) >= 0)[0]
+    ep = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], res.epochs)
+    sm_nav_g = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], sm_nav)
+    sm_P_g = np.asarray(sm_P)[g]
     pos0 = np.array([float(x) for x in prep.alignment.nav0.pos])
     lev = np.asarray(meas.lever)
     enu_f = antenna_enu(ep.nav, ep.t_nav, meas.t, lev, pos0)
-    enu_s = antenna_enu(sm_nav, ep.t_nav, meas.t, lev, pos0)
+    enu_s = antenna_enu(sm_nav_g, ep.t_nav, meas.t, lev, pos0)
     enu_ref = np.asarray(curvilinear_to_enu(pos0, np.asarray(meas.pos) - pos0))
     fixed = np.asarray(prep.pos.q)[prep.keep] == 1
     nonfinite = int(sum(np.count_nonzero(~np.isfinite(np.asarray(a))) for a in (*ep.nav, *sm_nav)))
@@ -412,10 +478,10 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
         e_s = np.hypot(*(enu_s - enu_ref)[:, :2].T)
         scores = score_outages(np.asarray(meas.t), e_f, e_s, fixed, prep.withheld, prep.outages, runtime_s=runtime,
                                n_nonfinite=nonfinite, sig_f=horizontal_sigma(ep.covs, ep.nav.pos),
-                               sig_s=horizontal_sigma(sm_P, sm_nav.pos))
+                               sig_s=horizontal_sigma(sm_P_g, sm_nav_g.pos))
     return InsRun(prep=prep, result=res, smoothed_nav=sm_nav, smoothed_biases=sm_b, smoothed_covs=sm_P,
                   enu_ref=enu_ref, enu_fwd=enu_f, enu_sm=enu_s, fixed=fixed, scores=scores, runtime_s=runtime,
-                  densities=d)
+                  densities=d, gnss_epochs=g)
 
 
 def estimate_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):

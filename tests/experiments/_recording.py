@@ -51,8 +51,17 @@ def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=
     model_g = sim.SensorErrorModel(bias_sigma=math.radians(5.0) / 3600, white=math.radians(0.15) / 60)
     model_a = sim.SensorErrorModel(bias_sigma=2e-3 * 9.81, white=0.04 / 60)
     kg, ka, kn = jax.random.split(jax.random.PRNGKey(seed), 3)
-    dth = np.asarray(sim.corrupt_increments(kg, truth.dtheta, dt, model_g)[0])
-    dv = np.asarray(sim.corrupt_increments(ka, truth.dv, dt, model_a)[0])
+    dth = np.array(sim.corrupt_increments(kg, truth.dtheta, dt, model_g)[0])
+    dv = np.array(sim.corrupt_increments(ka, truth.dv, dt, model_a)[0])
+    # engine and road vibration while the car moves (zero-mean sinusoids: 0.3 m/s^2 at 23 Hz vertical,
+    # 0.15 m/s^2 at 31 Hz lateral, 0.01 rad/s at 17 Hz in roll); none at standstill, engine off
+    t_end = np.asarray(truth.t)
+    moving = np.linalg.norm(np.asarray(truth.v_n)[1:], axis=1) > 0.05
+    def vib(amp, hz):  # increment of amp sin(2 pi hz t) over (t_k, t_k+1]
+        return amp / (2 * np.pi * hz) * (np.cos(2 * np.pi * hz * t_end[:-1]) - np.cos(2 * np.pi * hz * t_end[1:]))
+    dv[:, 2] += np.where(moving, vib(0.3, 23.0), 0.0)
+    dv[:, 0] += np.where(moving, vib(0.15, 31.0), 0.0)
+    dth[:, 1] += np.where(moving, vib(0.01, 17.0), 0.0)
     # body (RFU vehicle) -> FRD vehicle -> sensor: v_s = C_vs^T C_frd_rfu v_b
     C_vs = mounting_from_rpy_deg(*mounting_rpy_deg)
     C_sb = C_vs.T @ C_RFU_FRD
@@ -85,7 +94,7 @@ def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=
     return Recording(imu_file=imu_file, gnss_file=gnss_file, truth=truth, t_gnss=tg, tag_error_s=tag_error_s)
 
 
-def car_config(rec: Recording, folder, *, time_offset="estimate", extra="") -> str:
+def car_config(rec: Recording, folder, *, time_offset="estimate", states=15, extra="") -> str:
     """A ``jaxnav ins`` TOML for the recording (paths relative to ``folder``)."""
     text = f"""
 [run]
@@ -109,7 +118,7 @@ vel_sigma_floor_m_s = 0.03
 
 [noise]
 grade = "industrial"
-states = 15
+states = {states}
 arw_deg_per_sqrt_h = 0.15
 vrw_m_per_s_per_sqrt_h = 0.04
 init_gyro_bias_deg_per_s = 0.01

@@ -1,7 +1,9 @@
 """``jaxnav ins`` end to end on a simulated car written as KF-GINS files (known truth).
 
 From a config alone: a non-symmetric mounting, an antenna lever arm, IMU time tags 0.15 s late, 2 Hz
-RTK-level GNSS withheld on simulated 20 s outages. Checked: the time offset recovered by the
+RTK-level GNSS withheld on simulated 20 s outages; the 21-state model (Gauss-Markov biases and scale
+factors from the industrial grade's datasheet values), automatic standstill detection with ZUPT and
+ZARU, and the non-holonomic constraint. Checked: the time offset recovered by the
 likelihood to 10 ms, the solution against the truth, errors explained by the reported sigmas, the RTS
 smoother better than the forward filter inside the outages, and every output file readable.
 """
@@ -21,7 +23,9 @@ def done(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("car")
     rec = write_car(folder / "data")
-    cfg = car_config(rec, folder / "data")
+    cfg = car_config(rec, folder / "data", states=21,
+                     extra='[constraints]\nzupt = "auto"\nzaru = true\nnhc = true\ndetector_threshold = 30.0\n'
+                           "detector_sigma_a_m_s2 = 0.01\ndetector_sigma_w_deg_s = 0.05\ndetector_min_s = 1.0\n")
     out = folder / "out"
     assert main(["ins", str(cfg), "--out", str(out), "-q"]) == 0
     return rec, out, json.loads((out / "results.json").read_text())
@@ -36,7 +40,13 @@ def test_time_offset_recovered(done):
 
 def test_run_healthy_and_evaluated(done):
     _, _, r = done
-    assert r["status"] == 0 and r["n_nonfinite"] == 0
+    from jaxnav._status import INFO_FLAGS
+
+    assert r["status"] & ~INFO_FLAGS == 0 and r["n_nonfinite"] == 0 and r["n_states"] == 21
+    c = r["constraints"]
+    # the drive stands still twice: 20 s at the start and 8 s in the middle
+    assert c["standstill_intervals"] == 2 and 20.0 < c["standstill_s"] < 30.0
+    assert c["n_filter_epochs"] > c["n_gnss_epochs"]  # ZUPT and NHC epochs between the fixes
     ev = r["evaluation"]
     assert ev["n_windows"] >= 2 and ev["n_scored_windows"] == ev["n_windows"]
     # with GNSS: cm level; industrial IMU, 20 s outages: decimetres forward, smoothed clearly better

@@ -69,7 +69,9 @@ def test_coarse_alignment(run):
 def test_walk_outages_end_to_end(run):
     sc, ex = run
     res = ex["result"]
-    assert int(res.status) == 0
+    from jaxnav._status import INFO_FLAGS
+
+    assert int(res.status) & ~INFO_FLAGS == 0  # GNSS_GATED (information) may be set: epochs rejected by the gate
     assert sc.n_nonfinite_nav == 0
     assert sc.windows.shape == (3, 2)
     assert list(sc.n_ref[:2]) == [60, 60]  # 15 s at 4 Hz of withheld RTK-fixed epochs
