@@ -84,7 +84,7 @@ def read_csv_imu(path, columns: dict, units: dict | None = None, *, delimiter=",
       delimiter: field separator; None splits on runs of blanks, tabs and commas.
       comment: lines starting with it are skipped (None: none).
       header: True / False / None (auto: a header line if a column is given by name or the first
-        line holds no number).
+        line holds no number). The header line must not start with ``comment``.
     Returns:
       :class:`jaxnav.io.ImuLog` in SI, sensor axes as in the file (``timing`` "csv", ``counter`` =
       sample index). Increments are turned into rates over (t[k-1], t[k]] (first copies second).
