@@ -6,6 +6,10 @@ correlation coefficient over a grid of lags, refines the peak by a parabola thro
 neighbours, and returns the offset with quality figures. It is the first guess; a refinement by
 the filter's innovation likelihood belongs to the caller (``jaxnav.tune``).
 
+It assumes the vehicle's body points along its velocity (wheeled vehicles: no sideslip). For a
+pedestrian the path and the device's yaw are related by the gait, not a clock: on the handheld
+walk_0827 set it returns -0.33 s (correlation 0.92) while the filter's likelihood peaks near 0 s.
+
 Sign convention: ``offset_s`` is *added to the IMU times* to put them on the GNSS time scale,
 t_gnss = t_imu + offset (an IMU that time-tags its samples 0.15 s late has offset -0.15 s).
 """
