@@ -26,7 +26,14 @@ from jaxnav import units as _u
 from jaxnav.io._errors import ReaderError
 from jaxnav.io._imu import ImuLog
 from jaxnav.io._rtklib import PosSolution
-from jaxnav.io._tables import drop_missing_imu, gps_time, increments_to_rates, make_imu_log, make_pos_solution, read_rows
+from jaxnav.io._tables import (
+    drop_missing_imu,
+    gps_time,
+    increments_to_rates,
+    make_imu_log,
+    make_pos_solution,
+    read_rows,
+)
 
 _TIME = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 _GYRO_RATE = {"rad/s": 1.0, "deg/s": _u.DEG}

@@ -178,7 +178,8 @@ def make_pos_solution(path, t, lat_deg, lon_deg, h, sd_enu, v_enu, sd_venu, q, n
     keep = ~pos_miss
     if not keep.any():
         raise ReaderError(p, None, "every record has a missing (nan) position or position sigma")
-    t, lat_deg, lon_deg, h, sd_enu, linenos = t[keep], lat_deg[keep], lon_deg[keep], h[keep], sd_enu[keep], linenos[keep]
+    t, lat_deg, lon_deg, h = t[keep], lat_deg[keep], lon_deg[keep], h[keep]
+    sd_enu, linenos = sd_enu[keep], linenos[keep]
     check_times(t, linenos, p)
     for name, a, lo, hi in (("latitude", lat_deg, -90.0, 90.0), ("longitude", lon_deg, -360.0, 360.0),
                             ("height", h, *HEIGHT_RANGE_M)):

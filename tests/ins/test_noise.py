@@ -28,13 +28,14 @@ def test_unit_helpers_against_hand_values():
 
 def test_presets_ordered_and_round_trip():
     grades = [ins.noise_preset(g) for g in ins.NOISE_GRADES]
-    for field in ("gyro_arw", "accel_vrw", "gyro_bias_instability", "gyro_bias_initial", "accel_bias_initial",
-                  "gyro_sf"):
+    for field in ("gyro_arw", "accel_vrw", "gyro_bias_instability", "accel_bias_instability", "gyro_bias_initial",
+                  "accel_bias_initial", "gyro_sf", "accel_sf"):
         vals = [getattr(n, field) for n in grades]
         assert all(a > b for a, b in zip(vals, vals[1:])), (field, vals)  # better grade, smaller figure
     nav = ins.noise_preset("navigation")
     ds = ins.imu_noise_to_datasheet(nav)
-    assert ds["arw_deg_per_sqrt_h"] == pytest.approx(0.002) and ds["gyro_bias_instability_deg_per_h"] == pytest.approx(0.005)
+    assert ds["arw_deg_per_sqrt_h"] == pytest.approx(0.002)
+    assert ds["gyro_bias_instability_deg_per_h"] == pytest.approx(0.005)
     back = ins.imu_noise_from_datasheet(**ds)
     np.testing.assert_allclose(np.array(back), np.array(nav), rtol=1e-12)
     # Groves (2013) ch. 4 orders: navigation-class gyro bias < 0.01 deg/h; consumer > 100 deg/h uncalibrated
@@ -49,7 +50,7 @@ def test_datasheet_checks():
         ins.imu_noise_from_datasheet(arw_deg_per_sqrt_h=-1.0, vrw_mps_per_sqrt_h=0.1)
     with pytest.raises(ValueError, match="gyro_bias_tau_s"):
         ins.imu_noise_from_datasheet(arw_deg_per_sqrt_h=0.1, vrw_mps_per_sqrt_h=0.1, gyro_bias_tau_s=0.0)
-    n = ins.imu_noise_from_datasheet(arw_deg_per_sqrt_h=0.1, vrw_mps_per_sqrt_h=0.1, gyro_bias_rw_deg_per_h_per_sqrt_h=1.0,
-                                     accel_bias_rw_mps2_per_sqrt_h=0.06)
+    n = ins.imu_noise_from_datasheet(arw_deg_per_sqrt_h=0.1, vrw_mps_per_sqrt_h=0.1,
+                                     gyro_bias_rw_deg_per_h_per_sqrt_h=1.0, accel_bias_rw_mps2_per_sqrt_h=0.06)
     assert n.gyro_bias_rw == pytest.approx(math.radians(1) / 3600 / 60)
     assert n.accel_bias_rw == pytest.approx(0.001)
