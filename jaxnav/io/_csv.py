@@ -10,6 +10,10 @@ forces ``ax ay az`` or increments ``dthx dthy dthz`` / ``dvx dvy dvz``. Units (e
 here): ``t``: s, ms, us, ns; ``gyro``: rad/s, deg/s (rates) or rad, deg (increments); ``accel``:
 m/s^2, g, mg (specific force) or m/s (increments).
 
+Times must be on the GNSS solution's time scale (GPST seconds since the GPS epoch for RTKLIB
+``.pos`` files; a constant IMU-GNSS offset is the caller's ``time_offset_s``), or GPS week +
+seconds of week columns.
+
 GNSS quantities: ``t`` (or ``week`` + ``tow``), ``lat``, ``lon``, ``h`` (ellipsoidal, m), sigmas
 ``sd_e sd_n sd_u`` (m; ``sd_d`` may stand for ``sd_u``), optional velocity ``ve vn vu`` (m/s;
 ``vd`` for down), its sigmas ``sd_ve sd_vn sd_vu``, quality ``q`` and ``ns``. Units: ``t`` as
