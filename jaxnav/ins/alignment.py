@@ -98,7 +98,7 @@ def coarse_alignment(t, f_b, w_b, pos_sol=None, *, static_s: float = 1.5, min_sp
                      gyro_bias_sigma: float = 0.0, max_gyrocompass_sigma: float = math.radians(1.0)) -> Alignment:
     """Coarse alignment for a static start (host side, numpy).
 
-    1. Levelling (Groves 2013, sect. 5.6.2; Titterton & Weston 2004, ch. 10): the mean specific
+    1. Levelling (Groves 2013, ch. 5, initialization and alignment): the mean specific
        force over the first ``static_s`` seconds gives pitch = atan2(f_y, hypot(f_x, f_z)),
        roll = atan2(-f_x, f_z) (jaxnav convention: f_b = g C_bn^T e_U, body right-forward-up).
     2. Heading, by ``heading``:

@@ -23,16 +23,16 @@ have one:
   deg/s/sqrt(Hz), i.e. 0.3-0.9 deg/sqrt(h); accelerometer ~100-200 ug/sqrt(Hz)); industrial
   (Xsens MTi / ADIS-class: ~0.1-0.4 deg/sqrt(h), in-run bias stability 2-10 deg/h).
 
-=============  ==========  ==========  ========  =========  ========  =========  =======  =======
-grade          ARW         VRW         gyro BI   accel BI   tau       gyro       accel    SF g/a
-               deg/sqrt h  m/s/sqrt h  deg/h     mg         s         turn-on    turn-on  ppm
-                                                                      deg/h      mg
-=============  ==========  ==========  ========  =========  ========  =========  =======  =======
-consumer       0.5         0.1         10        0.1        300       1000       30       5000/5000
-industrial     0.15        0.04        3         0.03       600       50         3        1000/1000
-tactical       0.05        0.02        1         0.05       1800      3          1        300/300
-navigation     0.002       0.005       0.005     0.01       3600      0.01       0.025    5/50
-=============  ==========  ==========  ========  =========  ========  =========  =======  =======
+=============  ==========  ==========  ========  ========  ======  =========  =======  =========
+grade          ARW         VRW         gyro BI   accel BI  tau     gyro       accel    SF gyro /
+               deg/sqrt h  m/s/sqrt h  deg/h     mg        s       turn-on    turn-on  accel
+                                                                   deg/h      mg       ppm
+=============  ==========  ==========  ========  ========  ======  =========  =======  =========
+consumer       0.5         0.1         10        0.1       300     1000       30       5000/5000
+industrial     0.15        0.04        3         0.03      600     50         3        1000/1000
+tactical       0.05        0.02        1         0.02      1800    3          1        300/300
+navigation     0.002       0.005       0.005     0.01      3600    0.01       0.025    5/50
+=============  ==========  ==========  ========  ========  ======  =========  =======  =========
 
 The bias random walk of the presets is zero (the in-run drift is carried by the Gauss-Markov
 bias instability; a first-order Gauss-Markov process of sigma s and time tau has the driving
@@ -156,7 +156,7 @@ _PRESETS = {  # edge units, see the module table
                        gyro_bias_initial_deg_per_h=50.0, accel_bias_initial_mg=3.0, gyro_sf_ppm=1000.0,
                        accel_sf_ppm=1000.0),
     "tactical": dict(arw_deg_per_sqrt_h=0.05, vrw_mps_per_sqrt_h=0.02, gyro_bias_instability_deg_per_h=1.0,
-                     accel_bias_instability_mg=0.05, gyro_bias_tau_s=1800.0, accel_bias_tau_s=1800.0,
+                     accel_bias_instability_mg=0.02, gyro_bias_tau_s=1800.0, accel_bias_tau_s=1800.0,
                      gyro_bias_initial_deg_per_h=3.0, accel_bias_initial_mg=1.0, gyro_sf_ppm=300.0, accel_sf_ppm=300.0),
     "navigation": dict(arw_deg_per_sqrt_h=0.002, vrw_mps_per_sqrt_h=0.005, gyro_bias_instability_deg_per_h=0.005,
                        accel_bias_instability_mg=0.01, gyro_bias_tau_s=3600.0, accel_bias_tau_s=3600.0,

@@ -14,7 +14,8 @@ the generalized likelihood ratio of "at rest" (specific force of magnitude g alo
 direction, zero rate, white noise sigma_a, sigma_w per sample) against "moving"; at rest its
 expected value is about (6 W - 2) / W ~ 6 (six unit-variance noise terms per sample, two degrees
 of freedom absorbed by the estimated direction of gravity), so a threshold of a few tens
-separates rest from walking or driving when the sigmas are the sensor's. Here the window is centred on the sample, clamped at the ends.
+separates rest from walking or driving when the sigmas are the sensor's. Here the window is
+centred on the sample, clamped at the ends.
 """
 
 from __future__ import annotations

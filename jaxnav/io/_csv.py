@@ -10,6 +10,10 @@ forces ``ax ay az`` or increments ``dthx dthy dthz`` / ``dvx dvy dvz``. Units (e
 here): ``t``: s, ms, us, ns; ``gyro``: rad/s, deg/s (rates) or rad, deg (increments); ``accel``:
 m/s^2, g, mg (specific force) or m/s (increments).
 
+Times must be on the GNSS solution's time scale (GPST seconds since the GPS epoch for RTKLIB
+``.pos`` files; a constant IMU-GNSS offset is the caller's ``time_offset_s``), or GPS week +
+seconds of week columns.
+
 GNSS quantities: ``t`` (or ``week`` + ``tow``), ``lat``, ``lon``, ``h`` (ellipsoidal, m), sigmas
 ``sd_e sd_n sd_u`` (m; ``sd_d`` may stand for ``sd_u``), optional velocity ``ve vn vu`` (m/s;
 ``vd`` for down), its sigmas ``sd_ve sd_vn sd_vu``, quality ``q`` and ``ns``. Units: ``t`` as
@@ -26,7 +30,14 @@ from jaxnav import units as _u
 from jaxnav.io._errors import ReaderError
 from jaxnav.io._imu import ImuLog
 from jaxnav.io._rtklib import PosSolution
-from jaxnav.io._tables import drop_missing_imu, gps_time, increments_to_rates, make_imu_log, make_pos_solution, read_rows
+from jaxnav.io._tables import (
+    drop_missing_imu,
+    gps_time,
+    increments_to_rates,
+    make_imu_log,
+    make_pos_solution,
+    read_rows,
+)
 
 _TIME = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 _GYRO_RATE = {"rad/s": 1.0, "deg/s": _u.DEG}
@@ -84,7 +95,7 @@ def read_csv_imu(path, columns: dict, units: dict | None = None, *, delimiter=",
       delimiter: field separator; None splits on runs of blanks, tabs and commas.
       comment: lines starting with it are skipped (None: none).
       header: True / False / None (auto: a header line if a column is given by name or the first
-        line holds no number).
+        line holds no number). The header line must not start with ``comment``.
     Returns:
       :class:`jaxnav.io.ImuLog` in SI, sensor axes as in the file (``timing`` "csv", ``counter`` =
       sample index). Increments are turned into rates over (t[k-1], t[k]] (first copies second).

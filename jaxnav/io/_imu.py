@@ -75,7 +75,9 @@ class ImuLog(NamedTuple):
       lineno: (N,) int 1-based line number of each sample in the CSV.
       n_skipped_lines: number of lines not turned into samples.
       skipped: tuple of ``(lineno, reason)`` for those lines.
-      timing: how ``t`` was made: 'counter', 'arrival', 'endpoints' (see :func:`read_rtklib_imu`).
+      timing: how ``t`` was made: 'counter', 'arrival', 'endpoints' (see :func:`read_rtklib_imu`);
+        'increments' (:func:`jaxnav.io.read_kfgins_imu`) or 'csv' (:func:`jaxnav.io.read_csv_imu`): the
+        file's own time column (``counter`` is then the sample index).
       t_start: GPST (s since the GPS epoch) of the tag file's start time, or the given ``t_start``.
     """
 

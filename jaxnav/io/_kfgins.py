@@ -30,6 +30,7 @@ from jaxnav.io._tables import (
     make_pos_solution,
     read_rows,
     split_fields,
+    unwrap_week,
 )
 
 
@@ -43,8 +44,10 @@ def read_kfgins_imu(path, *, gps_week=None, n_columns: int = 7) -> ImuLog:
 
     Args:
       path: the file.
-      gps_week: GPS week of the data: ``t`` is then GPST s since the GPS epoch (to match
+      gps_week: GPS week of the data's start: ``t`` is then GPST s since the GPS epoch (to match
         :func:`read_kfgins_gnss` with the same week or RTKLIB solutions); None keeps seconds of week.
+        A week rollover inside the file (the time drops from the end of a week to the start of the
+        next, with at most 1 h between the two records) adds a week to the records after it.
       n_columns: fields per line, 7 (default) or 8 (with the odometer column, ignored).
     Returns:
       :class:`jaxnav.io.ImuLog` (``counter`` = sample index, ``timing`` = "increments", axes as in the file).
@@ -60,7 +63,7 @@ def read_kfgins_imu(path, *, gps_week=None, n_columns: int = 7) -> ImuLog:
     vals, lines, skipped = drop_missing_imu(vals, lines)
     if not lines.size:
         raise ReaderError(str(path), None, "every IMU record has a missing (nan) value")
-    t = gps_time(vals[:, 0], gps_week, str(path), lines)
+    t = gps_time(unwrap_week(vals[:, 0]), gps_week, str(path), lines)
     w_b, f_b = increments_to_rates(t, vals[:, 1:4], vals[:, 4:7], str(path), lines)
     return make_imu_log(path, t, w_b, f_b, lines, skipped, "increments")
 
@@ -70,7 +73,8 @@ def read_kfgins_gnss(path, *, gps_week=None, quality: int = 1) -> PosSolution:
 
     Args:
       path: the file.
-      gps_week: GPS week: ``t`` in GPST s since the GPS epoch; None keeps seconds of week.
+      gps_week: GPS week of the start: ``t`` in GPST s since the GPS epoch; None keeps seconds of
+        week (a week rollover inside the file is unwrapped, as in :func:`read_kfgins_imu`).
       quality: the ``q`` given to every epoch (the format has no quality flag; 1 = "fixed" makes
         every epoch pass a fixed-only selection, so set it to what the solution is).
     Returns:
@@ -97,7 +101,7 @@ def read_kfgins_gnss(path, *, gps_week=None, quality: int = 1) -> PosSolution:
     c = {k: vals[:, i] for i, k in enumerate(names)}
     if not np.isfinite(quality) or quality != int(quality) or not 0 <= quality <= 7:
         raise ValueError(f"quality must be a whole number in [0, 7], got {quality!r}")
-    tt = c["t"].copy()
+    tt = unwrap_week(c["t"])
     ok = np.isfinite(tt)
     tt[ok] = gps_time(tt[ok], gps_week, str(path), lines[ok])
     sd = np.stack([c["sde"], c["sdn"], c["sdd"]], 1)

@@ -121,6 +121,26 @@ def check_times(t, linenos, path, *, what="time"):
                                                  f"{t[k - 1]:.9g} s (line {int(linenos[k - 1])}); times must increase")
 
 
+#: the largest gap (s) across a week rollover that :func:`unwrap_week` accepts as one
+ROLLOVER_MAX_GAP_S = 3600.0
+
+
+def unwrap_week(sow):
+    """Seconds of week made continuous across week rollovers: where the time drops from the end of a
+    week to the start of the next (the gap across the rollover, t[k] + 604800 - t[k-1], in (0, 1 h]),
+    a week is added to it and all that follow; any other drop stays (and is reported as such)."""
+    sow = np.asarray(sow, float)
+    ok = np.isfinite(sow)
+    x = sow[ok]
+    if x.size < 2:
+        return sow
+    gap = x[1:] + SECONDS_PER_WEEK - x[:-1]
+    jumps = np.concatenate([[0], np.cumsum((gap > 0) & (gap <= ROLLOVER_MAX_GAP_S))])
+    out = sow.copy()
+    out[ok] = x + jumps * SECONDS_PER_WEEK
+    return out
+
+
 def gps_time(sow, week, path, linenos):
     """GPST s since the GPS epoch from seconds of week and a week number (scalar or per row)."""
     sow = np.asarray(sow, float)
@@ -178,7 +198,8 @@ def make_pos_solution(path, t, lat_deg, lon_deg, h, sd_enu, v_enu, sd_venu, q, n
     keep = ~pos_miss
     if not keep.any():
         raise ReaderError(p, None, "every record has a missing (nan) position or position sigma")
-    t, lat_deg, lon_deg, h, sd_enu, linenos = t[keep], lat_deg[keep], lon_deg[keep], h[keep], sd_enu[keep], linenos[keep]
+    t, lat_deg, lon_deg, h = t[keep], lat_deg[keep], lon_deg[keep], h[keep]
+    sd_enu, linenos = sd_enu[keep], linenos[keep]
     check_times(t, linenos, p)
     for name, a, lo, hi in (("latitude", lat_deg, -90.0, 90.0), ("longitude", lon_deg, -360.0, 360.0),
                             ("height", h, *HEIGHT_RANGE_M)):

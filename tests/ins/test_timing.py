@@ -19,6 +19,10 @@ def test_offset_recovered_to_10_ms():
     assert abs(r.offset_s - (-0.15)) < 0.010, r
     assert abs(r.offset_s + 0.15) < 4 * r.sigma_s + 1e-3  # the reported sigma explains the error
     assert r.corr > 0.95 and r.n_epochs > 300 and r.turn_rate_rms > 0.1
+    v_gap = v.copy()
+    v_gap[250:262] = np.nan  # missing velocities (a reader's masked values) are left out
+    r2 = ins.estimate_time_offset(t + 0.15, w, tg, v_gap, f_b=f)
+    assert r2.source == "velocity" and r2.n_epochs < r.n_epochs and abs(r2.offset_s + 0.15) < 0.010
     # the other sign, and 1 Hz GNSS
     tg1, v1, _ = _car.gnss(1.0)
     r = ins.estimate_time_offset(t - 0.32, w, tg1, v1, f_b=f)

@@ -37,6 +37,15 @@ def test_kfgins_imu_round_trip(tmp_path):
     assert np.mean(vb[:, 2] / dt) == pytest.approx(9.8, abs=0.05)
     # seconds of week without a week
     assert io.read_kfgins_imu(p).t[0] == pytest.approx(t[0])
+    # a week rollover inside the file: seconds of week restart at 0, the times keep increasing
+    q = tmp_path / "roll.txt"
+    q.write_text("".join(f"{sow:.3f} 1e-4 0 0 0 0 -0.049\n" for sow in (604799.990, 604799.995, 0.0, 0.005)))
+    log = io.read_kfgins_imu(q, gps_week=WEEK)
+    np.testing.assert_allclose(np.diff(log.t), 0.005, atol=1e-6)
+    assert log.t[2] == pytest.approx((WEEK + 1) * 604800.0)
+    q.write_text("".join(f"{sow:.3f} 1e-4 0 0 0 0 -0.049\n" for sow in (456250.0, 456250.005, 0.0, 456250.015)))
+    with pytest.raises(ReaderError, match=r"roll\.txt:3: time 0 s is not after"):  # a corrupted time, not a rollover
+        io.read_kfgins_imu(q)
 
 
 def test_kfgins_imu_missing_and_errors(tmp_path):
