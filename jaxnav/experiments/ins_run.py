@@ -487,11 +487,11 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
 def estimate_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
     """IMU-GNSS time offset (s, added to IMU times): innovation likelihood over a grid around a first guess.
 
-    The first guess is the cross-correlation of the yaw rate with the GNSS course rate
-    (:func:`jaxnav.ins.estimate_time_offset`); the filter then runs (no outages) on every offset of a
-    10 ms grid within +-max(50 ms, 3 sigma) of it (+-``imu.time_offset_search_s`` around zero in steps of
-    20 ms when the correlation is not usable: too few turns), and a parabola through the three best
-    log-likelihoods refines the maximum.
+    The filter runs (no outages) on a 50 ms grid over +-``imu.time_offset_search_s`` plus the
+    cross-correlation estimate of the yaw rate against the GNSS course rate
+    (:func:`jaxnav.ins.estimate_time_offset`, reported as the first guess; it assumes the body points
+    along the velocity, which a handheld device does not), then on a 10 ms grid within +-50 ms of the
+    best, and a parabola through the three best log-likelihoods refines the maximum.
 
     Returns:
       (offset s, info dict with the grid, its log-likelihoods and the method).
@@ -514,30 +514,46 @@ def estimate_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=
     except ValueError as exc:  # too few turns or epochs: search around zero
         guess = 0.0
         info.update(first_guess=f"0 (cross-correlation not usable: {exc})")
-    if "first_guess_sigma_s" in info and info.get("first_guess_corr", 0) > 0.5:
-        span = min(cfg.imu.time_offset_search_s, max(0.05, 3.0 * info["first_guess_sigma_s"]))
-        step = 0.01
-    else:
-        span, step = cfg.imu.time_offset_search_s, 0.02
-    grid = guess + np.arange(-span, span + 1e-9, step)
-    no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0))
-    ll = []
-    for k, off in enumerate(grid):
-        p = prepare(no_eval, imu=imu._replace(t=np.asarray(imu.t, float) + off - 0.0), pos=pos, progress=None)
-        ll.append(float(run_filter(p, save=("nav",)).loglik))
-        if progress and (k % 10 == 0 or k == len(grid) - 1):
-            progress(f"time offset: {k + 1}/{len(grid)} offsets tried")
-    ll = np.asarray(ll)
+    span = cfg.imu.time_offset_search_s
+    # likelihoods comparable between offsets: every GNSS epoch, no gate, no pseudo-measurements
+    no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0),
+                           gnss=cfg.gnss._replace(gate_probability=None),
+                           constraints=cfg.constraints._replace(zupt=False, nhc=False))
+    cache = {}
+
+    def loglik(off):
+        key = round(float(off), 6)
+        if key not in cache:
+            p = prepare(no_eval, imu=imu._replace(t=np.asarray(imu.t, float) + key), pos=pos, progress=None)
+            cache[key] = float(run_filter(p, save=("nav",)).loglik)
+        return cache[key]
+
+    # coarse: 50 ms steps over +-span (zero included) and the cross-correlation guess; fine: 10 ms
+    # steps within +-50 ms of the coarse best; a parabola through the best three refines it
+    coarse = np.union1d(np.round(np.arange(-span, span + 1e-9, 0.05), 6), [round(guess, 6)] if abs(guess) <= span else [])
+    for k, off in enumerate(coarse):
+        loglik(off)
+        if progress and (k % 10 == 0 or k == len(coarse) - 1):
+            progress(f"time offset: coarse grid {k + 1}/{len(coarse)}")
+    c_best = max((o for o in coarse), key=loglik)
+    fine = np.round(c_best + np.arange(-0.05, 0.05 + 1e-9, 0.01), 6)
+    fine = fine[np.abs(fine) <= span + 1e-9]
+    ll = np.array([loglik(o) for o in fine])
     j = int(np.nanargmax(ll))
-    best = float(grid[j])
-    if 0 < j < len(grid) - 1:
+    best = float(fine[j])
+    if 0 < j < len(fine) - 1:
         y0, y1, y2 = ll[j - 1:j + 2]
         den = y0 - 2 * y1 + y2
         if den < 0:
-            best += 0.5 * (y0 - y2) / den * (grid[1] - grid[0])
-    at_edge = j in (0, len(grid) - 1)
-    info.update(method="innovation log-likelihood on a grid, parabolic refinement", grid_s=grid, loglik=ll,
-                offset_s=best, at_search_edge=at_edge)
+            best += 0.5 * (y0 - y2) / den * (fine[1] - fine[0])
+    grid = np.array(sorted(cache))
+    at_edge = abs(best) >= span - 0.01
+    info.update(method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
+                       "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[g] for g in grid]),
+                offset_s=best, at_search_edge=bool(at_edge))
+    if at_edge and progress:
+        progress(f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
+                 "imu.time_offset_search_s")
     return best, info
 
 

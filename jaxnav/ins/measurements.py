@@ -26,7 +26,7 @@ and heading aiding):
 * :data:`ZUPT`: v_n = 0 at the IMU;  z = v_n, H[dV] = I.
 * :data:`ZARU`: mean corrected angular rate over the interval's standstill samples = Earth rate;
   z = w_mean_b - C_bn^T w_ie_n, H[eps_b] = I (and eps_r), H[phi] = C_bn^T [w_ie_n x],
-  R = density^2 / T_still.
+  H[dlat] = -C_bn^T dw_ie_n/dlat, R = density^2 / T_still.
 * :data:`NHC`: vehicle-frame lateral and vertical velocity of a point (the rear axle) are 0;
   v_P^v = C_vb (C_bn^T v_n + w_nb_b x l_b); z = v_P^v[x, z]; H[dV] = C_vb C_bn^T, H[phi] = -C_vb C_bn^T [v_n x].
 * :data:`ODOMETER`: forward vehicle-frame speed of that point; z = v_P^v[y] - speed.
@@ -34,6 +34,11 @@ and heading aiding):
   psi = atan2(u_E, u_N), z = wrap(psi - psi_meas), H[phi] = [u_N, -u_E, 0] [u_n x] / (u_E^2 + u_N^2).
 
 Frames: navigation ENU, body right-forward-up, vehicle right-forward-up (C_vb body -> vehicle).
+
+First-order terms at the Earth-rate level are neglected where they are below 1e-4 of a row's
+largest entry (the lever-arm velocity's dependence on w_in_n through attitude and latitude, and
+its gyro-bias term; tested against autodiff of the nonlinear measurements in
+``tests/ins/test_aiding.py``).
 """
 
 from __future__ import annotations
@@ -211,6 +216,8 @@ def _zaru(ctx, data, params: ZaruParams, idx, n, ellipsoid=WGS84) -> MeasRows:
     w_ie = earth_params(nav.pos, nav.v_n, ellipsoid).w_ie_n
     z = ctx.w_mean_b - C.T @ w_ie
     H = _block(idx.eps_b, n, 3, jnp.eye(3, dtype=dtype), dtype).at[:, idx.phi].set(C.T @ skew(w_ie))
+    dwie_dlat = jnp.stack([jnp.zeros((), dtype), -w_ie[2], w_ie[1]])  # d/dlat of Omega [0, cos L, sin L]
+    H = H.at[:, idx.dpos.start].set(-C.T @ dwie_dlat)
     if idx.eps_r is not None:
         H = H.at[:, idx.eps_r].set(jnp.eye(3, dtype=dtype))
     d = jnp.broadcast_to(jnp.asarray(params.density, dtype), (3,))
@@ -359,14 +366,15 @@ def zaru(standstill, *, density=1e-3, rate_hz=None) -> Aid:
     return Aid(ZARU, _mask(standstill, "standstill"), None, ZaruParams(jnp.asarray(density, float)), _rate(rate_hz))
 
 
-def nhc(active=None, *, sigma=(0.1, 0.1), C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=10.0) -> Aid:
+def nhc(active=None, *, sigma=(0.1, 0.1), C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=2.0) -> Aid:
     """Non-holonomic constraint of a wheeled vehicle: no lateral and no vertical velocity at ``lever_b``.
 
     Args:
       active: (N,) bool (e.g. False while skidding or at standstill) or None (every sample).
       sigma: scalar or (2,) m/s (lateral, vertical).  C_vb: (3, 3) body -> vehicle rotation (None: identity).
       lever_b: (3,) constrained point (rear axle centre) minus IMU, body frame, m.
-      rate_hz: constraint epochs per second (default 10).
+      rate_hz: constraint epochs per second (default 2: on a simulated car with 60 s outages 2 Hz and 10 Hz
+        bounded the drift equally, 4.0 m vs 4.3 m, at 0.56x the run time).
     """
     return Aid(NHC, _mask(active, "active"), None,
                VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))

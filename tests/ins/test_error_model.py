@@ -326,3 +326,127 @@ def test_float32_position_raises():
     pos, v, C, _, f_b = _points()
     with pytest.raises(ValueError, match="enable_x64"):
         em.error_model_F(pos[0].astype(jnp.float32), v[0], f_b[0], C[0], TAU)
+
+
+# ----------------------------------------------------------------------------- 6. 21-state model (issue 18)
+TAU6 = jnp.array([3600.0, 2000.0, jnp.inf, 1000.0, jnp.inf, 500.0])  # s; inf: random-walk bias
+
+
+def _error_dynamics21(x, w, C, v, pos, w_ib, f_b):
+    """d/dt of the 9 navigation errors for the 21-state error x and noise w = [w_g, w_a, ...]:
+    the corrected gyro reads w_ib + eps_b + diag(w_ib) s_g + w_g, the accelerometer f_b + nabla + diag(f_b) s_a + w_a."""
+    Cc = rv_to_dcm(-x[0:3]) @ C
+    vc, pc = v + x[3:6], pos + x[6:9]
+    w_c = w_ib + x[9:12] + w_ib * x[15:18] + w[0:3]
+    f_c = f_b + x[12:15] + f_b * x[18:21] + w[3:6]
+    Cc_dot, vc_dot, pc_dot = _nav_dot(Cc, vc, pc, w_c, f_c)
+    C_dot, v_dot, p_dot = _nav_dot(C, v, pos, w_ib, f_b)
+    return jax.jvp(_chart, (Cc, C, vc, v, pc, pos), (Cc_dot, C_dot, vc_dot, v_dot, pc_dot, p_dot))[1]
+
+
+def test_F21_and_G21_equal_jacobians_of_nonlinear_navigation_with_scale_factors():
+    pos, v, C, w_ib, f_b = _points()
+
+    @jax.jit
+    @jax.vmap
+    def both(pos, v, C, w_ib, f_b):
+        x0, w0 = jnp.zeros(21), jnp.zeros(18)
+        Jx = jax.jacfwd(_error_dynamics21, argnums=0)(x0, w0, C, v, pos, w_ib, f_b)
+        Jw = jax.jacfwd(_error_dynamics21, argnums=1)(x0, w0, C, v, pos, w_ib, f_b)
+        F = em.ERROR_MODEL_21.F(pos, v, C @ f_b, C, TAU6, Cw=C * w_ib[None, :], Cf=C * f_b[None, :])
+        return F, em.ERROR_MODEL_21.G(C), Jx, Jw
+
+    F, G, Jx, Jw = (np.asarray(a) for a in both(pos, v, C, w_ib, f_b))
+    for k in range(F.shape[0]):
+        for j in range(21):  # column by column: every error state's effect on the navigation errors
+            np.testing.assert_allclose(F[k, :9, j], Jx[k, :, j], rtol=1e-8, atol=1e-11 * np.linalg.norm(Jx[k]) + 1e-30)
+        np.testing.assert_allclose(G[k, :9], Jw[k], rtol=1e-12, atol=1e-20)
+        # the scale-factor columns are nonzero where the motion excites them
+        assert np.linalg.norm(Jx[k, 0:3, 15:18]) > 0 and np.linalg.norm(Jx[k, 3:6, 18:21]) > 0
+    # sensor-error rows: Gauss-Markov biases (inf -> random walk, F = 0), constant scale factors
+    np.testing.assert_allclose(np.diag(F[0, 9:15, 9:15]), -1.0 / np.asarray(TAU6))
+    np.testing.assert_array_equal(F[0, 15:21], 0.0)
+    np.testing.assert_array_equal(G[0, 9:21, 6:18], np.eye(12))
+    assert em.error_model_for(21) is em.ERROR_MODEL_21 and em.ERROR_MODEL_21.tau_size == 6
+    assert em.ERROR_MODEL_21.scale_factors and not em.ERROR_MODEL_15GM.scale_factors
+
+
+def test_15gm_is_21_without_scale_factors():
+    pos, v, C, w_ib, f_b = _points()
+    F21 = em.error_model_F21(pos[2], v[2], C[2] @ f_b[2], C[2], TAU6, Cw=C[2] * w_ib[2], Cf=C[2] * f_b[2])
+    F15 = em.ERROR_MODEL_15GM.F(pos[2], v[2], C[2] @ f_b[2], C[2], TAU6)
+    np.testing.assert_array_equal(F15, F21[:15, :15])
+    np.testing.assert_array_equal(em.ERROR_MODEL_15GM.G(C[2]), em.error_model_G21(C[2])[:15, :12])
+    Qc = em.error_model_Qc21(1e-4, 1e-3, gyro_bias_sigma=1e-5, gyro_bias_tau=3600.0, accel_bias_rw=1e-5)
+    assert em.ERROR_MODEL_15GM.Qc(Qc).shape == (12, 12) and em.ERROR_MODEL_15GM.idx == em.IDX15
+
+
+def test_qc21_from_datasheet_values():
+    """ARW, VRW, bias instability with its correlation time, bias random walk: q = 2 sigma^2 / tau + K^2."""
+    arw, vrw = 0.1 * units.DEG_PER_SQRT_HOUR, 0.05  # rad/sqrt(s), m/s/sqrt(s)
+    bi, tau = 5.0 * units.DEG_PER_HOUR, 1800.0
+    rw = 1e-6  # rad/s/sqrt(s)
+    Q = np.diag(np.asarray(em.error_model_Qc21(arw, vrw, gyro_bias_sigma=bi, gyro_bias_tau=tau, gyro_bias_rw=rw,
+                                               accel_bias_sigma=1e-3, accel_bias_tau=jnp.inf, accel_scale_rw=1e-7)))
+    np.testing.assert_allclose(Q[0:3], arw**2)
+    np.testing.assert_allclose(Q[3:6], vrw**2)
+    np.testing.assert_allclose(Q[6:9], 2 * bi**2 / tau + rw**2)
+    np.testing.assert_array_equal(Q[9:12], 0.0)  # tau = inf: the instability term is dropped (a random walk needs K)
+    np.testing.assert_array_equal(Q[12:15], 0.0)
+    np.testing.assert_allclose(Q[15:18], 1e-14)
+    # stationary std of the Gauss-Markov bias in the discretised model equals the datasheet sigma
+    pos, v, C, w_ib, f_b = _points()
+    Qc = em.error_model_Qc21(0.0, 0.0, gyro_bias_sigma=bi, gyro_bias_tau=tau)
+    F = em.error_model_F21(pos[0], v[0], C[0] @ f_b[0], C[0], jnp.full(6, tau))
+    Phi, Qd = em.discretize_van_loan(F, em.error_model_G21(C[0]), Qc, 1.0)
+    r = em.IDX21.eps_b
+    P = solve_discrete_lyapunov(np.asarray(Phi[r, r]), np.asarray(Qd[r, r]))
+    np.testing.assert_allclose(np.diag(P), bi**2, rtol=1e-9)
+
+
+def test_P0_helper_places_each_block():
+    pos = jnp.array([0.7, 0.2, 100.0])
+    P = np.asarray(em.error_model_P0(em.ERROR_MODEL_21, pos, att=1e-3, vel=0.1, pos_enu=[1.0, 2.0, 3.0], gyro_bias=1e-4,
+                                     accel_bias=1e-2, gyro_scale=1e-3, accel_scale=2e-3))
+    sd = np.sqrt(np.diag(P))
+    np.testing.assert_allclose(sd[[0, 3, 8, 9, 12, 15, 18]], [1e-3, 0.1, 3.0, 1e-4, 1e-2, 1e-3, 2e-3])
+    np.testing.assert_allclose(sd[7] * 6.39e6 * np.cos(0.7), 1.0, rtol=5e-3)  # lon from east metres
+    assert em.error_model_P0(em.ERROR_MODEL_18, pos, att=0, vel=0, pos_enu=0, gyro_bias=0, accel_bias=0,
+                             gyro_markov=1e-6)[13, 13] == 1e-12
+
+
+def test_F21_predicts_the_mechanization_error_growth():
+    """Finite differences of the strapdown mechanization itself: integrate a constant-rate manoeuvre (turn,
+    climb, acceleration) for 0.5 s with the true increments and with increments carrying scale-factor and bias
+    errors, chart the difference as an error state and compare with Phi(T) x of the 21-state model (F at the
+    interval's time averages, C diag(w) and C diag(f) averaged as in the filter)."""
+    from jaxnav.ins import NavState, mechanize
+    from jaxnav.ins.attitude import dcm_to_quat, quat_to_dcm
+
+    deg = units.DEG
+    pos0 = jnp.array([47.0 * deg, 8.0 * deg, 400.0])
+    C0 = euler_to_dcm(jnp.array([2.0, -3.0, 40.0]) * deg)
+    nav0 = NavState(q_bn=dcm_to_quat(C0), v_n=jnp.array([12.0, 15.0, 0.3]), pos=pos0)
+    dt, K = 0.01, 50
+    w = jnp.array([0.05, -0.03, 0.3])  # rad/s: a turn while pitching
+    f = jnp.array([0.8, 2.0, 9.9])  # m/s^2
+    dth, dv = jnp.tile(w * dt, (K, 1)), jnp.tile(f * dt, (K, 1))
+    ref = mechanize(nav0, dth, dv, dt)
+    x = jnp.zeros(21).at[9:12].set(2e-5).at[12:15].set(jnp.array([3e-3, -2e-3, 1e-3])) \
+        .at[15:18].set(jnp.array([2e-3, -3e-3, 5e-3])).at[18:21].set(jnp.array([-2e-3, 4e-3, 3e-3]))
+    # measured - applied = error: the computed increments carry bias and scale errors
+    res = mechanize(nav0, dth * (1 + x[15:18]) + x[9:12] * dt, dv * (1 + x[18:21]) + x[12:15] * dt, dt)
+    C = quat_to_dcm(ref.nav.q_bn)
+    avg = lambda a: jnp.mean(a, axis=0)  # noqa: E731
+    F = em.ERROR_MODEL_21.F(avg(ref.nav.pos), avg(ref.nav.v_n), avg(C @ f), avg(C), jnp.inf,
+                            Cw=avg(C * (w * 1.0)[None, None, :]), Cf=avg(C * f[None, None, :]))
+    Phi, _, _ = em.discretize_taylor(F, em.error_model_G21(C0), jnp.zeros((18, 18)), K * dt)
+    pred = (Phi @ x)[:9]
+    last = lambda a: a[-1]  # noqa: E731
+    got = _chart(quat_to_dcm(last(res.nav.q_bn)), last(C), last(res.nav.v_n), last(ref.nav.v_n),
+                 last(res.nav.pos), last(ref.nav.pos))
+    for sl in (slice(0, 3), slice(3, 6)):  # attitude and velocity errors (position is second order here)
+        np.testing.assert_allclose(got[sl], pred[sl], rtol=2e-2, atol=2e-2 * float(jnp.max(jnp.abs(pred[sl]))))
+    # without the scale-factor columns the prediction misses the dominant part of the error
+    pred0 = (Phi @ x.at[15:21].set(0.0))[:6]
+    assert float(jnp.max(jnp.abs(got[:3] - pred0[:3]))) > 10 * float(jnp.max(jnp.abs(got[:3] - pred[:3])))
