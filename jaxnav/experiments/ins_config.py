@@ -82,6 +82,7 @@ class GnssSection(NamedTuple):
     gps_week: Optional[int] = None
     delimiter: Optional[str] = ","
     sigma_m: Any = None
+    gate_max_run: int = 10
 
 
 class NoiseSection(NamedTuple):
@@ -355,7 +356,8 @@ def _gnss(path, d, variables=None) -> GnssSection:
                     use_velocity=r.get("use_velocity", bool, True), fixed_only=r.get("fixed_only", bool, False),
                     pos_sigma_floor=r.get("pos_sigma_floor_m", float, 0.02, lo=0.0),
                     vel_sigma_floor=r.get("vel_sigma_floor_m_s", float, 0.05, lo=0.0), gate_probability=gate,
-                    gps_week=week, delimiter=delim, sigma_m=sig)
+                    gps_week=week, delimiter=delim, sigma_m=sig,
+                    gate_max_run=r.get("gate_max_run", int, 10, lo=1, hi=1_000_000))
     r.done()
     return g
 

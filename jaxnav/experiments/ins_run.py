@@ -331,7 +331,8 @@ def run_filter(prep: Prepared, d: Optional[Densities] = None, *, meas=None, save
     z3 = np.zeros(3)
     b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
     return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
-                           n_states=n, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability)
+                           n_states=n, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability,
+                           gate_max_run=prep.cfg.gnss.gate_max_run)
 
 
 def antenna_enu(nav, t_nav, t, lever, pos0):

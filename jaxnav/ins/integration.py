@@ -258,6 +258,7 @@ class _Carry(NamedTuple):
     kf: FilterState
     G_prev: Any = None  # two-speed mechanization: the last block's gravity minus Coriolis (else None)
     n_gated: Any = None  # int32 count of gated GNSS epochs
+    gate_run: Any = None  # int32 consecutive gated GNSS epochs (re-acquisition after gate_max_run)
 
 
 class _Sums(NamedTuple):
@@ -496,11 +497,11 @@ class _AidEpochs(NamedTuple):
 
 @partial(jax.jit, static_argnames=("model", "save", "ellipsoid", "hold_height", "check_finite",
                                    "save_imu_every", "remat", "discretization", "taylor_order", "nav_every",
-                                   "aid_models"))
+                                   "aid_models", "gate_max_run"))
 def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last, meas, params, inflation,
              estimator, model, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False,
              discretization="taylor", taylor_order=8, nav_every=1, aid_models=(), aid_epochs=None, aid_params=(),
-             gate_thresholds=None):
+             gate_thresholds=None, gate_max_run=10):
     dtype = nav0.v_n.dtype
     tau_all = jnp.broadcast_to(jnp.asarray(params.tau_markov, dtype), (model.tau_size,))
     tau = jnp.full(3, jnp.inf, dtype) if model.bias_gm else tau_all  # the Markov drift's (none with GM biases)
@@ -532,6 +533,12 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
         gated, gnss_nis = jnp.zeros((), bool), z0
         if gate:
             gated, gnss_nis = _gate(gnss, Phi, Qd, carry.kf.P, gate_thresholds)
+            # re-acquisition: after gate_max_run consecutive rejected GNSS epochs the next one is taken,
+            # so a filter that drifted away (bad start, long outage) is pulled back instead of
+            # rejecting every later fix
+            gated = gated & (carry.gate_run < gate_max_run)
+            has_gnss = jnp.any(gnss.mask & jnp.isfinite(gnss.z))
+            gate_run = jnp.where(gated, carry.gate_run + 1, jnp.where(has_gnss, 0, carry.gate_run))
             gnss = gnss._replace(mask=gnss.mask & ~(gated & jnp.isfinite(gnss.z)))
             flag = flag | jnp.where(gated, _status.GNSS_GATED, 0).astype(jnp.int32)
         parts = [gnss]
@@ -545,7 +552,8 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
         kf, info = filter_step(kf_prior, StepInput(z=z, mask=mask, F=Phi, H=H, Q=Qd, R=R), fparams,
                                save=_STEP_OUTPUTS, check_finite=check_finite)
         new = _feedback(p, kf, model.idx, flag)
-        new = new._replace(n_gated=carry.n_gated + gated.astype(jnp.int32))
+        new = new._replace(n_gated=carry.n_gated + gated.astype(jnp.int32),
+                           gate_run=gate_run if gate else carry.gate_run)
         allv = dict(nav=new.mech.nav, biases=new.biases, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi,
                     corrections=kf.x, innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
                     factors=info.factors, noise=info.noise, valid=info.valid, gated=gated,
@@ -564,7 +572,7 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
     # and are skipped by the ``use`` mask (no dynamic indexing inside the scan)
     dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (dtheta.shape[0],))
     rows = (dtheta[seg_idx], dv[seg_idx], jnp.where(seg_use, dt_all[seg_idx], 1.0), seg_use)
-    carry0 = _Carry(mech0, biases0, kf0, G0, jnp.zeros((), jnp.int32))
+    carry0 = _Carry(mech0, biases0, kf0, G0, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
     final, (ep, navs) = jax.lax.scan(outer, carry0, (rows, meas.t, t_last, meas, aid_epochs))
     return LCResult(epochs=ep, final_nav=final.mech.nav, final_biases=final.biases, loglik=final.kf.loglik,
                     n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped,
@@ -648,7 +656,7 @@ def _merge_epochs(t_imu, meas: PVMeasurements, active):
 def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, params: LCParams, *,
                     dt_imu=None, biases0: Optional[SensorBiases] = None, n_states: int = 18,
                     error_model: Optional[ErrorModel] = None, aids: Sequence[Aid] = (),
-                    gate_prob: Optional[float] = None, inflation=None,
+                    gate_prob: Optional[float] = None, gate_max_run: int = 10, inflation=None,
                     estimator=None, save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections",
                                           "innovations", "nis", "factors", "valid"),
                     ellipsoid: Ellipsoid = WGS84, hold_height: bool = False, check_finite: bool = True,
@@ -680,6 +688,9 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
         components, against the un-inflated prior) exceeds the chi-square quantile of that
         probability for their number of valid components are rejected (their GNSS components
         masked, the epoch's aids kept), counted in ``n_gated`` and flagged GNSS_GATED.
+      gate_max_run: static; after this many consecutive rejected GNSS epochs the next GNSS epoch is
+        accepted whatever its NIS (re-acquisition: a gate alone locks a filter out for good once it has
+        drifted, e.g. after a poor initial heading or a long outage). Default 10.
       inflation, estimator: plug-ins of :mod:`jaxnav.filters` (classic when None).
       save: static per-epoch outputs (subset of ``LC_OUTPUTS``).
       ellipsoid, hold_height: static, as :func:`jaxnav.ins.mechanize`.
@@ -781,6 +792,8 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
         still = jnp.asarray(raw[mean_aids[0]][seg.idx] & seg.use) if mean_aids else None
         aid_epochs = _AidEpochs(data=data, active=active, still=still)
     thresholds = None
+    if not isinstance(gate_max_run, (int, np.integer)) or gate_max_run < 1:
+        raise ValueError(f"gate_max_run={gate_max_run!r} must be an integer >= 1")
     if gate_prob is not None:
         thresholds = jnp.asarray([np.inf] + [chi2_quantile(float(gate_prob), k) for k in range(1, 7)])
     meas = meas._replace(t=jnp.asarray(meas.t, jnp.float64))
@@ -801,7 +814,7 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
                    seg.t_last, meas, params, inflation, estimator, model, tuple(save), ellipsoid,
                    hold_height, check_finite, int(save_imu_every), bool(remat), discretization, int(taylor_order),
                    int(nav_every), tuple(a.model for a in aids), aid_epochs, tuple(a.params for a in aids),
-                   thresholds)
+                   thresholds, int(gate_max_run))
     return res._replace(epochs=res.epochs._replace(gnss_row=gnss_row))
 
 

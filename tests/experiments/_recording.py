@@ -106,7 +106,7 @@ format = "kf-gins"
 gps_week = {WEEK}
 mounting_rpy_deg = [3.0, -4.0, 100.0]
 time_offset_s = {time_offset if isinstance(time_offset, float) else '"' + time_offset + '"'}
-time_offset_search_s = 0.3
+time_offset_search_s = 0.2
 
 [gnss]
 file = "{rec.gnss_file.name}"
