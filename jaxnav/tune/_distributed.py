@@ -86,8 +86,10 @@ def initialize(coordinator: Optional[str] = None, num_processes: Optional[int] =
         coordinator = _check_coordinator(coordinator)
     if num_processes is not None and num_processes < 1:
         raise ValueError(f"number of processes must be >= 1, got {num_processes}")
-    if process_id is not None and (process_id < 0 or (num_processes is not None and process_id >= num_processes)):
-        raise ValueError(f"process id must be in 0 .. number of processes - 1 = {(num_processes or 0) - 1}, "
+    if process_id is not None and process_id < 0:
+        raise ValueError(f"process id must be >= 0, got {process_id}")
+    if process_id is not None and num_processes is not None and process_id >= num_processes:
+        raise ValueError(f"process id must be in 0 .. {num_processes - 1} (the number of processes - 1), "
                          f"got {process_id}")
     if not getattr(jax.config, "jax_cpu_collectives_implementation", None):  # older JAX: no default
         jax.config.update("jax_cpu_collectives_implementation", "gloo")

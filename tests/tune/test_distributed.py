@@ -112,7 +112,10 @@ def test_two_processes_equal_one_process(tmp_path):
     one = json.loads((tmp_path / "single" / "results.json").read_text())
     assert (two["n_devices"], two["n_processes"], one["n_devices"], one["n_processes"]) == (4, 2, 1, 1)
     np.testing.assert_allclose(two["loss_per_run"], one["loss_per_run"], rtol=1e-12, atol=0)
-    assert (tmp_path / "cli_0" / "table.csv").read_text() == (tmp_path / "single" / "table.csv").read_text()
+    t2, t1 = (np.genfromtxt(tmp_path / d / "table.csv", delimiter=",", names=True) for d in ("cli_0", "single"))
+    assert t2.dtype.names == t1.dtype.names and len(t2) == 6
+    for name in t1.dtype.names:
+        np.testing.assert_allclose(t2[name], t1[name], rtol=1e-12, atol=1e-15, err_msg=name)  # std of ~equal runs
 
     # every process returns the whole study, equal to the single-process one
     for i in range(2):
