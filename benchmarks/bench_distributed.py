@@ -81,8 +81,9 @@ def worker(a):
         times.append(time.perf_counter() - t0)
     runs = 3 * a.seeds
     M = len(S.t_gnss)
-    per_epoch = sum(v[0, 0].nbytes for v in r.values.values() if v.ndim >= 3 and v.shape[2] == M)
-    fixed = sum(v[0, 0].nbytes for v in r.values.values()) - per_epoch
+    per_run_epochs = sum(v[0, 0].nbytes for v in r.values.values() if v.ndim >= 3 and v.shape[2] == M)
+    fixed = sum(v[0, 0].nbytes for v in r.values.values()) - per_run_epochs
+    per_epoch = per_run_epochs // M
     if tune.is_writer():
         print(json.dumps(dict(processes=a.processes, devices=r.n_devices, compile_s=first.compile_time_s,
                               run_s=float(np.median(times)), runs=runs, epochs=M, bytes_fixed=int(fixed),
@@ -126,7 +127,8 @@ def estimate(base, rows, runs_total=3000, epochs_full=2000, hosts=(1, 4, 16, 64,
              f"in parallel on all hosts;",
              f"- output per filter run (what the all-gather moves): {base['bytes_fixed']} B + "
              f"{base['bytes_per_epoch']} B per GPS epoch = {out_run / 1e3:.0f} kB for 2000 epochs; "
-             f"{runs_total} runs = {vol / 1e9:.2f} GB received by every host (input: 24 B per run);",
+             f"{runs_total} runs = {vol / 1e9:.2f} GB received by every host (input: 24 B per run); the table assumes "
+             f"hosts like this one (one CPU device each) and a {gbit:g} Gbit/s network;",
              "",
              f"| hosts N (1 device each) | compute {runs_total} runs | all-gather at {gbit:g} Gbit/s | "
              f"compile | total |",
@@ -168,6 +170,8 @@ def main(argv=None):
     wall = time.perf_counter() - t_all
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
+        "## Several processes and hosts (`benchmarks/bench_distributed.py`)",
+        "",
         f"{when}, {cpu_model()}, {os.cpu_count()} CPUs (shared with other sessions), Python "
         f"{platform.python_version()}, jax {_version('jax')}, jaxnav {git_revision()}; whole script {wall:.0f} s.",
         "",
