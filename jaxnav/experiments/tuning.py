@@ -244,8 +244,6 @@ def _grid(P: Problem, axes: dict):
     return tune.grid(**full)
 
 
-
-
 def run_sweep(config, out, *, progress=True) -> dict:
     """Sweep the config's grid x Monte Carlo runs; write results.json, table.csv and figures into ``out``.
 
