@@ -60,27 +60,31 @@ def _start(tmp_path, config):
     for var in ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID"):
         env.pop(var, None)
     port = str(_free_port())
-    return [subprocess.Popen([sys.executable, str(HERE / "_multiprocess.py"), str(tmp_path), str(i), "2", port,
-                              str(config)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-            for i in range(2)]
+    procs = []
+    for i in range(2):  # output to files, not pipes: a full pipe would block a process
+        with open(tmp_path / f"stdout_{i}.txt", "w") as out, open(tmp_path / f"stderr_{i}.txt", "w") as err:
+            procs.append(subprocess.Popen([sys.executable, str(HERE / "_multiprocess.py"), str(tmp_path), str(i), "2",
+                                           port, str(config)], env=env, stdout=out, stderr=err))
+    return procs
 
 
-def _wait(procs, deadline):
+def _wait(procs, tmp_path, deadline):
     """Wait for both; kill both as soon as one fails or the deadline passes. Returns their stdout."""
+    def tails():
+        return "\n----\n".join((tmp_path / f"stderr_{i}.txt").read_text()[-2500:] for i in range(len(procs)))
+
     while any(p.poll() is None for p in procs):
         failed = [p for p in procs if p.poll() not in (None, 0)]
         if failed or time.monotonic() > deadline:
             for p in procs:
                 if p.poll() is None:
                     p.kill()
-            errs = [p.communicate()[1][-2500:] for p in procs]
+                    p.wait()
             pytest.fail(("a process failed" if failed else f"no result within {DEADLINE_S} s (a hang?)")
-                        + "\n" + "\n----\n".join(errs))
+                        + "\n" + tails())
         time.sleep(0.2)
-    outs = [p.communicate() for p in procs]
-    for p, (_, err) in zip(procs, outs):
-        assert p.returncode == 0, err[-3000:]
-    return [o for o, _ in outs]
+    assert all(p.returncode == 0 for p in procs), tails()
+    return [(tmp_path / f"stdout_{i}.txt").read_text() for i in range(len(procs))]
 
 
 def test_two_processes_equal_one_process(tmp_path):
@@ -97,8 +101,9 @@ def test_two_processes_equal_one_process(tmp_path):
     except BaseException:
         for p in procs:
             p.kill()
+            p.wait()
         raise
-    outs = _wait(procs, deadline)
+    outs = _wait(procs, tmp_path, deadline)
     facts = [json.loads(o.strip().splitlines()[-1]) for o in outs]
     for i, f in enumerate(facts):
         assert f == {"cli_rc": 0, "process_index": i, "process_count": 2, "devices": 4, "local_devices": 2,
