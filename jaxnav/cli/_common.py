@@ -4,7 +4,9 @@ A command's ``run(args)`` raises :class:`UsageError` for a wrong combination of 
 :class:`CommandError` for anything else the user must fix; ``main`` prints either as one line
 ``jaxnav COMMAND: message`` and exits with 2. Numeric options are checked while parsing by the
 ``type=`` helpers here (:func:`int_range`, :func:`float_range`), and :func:`prepare_out` creates
-and checks the output folder before any work.
+and checks the output folder before any work. The study commands (Monte Carlo, sweeps, tuning)
+take the multi-process options of :func:`add_process_args` and join the study's processes with
+:func:`start_processes` before any JAX work.
 """
 
 from __future__ import annotations
@@ -148,4 +150,48 @@ def add_config_parser(subparsers, name: str, what: str):
     p.add_argument("--out", default=f"out/{name}",
                    help=f"output folder (created and checked first); default out/{name}")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    add_process_args(p)
     return p
+
+
+def add_process_args(p):
+    """Add ``--coordinator HOST:PORT --num-processes N --process-id I`` (one study over several processes/hosts).
+
+    Each defaults to the environment variable ``JAX_COORDINATOR_ADDRESS``, ``JAX_NUM_PROCESSES``,
+    ``JAX_PROCESS_ID``; values still missing come from the cluster (SLURM, Open MPI) through
+    ``jax.distributed.initialize``. Without any of them the command runs as one process.
+    """
+    g = p.add_argument_group("several processes or hosts (jax.distributed; process 0 writes the results)")
+    g.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                   help="address of process 0's coordinator, the same for all processes "
+                        "(default $JAX_COORDINATOR_ADDRESS)")
+    g.add_argument("--num-processes", type=int_range(1, 100_000), default=None, metavar="N",
+                   help="number of processes, >= 1 (default $JAX_NUM_PROCESSES, or from SLURM/Open MPI)")
+    g.add_argument("--process-id", type=int_range(0, 99_999), default=None, metavar="I",
+                   help="this process, 0 .. N-1 (default $JAX_PROCESS_ID, or from SLURM/Open MPI)")
+    g.add_argument("--join-timeout", type=int_range(1, 86_400), default=300, metavar="S",
+                   help="seconds to wait for all processes to join; default 300")
+    return g
+
+
+def start_processes(args) -> bool:
+    """Join the study's processes (:func:`jaxnav.tune.initialize`) from the options of :func:`add_process_args`.
+
+    Call first in ``run(args)``, before any JAX work. Returns whether this process writes the
+    results and prints the summary (process 0; always True for a single process).
+
+    Raises:
+      UsageError: a malformed address or an id outside 0 .. N-1.
+      CommandError: the processes could not join (coordinator unreachable, timeout).
+    """
+    from jaxnav import tune
+
+    try:
+        tune.initialize(args.coordinator, args.num_processes, args.process_id, timeout_s=args.join_timeout)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    except Exception as exc:  # noqa: BLE001 - JAX's runtime errors (timeouts, unreachable coordinator)
+        where = args.coordinator or os.environ.get("JAX_COORDINATOR_ADDRESS") or "the cluster's coordinator"
+        raise CommandError(f"cannot join the processes of this study at {where}: {type(exc).__name__}: "
+                           f"{str(exc).strip().splitlines()[0] if str(exc).strip() else ''}") from None
+    return tune.is_writer()

@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from jaxnav.cli._common import DATA_ENV, MAX_SEEDS, CommandError, data_dir, input_file, int_range, prepare_out
+from jaxnav.cli._common import (DATA_ENV, MAX_SEEDS, CommandError, add_process_args, data_dir, input_file, int_range,
+                                prepare_out, start_processes)
 from jaxnav.cli.walk import WALK_SET
 
 
@@ -25,6 +26,7 @@ def register(subparsers):
     p.add_argument("--data", default=None, help=f"{WALK_SET} folder for the real-walk stop detection "
                                                 f"(default ${DATA_ENV}/{WALK_SET}; skipped if neither is set)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    add_process_args(p)
     return p
 
 
@@ -35,6 +37,7 @@ def run(args) -> int:
     from jaxnav.io import read_stop_list
     from jaxnav.sim import load_cadastral
 
+    writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     walk_dir = data_dir(args.data, WALK_SET, required=False)
     if args.config is not None:
         input_file(args.config, "--config")
@@ -47,6 +50,8 @@ def run(args) -> int:
     prepare_out(args.out)
     res = run_cadastral(args.out, config=args.config, seeds=args.seeds, grades=args.grade, stops=args.stops,
                         chunk=args.chunk, progress=not args.no_progress, n_legs=args.legs, walk_dir=walk_dir)
+    if not writer:
+        return 0
     print(format_cadastral(res))
     print(f"wrote {args.out}/results.json and figures")
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import MAX_SEEDS, input_file, int_range, prepare_out
+from jaxnav.cli._common import MAX_SEEDS, add_process_args, input_file, int_range, prepare_out, start_processes
 
 
 def register(subparsers):
@@ -19,6 +19,7 @@ def register(subparsers):
     p.add_argument("--sweep-points", type=int_range(1), default=None,
                    help="use only the first n (>= 1) b values of the sweep")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    add_process_args(p)
     return p
 
 
@@ -26,6 +27,7 @@ def run(args) -> int:
     """Run the reproduction, print its table, write results.json and figures into ``--out``."""
     from jaxnav.experiments import format_s0, load_experiment, run_s0
 
+    writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     if args.config is not None:
         input_file(args.config, "--config")
         load_experiment(args.config)  # every key checked before any work
@@ -33,6 +35,8 @@ def run(args) -> int:
     res = run_s0(args.out, seeds=args.seeds, config=args.config, sweep_points=args.sweep_points,
                  progress=not args.no_progress)
     out = pathlib.Path(args.out)
+    if not writer:
+        return 0
     print(format_s0(res))
     print(f"\nwrote {out / 'results.json'} and {len(res['figures'])} figures to {out} "
           f"({res['wall_time_s']['total']:.0f} s in all)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import MAX_SEEDS, float_range, int_range, prepare_out
+from jaxnav.cli._common import MAX_SEEDS, add_process_args, float_range, int_range, prepare_out, start_processes
 
 
 def register(subparsers):
@@ -19,6 +19,7 @@ def register(subparsers):
     p.add_argument("--b", type=float_range(0.0, 1.0, hi_open=True), default=0.254,
                    help="attenuation factor b in [0, 1); default 0.254 (S0)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_process_args(p)
     return p
 
 
@@ -26,10 +27,13 @@ def run(args) -> int:
     """Run the demonstration, print its table, write results.json and filter_family.png into ``--out``."""
     from jaxnav.experiments import format_filter_family, run_filter_family
 
+    writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     prepare_out(args.out)
     res = run_filter_family(out=args.out, seeds=args.seeds, epochs=args.epochs, b=args.b,
                             progress=not args.no_progress)
     out = pathlib.Path(args.out)
+    if not writer:
+        return 0
     print(format_filter_family(res))
     print(f"\nwrote {out / 'filter_family.png'} and {out / 'results.json'} ({res['wall_time_s']:.1f} s incl. "
           f"compilation)")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import add_config_parser, prepare_out
+from jaxnav.cli._common import add_config_parser, prepare_out, start_processes
 
 
 def register(subparsers):
@@ -21,10 +21,13 @@ def run(args) -> int:
     """Run the sweep, print its summary, write results.json, table.csv and figures into ``--out``."""
     from jaxnav.experiments import format_sweep, load_config, run_sweep
 
+    writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     load_config(args.config)  # every section and key checked before any work
     prepare_out(args.out)
     res = run_sweep(args.config, args.out, progress=not args.no_progress)
     out = pathlib.Path(args.out)
+    if not writer:
+        return 0
     print(format_sweep(res))
     print(f"wrote {out / 'results.json'}, {out / 'table.csv'} and {len(res['figures'])} figure(s)")
     return 0

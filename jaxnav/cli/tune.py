@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import add_config_parser, prepare_out
+from jaxnav.cli._common import add_config_parser, prepare_out, start_processes
 
 
 def register(subparsers):
@@ -20,10 +20,13 @@ def run(args) -> int:
     """Run the tuning, print its summary, write results.json and figures into ``--out``."""
     from jaxnav.experiments import format_tune, load_config, run_tune
 
+    writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     load_config(args.config)  # every section and key checked before any work
     prepare_out(args.out)
     res = run_tune(args.config, args.out, progress=not args.no_progress)
     out = pathlib.Path(args.out)
+    if not writer:
+        return 0
     print(format_tune(res))
     print(f"wrote {out / 'results.json'} and {len(res['figures'])} figure(s)")
     return 0

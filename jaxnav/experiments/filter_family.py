@@ -17,7 +17,7 @@ import numpy as np
 
 from jaxnav.io import write_json
 from jaxnav import filters as jf
-from jaxnav.tune import run_chunked
+from jaxnav.tune import is_writer, run_chunked
 from jaxnav.sim import simulate_cv_scenario
 from jaxnav.units import MM
 
@@ -71,7 +71,9 @@ def run_filter_family(out="out/demo", seeds=64, epochs=1200, b=0.254, progress=T
       position RMS (mm) before, during and after the burst and of the forecast deviation (mm).
     """
     outdir = pathlib.Path(out)
-    outdir.mkdir(parents=True, exist_ok=True)
+    writer = is_writer()  # several processes: all compute, process 0 writes
+    if writer:
+        outdir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     keys = jax.random.split(jax.random.PRNGKey(2026), seeds)
     res = run_chunked(lambda k: _one(k, epochs, b)[0], keys, chunk=16, desc="filters x seeds", progress=progress)
@@ -96,17 +98,19 @@ def run_filter_family(out="out/demo", seeds=64, epochs=1200, b=0.254, progress=T
         table[name] = row
 
     fig_path = outdir / "filter_family.png"
-    from jaxnav.plot import plot_filter_family
+    if writer:
+        from jaxnav.plot import plot_filter_family
 
-    plot_filter_family({k: {kk: v[0] for kk, v in r.items()} for k, r in res.items()}, np.asarray(sc0.t),
-                       (i0, i1), fig_path, b=b)
+        plot_filter_family({k: {kk: v[0] for kk, v in r.items()} for k, r in res.items()}, np.asarray(sc0.t),
+                           (i0, i1), fig_path, b=b)
     results = dict(
         settings=dict(seeds=seeds, epochs=epochs, b=b, sigma_m=SIGMA, accel_std_mps2=ACCEL_STD,
                       change_accel_mps2=list(CHANGE_ACCEL), change_epochs=[i0, i1], fading_window=10,
                       vc_window=30, vc_horizon=10, vc_floor_rel=1.0),
         table=table, wall_time_s=wall, jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
     )
-    write_json(outdir / "results.json", results, indent=2)
+    if writer:
+        write_json(outdir / "results.json", results, indent=2)
     return results
 
 

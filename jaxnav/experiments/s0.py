@@ -300,7 +300,9 @@ def s0_metrics(setup: S0Setup, params: Mapping, key, *, filter="attenuated", los
 def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progress=True) -> dict:
     """The S0 reproduction (``jaxnav demo``): Table 1 over Monte Carlo seeds and a b sweep.
 
-    Writes ``results.json`` and the figures of :func:`jaxnav.plot.plot_s0` into ``out``.
+    Writes ``results.json`` and the figures of :func:`jaxnav.plot.plot_s0` into ``out`` (with several
+    processes, see :func:`jaxnav.tune.initialize`: the runs are sharded over all of them and only
+    process 0 writes; every process returns the results).
 
     Args:
       out: output folder (created).  seeds: Monte Carlo seeds (default from the experiment, 32).
@@ -316,7 +318,9 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
     exp = load_experiment(config or EXPERIMENT)
     seeds = exp["monte_carlo"]["seeds"] if seeds is None else int(seeds)
     outdir = pathlib.Path(out)
-    outdir.mkdir(parents=True, exist_ok=True)
+    writer = tune.is_writer()  # several processes: all compute, process 0 writes
+    if writer:
+        outdir.mkdir(parents=True, exist_ok=True)
     S = S0Setup(exp)
     keys = jax.random.split(jax.random.PRNGKey(2019), seeds)
     chunk = exp["monte_carlo"]["chunk"]
@@ -383,10 +387,12 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
     sweep_mean = sweep[:, :, :3].mean(axis=(1, 2))
     best = int(np.argmin(sweep_mean))
 
-    from jaxnav.plot import plot_s0
+    figs = []
+    if writer:
+        from jaxnav.plot import plot_s0
 
-    figs = plot_s0(outdir, truth=S.truth, gidx=S.gidx, t=S.t_gnss, detail=detail, sweep_b=bs,
-                   sweep_rms=sweep_mean, b_paper=exp["filter"]["b"])
+        figs = plot_s0(outdir, truth=S.truth, gidx=S.gidx, t=S.t_gnss, detail=detail, sweep_b=bs,
+                       sweep_rms=sweep_mean, b_paper=exp["filter"]["b"])
     wall = time.perf_counter() - t_all
     results = dict(
         settings=dict(seeds=seeds, experiment=exp, duration_s=S.cfg.duration, imu_rate_hz=S.cfg.imu_rate_hz,
@@ -394,9 +400,10 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         filters=table,
         sweep=dict(b=bs.tolist(), seeds=len(skeys), mean_pos_rms_m=sweep_mean.tolist(), best_b=float(bs[best])),
         wall_time_s=dict(total=wall, **timing), figures=[str(f) for f in figs],
-        jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
+        jax_version=jax.__version__, devices=[str(d) for d in jax.devices()], n_processes=jax.process_count(),
     )
-    write_json(outdir / "results.json", results)
+    if writer:
+        write_json(outdir / "results.json", results)
     return results
 
 

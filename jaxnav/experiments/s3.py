@@ -47,7 +47,7 @@ from jaxnav.survey import (
     white_noise_variance,
     zero_phase_lowpass,
 )
-from jaxnav.tune import run_chunked
+from jaxnav.tune import is_writer, run_chunked
 
 _AR2_PHI = (0.6, -0.3)
 
@@ -231,7 +231,9 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
     """
     t_start = time.perf_counter()
     out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    writer = is_writer()  # several processes: all compute, process 0 writes (stop lists, figures, results)
+    if writer:
+        out.mkdir(parents=True, exist_ok=True)
     scns, pipe = load_cadastral(config)
     names = list(scns) if grades is None else list(grades)
     for g in names:
@@ -253,7 +255,8 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
             scn = short_survey(scn, n_legs)
         mc = survey_monte_carlo(scn, pipe, seeds, stops=user_stops, chunk=chunk, progress=progress)
         truth, plan, res = mc["truth"], mc["plan"], mc["res"]
-        write_stop_list(out / f"stops_{g}.csv", truth.stops)
+        if writer:
+            write_stop_list(out / f"stops_{g}.csv", truth.stops)
         errs = {s: res["errors"][s] for s in STAGES}
         summ = summarize_errors(errs)
         tnames = [plan.stops.name[k] for k in plan.targets]
@@ -288,15 +291,19 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
         est = {"(b) strapdown from known points, seed 0": _enu(res["route"]["smoothed"][0], ref)[:, :2],
                "(c) reverse navigation, seed 0": _enu(res["route"]["backward"][0], ref)[:, :2]}
         f_route = out / f"cadastral_route_{g}.png"
-        plot_cadastral_route(f_route, route[:, :2], st_enu[:, :2], plan.stops.kind, plan.stops.name, estimates=est,
-                             target_errors={s: errs[s][0] for s in ("forward", "preprocessed", "smoothed", "fused", "rts")},
-                             title=f"S3 cadastral survey, {g} IMU (seed 0)")
         f_err = out / f"cadastral_errors_{g}.png"
-        plot_cadastral_errors(f_err, errs, title=f"S3 target errors, {g} IMU, {seeds} seeds x {len(tnames)} targets")
         f_det = out / f"cadastral_detection_{g}.png"
-        plot_stop_detection(f_det, t_imu, np.where(res["static"][0], 0.5, 5.0), 1.0,
-                            static_spans(res["static"][0], t_imu, min_duration=2.0, min_gap=0.5), true_spans,
-                            title=f"stop detector on the simulated survey (seed 0), {g}: 0.5 = static, 5 = moving")
+        if writer:
+            plot_cadastral_route(f_route, route[:, :2], st_enu[:, :2], plan.stops.kind, plan.stops.name,
+                                 estimates=est, title=f"S3 cadastral survey, {g} IMU (seed 0)",
+                                 target_errors={s: errs[s][0] for s in ("forward", "preprocessed", "smoothed",
+                                                                       "fused", "rts")})
+            plot_cadastral_errors(f_err, errs,
+                                  title=f"S3 target errors, {g} IMU, {seeds} seeds x {len(tnames)} targets")
+            plot_stop_detection(f_det, t_imu, np.where(res["static"][0], 0.5, 5.0), 1.0,
+                                static_spans(res["static"][0], t_imu, min_duration=2.0, min_gap=0.5), true_spans,
+                                title=f"stop detector on the simulated survey (seed 0), {g}: 0.5 = static, "
+                                      f"5 = moving")
         status = np.bitwise_or.reduce(np.asarray(res["status"]).ravel())
         results["grades"][g] = {
             "survey": {"duration_s": scn.duration, "n_imu": int(t_imu.size), "n_stops": len(plan.stops.t_start),
@@ -318,11 +325,12 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
     if walk_dir is None:
         results["walk_detection"] = {"skipped": "no walk set given (walk_dir; --data or JAXNAV_DATA)"}
     elif (pathlib.Path(walk_dir) / "walk_0827").is_dir():
-        results["walk_detection"] = walk_detection(walk_dir, out)
+        results["walk_detection"] = walk_detection(walk_dir, out if writer else None)
     else:
         results["walk_detection"] = {"skipped": f"walk set not found (looked in {walk_dir})"}
     results["wall_s_total"] = time.perf_counter() - t_start
-    write_json(out / "results.json", results)
+    if writer:
+        write_json(out / "results.json", results)
     return results
 
 

@@ -228,9 +228,9 @@ class Problem:
         return {"loss": nll, "nll": nll}
 
     def loss(self, params):
-        """Mean loss over the runs (common random numbers)."""
+        """Mean loss over the runs (common random numbers), the runs sharded over all devices and processes."""
         remat = self.cfg["tune"]["mode"] == "reverse"
-        return jnp.mean(jax.vmap(lambda k: self.point(params, k, remat)["loss"])(self.keys))
+        return tune.monte_carlo_mean(lambda p, k: self.point(p, k, remat)["loss"], self.keys)(params)
 
 
 def _axis(ax):
@@ -244,11 +244,6 @@ def _grid(P: Problem, axes: dict):
     return tune.grid(**full)
 
 
-def _write(out: pathlib.Path, results: dict):
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "results.json", results)
-
-
 def run_sweep(config, out, *, progress=True) -> dict:
     """Sweep the config's grid x Monte Carlo runs; write results.json, table.csv and figures into ``out``.
 
@@ -258,7 +253,9 @@ def run_sweep(config, out, *, progress=True) -> dict:
     t0 = time.perf_counter()
     cfg = load_config(config)
     out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
+    writer = tune.is_writer()  # several processes: all compute, process 0 writes
+    if writer:
+        out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
     P = Problem(cfg)
     axes = {k: _axis(v) for k, v in cfg["sweep"].items() if k != "chunk"}
     if not axes:
@@ -269,22 +266,22 @@ def run_sweep(config, out, *, progress=True) -> dict:
     loss = res.values["loss"]  # (G, K)
     mean = loss.mean(1)
     best = int(np.argmin(mean))
-    out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = tune.table(res, lambda v: {"loss": v["loss"]})
-    with open(out / "table.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    from jaxnav.plot import plot_sweep
+    figs = []
+    if writer:
+        rows = tune.table(res, lambda v: {"loss": v["loss"]})
+        with open(out / "table.csv", "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        from jaxnav.plot import plot_sweep
 
-    figs = plot_sweep(out, grid=g, axes=list(axes), loss=loss, loss_name=P.loss_name, init=P.init)
+        figs = plot_sweep(out, grid=g, axes=list(axes), loss=loss, loss_name=P.loss_name, init=P.init)
     results = dict(
         command="sweep", config=cfg["_path"], problem=cfg["problem"], loss_name=P.loss_name,
         grid={k: v for k, v in g.items()},
         axes=list(axes), loss_mean=mean, loss_std=loss.std(1), loss_per_run=loss,
         best={**{k: float(v[best]) for k, v in g.items()}, "loss": float(mean[best])},
-        runs=len(P.keys), points=len(mean), chunk=res.chunk, n_devices=res.n_devices,
+        runs=len(P.keys), points=len(mean), chunk=res.chunk, n_devices=res.n_devices, n_processes=res.n_processes,
         peak_bytes_per_chunk=res.peak_bytes,
         wall_time_s=dict(total=time.perf_counter() - t0, sweep=res.wall_time_s, compile=res.compile_time_s),
         figures=[str(f) for f in figs], table=str(out / "table.csv"),
@@ -292,7 +289,8 @@ def run_sweep(config, out, *, progress=True) -> dict:
     )
     if "rms" in res.values:
         results["rms_best_mean"] = res.values["rms"][best].mean(0)
-    _write(out, results)
+    if writer:
+        write_json(out / "results.json", results)
     return results
 
 
@@ -322,7 +320,9 @@ def run_tune(config, out, *, progress=True) -> dict:
     t0 = time.perf_counter()
     cfg = load_config(config)
     out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
+    writer = tune.is_writer()  # several processes: all compute (the same parameters), process 0 writes
+    if writer:
+        out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
     P = Problem(cfg)
     tn = cfg["tune"]
     if tn["optimizer"] == "lbfgs_wolfe":  # steps = evaluation budget; the loss is compiled once
@@ -343,17 +343,17 @@ def run_tune(config, out, *, progress=True) -> dict:
             sw = tune.sweep(lambda p, k: P.point(p, k), {name: vals}, P.keys, chunk=cfg["sweep"].get("chunk"),
                             progress=progress, desc="landscape")
             landscape = dict(values=vals, loss=sw.values["loss"].mean(1), wall_time_s=sw.wall_time_s)
-    # Monte Carlo distribution of the per-run loss at the start and at the tuned values
-    per_run = jax.jit(jax.vmap(lambda p, k: P.point(p, k)["loss"], in_axes=(None, 0)))
-    start_runs = np.asarray(per_run({k: jnp.asarray(v) for k, v in P.init.items()}, P.keys))
-    final_runs = np.asarray(per_run({k: jnp.asarray(v) for k, v in final.items()}, P.keys))
-    from jaxnav.plot import plot_tune
+    # Monte Carlo distribution of the per-run loss at the start and at the tuned values (a 2-point sweep)
+    ends = tune.sweep(lambda p, k: P.point(p, k)["loss"], {k: [P.init[k], final[k]] for k in P.init}, P.keys,
+                      chunk=cfg["sweep"].get("chunk"), progress=False).values
+    start_runs, final_runs = ends[0], ends[1]
+    figs = []
+    if writer:
+        from jaxnav.plot import plot_tune
 
-    out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    figs = plot_tune(out, path={k: np.asarray(v) for k, v in res.path.items()}, losses=np.asarray(res.losses),
-                     final=final, final_loss=float(res.loss), landscape=landscape, loss_name=P.loss_name,
-                     start_runs=start_runs, final_runs=final_runs)
+        figs = plot_tune(out, path={k: np.asarray(v) for k, v in res.path.items()}, losses=np.asarray(res.losses),
+                         final=final, final_loss=float(res.loss), landscape=landscape, loss_name=P.loss_name,
+                         start_runs=start_runs, final_runs=final_runs)
     results = dict(
         command="tune", config=cfg["_path"], problem=cfg["problem"], loss_name=P.loss_name, init=P.init,
         tuned=final,
@@ -362,9 +362,11 @@ def run_tune(config, out, *, progress=True) -> dict:
         optimizer=dict(tn), loss_evaluations=int(res.n_evals), runs=len(P.keys),
         loss_per_run=dict(init=start_runs, tuned=final_runs),
         landscape=landscape, wall_time_s=dict(tune=t_tune, total=time.perf_counter() - t0),
-        figures=[str(f) for f in figs], jax_version=jax.__version__,
+        figures=[str(f) for f in figs], jax_version=jax.__version__, n_processes=jax.process_count(),
+        n_devices=len(jax.devices()),
     )
-    _write(out, results)
+    if writer:
+        write_json(out / "results.json", results)
     return results
 
 
