@@ -228,6 +228,23 @@ def _densities_dict(d) -> dict:
             "init_accel_bias_mg": float(d.init_accel_bias) / MG, "pos_sigma_scale": float(d.pos_sigma_scale)}
 
 
+def _commit():
+    """Short git commit of the jaxnav checkout (with '+dirty' for local changes), or None outside a checkout."""
+    import subprocess
+
+    root = pathlib.Path(__file__).resolve().parents[2]
+    if not (root / ".git").exists():
+        return None
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                             timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jaxnav"], cwd=root, capture_output=True,
+                               text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return (rev + ("+dirty" if dirty else "")) or None
+
+
 def _constraints(prep, run) -> dict:
     """What the pseudo-measurements did: standstill detection, ZUPT/ZARU/NHC epochs."""
     from jaxnav.ins import standstill_intervals
@@ -253,6 +270,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
       the ``results.json`` dict (also written), with "files" listing everything written.
     """
     import jaxnav
+    from jaxnav._status import INFO_FLAGS, describe
     from jaxnav.experiments.ins_run import prepare, run_ins, tune_noise
     from jaxnav.io import write_json
 
@@ -263,7 +281,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
     say(f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
         f"running the filter and the smoother")
     run = run_ins(prep)
-    results = {"jaxnav_version": jaxnav.__version__, "command": command,
+    results = {"jaxnav_version": jaxnav.__version__, "git_commit": _commit(), "command": command,
                "date_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                "config_file": str(cfg.path), "config": cfg.raw,
                "mounting": {"source": cfg.imu.mounting_source,
@@ -284,7 +302,9 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                         "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
                         "n_withheld": int(np.count_nonzero(prep.withheld))},
                "constraints": _constraints(prep, run),
-               "status": int(run.result.status), "n_nonfinite": int(run.result.n_nonfinite),
+               "status": int(run.result.status), "status_flags": describe(run.result.status),
+               "status_ok": int(run.result.status) & ~INFO_FLAGS == 0,
+               "n_nonfinite": int(run.result.n_nonfinite),
                "n_gated_gnss_epochs": int(run.result.n_gated) if run.result.n_gated is not None else 0,
                "n_skipped_updates": int(run.result.n_skipped), "loglik": float(run.result.loglik),
                "runtime_s": run.runtime_s, "evaluation": _evaluation(run.scores)}
@@ -323,6 +343,8 @@ def format_ins(results: dict) -> str:
              f"  {r['n_states']}-state filter + RTS: status {r['status']}, log-likelihood {r['loglik']:.1f}, "
              f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
              f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s"]
+    for msg in r.get("status_flags", []):
+        lines.append(f"  {'note' if r.get('status_ok', True) else 'PROBLEM'}: {msg}")
     c = r.get("constraints", {})
     if "standstill_intervals" in c:
         lines.append(f"  standstill: {c['standstill_intervals']} intervals, {c['standstill_s']:.1f} s (SHOE GLRT) -> "
