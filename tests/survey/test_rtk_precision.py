@@ -133,3 +133,40 @@ def test_claimed_precision_on_spirent_static_point():
     actual, claimed = _claimed_vs_actual(z, mask, ps.sigma)
     pooled = float(np.sqrt(np.mean((actual / claimed) ** 2)))
     assert len(names) == 5 and 1 / 1.5 < pooled < 1.5
+
+
+def _static_then_drive(path):
+    """A .pos file: the real static rooftop records, then the real car drive's records moved in time
+    to start 2 s after them (a static half and a driving half, as the issue's u-blox file)."""
+    import datetime as dt
+
+    st = NAGOYA.read_text().splitlines()
+    drive = [ln for ln in DRIVE.read_text().splitlines() if ln.strip() and not ln.startswith("%")]
+    last = dt.datetime.strptime(" ".join(st[-1].split()[:2]), "%Y/%m/%d %H:%M:%S.%f")
+    t0 = dt.datetime.strptime(" ".join(drive[0].split()[:2]), "%Y/%m/%d %H:%M:%S.%f")
+    out = list(st)
+    for ln in drive:
+        w = ln.split()
+        t = dt.datetime.strptime(f"{w[0]} {w[1]}", "%Y/%m/%d %H:%M:%S.%f") - t0 + last + dt.timedelta(seconds=2)
+        out.append(t.strftime("%Y/%m/%d %H:%M:%S.%f")[:-3] + "   " + "   ".join(w[2:]))
+    path.write_text("\n".join(out) + "\n")
+    return path
+
+
+def test_cli_excludes_the_driving_half(tmp_path, capsys):
+    """``jaxnav rtk`` on a static half + driving half: points only where the antenna stood, the
+    moving epochs counted in the JSON and said in the summary line."""
+    from jaxnav.cli import main
+
+    f = _static_then_drive(tmp_path / "static_then_drive.pos")
+    assert main(["rtk", str(f), "--out", str(tmp_path / "o")]) == 0
+    text = capsys.readouterr().out
+    s = json.loads((tmp_path / "o" / "rtk_results.json").read_text())
+    # the static half: 296 epochs pass (the last 5 are within 5 s of the departure) -> 148 at 2 s -> 60, 60 (+28 < 30)
+    assert s["n_points"] == 2 and [p["name"] for p in s["points"]] == [f"static_then_drive#{k}" for k in (1, 2)]
+    assert 500 < s["excluded_moving_epochs"] < 531 and s["motion_test"]["files"][0]["n_epochs"] == 832
+    assert f"{s['excluded_moving_epochs']} of 832 epochs moving" in text and "EXCLUDED" in text
+    assert all(p["t_end"] <= "2024-06-24T08:25:00.000" for p in s["points"])
+    # without the test, 4 of 7 points are formed while driving (the issue's "17 of 38")
+    w = windows_from_pos(read_pos(f), motion=None, fixed_only=False)
+    assert len(set(w["point"])) == 7 and w["n_moving"] == 0
