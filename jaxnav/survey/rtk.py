@@ -643,6 +643,16 @@ class PointSigmas(NamedTuple):
     method: str
 
 
+@partial(jax.jit, static_argnames=("max_lag",))
+def _segment_variances(series, have, idx, w, max_lag):
+    """Autocovariances (3, max_lag + 1) of a segment's (N, 3) series and the variances (Pk, 3) of its points' means."""
+    from jaxnav.survey._ar import autocovariance_masked, mean_variance_from_acov
+
+    gam = jax.vmap(lambda x: autocovariance_masked(x, have, max_lag))(series.T)
+    v = jax.vmap(lambda gm: jax.vmap(lambda k, wk: mean_variance_from_acov(gm, k, wk))(idx, w))(gam)
+    return gam, v.T
+
+
 #: name of the precision method of :func:`point_sigmas` (written as ``sigma_method``)
 SIGMA_METHOD = "acf_ess_segment"
 
@@ -673,8 +683,6 @@ def point_sigmas(z, mask, grid, segment) -> PointSigmas:
     Raises:
       ValueError: inconsistent shapes.
     """
-    from jaxnav.survey._ar import autocovariance_masked, mean_variance_from_acov
-
     z, mask, grid = np.asarray(z, float), np.asarray(mask, bool), np.asarray(grid, np.int64)
     segment = np.asarray(segment)
     P, T = mask.shape
@@ -701,28 +709,33 @@ def point_sigmas(z, mask, grid, segment) -> PointSigmas:
         series[g - g0] = z[pts][valid]
         have[g - g0] = True
         spans = [int(np.ptp(grid[p][mask[p]])) if mask[p].any() else 0 for p in pts]
-        max_lag = max(1, min(N - 1, max(spans))) if N > 1 else 0
-        if N > 1:
-            gam = np.stack([np.asarray(autocovariance_masked(jnp.asarray(series[:, c]), jnp.asarray(have), max_lag))
-                            for c in range(3)])  # (3, L+1)
-        else:
-            gam = np.zeros((3, 1))
-        for p in pts:
-            m = mask[p]
-            n = int(m.sum())
-            seg_n[p], seg_p[p] = int(have.sum()), len(pts)
-            if n == 0:
-                continue
-            w = m / n
-            for c in range(3):
-                v = float(mean_variance_from_acov(jnp.asarray(gam[c]), jnp.asarray(grid[p] - g0),
-                                                  jnp.asarray(w)))
-                v = max(v, gam[c, 0] / n)
-                sigma[p, c] = math.sqrt(v) if n > 1 and gam[c, 0] > 0 else np.nan
-                n_eff[p, c] = gam[c, 0] / v if v > 0 else np.nan
-                lag1[p, c] = gam[c, 1] / gam[c, 0] if gam.shape[1] > 1 and gam[c, 0] > 0 else np.nan
-                if n > 1:
-                    zc = z[p, m, c]
-                    naive[p, c] = float(np.std(zc, ddof=1)) / math.sqrt(n)
+        # shapes bucketed (multiples of 32 / powers of 2) so that segments share compilations
+        max_lag = int(-(-max(1, max(spans)) // 32) * 32)
+        Npad = int(-(-max(N, max_lag + 1) // 128) * 128)
+        Pk = len(pts)
+        Ppad = 1 << (Pk - 1).bit_length()
+        series_p = np.zeros((Npad, 3))
+        series_p[:N] = series
+        have_p = np.zeros(Npad, bool)
+        have_p[:N] = have
+        n = mask[pts].sum(1)  # (Pk,)
+        w = np.zeros((Ppad, T))
+        w[:Pk] = mask[pts] / np.maximum(n, 1)[:, None]
+        idx = np.zeros((Ppad, T), np.int64)
+        idx[:Pk] = grid[pts] - g0
+        gam, v = (np.asarray(a) for a in _segment_variances(jnp.asarray(series_p), jnp.asarray(have_p),
+                                                              jnp.asarray(idx), jnp.asarray(w), max_lag))
+        v = v[:Pk]
+        g0v = gam[:, 0][None, :]
+        v = np.maximum(v, g0v / np.maximum(n, 1)[:, None])
+        ok = (n > 1)[:, None] & (g0v > 0)
+        sigma[pts] = np.where(ok, np.sqrt(np.where(ok, v, 1.0)), np.nan)
+        n_eff[pts] = np.where(ok, g0v / np.where(ok, v, 1.0), np.nan)
+        lag1[pts] = (gam[:, 1] / gam[:, 0] if gam.shape[1] > 1 and np.all(gam[:, 0] > 0)
+                     else np.full(3, np.nan))[None, :]
+        seg_n[pts], seg_p[pts] = int(have.sum()), len(pts)
+        for p, k in zip(pts, n):
+            if k > 1:
+                naive[p] = np.std(z[p][mask[p]], axis=0, ddof=1) / math.sqrt(k)
     return PointSigmas(sigma=sigma, sigma_naive=naive, n_eff=n_eff, lag1=lag1, segment_epochs=seg_n,
                        segment_points=seg_p, method=SIGMA_METHOD)

@@ -170,3 +170,11 @@ def test_cli_excludes_the_driving_half(tmp_path, capsys):
     # without the test, 4 of 7 points are formed while driving (the "17 of 38")
     w = windows_from_pos(read_pos(f), motion=None, fixed_only=False)
     assert len(set(w["point"])) == 7 and w["n_moving"] == 0
+
+
+def test_cli_on_a_drive_only_file_says_why_nothing_is_left(tmp_path, capsys):
+    from jaxnav.cli import main
+
+    assert main(["rtk", str(DRIVE), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no window of 30 epochs" in err[0] and "506 moving" in err[0]
