@@ -7,9 +7,9 @@ from jaxnav.cli._common import UsageError, float_range, input_file, int_range, p
 
 def register(subparsers):
     """Add the ``rtk`` subcommand; returns its parser."""
-    p = subparsers.add_parser("rtk", help="S2: Kalman filtering of RTK point series (epoch-log CSV or static .pos "
-                                          "files) -> per-point results CSV + JSON + figure")
-    p.add_argument("files", nargs="*", help="RTKLIB .pos files (static) and/or CSV epoch logs")
+    p = subparsers.add_parser("rtk", help="S2: Kalman filtering of RTK point series (epoch-log CSV or .pos files, "
+                                          "moving epochs excluded) -> per-point results CSV + JSON + figure")
+    p.add_argument("files", nargs="*", help="RTKLIB .pos files (static parts used) and/or CSV epoch logs")
     p.add_argument("--out", default="out/rtk", help="output folder; default out/rtk")
     p.add_argument("--control", default=None, help="control-point CSV (point,B,L,H,x,y,h) of the connection survey")
     p.add_argument("--levelling", default=None, help="levelling CSV (point,height) for the Table 3 comparison")

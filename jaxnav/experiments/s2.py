@@ -106,8 +106,9 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     """Run the S2 pipeline on files and write ``rtk_results.csv``, ``rtk_results.json`` and ``rtk.png``.
 
     Args:
-      files: RTKLIB .pos files (static; each cut into occupations of ``window`` epochs at ``step``
-        s) and/or CSV epoch logs (:func:`jaxnav.io.read_epoch_log`).
+      files: RTKLIB .pos files (split into static segments and moving epochs first, see ``motion``;
+        each static segment cut into occupations of ``window`` epochs at ``step`` s) and/or CSV
+        epoch logs (:func:`jaxnav.io.read_epoch_log`; one point a name, no motion test).
       out: output folder (created).
       control: optional control-point file (:func:`jaxnav.io.read_control_points`): gives the datum
         transformation and the height-anomaly surface; without it the results stay in WGS-84
@@ -120,7 +121,13 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
       motion: static/moving test of the .pos files (:class:`jaxnav.survey.MotionParams`; None: none):
         moving epochs are excluded before points are formed, counted in ``excluded_moving_epochs``.
     Returns:
-      dict summary (also written as JSON).
+      dict summary (also written as JSON): besides the S2 figures, ``crs``, ``zone``,
+      ``height_system``, ``time_system``, ``sigma_method``, ``excluded_moving_epochs`` and
+      ``points`` (``name``, ``n_epochs``, ``t_start``, ``t_end``, ``x_m``, ``y_m``, ``h_m``,
+      ``sigma_x_m``, ``sigma_y_m``, ``sigma_h_m``, ``sigma_method``, ...): the precision of each
+      point's mean with time-correlated epochs (:func:`jaxnav.survey.point_sigmas`, computed on the
+      WGS-84 Gauss-Krüger x, y, H epochs; the datum transformation's own uncertainty and the
+      height-anomaly fit are not in it).
     """
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
