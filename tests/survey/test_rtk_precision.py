@@ -162,7 +162,8 @@ def test_cli_excludes_the_driving_half(tmp_path, capsys):
     assert main(["rtk", str(f), "--out", str(tmp_path / "o")]) == 0
     text = capsys.readouterr().out
     s = json.loads((tmp_path / "o" / "rtk_results.json").read_text())
-    # the static half: 296 epochs pass (the last 5 are within 5 s of the departure) -> 148 at 2 s -> 60, 60 (+28 < 30)
+    # the static half: 297 of 301 epochs pass (the last ones are within 5 s of the departure) -> 149 at 2 s
+    # -> 60, 60 (+29 < 30)
     assert s["n_points"] == 2 and [p["name"] for p in s["points"]] == [f"static_then_drive#{k}" for k in (1, 2)]
     assert 500 < s["excluded_moving_epochs"] < 531 and s["motion_test"]["files"][0]["n_epochs"] == 832
     assert f"{s['excluded_moving_epochs']} of 832 epochs moving" in text and "EXCLUDED" in text
