@@ -32,11 +32,9 @@ sys.path.insert(0, str(ROOT))
 DATA = ROOT.parent / "shared" / "data"
 
 import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxnav import geodesy as g  # noqa: E402
 from jaxnav.io import read_pos  # noqa: E402
 from jaxnav.survey import motion_segments, pack_points, point_sigmas, process_points, windows_from_pos  # noqa: E402
 
@@ -84,7 +82,9 @@ def real_files():
             claimed = np.sqrt(np.mean(ps.sigma**2, 0))
             naive = np.sqrt(np.mean(ps.sigma_naive**2, 0))
             pooled = np.sqrt(np.mean((actual / claimed) ** 2))
-            rows.append(f"| {label} | {what} | {len(names)}{'' if n_all == len(names) else f' of {n_all}'} ({', '.join(str(int(n)) for n in np.asarray(res.n))}) | "
+            kept = f"{len(names)}{'' if n_all == len(names) else f' of {n_all}'}"
+            counts = ", ".join(str(int(n)) for n in np.asarray(res.n))
+            rows.append(f"| {label} | {what} | {kept} ({counts}) | "
                         f"{fmt3(actual)} | {fmt3(claimed)} | {fmt3(actual / claimed, 1, 2)} ({pooled:.2f}) | "
                         f"{fmt3(naive)} | {fmt3(actual / naive, 1, 1)} | {fmt3(np.mean(ps.lag1, 0), 1, 2)} |")
             if what == "2 min at 2 s":
@@ -139,7 +139,8 @@ def slow(mc, q):
 
 
 def drive_test():
-    st, dr = read_pos(FILES["Nagoya rooftop (MatRTKLIB, real, 5 min 1 Hz)"][0]), read_pos(DATA / "rtk_pos_matrtklib/kinematic/rover_1Hz_rtk.pos")
+    st = read_pos(FILES["Nagoya rooftop (MatRTKLIB, real, 5 min 1 Hz)"][0])
+    dr = read_pos(DATA / "rtk_pos_matrtklib/kinematic/rover_1Hz_rtk.pos")
     t = np.r_[st.t, dr.t - dr.t[0] + st.t[-1] + 1.0]
     seg = motion_segments(t, np.r_[st.lat, dr.lat], np.r_[st.lon, dr.lon])
     ns = st.t.size

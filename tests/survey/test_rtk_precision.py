@@ -11,7 +11,6 @@ import pytest
 from jaxnav import geodesy as g
 from jaxnav.io import read_pos
 from jaxnav.survey import (
-    MotionParams,
     autocovariance,
     autocovariance_masked,
     mean_variance_from_acov,
