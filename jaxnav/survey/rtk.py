@@ -631,7 +631,8 @@ class PointSigmas(NamedTuple):
 
     Attributes:
       sigma: (P, 3) standard deviation of each point's mean (x north, y east, H), m, from the
-        autocovariance of its static segment (``method``).
+        autocovariance of its static segment (``method``); NaN for a point with fewer than 2 valid
+        epochs or a component without any scatter in its segment.
       sigma_naive: (P, 3) the same with the epochs taken as independent, s / sqrt(n), s the
         scatter of the point's own epochs (S2 eq. (19)), m.
       n_eff: (P, 3) effective number of independent epochs, gamma(0) / sigma^2.
@@ -738,7 +739,8 @@ def point_sigmas(z, mask, grid, segment) -> PointSigmas:
         ok = (n > 1)[:, None] & (g0v > 0)
         sigma[pts] = np.where(ok, np.sqrt(np.where(ok, v, 1.0)), np.nan)
         n_eff[pts] = np.where(ok, g0v / np.where(ok, v, 1.0), np.nan)
-        lag1[pts] = (gam[:, 1] / gam[:, 0] if gam.shape[1] > 1 and np.all(gam[:, 0] > 0)
+        pos = gam[:, 0] > 0
+        lag1[pts] = (np.where(pos, gam[:, 1] / np.where(pos, gam[:, 0], 1.0), np.nan) if gam.shape[1] > 1
                      else np.full(3, np.nan))[None, :]
         seg_n[pts], seg_p[pts] = int(have.sum()), len(pts)
         for p, k in zip(pts, n):
