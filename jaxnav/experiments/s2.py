@@ -29,23 +29,35 @@ from jaxnav.io import (
 )
 from jaxnav.plot import plot_rtk
 from jaxnav.sim import RtkPointsConfig, simulate_rtk_points
-from jaxnav.survey.rtk import compare_levelling, connection_models, pack_points, process_points, windows_from_pos
+from jaxnav.survey.rtk import (
+    MotionParams,
+    compare_levelling,
+    connection_models,
+    pack_points,
+    point_sigmas,
+    process_points,
+    windows_from_pos,
+)
 from jaxnav.units import CM, MM, rad_to_deg
 
 
-def _read_inputs(files, *, step, window, min_epochs, fixed_only):
-    """Flat epoch arrays (S2 input) from .pos files (cut into occupations) and/or CSV epoch logs.
+def _read_inputs(files, *, step, window, min_epochs, fixed_only, motion):
+    """Flat epoch arrays (S2 input) from .pos files (cut into static occupations) and/or CSV epoch logs.
 
     Returns:
-      dict of N epochs: point (N,) names, t (N,) s, lat, lon (N,) rad, H (N,) m, sigma (N, 3) m,
-      mask (N,) bool, h_terminal (N,) m and xy_terminal (N, 2) m (NaN for .pos files).
+      (dict of N epochs: point (N,) names, t (N,) s, lat, lon (N,) rad, H (N,) m, sigma (N, 3) m,
+      mask (N,) bool, h_terminal (N,) m and xy_terminal (N, 2) m (NaN for .pos files), segment (N,)
+      static-segment labels, grid (N,) sampling-grid indices (-1: to be derived per point);
+      list of per-file motion counts).
     """
-    parts = []
+    parts, motion_counts = [], []
     for f in files:
         f = pathlib.Path(f)
         if f.suffix.lower() == ".pos":
             w = windows_from_pos(read_pos(f), step=step, window=window, min_epochs=min_epochs,
-                                 fixed_only=fixed_only)
+                                 fixed_only=fixed_only, motion=motion)
+            motion_counts.append(dict(file=str(f), n_epochs=w.pop("n_epochs"), n_moving=w.pop("n_moving"),
+                                      n_short_static=w.pop("n_short_static"), n_segments=w.pop("n_segments")))
             n = len(w["t"])
             w["h_terminal"] = np.full(n, np.nan)
             w["xy_terminal"] = np.full((n, 2), np.nan)
@@ -54,23 +66,49 @@ def _read_inputs(files, *, step, window, min_epochs, fixed_only):
             log = read_epoch_log(f)
             parts.append(dict(point=log.point, t=log.t, lat=log.lat, lon=log.lon, H=log.H, sigma=log.sigma,
                               mask=np.ones(len(log.t), bool), h_terminal=log.h,
-                              xy_terminal=np.stack([log.x, log.y], -1)))
+                              xy_terminal=np.stack([log.x, log.y], -1),
+                              segment=np.array([f"{f.stem}/{p}" for p in log.point]),
+                              grid=np.full(len(log.t), -1, np.int64)))
     names_seen = {}
     for f, p in zip(files, parts):
         for name in dict.fromkeys(p["point"]):
             if name in names_seen:
                 raise ValueError(f"{f}: point {name!r} also appears in {names_seen[name]}")
             names_seen[name] = f
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, motion_counts
+
+
+def _point_grid(t, mask, grid):
+    """(P, T) sampling-grid indices: given ones (.pos windows) or round((t - t_0) / median dt) per point."""
+    out = np.array(grid, np.int64)
+    for p in range(t.shape[0]):
+        if out[p, 0] >= 0:
+            continue
+        tv = t[p][mask[p]]
+        dt = float(np.median(np.diff(tv))) if tv.size > 1 else 1.0
+        dt = dt if dt > 0 else 1.0
+        out[p] = np.round((t[p] - (tv[0] if tv.size else t[p, 0])) / dt).astype(np.int64)
+    return out
+
+
+def gpst_iso(t) -> str:
+    """GPST seconds since 1980-01-06 as ISO 8601 'YYYY-MM-DDTHH:MM:SS.sss' (GPST, no leap seconds)."""
+    import datetime as _dt
+
+    from jaxnav.io import GPS_EPOCH
+
+    return (GPS_EPOCH + _dt.timedelta(seconds=float(t))).isoformat(timespec="milliseconds")
 
 
 def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_width=3, step=2.0, window=60,
-            min_epochs=30, fixed_only=True, smoother=False, surface="auto", quiet=False):
+            min_epochs=30, fixed_only=True, smoother=False, surface="auto", quiet=False,
+            motion: MotionParams | None = MotionParams()):
     """Run the S2 pipeline on files and write ``rtk_results.csv``, ``rtk_results.json`` and ``rtk.png``.
 
     Args:
-      files: RTKLIB .pos files (static; each cut into occupations of ``window`` epochs at ``step``
-        s) and/or CSV epoch logs (:func:`jaxnav.io.read_epoch_log`).
+      files: RTKLIB .pos files (split into static segments and moving epochs first, see ``motion``;
+        each static segment cut into occupations of ``window`` epochs at ``step`` s) and/or CSV
+        epoch logs (:func:`jaxnav.io.read_epoch_log`; one point a name, no motion test).
       out: output folder (created).
       control: optional control-point file (:func:`jaxnav.io.read_control_points`): gives the datum
         transformation and the height-anomaly surface; without it the results stay in WGS-84
@@ -80,15 +118,24 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
       step, window, min_epochs, fixed_only: see :func:`jaxnav.survey.rtk.windows_from_pos`.
       smoother: add the RTS pass.  surface: height-anomaly surface ("auto", "plane", "quadratic").
       quiet: do not print the summary.
+      motion: static/moving test of the .pos files (:class:`jaxnav.survey.MotionParams`; None: none):
+        moving epochs are excluded before points are formed, counted in ``excluded_moving_epochs``.
     Returns:
-      dict summary (also written as JSON).
+      dict summary (also written as JSON): besides the S2 figures, ``crs``, ``zone``,
+      ``height_system``, ``time_system``, ``sigma_method``, ``excluded_moving_epochs`` and
+      ``points`` (``name``, ``n_epochs``, ``t_start``, ``t_end``, ``x_m``, ``y_m``, ``h_m``,
+      ``sigma_x_m``, ``sigma_y_m``, ``sigma_h_m``, ``sigma_method``, ...): the precision of each
+      point's mean with time-correlated epochs (:func:`jaxnav.survey.point_sigmas`, computed on the
+      WGS-84 Gauss-Krüger x, y, H epochs; the datum transformation's own uncertainty and the
+      height-anomaly fit are not in it).
     """
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files = [pathlib.Path(f) for f in files]
     if not files:
         raise ValueError("jaxnav rtk: give at least one .pos or CSV epoch-log file")
-    ep = _read_inputs(files, step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only)
+    ep, motion_counts = _read_inputs(files, step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only,
+                                     motion=motion)
     if not len(ep["t"]):
         raise ValueError(f"{', '.join(map(str, files))}: no epochs left to process (a .pos file needs occupations of "
                          f"at least min_epochs={min_epochs} {'fixed ' if fixed_only else ''}epochs)")
@@ -99,6 +146,13 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     names, series = pack_points(ep["point"], ep["t"], ep["lat"], ep["lon"], ep["H"], ep["sigma"],
                                 h_terminal=ep["h_terminal"], xy_terminal=ep["xy_terminal"], mask=ep["mask"],
                                 length=length)
+    first = {n: i for i, n in reversed(list(enumerate(ep["point"])))}
+    point_segment = np.array([ep["segment"][first[n]] for n in names])
+    grid = np.full(np.shape(series.t), -1, np.int64)
+    for i, n in enumerate(names):
+        g = ep["grid"][ep["point"] == n]
+        grid[i, :len(g)] = g
+        grid[i, len(g):] = g[-1] if len(g) else -1
     if lon0_deg is None:  # each point in its own zone
         lon_pt = np.array([np.nanmean(np.where(m, lo, np.nan)) for lo, m in zip(series.lon, series.mask)])
         lon0 = np.asarray(zone_central_meridian(jnp.asarray(lon_pt), zone_width)[0])
@@ -109,6 +163,9 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
         raise ValueError(f"points fall in zones with central meridians {zones} deg; one control set needs one "
                          "projection: give --lon0")
     summary = dict(files=[str(f) for f in files], n_points=len(names), lon0_deg=zones, smoother=smoother,
+                   excluded_moving_epochs=sum(c["n_moving"] for c in motion_counts),
+                   excluded_short_static_epochs=sum(c["n_short_static"] for c in motion_counts),
+                   motion_test=None if motion is None else dict(motion._asdict(), files=motion_counts),
                    masked_epochs=int(np.sum(~np.asarray(ep["mask"]) | ~np.all(np.isfinite(ep["sigma"]), axis=1)
                                         | ~np.isfinite(ep["lat"]) | ~np.isfinite(ep["lon"]) | ~np.isfinite(ep["H"]))))
     transform = anomaly = None
@@ -131,6 +188,22 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     res = process_points(series, lon0=jnp.asarray(lon0), transform=transform, anomaly=anomaly,
                          smoother=smoother)
     res = type(res)(*[np.asarray(a) if not isinstance(a, tuple) else a for a in res])
+    grid = _point_grid(np.asarray(series.t), np.asarray(series.mask), grid)
+    # precision with time-correlated epochs, on the filter's measurements (WGS-84 GK x, y, H)
+    ps = point_sigmas(res.gk, np.asarray(series.mask) & (res.n[:, None] > 0), grid, point_segment)
+    t_arr, m_arr = np.asarray(series.t), np.asarray(series.mask)
+    crs = ("reference grid of the control survey (4-parameter similarity from WGS-84 Gauss-Krueger; x north, "
+           "y east, m)" if transform is not None else "WGS-84 Gauss-Krueger (transverse Mercator, scale 1, no false "
+           "easting; x north, y east, m)")
+    summary["crs"] = crs
+    summary["zone"] = dict(central_meridian_deg=zones, zone_width_deg=None if lon0_deg is not None else zone_width)
+    summary["height_system"] = ("normal height: ellipsoidal H - fitted height anomaly (m)" if anomaly is not None
+                                else "WGS-84 ellipsoidal height (m)")
+    summary["time_system"] = "GPST"
+    summary["sigma_method"] = ps.method
+    summary["sigma_method_description"] = (
+        "standard deviation of each point's mean from the sample autocovariance of its static segment "
+        "(effective sample size; errors slower than the segment and errors common to the session not included)")
     h_level = np.full(len(names), np.nan)
     if levelling is not None:
         table = dict(zip(lev.point, lev.height))
@@ -153,13 +226,36 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
                     max_abs_cm=c.max_abs / CM, mean_cm=c.mean / CM, std_cm=c.std / CM, rms_cm=c.rms / CM,
                     thresholds_cm=[float(v) / CM for v in c.thresholds], count_within=[int(v) for v in c.count_within],
                     share_within=[float(v) for v in c.share_within])
-    write_rtk_results(out / "rtk_results.csv", names, res, h_level)
-    plot_rtk(res, out / "rtk.png", h_level=h_level if np.any(np.isfinite(h_level)) else None, names=names)
-    summary["points"] = [dict(point=str(n), n=int(res.n[i]), x=float(res.xyh[i, 0]), y=float(res.xyh[i, 1]),
-                              h=float(res.xyh[i, 2]), precision_mm=[float(v) / MM for v in res.precision[i]],
-                              raw_precision_mm=[float(v) / MM for v in res.raw_precision[i]],
-                              formal_precision_mm=[float(v) / MM for v in res.formal_precision[i]])
-                         for i, n in enumerate(names)]
+    write_rtk_results(out / "rtk_results.csv", names, res, h_level, sigma=ps.sigma, sigma_method=ps.method,
+                      crs=crs, zone=f"central meridian {', '.join(f'{z:g}' for z in zones)} deg",
+                      height_system=summary["height_system"])
+    plot_rtk(res, out / "rtk.png", h_level=h_level if np.any(np.isfinite(h_level)) else None, names=names,
+             sigma=ps.sigma)
+    pts = []
+    for i, n in enumerate(names):
+        tv = t_arr[i][m_arr[i]]
+        pts.append(dict(
+            name=str(n), n_epochs=int(res.n[i]),
+            t_start=gpst_iso(tv[0]) if tv.size else None, t_end=gpst_iso(tv[-1]) if tv.size else None,
+            x_m=float(res.xyh[i, 0]), y_m=float(res.xyh[i, 1]), h_m=float(res.xyh[i, 2]),
+            sigma_x_m=float(ps.sigma[i, 0]), sigma_y_m=float(ps.sigma[i, 1]), sigma_h_m=float(ps.sigma[i, 2]),
+            sigma_method=ps.method,
+            sigma_naive_x_m=float(ps.sigma_naive[i, 0]), sigma_naive_y_m=float(ps.sigma_naive[i, 1]),
+            sigma_naive_h_m=float(ps.sigma_naive[i, 2]),
+            n_eff=[float(v) for v in ps.n_eff[i]], lag1_autocorrelation=[float(v) for v in ps.lag1[i]],
+            segment=str(point_segment[i]), segment_epochs=int(ps.segment_epochs[i]),
+            segment_points=int(ps.segment_points[i]),
+            # the earlier per-point keys, kept
+            point=str(n), n=int(res.n[i]), x=float(res.xyh[i, 0]), y=float(res.xyh[i, 1]), h=float(res.xyh[i, 2]),
+            precision_mm=[float(v) / MM for v in res.precision[i]],
+            raw_precision_mm=[float(v) / MM for v in res.raw_precision[i]],
+            formal_precision_mm=[float(v) / MM for v in res.formal_precision[i]]))
+    summary["points"] = pts
+    ok = np.all(np.isfinite(ps.sigma), axis=1) & np.all(np.isfinite(ps.sigma_naive), axis=1)
+    summary["sigma_mean_mm"] = dict(
+        corrected=[float(v) / MM for v in np.sqrt(np.mean(ps.sigma[ok] ** 2, axis=0))] if ok.any() else None,
+        naive=[float(v) / MM for v in np.sqrt(np.mean(ps.sigma_naive[ok] ** 2, axis=0))] if ok.any() else None,
+        components=["x", "y", "h"])
     summary["outputs"] = [str(out / "rtk_results.csv"), str(out / "rtk_results.json"), str(out / "rtk.png")]
     write_json(out / "rtk_results.json", summary)
     if not quiet:
@@ -171,8 +267,22 @@ def format_rtk(summary: dict) -> str:
     """The summary of :func:`run_rtk` as text: internal precisions (mm, S2 eq. (19)) and levelling (cm, Table 3)."""
     p = summary["internal_precision_mean"]
     lines = [f"S2 pipeline: {summary['n_points']} points, central meridian(s) {summary['lon0_deg']} deg, "
-             f"{'forward filter + RTS' if summary['smoother'] else 'forward filter'}",
-             "  internal precision of the mean (average over points): plane / height mm",
+             f"{'forward filter + RTS' if summary['smoother'] else 'forward filter'}"]
+    mt = summary.get("motion_test")
+    if mt is not None and mt["files"]:
+        n_all = sum(c["n_epochs"] for c in mt["files"])
+        lines.append(f"  static/moving test (.pos files): {summary['excluded_moving_epochs']} of {n_all} epochs moving "
+                     f"(speed > {mt['v_max']:g} m/s or > {mt['d_max']:g} m in {mt['window_s']:g} s) and "
+                     f"{summary['excluded_short_static_epochs']} in static runs < {mt['min_static_s']:g} s: "
+                     f"EXCLUDED; {sum(c['n_segments'] for c in mt['files'])} static segment(s)")
+    sm = summary.get("sigma_mean_mm", {})
+    if sm.get("corrected") is not None:
+        c, nv = sm["corrected"], sm["naive"]
+        lines.append(f"  precision of a point mean, x / y / h mm (rms over points): {c[0]:.2f} / {c[1]:.2f} / "
+                     f"{c[2]:.2f} [{summary['sigma_method']}: correlated epochs]; epochs taken as independent: "
+                     f"{nv[0]:.2f} / {nv[1]:.2f} / {nv[2]:.2f} ({c[0] / nv[0]:.1f} / {c[1] / nv[1]:.1f} / "
+                     f"{c[2] / nv[2]:.1f}x optimistic)")
+    lines += ["  S2 internal precision of the mean, eq. (19) (epochs taken as independent), plane / height mm:",
              f"    conventional averaging, eq. (19): {p['conventional']['plane_mm']:.2f} / "
              f"{p['conventional']['height_mm']:.2f}",
              f"    from the reported sigmas        : {p['formal']['plane_mm']:.2f} / {p['formal']['height_mm']:.2f}",

@@ -1,4 +1,5 @@
-"""Figures of the S2 RTK pipeline: height differences against levelling (the form of S2 Fig. 1)."""
+"""Figures of the S2 RTK pipeline: height differences against levelling (the form of S2 Fig. 1) and the
+precision of the point means (eq. (19), reported sigmas, and with time-correlated epochs)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np  # noqa: E402
 from jaxnav.units import CM, MM  # noqa: E402
 
 
-def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015)):
+def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015), sigma=None):
     """S2 Fig. 1 (RTK height - levelling per point, conventional vs filtered) and internal precision.
 
     Top panel (only with ``h_level``): differences in cm per point number for the conventional RTK
@@ -27,6 +28,8 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
       h_level: optional (P,) levelled heights, m (NaN where a point was not levelled).
       names: optional (P,) point names for the x tick labels (shown when P <= 30).
       thresholds: |difference| bands to draw, m.
+      sigma: optional (P, 3) precision of the means with time-correlated epochs
+        (:func:`jaxnav.survey.point_sigmas`), m, drawn beside the eq. (19) values.
     Returns:
       The matplotlib figure.
     """
@@ -58,6 +61,13 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
     ax[a].plot(k, mp_f, "o-", ms=3, lw=0.8, color="tab:blue", label="filtered mean, eq. (19)")
     fp = np.asarray(result.formal_precision)
     ax[a].plot(k, np.hypot(fp[:, 0], fp[:, 1]) / MM, ":", lw=1.0, color="tab:red", label="from reported sigmas")
+    if sigma is not None:
+        sg = np.asarray(sigma, float)
+        ax[a].plot(k, np.hypot(sg[:, 0], sg[:, 1]) / MM, "^-", ms=3, lw=1.0, color="tab:orange",
+                   label="correlated epochs (acf_ess_segment)")
+        ax[a + 1].plot(k, sg[:, 2] / MM, "^-", ms=3, lw=1.0, color="tab:orange",
+                       label="correlated epochs (acf_ess_segment)")
+    ax[a].set_title("Precision of each point's mean (log scale)")
     ax[a].set_ylabel("plane precision, mm")
     ax[a].legend(fontsize=8)
     ax[a + 1].plot(k, np.asarray(result.raw_precision)[:, 2] / MM, "s-", ms=3, lw=0.8, color="tab:gray",
@@ -65,6 +75,8 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
     ax[a + 1].plot(k, np.asarray(result.precision)[:, 2] / MM, "o-", ms=3, lw=0.8, color="tab:blue",
                    label="filtered")
     ax[a + 1].plot(k, fp[:, 2] / MM, ":", lw=1.0, color="tab:red", label="from reported sigmas")
+    ax[a].set_yscale("log")
+    ax[a + 1].set_yscale("log")
     ax[a + 1].set_ylabel("height precision, mm")
     ax[a + 1].set_xlabel("point number")
     ax[a + 1].legend(fontsize=8)

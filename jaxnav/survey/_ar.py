@@ -280,3 +280,55 @@ def ar_kalman(y, phi, sigma2, R, *, smooth: bool = True) -> ARKalmanResult:
         x, P = res.means, res.covs
     err = x[:, 0] + m
     return ARKalmanResult(error=err, noise=y - err, variance=P[:, 0, 0])
+
+
+def autocovariance_masked(x, mask, max_lag: int):
+    """Biased sample autocovariance of a regularly sampled series with gaps.
+
+    gamma(k) = 1/n sum_t m_t m_{t+k} (x_t - xbar)(x_{t+k} - xbar), xbar and n = sum m_t over the
+    valid samples (m_t = 1) only: the estimator of :func:`autocovariance` with missing samples
+    left out of every product (Box, Jenkins & Reinsel, Time Series Analysis, sec. 2.1.4, with the
+    usual treatment of missing values). Computed by FFT with zero padding.
+
+    Args:
+      x: (N,) series on a regular grid (values at masked samples are ignored).
+      mask: (N,) bool, True where a sample exists.  max_lag: static int < N.
+    Returns:
+      (max_lag + 1,) autocovariances, unit^2 of x.
+    """
+    x = jnp.asarray(x)
+    mask = jnp.asarray(mask, bool)
+    if x.ndim != 1 or x.shape != mask.shape or x.shape[0] <= max_lag:
+        raise ValueError(f"autocovariance_masked needs a 1-D series and mask of one shape, longer than "
+                         f"max_lag={max_lag}; got {x.shape} and {mask.shape}")
+    N = x.shape[0]
+    m = mask.astype(x.dtype)
+    n = jnp.maximum(jnp.sum(m), 1.0)
+    d = jnp.where(mask, x - jnp.sum(jnp.where(mask, x, 0.0)) / n, 0.0)
+    nfft = int(2 ** np.ceil(np.log2(2 * N)))
+    f = jnp.fft.rfft(d, nfft)
+    return jnp.fft.irfft(f * jnp.conj(f), nfft)[: max_lag + 1] / n
+
+
+def mean_variance_from_acov(gamma, lag_index, weights):
+    """Variance of a weighted mean of correlated samples from their autocovariance function.
+
+    Var(sum_i w_i x_i) = sum_i sum_j w_i w_j gamma(|k_i - k_j|) for samples at grid indices k_i
+    of a stationary series (the effective-sample-size correction of the mean: with equal weights
+    1/n it is gamma(0)/n [1 + 2 sum_{k>=1} (1 - k/n) rho_k] for n consecutive samples;
+    e.g. Bayley & Hammersley 1946, von Storch & Zwiers, Statistical Analysis in Climate Research,
+    sec. 6.6). Lags beyond the end of ``gamma`` count as uncorrelated (gamma = 0).
+
+    Args:
+      gamma: (L + 1,) autocovariances for lags 0..L (unit^2).
+      lag_index: (n,) int grid indices of the samples.  weights: (n,) weights (0 for absent samples).
+    Returns:
+      () variance, unit^2.
+    """
+    gamma = jnp.asarray(gamma)
+    k = jnp.asarray(lag_index)
+    lag = jnp.abs(k[:, None] - k[None, :])
+    L = gamma.shape[0]
+    G = jnp.where(lag < L, gamma[jnp.minimum(lag, L - 1)], 0.0)
+    w = jnp.asarray(weights, gamma.dtype)
+    return w @ G @ w

@@ -15,10 +15,18 @@ different epoch counts are padded to a common length and masked):
 The same transforms applied to the unfiltered epochs give the *conventional* result (plain
 averaging) that the paper compares against; the terminal's own fitted heights h (the second height
 path) are averaged as well, and :func:`compare_levelling` forms the paper's Table 3.
+
+Issue 19 (host side, before and after the pipeline): :func:`motion_segments` splits a ``.pos``
+series into static segments and moving epochs (:class:`MotionParams`), :func:`windows_from_pos`
+cuts points inside static segments only, and :func:`point_sigmas` states the precision of each
+point's mean with time-correlated epochs (``sigma_method = "acf_ess_segment"``: the effective
+sample size from the segment's sample autocovariance) beside eq. (19), which takes the epochs as
+independent.
 """
 
 from __future__ import annotations
 
+import math
 from functools import partial
 from typing import Any, NamedTuple
 
@@ -462,21 +470,119 @@ def series_from_simulation(sim) -> RtkSeries:
                      h_terminal=sim.h_terminal, xy_terminal=sim.xy_terminal)
 
 
-def windows_from_pos(sol, *, step: float = 2.0, window: int = 60, min_epochs: int = 30, fixed_only: bool = True,
-                     name: str | None = None):
-    """Cut a static RTKLIB solution into S2-style point occupations (host side).
+class MotionParams(NamedTuple):
+    """Thresholds of the static/moving test of :func:`motion_segments` (host side; SI units).
 
-    The epochs are thinned to one every ``step`` seconds (S2 samples at 2 s) and cut into
-    consecutive windows of ``window`` epochs (60 epochs at 2 s = the paper's 2 min); windows with
-    fewer than ``min_epochs`` epochs are dropped. Each window becomes one "point" named
-    ``name#k``. Non-fixed epochs (Q != 1) are masked when ``fixed_only``.
+    Attributes:
+      v_max: an epoch is moving when the horizontal speed over the interval before or after it,
+        |p_k - p_{k-1}| / (t_k - t_{k-1}), exceeds this, m/s (default 0.10: RTK-fixed noise at
+        1-4 Hz stays below ~0.02 m/s, walking is ~1 m/s).
+      window_s: length of the displacement test window, s (default 10).
+      d_max: an epoch is moving when the horizontal displacement between the positions
+        ``window_s``/2 before and after it exceeds this, m (default 0.10: catches creeping faster
+        than ~1 cm/s that the speed test misses).
+      max_gap_s: a gap between records longer than this ends a static segment (the antenna may
+        have moved unseen), s (default 10).
+      min_static_s: static runs shorter than this are not occupations and are excluded too, s
+        (default 20).
+    """
+
+    v_max: float = 0.10
+    window_s: float = 10.0
+    d_max: float = 0.10
+    max_gap_s: float = 10.0
+    min_static_s: float = 20.0
+
+
+class MotionSegments(NamedTuple):
+    """Result of :func:`motion_segments` for N epochs.
+
+    Attributes:
+      segment: (N,) int static-segment number 0, 1, ... (-1 for excluded epochs).
+      moving: (N,) bool, epochs that failed the speed or displacement test.
+      short: (N,) bool, static epochs in runs shorter than ``min_static_s`` (excluded, not moving).
+      speed: (N,) horizontal speed over the interval before each epoch, m/s (NaN for the first).
+      n_segments: number of static segments.
+    """
+
+    segment: Any
+    moving: Any
+    short: Any
+    speed: Any
+    n_segments: int
+
+
+def motion_segments(t, lat, lon, params: MotionParams = MotionParams()) -> MotionSegments:
+    """Split a position series into static segments and moving epochs (host side, numpy).
+
+    Horizontal positions relative to the first epoch on a sphere of radius 6 371 km (distances to
+    < 0.5 %, enough for thresholds). An epoch is *moving* when (a) the speed over the interval
+    before or after it exceeds ``v_max``, or (b) the positions ``window_s``/2 before and after it
+    (nearest records) are more than ``d_max`` apart. The remaining epochs form static runs, cut at
+    gaps longer than ``max_gap_s``; runs shorter than ``min_static_s`` are flagged ``short``.
+
+    Args:
+      t: (N,) increasing times, s.  lat, lon: (N,) rad.  params: :class:`MotionParams`.
+    Returns:
+      :class:`MotionSegments`.
+    Raises:
+      ValueError: arrays of different shapes or fewer than 1 epoch.
+    """
+    t, lat, lon = (np.asarray(a, float) for a in (t, lat, lon))
+    if not (t.ndim == 1 and t.shape == lat.shape == lon.shape and t.size >= 1):
+        raise ValueError(f"motion_segments: t, lat, lon must be (N,) arrays of one shape, N >= 1; got "
+                         f"{t.shape}, {lat.shape}, {lon.shape}")
+    R = 6.371e6
+    e = (lon - lon[0]) * R * np.cos(lat[0])
+    n = (lat - lat[0]) * R
+    N = t.size
+    dt = np.diff(t)
+    step = np.hypot(np.diff(e), np.diff(n))
+    speed = np.concatenate([[np.nan], step / np.where(dt > 0, dt, np.nan)])
+    fast = speed > params.v_max
+    moving = fast.copy()
+    moving[:-1] |= fast[1:]
+    lo = np.clip(np.searchsorted(t, t - params.window_s / 2.0), 0, N - 1)
+    hi = np.clip(np.searchsorted(t, t + params.window_s / 2.0, side="right") - 1, 0, N - 1)
+    moving |= np.hypot(e[hi] - e[lo], n[hi] - n[lo]) > params.d_max
+    # static runs: consecutive static epochs without a long gap
+    brk = np.concatenate([[True], moving[1:] | moving[:-1] | (dt > params.max_gap_s)])
+    run = np.cumsum(brk) - 1
+    segment = np.full(N, -1)
+    short = np.zeros(N, bool)
+    k = 0
+    for r in np.unique(run[~moving]):
+        idx = np.flatnonzero((run == r) & ~moving)
+        if t[idx[-1]] - t[idx[0]] < params.min_static_s:
+            short[idx] = True
+        else:
+            segment[idx] = k
+            k += 1
+    return MotionSegments(segment=segment, moving=moving, short=short, speed=speed, n_segments=k)
+
+
+def windows_from_pos(sol, *, step: float = 2.0, window: int = 60, min_epochs: int = 30, fixed_only: bool = True,
+                     name: str | None = None, motion: MotionParams | None = MotionParams()):
+    """Cut an RTKLIB solution into S2-style point occupations, static epochs only (host side).
+
+    First the series is split by :func:`motion_segments` (skipped with ``motion=None``): moving
+    epochs and too-short static runs are excluded and counted. Within each static segment the
+    epochs are thinned to one every ``step`` seconds (S2 samples at 2 s; the grid is counted from
+    the file's first epoch) and cut into consecutive windows of ``window`` epochs (60 epochs at
+    2 s = the paper's 2 min); windows never span two segments, and windows with fewer than
+    ``min_epochs`` epochs are dropped. Each window becomes one "point" named ``name#k``.
+    Non-fixed epochs (Q != 1) are masked when ``fixed_only``.
 
     Args:
       sol: :class:`jaxnav.io.PosSolution`.
       step: thinning interval, s.  window: epochs per occupation.  min_epochs: shortest kept window.
       fixed_only: mask epochs that are not ambiguity-fixed.  name: point name stem (default: file stem).
+      motion: :class:`MotionParams` of the static/moving test, or None to treat the whole file as static.
     Returns:
-      dict of flat arrays ``point, t, lat, lon, H, sigma (north, east, up), mask`` for :func:`pack_points`.
+      dict of flat arrays ``point, t, lat, lon, H, sigma (north, east, up), mask, segment, grid``
+      (``segment``: the static segment of the epoch, as ``name/s<k>``; ``grid``: the epoch's index
+      on the ``step`` grid) for :func:`pack_points`, and the counts ``n_epochs`` (in the file),
+      ``n_moving``, ``n_short_static`` (excluded) and ``n_segments``.
     Raises:
       ValueError: if no window has ``min_epochs`` epochs.
     """
@@ -484,22 +590,161 @@ def windows_from_pos(sol, *, step: float = 2.0, window: int = 60, min_epochs: in
 
     stem = name or pathlib.Path(sol.path).stem
     t = np.asarray(sol.t)
+    if motion is None:
+        seg = MotionSegments(segment=np.zeros(len(t), int), moving=np.zeros(len(t), bool),
+                             short=np.zeros(len(t), bool), speed=np.full(len(t), np.nan), n_segments=1)
+    else:
+        seg = motion_segments(t, sol.lat, sol.lon, motion)
     rel = t - t[0]
-    keep = np.abs(rel / step - np.round(rel / step)) < 1e-3
-    idx = np.flatnonzero(keep)
+    grid = np.round(rel / step).astype(np.int64)
+    keep = np.abs(rel / step - grid) < 1e-3
     sig = np.sqrt(np.stack([sol.cov_enu[:, 1, 1], sol.cov_enu[:, 0, 0], sol.cov_enu[:, 2, 2]], -1))
-    out = {k: [] for k in ("point", "t", "lat", "lon", "H", "sigma", "mask")}
-    for k, start in enumerate(range(0, len(idx), window)):
-        sel = idx[start:start + window]
-        if len(sel) < min_epochs:
-            continue
-        out["point"] += [f"{stem}#{k + 1}"] * len(sel)
-        out["t"].append(t[sel])
-        out["lat"].append(np.asarray(sol.lat)[sel])
-        out["lon"].append(np.asarray(sol.lon)[sel])
-        out["H"].append(np.asarray(sol.h)[sel])
-        out["sigma"].append(sig[sel])
-        out["mask"].append((np.asarray(sol.q)[sel] == 1) if fixed_only else np.ones(len(sel), bool))
+    out = {k: [] for k in ("point", "t", "lat", "lon", "H", "sigma", "mask", "segment", "grid")}
+    k = 0
+    for s in range(seg.n_segments):
+        idx = np.flatnonzero(keep & (seg.segment == s))
+        for start in range(0, len(idx), window):
+            sel = idx[start:start + window]
+            if len(sel) < min_epochs:
+                continue
+            k += 1
+            out["point"] += [f"{stem}#{k}"] * len(sel)
+            out["segment"] += [f"{stem}/s{s + 1}"] * len(sel)
+            out["grid"].append(grid[sel])
+            out["t"].append(t[sel])
+            out["lat"].append(np.asarray(sol.lat)[sel])
+            out["lon"].append(np.asarray(sol.lon)[sel])
+            out["H"].append(np.asarray(sol.h)[sel])
+            out["sigma"].append(sig[sel])
+            out["mask"].append((np.asarray(sol.q)[sel] == 1) if fixed_only else np.ones(len(sel), bool))
     if not out["t"]:
-        raise ValueError(f"{sol.path}: no window of {min_epochs} epochs at {step} s (file has {len(t)} epochs)")
-    return {k: (np.array(v) if k == "point" else np.concatenate(v)) for k, v in out.items()}
+        raise ValueError(f"{sol.path}: no window of {min_epochs} epochs at {step} s in a static segment (file has "
+                         f"{len(t)} epochs, {int(seg.moving.sum())} moving, {seg.n_segments} static segment(s))")
+    res = {k: (np.array(v) if k in ("point", "segment") else np.concatenate(v)) for k, v in out.items()}
+    res.update(n_epochs=int(len(t)), n_moving=int(seg.moving.sum()), n_short_static=int(seg.short.sum()),
+               n_segments=int(seg.n_segments))
+    return res
+
+
+class PointSigmas(NamedTuple):
+    """Precision of P point means under time-correlated epoch errors (:func:`point_sigmas`).
+
+    Attributes:
+      sigma: (P, 3) standard deviation of each point's mean (x north, y east, H), m, from the
+        autocovariance of its static segment (``method``); NaN for a point with fewer than 2 valid
+        epochs or a component without any scatter in its segment.
+      sigma_naive: (P, 3) the same with the epochs taken as independent, s / sqrt(n), s the
+        scatter of the point's own epochs (S2 eq. (19)), m.
+      n_eff: (P, 3) effective number of independent epochs, gamma(0) / sigma^2.
+      lag1: (P, 3) lag-1 autocorrelation (one grid step) of the segment.
+      segment_epochs: (P,) valid epochs of the segment the autocovariance was estimated from.
+      segment_points: (P,) points cut from that segment.
+      method: name of the method (``sigma_method`` in the outputs).
+    """
+
+    sigma: Any
+    sigma_naive: Any
+    n_eff: Any
+    lag1: Any
+    segment_epochs: Any
+    segment_points: Any
+    method: str
+
+
+@partial(jax.jit, static_argnames=("max_lag",))
+def _segment_variances(series, have, idx, w, max_lag):
+    """Autocovariances (3, max_lag + 1) of a segment's (N, 3) series and the variances (Pk, 3) of its points' means."""
+    from jaxnav.survey._ar import autocovariance_masked, mean_variance_from_acov
+
+    gam = jax.vmap(lambda x: autocovariance_masked(x, have, max_lag))(series.T)
+    v = jax.vmap(lambda gm: jax.vmap(lambda k, wk: mean_variance_from_acov(gm, k, wk))(idx, w))(gam)
+    return gam, v.T
+
+
+#: name of the precision method of :func:`point_sigmas` (written as ``sigma_method``)
+SIGMA_METHOD = "acf_ess_segment"
+
+
+def point_sigmas(z, mask, grid, segment) -> PointSigmas:
+    """Precision of each point's mean with time-correlated epochs (effective sample size).
+
+    For each static segment (one antenna set-up: all points cut from it share its error process)
+    the epochs of its points are laid on their common sampling grid, and per component the sample
+    autocovariance gamma(k) of the segment is estimated (:func:`jaxnav.survey.autocovariance_masked`,
+    mean of the segment removed). The variance of a point's plain mean over its n valid epochs at
+    grid indices k_i is then (:func:`jaxnav.survey.mean_variance_from_acov`)
+
+        sigma^2 = 1/n^2 sum_i sum_j gamma(|k_i - k_j|),
+
+    floored at gamma(0)/n (never better than independent epochs). With n consecutive epochs this
+    is gamma(0)/n [1 + 2 sum_k (1 - k/n) rho_k], the effective-sample-size correction. It describes
+    the scatter of point means about the segment's long-run mean: error processes slower than the
+    segment (and a point that is a segment of its own only sees correlation shorter than itself)
+    are not in it, and neither are errors common to the whole session (base coordinates, datum).
+
+    Args:
+      z: (P, T, 3) epoch coordinates of the points (e.g. ``RtkResult.gk``), m.
+      mask: (P, T) bool valid epochs.  grid: (P, T) int sampling-grid index of each epoch.
+      segment: (P,) segment label of each point (points with equal labels share a segment).
+    Returns:
+      :class:`PointSigmas`.
+    Raises:
+      ValueError: inconsistent shapes.
+    """
+    z, mask, grid = np.asarray(z, float), np.asarray(mask, bool), np.asarray(grid, np.int64)
+    segment = np.asarray(segment)
+    P, T = mask.shape
+    if z.shape != (P, T, 3) or grid.shape != (P, T) or segment.shape != (P,):
+        raise ValueError(f"point_sigmas: z {z.shape}, mask {mask.shape}, grid {grid.shape}, segment "
+                         f"{segment.shape}; expected (P, T, 3), (P, T), (P, T), (P,)")
+    mask = mask & np.all(np.isfinite(z), axis=-1)
+    sigma = np.full((P, 3), np.nan)
+    naive = np.full((P, 3), np.nan)
+    n_eff = np.full((P, 3), np.nan)
+    lag1 = np.full((P, 3), np.nan)
+    seg_n = np.zeros(P, int)
+    seg_p = np.zeros(P, int)
+    for lab in dict.fromkeys(segment.tolist()):
+        pts = np.flatnonzero(segment == lab)
+        valid = mask[pts]
+        if not valid.any():
+            continue
+        g = grid[pts][valid]
+        g0 = g.min()
+        N = int(g.max() - g0 + 1)
+        series = np.zeros((N, 3))
+        have = np.zeros(N, bool)
+        series[g - g0] = z[pts][valid]
+        have[g - g0] = True
+        spans = [int(np.ptp(grid[p][mask[p]])) if mask[p].any() else 0 for p in pts]
+        # shapes bucketed (multiples of 32 / powers of 2) so that segments share compilations
+        max_lag = int(-(-max(1, max(spans)) // 32) * 32)
+        Npad = int(-(-max(N, max_lag + 1) // 128) * 128)
+        Pk = len(pts)
+        Ppad = 1 << (Pk - 1).bit_length()
+        series_p = np.zeros((Npad, 3))
+        series_p[:N] = series
+        have_p = np.zeros(Npad, bool)
+        have_p[:N] = have
+        n = mask[pts].sum(1)  # (Pk,)
+        w = np.zeros((Ppad, T))
+        w[:Pk] = mask[pts] / np.maximum(n, 1)[:, None]
+        idx = np.zeros((Ppad, T), np.int64)
+        idx[:Pk] = grid[pts] - g0
+        gam, v = (np.asarray(a) for a in _segment_variances(jnp.asarray(series_p), jnp.asarray(have_p),
+                                                              jnp.asarray(idx), jnp.asarray(w), max_lag))
+        v = v[:Pk]
+        g0v = gam[:, 0][None, :]
+        v = np.maximum(v, g0v / np.maximum(n, 1)[:, None])
+        ok = (n > 1)[:, None] & (g0v > 0)
+        sigma[pts] = np.where(ok, np.sqrt(np.where(ok, v, 1.0)), np.nan)
+        n_eff[pts] = np.where(ok, g0v / np.where(ok, v, 1.0), np.nan)
+        pos = gam[:, 0] > 0
+        lag1[pts] = (np.where(pos, gam[:, 1] / np.where(pos, gam[:, 0], 1.0), np.nan) if gam.shape[1] > 1
+                     else np.full(3, np.nan))[None, :]
+        seg_n[pts], seg_p[pts] = int(have.sum()), len(pts)
+        for p, k in zip(pts, n):
+            if k > 1:
+                naive[p] = np.std(z[p][mask[p]], axis=0, ddof=1) / math.sqrt(k)
+    return PointSigmas(sigma=sigma, sigma_naive=naive, n_eff=n_eff, lag1=lag1, segment_epochs=seg_n,
+                       segment_points=seg_p, method=SIGMA_METHOD)

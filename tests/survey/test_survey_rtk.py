@@ -162,7 +162,11 @@ def test_cli_on_simulated_survey(survey, tmp_path):
     assert abs(f["std_cm"] - c.std * 100) < 0.01 and abs(f["mean_cm"] - c.mean * 100) < 0.01
     assert summary["levelling_conventional_terminal"]["mean_cm"] > 7
     rows = (tmp_path / "rtk_results.csv").read_text().splitlines()
-    assert len(rows) == 46 and rows[0].startswith("point,n,x,y,h,H,m_x_mm")
+    assert len(rows) == 47 and rows[1].startswith("point,n,x,y,h,H,m_x_mm") and rows[1].endswith("sigma_h_mm")
+    assert rows[0].startswith("# units:") and "normal height" in rows[0] and "acf_ess_segment" in rows[0]
+    assert summary["crs"].startswith("reference grid") and summary["excluded_moving_epochs"] == 0
+    p = summary["points"][0]
+    assert p["sigma_method"] == "acf_ess_segment" and p["sigma_x_m"] >= 0.8 * p["sigma_naive_x_m"]
 
 
 def test_cli_on_real_static_pos_files(tmp_path):
@@ -187,6 +191,17 @@ def test_cli_on_real_static_pos_files(tmp_path):
     for k in (1, 2, 3):
         p = pts[f"rover_rtk#{k}"]
         assert np.hypot(p["x"] - float(xn), p["y"] - float(yn)) < 0.0015 and abs(p["h"] - h) < 0.002
+    # issue 19: the stable schema, the motion test (nothing moves in these files) and the precision
+    assert summary["excluded_moving_epochs"] == 0 and summary["height_system"] == "WGS-84 ellipsoidal height (m)"
+    assert summary["zone"]["central_meridian_deg"] == [9.0, 138.0] and summary["crs"].startswith("WGS-84 Gauss")
+    keys = {"name", "n_epochs", "t_start", "t_end", "x_m", "y_m", "h_m", "sigma_x_m", "sigma_y_m", "sigma_h_m",
+            "sigma_method"}
+    for p in summary["points"]:
+        assert keys <= set(p) and p["sigma_method"] == "acf_ess_segment" and p["n_epochs"] == p["n"]
+    p1 = pts["rover_rtk#1"]
+    assert p1["t_start"] == "2024-06-24T08:20:00.000" and p1["t_end"] == "2024-06-24T08:21:58.000"
+    # the correlated-epoch sigma is several times the independent-epoch one on the real rooftop file
+    assert p1["sigma_x_m"] > 2.5 * p1["sigma_naive_x_m"] and p1["sigma_y_m"] > 2.5 * p1["sigma_naive_y_m"]
     ip = summary["internal_precision_mean"]
     # RTKLIB's reported sigmas are far larger than the epoch scatter: against them the filtered
     # precision looks ~5x better, against the scatter of plain averaging only ~1.1x
