@@ -156,12 +156,14 @@ class EvaluateSection(NamedTuple):
 
 
 class TuneSection(NamedTuple):
-    """[tune]: parameters tuned by ``--tune`` (names of :data:`TUNABLE`), optimiser steps, learning rate."""
+    """[tune]: parameters tuned by ``--tune`` (names of :data:`TUNABLE`), L-BFGS evaluations (``steps``),
+    gradient mode, and the loss: "innovations" (GNSS innovation likelihood over the run) or "outages"
+    (predictive likelihood of fixes withheld on training windows between the evaluation windows)."""
 
     params: tuple
     steps: int
-    learning_rate: float
     mode: str
+    loss: str = "innovations"
 
 
 class InsConfig(NamedTuple):
@@ -461,8 +463,8 @@ def _tune(path, d) -> TuneSection:
     if not isinstance(ps, list) or not ps or not all(p in TUNABLE for p in ps) or len(set(ps)) != len(ps):
         r.fail("params", f"must be a non-empty list of distinct names from {list(TUNABLE)}, got {ps!r}")
     t = TuneSection(params=tuple(ps), steps=r.get("steps", int, 25, lo=1, hi=10_000),
-                    learning_rate=r.get("learning_rate", float, 0.1, lo=0.0, lo_open=True, hi=10.0),
-                    mode=r.get("mode", str, "reverse", choices=("reverse", "forward")))
+                    mode=r.get("mode", str, "reverse", choices=("reverse", "forward")),
+                    loss=r.get("loss", str, "innovations", choices=("innovations", "outages")))
     r.done()
     return t
 

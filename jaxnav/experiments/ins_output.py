@@ -309,12 +309,13 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                "n_skipped_updates": int(run.result.n_skipped), "loglik": float(run.result.loglik),
                "runtime_s": run.runtime_s, "evaluation": _evaluation(run.scores)}
     if tune:
-        say(f"tuning {', '.join(cfg.tune.params)} by the innovation likelihood (L-BFGS, {cfg.tune.steps} evaluations)")
-        rep = tune_noise(prep, cfg.tune.params, max_evals=cfg.tune.steps, mode=cfg.tune.mode)
+        say(f"tuning {', '.join(cfg.tune.params)} by the {cfg.tune.loss} likelihood (L-BFGS, {cfg.tune.steps} evaluations)")
+        rep = tune_noise(prep, cfg.tune.params, max_evals=cfg.tune.steps, mode=cfg.tune.mode, loss_kind=cfg.tune.loss)
         tuned_prep = prep._replace(lever_rfu=rep.lever_rfu, meas=prep.meas._replace(
             lever=np.broadcast_to(rep.lever_rfu, np.shape(prep.meas.lever)).copy()))
         run_t = run_ins(tuned_prep, rep.densities)
-        results["tune"] = {"params": list(cfg.tune.params), "before_si": rep.before, "after_si": rep.after,
+        results["tune"] = {"params": list(cfg.tune.params), "loss": cfg.tune.loss,
+                           "before_si": rep.before, "after_si": rep.after,
                            "loglik_before": rep.loglik_before, "loglik_after": rep.loglik_after,
                            "n_evals": rep.n_evals, "wall_time_s": rep.wall_time_s,
                            "noise_after": _densities_dict(rep.densities),
@@ -364,7 +365,8 @@ def format_ins(results: dict) -> str:
     ev(r.get("evaluation"))
     if "tune" in r:
         t = r["tune"]
-        lines.append(f"  --tune: log-likelihood {t['loglik_before']:.1f} -> {t['loglik_after']:.1f} "
+        lines.append(f"  --tune ({t.get('loss', 'innovations')}): log-likelihood {t['loglik_before']:.1f} -> "
+                     f"{t['loglik_after']:.1f} "
                      f"({t['n_evals']} evaluations, {t['wall_time_s']:.1f} s); "
                      + ", ".join(f"{k} {_fmt(t['before_si'][k])} -> {_fmt(t['after_si'][k])}" for k in t["params"]))
         ev(t["evaluation_after"], " after tuning")

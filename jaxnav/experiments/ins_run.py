@@ -303,6 +303,11 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     align = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], pos, static_s=a.static_s,
                              min_speed=a.min_speed, course_s=a.course_s, heading=a.heading, attitude=att,
                              gyro_arw=float(dens.arw), gyro_bias_sigma=float(dens.gyro_markov))
+    # the alignment starts at the first GNSS fix, i.e. at the antenna: move it to the IMU
+    C_bn = np.asarray(quat_to_dcm(np.asarray(align.nav0.q_bn)))
+    p0 = np.asarray(align.nav0.pos, float)
+    p_imu = p0 - np.asarray(enu_to_curvilinear(p0, C_bn @ lever_rfu))
+    align = align._replace(nav0=align.nav0._replace(pos=p_imu))
     ev = cfg.evaluate
     outages = np.zeros((0, 2)) if ev is None else outage_windows(
         t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
@@ -580,25 +585,76 @@ class TuneReport(NamedTuple):
     lever_rfu: Any
 
 
-def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse") -> TuneReport:
-    """Maximum-likelihood tuning of noise densities (and the lever arm) over the whole run.
+def training_windows(prep: Prepared) -> np.ndarray:
+    """(K, 2) GNSS outages for ``--tune`` with ``loss = "outages"``, disjoint from the evaluation windows.
 
-    Minimises the negative GNSS innovation log-likelihood of the forward filter (all GNSS epochs,
-    no simulated outages) by L-BFGS (:func:`jaxnav.tune.minimize_lbfgs`) with gradients through the
-    complete filter (reverse or forward mode); densities are tuned on a log scale.
+    With ``[evaluate]``: one window of ``outage_s`` (at most the gap) centred in every GNSS-on gap
+    between two evaluation windows, so tuning never scores the fixes the evaluation withholds; without
+    it, the default protocol's windows (40 s convergence, 15 s outages, 45 s gaps).
+    """
+    ev = prep.cfg.evaluate
+    t0, t1 = float(prep.t[0]), float(prep.t[-1])
+    if ev is None:
+        return outage_windows(t0, t1)
+    w = np.asarray(prep.outages, float).reshape(-1, 2)
+    out = []
+    for (a0, b0), (a1, _) in zip(w[:-1], w[1:]):
+        L = min(ev.outage_s, a1 - b0)
+        mid = 0.5 * (b0 + a1)
+        if L > 1.0:
+            out.append((mid - L / 2, mid + L / 2))
+    if not out and w.size:  # one evaluation window: train on the GNSS-on time after it
+        L = min(ev.outage_s, t1 - w[-1, 1] - 1.0)
+        if L > 1.0:
+            out.append((w[-1, 1] + 0.5, w[-1, 1] + 0.5 + L))
+    return np.asarray(out, float).reshape(-1, 2)
+
+
+def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse",
+               loss_kind: str = "innovations") -> TuneReport:
+    """Maximum-likelihood tuning of noise densities (and the lever arm) by gradient through the whole filter.
+
+    ``loss_kind``:
+
+    * "innovations": the negative GNSS innovation log-likelihood of the forward filter over the
+      whole run (all GNSS epochs, no simulated outages) — the classic ML criterion; at a GNSS rate
+      of several Hz it weighs predictions over fractions of a second.
+    * "outages": the negative predictive log-likelihood of the GNSS fixes withheld on
+      :func:`training_windows` (disjoint from the evaluation windows): horizontal antenna position
+      predicted by the forward filter against each withheld fixed-quality fix, with the filter's
+      predicted position variance plus the fix's own — the criterion for bridging outages.
+
+    Minimised by L-BFGS (:func:`jaxnav.tune.minimize_lbfgs`) with reverse- or forward-mode
+    gradients through the complete filter; densities are tuned on a log scale.
 
     Args:
-      prep: :class:`Prepared` (its outages are ignored here).  names: parameters from ``_TUNE_MAP``.
-      max_evals: loss evaluations at most.  mode: "reverse" or "forward".
+      prep: :class:`Prepared` (its evaluation outages are not withheld here).  names: parameters
+        from ``_TUNE_MAP``.  max_evals: loss evaluations at most.  mode: "reverse" or "forward".
     """
     from jaxnav.tune import Space, minimize_lbfgs
 
     unknown = [n for n in names if n not in _TUNE_MAP]
     if unknown:
         raise ValueError(f"cannot tune {unknown}; tunable: {sorted(_TUNE_MAP)}")
-    if "gyro_bias_instability" in names and prep.cfg.noise.states != 18:
-        raise ValueError("gyro_bias_instability is a parameter of the 18-state model (noise.states = 18)")
-    all_gnss = prep.meas._replace(mask=_mask_without_outages(prep))
+    if "gyro_bias_instability" in names and prep.cfg.noise.states not in (18, 21):
+        raise ValueError("gyro_bias_instability is a parameter of the 18- and 21-state models (noise.states)")
+    if loss_kind not in ("innovations", "outages"):
+        raise ValueError(f"loss must be 'innovations' or 'outages', got {loss_kind!r}")
+    base_mask = _mask_without_outages(prep)
+    scored = None
+    if loss_kind == "outages":
+        tw = training_windows(prep)
+        t = np.asarray(prep.meas.t)
+        inside = np.zeros(t.size, bool)
+        for a, b in tw:
+            inside |= (t >= a) & (t < b)
+        fixed = np.asarray(prep.pos.q)[prep.keep] == 1
+        scored = inside & fixed & base_mask[:, :3].any(-1)
+        if scored.sum() < 5:
+            raise ValueError(f"--tune loss 'outages': only {int(scored.sum())} fixed GNSS epochs inside the training "
+                             f"windows {tw.tolist()}; use loss = 'innovations'")
+        base_mask = base_mask & ~inside[:, None]
+    all_gnss = prep.meas._replace(mask=base_mask)
     d0 = prep.densities
     lever0 = jnp.asarray(prep.lever_rfu, float)
     p0 = {}
@@ -606,6 +662,9 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
         field, _ = _TUNE_MAP[n]
         p0[n] = lever0 if field == "lever_arm" else jnp.asarray(getattr(d0, field), float)
     space = Space({n: _TUNE_MAP[n][1] for n in names})
+    pos0 = jnp.asarray(np.asarray(prep.alignment.nav0.pos, float))
+    ref = jnp.asarray(np.asarray(prep.meas.pos, float))
+    R_h = jnp.asarray(np.asarray(prep.meas.R, float)[:, :2, :2])
 
     def unpack(p):
         d = d0._replace(**{_TUNE_MAP[n][0]: p[n] for n in names if _TUNE_MAP[n][0] != "lever_arm"})
@@ -615,7 +674,22 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     def loss(p):
         d, lev = unpack(p)
         m = all_gnss._replace(lever=jnp.broadcast_to(lev, all_gnss.lever.shape))
-        return -run_filter(prep, d, meas=m, save=("nav",)).loglik
+        if loss_kind == "innovations":
+            return -run_filter(prep, d, meas=m, save=("nav",)).loglik
+        res = run_filter(prep, d, meas=m, save=("nav", "covs"))
+        g = np.nonzero(np.asarray(res.epochs.gnss_row) >= 0)[0]
+        nav = jax.tree_util.tree_map(lambda a: a[g], res.epochs.nav)
+        P = res.epochs.covs[g]
+        C = quat_to_dcm(nav.q_bn)
+        dt = jnp.asarray(np.asarray(prep.meas.t)) - res.epochs.t_nav[g]
+        ant = (curvilinear_to_enu(pos0, nav.pos - pos0) + dt[:, None] * nav.v_n + jnp.einsum("mij,j->mi", C, lev))
+        e = ant[:, :2] - curvilinear_to_enu(pos0, ref - pos0)[:, :2]
+        sc = jnp.abs(curvilinear_to_enu(nav.pos, jnp.ones(3)))  # metres per (rad, rad, m)
+        var = jnp.stack([P[:, 7, 7] * sc[:, 0] ** 2, P[:, 6, 6] * sc[:, 1] ** 2], -1)
+        S = R_h * d.pos_sigma_scale**2 + jax.vmap(jnp.diag)(var)
+        nll = 0.5 * (jnp.einsum("mi,mi->m", e, jnp.linalg.solve(S, e[..., None])[..., 0])
+                     + jnp.linalg.slogdet(S)[1] + 2 * jnp.log(2 * jnp.pi))
+        return jnp.sum(jnp.where(jnp.asarray(scored), nll, 0.0))
 
     t0 = time.perf_counter()
     ll0 = -float(loss(p0))
