@@ -10,6 +10,7 @@ components); :func:`fit_series_batch` runs it over a batch of series in one ``vm
 from __future__ import annotations
 
 import datetime as _dt
+from functools import partial
 from typing import Any, NamedTuple
 
 import jax
@@ -205,8 +206,12 @@ def daily_grid(series, keep=None, *, bucket: int = GRID_BUCKET) -> DailyGrid:
 
 
 def fit_series_batch(y, valid, A, spec, scale, *, random_walk: bool = True, reml: bool = True,
-                     iterations: int = 40):
+                     iterations: int = 40, chunk=None):
     """Fit many series at once: one ``jax.vmap`` of :func:`fit_component` over the leading axis.
+
+    ``chunk`` (an int) runs the vmap over chunks of that many series in turn
+    (``jax.lax.map(batch_size=chunk)``): the reverse pass keeps about 150 numbers per series and
+    day, 4 MB per 10-year series, so a few thousand series at once need chunks on a small machine.
 
     Args:
       y: (B, T) m (any value where not valid).  valid: (B, T) bool.  A: (T, k) shared design.
@@ -218,11 +223,18 @@ def fit_series_batch(y, valid, A, spec, scale, *, random_walk: bool = True, reml
     th0, lo, hi = start_and_box(np.asarray(scale), kappa=spec.kappa, random_walk=random_walk)
     est = spec.kappa is None
     r, W, dg, Aj = jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid), jnp.asarray(A)
-    run = jax.vmap(lambda yy, vv, t0, l, h: fit_component(yy, vv, Aj, r, W, dg, t0, l, h, estimate_kappa=est,
-                                                          random_walk=random_walk, reml=reml,
-                                                          iterations=iterations))
-    return run(jnp.where(jnp.asarray(valid), jnp.asarray(y), 0.0), jnp.asarray(valid), jnp.asarray(th0),
-               jnp.asarray(lo), jnp.asarray(hi))
+    one = lambda yy, vv, t0, l, h: fit_component(yy, vv, Aj, r, W, dg, t0, l, h, estimate_kappa=est,  # noqa: E731
+                                                 random_walk=random_walk, reml=reml, iterations=iterations)
+    args = (jnp.where(jnp.asarray(valid), jnp.asarray(y), 0.0), jnp.asarray(valid), jnp.asarray(th0),
+            jnp.asarray(lo), jnp.asarray(hi))
+    if chunk is None:
+        return jax.vmap(one)(*args)
+    return _chunked(one, args, int(chunk))
+
+
+@partial(jax.jit, static_argnums=(0, 2))
+def _chunked(one, args, chunk):
+    return jax.lax.map(lambda a: one(*a), args, batch_size=chunk)
 
 
 class StationFit(NamedTuple):
