@@ -18,10 +18,10 @@ gives the trajectory parameters and their covariance (A~^T A~)^-1, and the log-l
   ln L   = -1/2 [N ln 2 pi + sum ln S_t + |y~ - A~ beta|^2]         (ML, regression profiled out)
   ln L_R = ln L - 1/2 ln det(A~^T A~)                               (REML, Hector's default)
 
-The noise parameters theta = (ln sigma_w, ln sigma_pl, ln sigma_rw[, kappa]) maximise ln L_R by a
-damped Newton iteration with the exact gradient and Hessian (``jax.hessian`` through the filter),
-projected on a box whose edges are reported; an estimate on an edge is flagged. Everything is a
-pure function of arrays: ``jax.vmap`` fits many stations (or components) at once.
+The noise parameters theta = (ln sigma_w, ln sigma_pl, ln sigma_rw[, kappa]) maximise ln L_R by
+BFGS with the exact gradient (reverse mode through the filter scan) and an Armijo backtracking
+step, projected on a box whose edges are reported; an estimate on an edge is flagged. Everything
+is a pure function of arrays: ``jax.vmap`` fits many stations (or components) at once.
 """
 
 from __future__ import annotations
@@ -109,13 +109,13 @@ class NoiseFit(NamedTuple):
       lo, hi: (4,) the box of theta.  at_lower, at_upper: (4,) bool, estimate within
         :data:`AT_BOUND_TOL` of an edge (free parameters only).
       free: (4,) bool, the parameters estimated.
-      theta_sigma: (4,) standard deviations of theta from the inverse Hessian of ln L (free,
-        not at a bound; NaN else).
+      theta_sigma: (4,) approximate standard deviations of theta from the BFGS inverse-Hessian
+        approximation at the end (free, not at a bound; NaN else): a rough guide only.
       beta: (k,) trajectory parameters (offset m, rate m/yr, seasonal m, steps m).
       beta_cov: (k, k) their covariance (GLS with the fitted noise), m^2 and (m/yr)^2.
       loglik: ln L (ML), loglik_reml: ln L_R at the estimate.
       grad_norm: largest |d ln L_R / d theta| over the free parameters not at a bound.
-      iterations: accepted Newton steps.
+      iterations: accepted BFGS steps.
       residuals: (T,) y - A beta (NaN where masked), m.
     """
 
@@ -229,16 +229,17 @@ def fit_component(y, valid, A, r, W, d_grid, theta0, lo, hi, *, estimate_kappa=F
                   reml=True, iterations: int = 40) -> NoiseFit:
     """Maximum-likelihood noise parameters and GLS trajectory of one component (vmappable).
 
-    A damped Newton iteration on -ln L_R with the exact gradient and Hessian (through the Kalman
-    filter), eigenvalues of the Hessian replaced by their magnitudes (so each step descends),
-    Levenberg-Marquardt damping adapted on success or failure, projection on the box [lo, hi]
-    (parameters at an edge whose gradient points out of the box are held there).
+    BFGS on -ln L_R with the exact gradient (through the Kalman-filter whitening), a fixed number
+    of ``lax.scan`` steps (so ``vmap`` batches need no while loop): each step tries the
+    (projected) quasi-Newton direction, at most 2 in ln sigma, with a step length doubled after an
+    accepted (Armijo) step and quartered after a rejected one; parameters at an edge of the box
+    [lo, hi] whose gradient points out of it are held there.
 
     Args:
       y: (T,) m.  valid: (T,) bool.  A: (T, k).  r, W, d_grid: the Gauss-Markov sum (see
         :func:`component_loglik`).  theta0, lo, hi: (4,) start and box (a parameter with lo == hi
         is fixed).
-      estimate_kappa, random_walk, reml: static model choices.  iterations: Newton steps (static).
+      estimate_kappa, random_walk, reml: static model choices.  iterations: BFGS steps (static).
     Returns:
       :class:`NoiseFit`.
     """
