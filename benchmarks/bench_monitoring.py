@@ -209,6 +209,8 @@ def main():
     ap.add_argument("--part", choices=["real", "kappa", "mc", "batch", "all"], default="all")
     ap.add_argument("--json")
     ap.add_argument("--stations", type=int, default=1000)
+    ap.add_argument("--days", type=int, default=3653, help="length of the batch part's series")
+    ap.add_argument("--chunk", type=int, default=250, help="series per vmap chunk in the batch part")
     a = ap.parse_args()
     res = {}
     if a.part in ("real", "all"):
@@ -219,7 +221,7 @@ def main():
         res["mc"] = part_mc()
         print(report({"mc": res["mc"]}), flush=True)
     if a.part in ("batch", "all"):
-        res["batch"] = part_batch(stations=a.stations)
+        res["batch"] = part_batch(stations=a.stations, n=a.days, chunk=a.chunk)
     print(report(res))
     if a.json:
         Path(a.json).write_text(json.dumps(res, indent=1))
