@@ -86,12 +86,12 @@ def test_rates_and_sigmas_agree_with_hector_on_a_real_series(lhas):
 
 
 def test_95_percent_rate_interval_covers_the_truth_in_simulated_flicker_series():
-    """40 simulated 4-year series (white 2 mm + flicker 6 mm/yr^0.25, 10 % missing days, known rate):
+    """40 simulated 3-year series (white 2 mm + flicker 6 mm/yr^0.25, 10 % missing days, known rate):
     the rate errors over their coloured-noise sigmas have a spread near 1 (0.7 .. 1.4) and the 95 %
     interval covers the truth in >= 34 of 40 (a binomial 95 % leaves fewer than 34 with probability
     2e-3); the white-noise sigmas are too small by far (spread > 3). The 500-series version is
     benchmarks/bench_monitoring.py."""
-    B, n = 40, 1461
+    B, n = 40, 1096
     rate = 3.0 * MM_PER_YEAR
     keys = jax.random.split(jax.random.PRNGKey(19), B)
     sim = jax.vmap(lambda k: mon.simulate_powerlaw_series(k, n, rate=rate, sigma_white=2 * MM,
