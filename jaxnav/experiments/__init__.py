@@ -63,7 +63,8 @@ __all__ = [
     "CONFIGS", "EXPERIMENT", "FILTERS", "Problem", "S0Setup", "S0_FILTERS", "S0_LOSSES", "S0_PARAMS", "S1Settings",
     "S1_PUBLISHED", "cut_timeline", "filter_params", "format_filter_family", "format_s0", "format_s1_tables",
     "format_sweep", "format_tune", "inflated_states", "load_config", "load_experiment", "rules", "run_filter_family",
-    "run_monitor_files", "run_monitor_simulation", "run_monitor_velocities", "station_record", "run_s0", "run_s1_simulation", "run_sweep", "run_tune",
+    "run_monitor_files", "run_monitor_simulation", "run_monitor_velocities", "station_record", "run_s0",
+    "run_s1_simulation", "run_sweep", "run_tune",
     "s0_measurements", "s0_metrics", "s0_rule", "s1_tables", "scenario",
 ]
 __all__ += [

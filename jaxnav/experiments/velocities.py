@@ -43,7 +43,8 @@ def station_record(fit, *, file, figure=None) -> dict:
             if not nf.free[c, j]:
                 continue
             f = (1.0, 365.25 ** (-kap / 4.0), math.sqrt(365.25))[j] if j < 3 else 1.0  # per day -> per yr units
-            bounds[nm] = [float(lo[j]), float(hi[j])] if j == 3 else [math.exp(lo[j]) * f / MM, math.exp(hi[j]) * f / MM]
+            bounds[nm] = ([float(lo[j]), float(hi[j])] if j == 3
+                          else [math.exp(lo[j]) * f / MM, math.exp(hi[j]) * f / MM])
         at = [names[j] + (" (upper)" if nf.at_upper[c, j] else " (lower)")
               for j in range(4) if nf.at_lower[c, j] or nf.at_upper[c, j]]
         noise[comp] = dict(

@@ -438,7 +438,8 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
             if j == 3:
                 bounds = f"[{lo:.3f}, {hi:.3f}]"
             elif j == 2:
-                bounds = f"[{np.exp(lo) * np.sqrt(365.25) * 1e3:.3g}, {np.exp(hi) * np.sqrt(365.25) * 1e3:.3g}] mm/sqrt(yr)"
+                f = np.sqrt(365.25) * 1e3  # per-day step (m) -> mm/sqrt(yr)
+                bounds = f"[{np.exp(lo) * f:.3g}, {np.exp(hi) * f:.3g}] mm/sqrt(yr)"
             elif j == 1:
                 d = -0.5 * fit.theta[c, 3]
                 f = 365.25 ** (d / 2) * 1e3

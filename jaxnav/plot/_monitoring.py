@@ -215,7 +215,8 @@ def plot_station_fit(fit, path):
         ax[2, c].loglog(f, p, "-", lw=0.7, color="0.4", label="residuals (Welch)")
         ax[2, c].loglog(f, _model_psd(f, fit, c), "-", lw=1.5, color="tab:red", label="fitted noise model")
         kap = float(fit.kappa[c])
-        ax[2, c].set_title(f"white {fit.white_sigma[c] / MM:.2f} mm, power law {fit.powerlaw_amplitude[c] * YEAR ** (-kap / 4) / MM:.2f} "
+        amp = fit.powerlaw_amplitude[c] * YEAR ** (-kap / 4) / MM
+        ax[2, c].set_title(f"white {fit.white_sigma[c] / MM:.2f} mm, power law {amp:.2f} "
                            f"mm/yr^{-kap / 4:.2f} (kappa {kap:.2f})", fontsize=8)
         ax[2, c].set_xlabel("frequency, cycles/yr")
         ax[2, c].set_ylabel("PSD, mm^2/(cycle/yr)")
