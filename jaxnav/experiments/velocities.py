@@ -122,7 +122,7 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
                       residual_k=residual_k, detect_steps=detect, ggm_1mphi=6.9e-6),
         stations={})
     lines = [f"{'station':<8}{'axis':<6}{'velocity mm/yr':>15}{'+-1 sigma':>10}{'(white only)':>13}"
-             f"{'white mm':>9}{'PL amp':>8}{'kappa':>7}{'RW mm/vyr':>10}{'outliers':>9}"]
+             f"{'white mm':>9}{'PL amp':>8}{'kappa':>7}{'RW mm/yr^.5':>12}{'outliers':>9}"]
     for f, s in zip(files, series):
         fit = fit_station(s, steps=steps.get(s.station, ()), detect=detect, kappa=kappa, random_walk=random_walk,
                           reml=reml, screen=screen, sigma_factor=sigma_factor, residual_k=residual_k)
@@ -137,7 +137,7 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
                          f"{rec['velocity_sigma_mm_per_yr'][comp]:>10.2f}"
                          f"{rec['velocity_sigma_white_noise_only_mm_per_yr'][comp]:>13.3f}{n['white_mm']:>9.2f}"
                          f"{n['powerlaw_amplitude']:>8.2f}{n['spectral_index']:>7.2f}"
-                         f"{n['random_walk_mm_per_sqrt_yr']:>10.2f}{no:>9d}")
+                         f"{n['random_walk_mm_per_sqrt_yr']:>12.2f}{no:>9d}")
         for st in rec["steps"]:
             lines.append(f"{'':<8}step {st['date']} ({st['source']}): " + ", ".join(
                 f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm" for k, v in st["size_mm"].items()))

@@ -216,8 +216,9 @@ def plot_station_fit(fit, path):
         ax[2, c].loglog(f, _model_psd(f, fit, c), "-", lw=1.5, color="tab:red", label="fitted noise model")
         kap = float(fit.kappa[c])
         amp = fit.powerlaw_amplitude[c] * YEAR ** (-kap / 4) / MM
-        ax[2, c].set_title(f"white {fit.white_sigma[c] / MM:.2f} mm, power law {amp:.2f} "
-                           f"mm/yr^{-kap / 4:.2f} (kappa {kap:.2f})", fontsize=8)
+        rw = fit.random_walk[c] * np.sqrt(YEAR) / MM
+        ax[2, c].set_title(f"white {fit.white_sigma[c] / MM:.2f} mm, power law {amp:.2f} mm/yr^{-kap / 4:.2f}\n"
+                           f"(kappa {kap:.2f}), random walk {rw:.2f} mm/sqrt(yr)", fontsize=8)
         ax[2, c].set_xlabel("frequency, cycles/yr")
         ax[2, c].set_ylabel("PSD, mm^2/(cycle/yr)")
         ax[2, c].legend(fontsize=7)
