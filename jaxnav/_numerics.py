@@ -254,6 +254,8 @@ def _mm_batchable(A, B):
 
 @_mm_batchable.def_vmap
 def _mm_batched(axis_size, in_batched, A, B):
+    if not any(in_batched):  # nested transforms (jacfwd of vmap) may call the rule with nothing batched
+        return _fused_mm(A, B), False
     kernel = _fused_mm if axis_size < DOT_FROM_BATCH else jnp.matmul
     return jax.vmap(kernel, in_axes=tuple(0 if b else None for b in in_batched))(A, B), True
 

@@ -111,3 +111,18 @@ def ppm_to_ratio(x):
 def ratio_to_ppm(x):
     """Dimensionless scale factor -> parts per million."""
     return x / PPM
+
+def powerlaw_amplitude_to_mm_yr(a, kappa):
+    """Power-law noise amplitude m s^(kappa/4) (SI) -> mm/yr^(-kappa/4), Hector's unit (Williams 2003).
+
+    Args:
+      a: amplitude, m / s^(-kappa/4).  kappa: spectral index (-1 flicker: mm/yr^0.25).
+    """
+    import numpy as _np
+
+    return _np.asarray(a) * YEAR ** (-_np.asarray(kappa) / 4.0) / MM
+
+
+def random_walk_to_mm_per_sqrt_yr(q):
+    """Random-walk amplitude m/sqrt(s) -> mm/sqrt(yr)."""
+    return q * math.sqrt(YEAR) / MM

@@ -1,30 +1,53 @@
-"""``jaxnav monitor``: S1 deformation monitoring on daily station files or on simulated 1 Hz stations.
+"""``jaxnav monitor``: station velocities with coloured noise on daily files, or S1 on simulated stations.
 
-* ``jaxnav monitor FILES... --out DIR``: each file (NGL ``.tenv3``, SIO ``.neu``, ``.col`` table)
-  is a station: velocities, one-day forecasts and S1 statistics
-  (:func:`jaxnav.experiments.run_monitor_files`).
+* ``jaxnav monitor FILES... --out DIR``: each file (NGL ``.tenv3``, SIO ``.neu``, ``.col`` table,
+  EarthScope/PBO ``.pos``) is a station: outlier screening, trajectory model (offset, rate,
+  annual, semi-annual, steps) with white + flicker (+ random-walk) noise fitted by maximum
+  likelihood, velocities and their uncertainties, one figure per station
+  (:func:`jaxnav.experiments.run_monitor_velocities`). ``--s1`` adds S1's adaptive-filter
+  forecasts and statistics of the same files (:func:`jaxnav.experiments.run_monitor_files`).
 * ``jaxnav monitor --simulate --out DIR``: the S1 experiment on simulated stations, S1's
   Tables 1-6 (:func:`jaxnav.experiments.run_monitor_simulation`).
 
-Both write ``monitor.json`` (statistics) and PNG figures to ``--out``.
+Both write ``monitor.json`` and PNG figures to ``--out``.
 """
 
 from __future__ import annotations
+
+import datetime as _dt
+import re
+import sys
 
 from jaxnav.cli._common import MAX_SEEDS, UsageError, float_range, input_file, int_range, prepare_out
 
 
 def register(subparsers):
     """Add the ``monitor`` subcommand; returns its parser."""
-    p = subparsers.add_parser("monitor", help="S1 deformation monitoring: daily station files (.tenv3, .neu, .col) "
-                                              "-> velocities, standard vs adaptive forecasts, S1 statistics; "
-                                              "or --simulate")
-    p.add_argument("files", nargs="*", help="daily station series, one station per file")
+    p = subparsers.add_parser("monitor", help="daily station files (.tenv3, .neu, .col, PBO .pos) -> velocities "
+                                              "with coloured-noise uncertainties (and, with --s1, S1's adaptive "
+                                              "forecasts); or --simulate (S1 on simulated stations)")
+    p.add_argument("files", nargs="*", help="daily series, one station per file")
     p.add_argument("--out", default="out/monitor", help="output folder; default out/monitor")
+    p.add_argument("--step", action="append", default=[], metavar="STATION:DATE",
+                   help="a known step (antenna change) at DATE (YYYY-MM-DD or decimal year) for STATION; "
+                        "repeat for more")
+    p.add_argument("--detect-steps", type=int_range(0, 10), default=0,
+                   help="detect up to this many further steps per station, 0 .. 10; default 0")
+    p.add_argument("--kappa", default="-1",
+                   help="spectral index of the power-law noise in (-2, 0) (-1 flicker, the default) or "
+                        "'estimate'")
+    p.add_argument("--no-random-walk", action="store_true", help="white + power-law noise only")
+    p.add_argument("--ml", action="store_true", help="plain maximum likelihood instead of REML (Hector's default)")
+    p.add_argument("--no-screen", action="store_true", help="no outlier screening")
+    p.add_argument("--sigma-factor", type=float_range(1.0, lo_open=True), default=5.0,
+                   help="reject days whose formal sigma exceeds this x the median, > 1; default 5")
+    p.add_argument("--residual-k", type=float_range(0.0, lo_open=True), default=5.0,
+                   help="reject values beyond this x the robust residual scale, > 0; default 5")
+    p.add_argument("--s1", action="store_true", help="also run S1's adaptive-filter forecasts on the files")
     p.add_argument("--simulate", action="store_true", help="the S1 experiment on simulated 1 Hz stations")
     p.add_argument("--period", type=int_range(1), default=365,
-                   help="epochs per statistics period for files, >= 1; default 365")
-    p.add_argument("--robust", action="store_true", help="add the robust filters (IGG-III, Yang)")
+                   help="epochs per statistics period for --s1, >= 1; default 365")
+    p.add_argument("--robust", action="store_true", help="add the robust filters (IGG-III, Yang) to S1")
     p.add_argument("--periods", type=int_range(1, MAX_SEEDS), default=60, help="simulated periods, >= 1; default 60")
     p.add_argument("--stations", type=int_range(1, 1000), default=2, help="simulated stations, 1 .. 1000; default 2")
     p.add_argument("--epochs", type=int_range(2, 10**6), default=3600,
@@ -37,15 +60,54 @@ def register(subparsers):
     return p
 
 
+def _epoch(text: str) -> float:
+    """YYYY-MM-DD or a decimal year -> s since J2000 (UsageError otherwise)."""
+    from jaxnav.units import YEAR
+
+    try:
+        if re.fullmatch(r"\d{4}-\d{2}-\d{2}", text):
+            d = _dt.date.fromisoformat(text)
+            return (d - _dt.date(2000, 1, 1)).days * 86400.0 - 43200.0
+        y = float(text)
+    except ValueError:
+        raise UsageError(f"--step: cannot read the date {text!r} (YYYY-MM-DD or a decimal year)") from None
+    if not 1950.0 <= y <= 2150.0:
+        raise UsageError(f"--step: decimal year {text!r} is outside 1950 .. 2150")
+    return (y - 2000.0) * YEAR
+
+
+def _steps(items) -> dict:
+    out = {}
+    for it in items:
+        if ":" not in it:
+            raise UsageError(f"--step expects STATION:DATE, got {it!r}")
+        st, date = it.split(":", 1)
+        out.setdefault(st.strip().upper(), []).append(_epoch(date.strip()))
+    return out
+
+
+def _kappa(text: str):
+    if text.strip().lower() in ("estimate", "estimated", "free"):
+        return None
+    try:
+        k = float(text)
+    except ValueError:
+        raise UsageError(f"--kappa: expected a number in (-2, 0) or 'estimate', got {text!r}") from None
+    if not -2.0 < k < 0.0:
+        raise UsageError(f"--kappa {text}: the spectral index must lie in (-2, 0) (the random walk is its own term)")
+    return k
+
+
 def run(args) -> int:
-    """Process the files (or simulate), print the statistics, write monitor.json and figures into ``--out``."""
-    from jaxnav.experiments import run_monitor_files, run_monitor_simulation
+    """Process the files (or simulate), print the results, write monitor.json and figures into ``--out``."""
+    from jaxnav.experiments import run_monitor_simulation, run_monitor_velocities
 
     if not args.simulate and not args.files:
-        raise UsageError("give daily series files (.tenv3, .neu, .col) or --simulate")
+        raise UsageError("give daily series files (.tenv3, .neu, .col, .pos) or --simulate")
     if args.simulate and args.files:
         raise UsageError("give either daily series files or --simulate, not both")
     files = [input_file(f, "FILES") for f in args.files]
+    steps, kappa = _steps(args.step), _kappa(args.kappa)
     out = prepare_out(args.out)
     if args.simulate:
         res = run_monitor_simulation(out, periods=args.periods, stations=args.stations, epochs=args.epochs,
@@ -55,7 +117,10 @@ def run(args) -> int:
         print(f"\nwrote {out / 'monitor.json'}, {out / 's1_statistics.png'}, {out / 's1_period.png'} "
               f"({res['wall_time_s']:.1f} s)")
         return 0
-    res = run_monitor_files(files, out, period=args.period, robust=args.robust)
+    res = run_monitor_velocities(files, out, steps=steps, detect=args.detect_steps, kappa=kappa,
+                                 random_walk=not args.no_random_walk, reml=not args.ml, screen=not args.no_screen,
+                                 sigma_factor=args.sigma_factor, residual_k=args.residual_k, s1=args.s1,
+                                 period=args.period, robust=args.robust, command="jaxnav " + " ".join(sys.argv[1:]))
     print(res["text"])
-    print(f"wrote {out / 'monitor.json'} and {len(args.files)} figure(s) in {out}")
+    print(f"wrote {out / 'monitor.json'} and {len(args.files)} figure(s) in {out} ({res['wall_time_s']:.1f} s)")
     return 0

@@ -9,6 +9,8 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
   an unmodelled burst (``jaxnav demo-filters``): :func:`run_filter_family`.
 * :mod:`~jaxnav.experiments.s1`: S1 deformation monitoring on simulated stations or daily files
   (``jaxnav monitor``): :func:`run_s1_simulation`, :func:`s1_tables`, :func:`run_monitor_files`.
+* :mod:`~jaxnav.experiments.velocities`: station velocities with coloured noise on daily files
+  (``jaxnav monitor FILES``): :func:`run_monitor_velocities`.
 * :mod:`~jaxnav.experiments.tuning`: sweeps and gradient tuning from a config
   (``jaxnav sweep`` / ``jaxnav tune``): :func:`load_config`, :func:`run_sweep`, :func:`run_tune`.
 * :mod:`~jaxnav.experiments.s2`: S2 RTK point series from files or the simulated survey
@@ -42,6 +44,7 @@ from jaxnav.experiments.s0 import (
     s0_rule,
     scenario,
 )
+from jaxnav.experiments.velocities import run_monitor_velocities, station_record
 from jaxnav.experiments.s1 import (
     S1_PUBLISHED,
     S1Settings,
@@ -66,7 +69,8 @@ __all__ = [
     "CONFIGS", "EXPERIMENT", "FILTERS", "Problem", "S0Setup", "S0_FILTERS", "S0_LOSSES", "S0_PARAMS", "S1Settings",
     "S1_PUBLISHED", "cut_timeline", "filter_params", "format_filter_family", "format_s0", "format_s1_tables",
     "format_sweep", "format_tune", "inflated_states", "load_config", "load_experiment", "rules", "run_filter_family",
-    "run_monitor_files", "run_monitor_simulation", "run_s0", "run_s1_simulation", "run_sweep", "run_tune",
+    "run_monitor_files", "run_monitor_simulation", "run_monitor_velocities", "station_record", "run_s0",
+    "run_s1_simulation", "run_sweep", "run_tune",
     "s0_measurements", "s0_metrics", "s0_rule", "s1_tables", "scenario",
 ]
 __all__ += [

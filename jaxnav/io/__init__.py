@@ -1,7 +1,7 @@
 """File readers (host side): RTKLIB solutions, raw IMU logs with RTKLIB time tags, daily station
-series (NGL tenv3, SIO .neu, .col tables), TOML configuration files; the walk_0827 set; S3 stop
-lists and S2 result tables (readers and writers); KF-GINS IMU/GNSS text files and generic CSV
-tables with a column map and units (issue 18).
+series (NGL tenv3, SIO .neu, .col tables, EarthScope/PBO .pos), TOML configuration files; the walk_0827
+set; S3 stop lists and S2 result tables (readers and writers); KF-GINS IMU/GNSS text files and generic
+CSV tables with a column map and units (issue 18).
 
 Errors are :class:`ReaderError` (a ValueError) naming the file and line; units are converted to SI
 here, at the edge. :func:`write_json` is the one strict JSON writer (non-finite numbers as null
@@ -11,7 +11,7 @@ with a reason).
 from jaxnav._config import load_toml, loads_toml  # the one TOML parser sits below every layer (sim reads scenarios)
 from jaxnav.io._errors import ReaderError
 from jaxnav.io._json import json_ready, write_json
-from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_tenv3, year_to_seconds
+from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_pbo_pos, read_tenv3, year_to_seconds
 from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, read_rtklib_imu, read_rtklib_tag
 from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
 from jaxnav.io._rtklib import GPS_EPOCH, PosSolution, read_pos

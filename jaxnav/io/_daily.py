@@ -1,4 +1,5 @@
-"""Readers for daily GNSS station position series (host side): NGL tenv3, SIO .neu, .col tables.
+"""Readers for daily GNSS station position series (host side): NGL tenv3, SIO .neu, .col tables,
+EarthScope/PBO (GAGE) ``.pos``.
 
 Every reader returns a :class:`DailySeries` in SI units (m, s) with the local east, north, up
 components in that order, whatever the file's order. Errors are :class:`jaxnav.io.ReaderError`
@@ -31,7 +32,7 @@ class DailySeries(NamedTuple):
 
     Attributes:
       station: station name (from the file or the file name).
-      path: the file read.  fmt: "tenv3", "neu" or "col".
+      path: the file read.  fmt: "tenv3", "neu", "col" or "pbo".
       t: (N,) s since J2000.0 (strictly increasing).
       year: (N,) decimal year, as in the file (or from the MJD for tenv3).
       enu: (N, 3) east, north, up offsets, m. For tenv3 they are relative to ``origin``.
@@ -43,6 +44,8 @@ class DailySeries(NamedTuple):
         (SIO .neu "slope" lines), else None.
       reference_velocity_sigma: (3,) its standard deviation, m/s, else None.
       n_masked: number of position components the file gave as ``nan`` (NaN in ``enu``).
+      xyz: (N, 3) ECEF X, Y, Z, m, where the file gives them (PBO .pos), else None.
+      cov_xyz: (N, 3, 3) their covariance, m^2 (PBO .pos), else None.
     """
 
     station: str
@@ -57,6 +60,8 @@ class DailySeries(NamedTuple):
     reference_velocity: Optional[Any] = None
     reference_velocity_sigma: Optional[Any] = None
     n_masked: int = 0
+    xyz: Optional[Any] = None
+    cov_xyz: Optional[Any] = None
 
 
 def year_to_seconds(year):
@@ -325,14 +330,95 @@ def read_col(path) -> DailySeries:
                        n_masked=n_masked)
 
 
+_PBO_TITLE = "PBO Station Position Time Series"
+
+
+def read_pbo_pos(path) -> DailySeries:
+    """Read an EarthScope/PBO (GAGE, UNAVCO) daily position series ``.pos`` (format version 1.1).
+
+    Header lines up to ``End Field Description`` (the station from ``4-character ID:``), one
+    line starting with ``*`` naming the fields, then records of 25 fields: YYYYMMDD, HHMMSS, MJD,
+    X, Y, Z, Sx, Sy, Sz, Rxy, Rxz, Ryz (ECEF, m), NLat, Elong (deg), Height (m), dN, dE, dU
+    (from the header's NEU reference position, m), Sn, Se, Su, Rne, Rnu, Reu, Soln. The local
+    offsets come with their full covariance (sigmas and the three correlations, reordered to
+    east, north, up); the ECEF coordinates and their full covariance are kept in
+    :attr:`DailySeries.xyz` and :attr:`DailySeries.cov_xyz`. Time is taken from the MJD.
+
+    Args:
+      path: file path.
+    Returns:
+      :class:`DailySeries` (fmt "pbo"), ``origin`` zeros (the offsets are the file's).
+    Raises:
+      ReaderError: naming file and line of a first line that is not the PBO title (e.g. an
+        RTKLIB .pos: use ``jaxnav rtk``), a record with fewer than 24 fields, a non-numeric field,
+        a non-UTF-8 byte, an infinite or impossible value, a bad sigma, a correlation outside
+        [-1, 1] or time not increasing; or no records. ``nan`` offsets are masked and counted.
+    """
+    path = pathlib.Path(path)
+    rows, lines, station, in_header, first = [], [], None, True, True
+    for lineno, line in text_lines(path):
+        s = line.strip()
+        if first:
+            first = False
+            if not s.startswith(_PBO_TITLE):
+                raise _err(path, lineno, f"not an EarthScope/PBO daily .pos file: the first line should be "
+                                         f"'{_PBO_TITLE}' (an RTKLIB solution .pos goes to `jaxnav rtk`)")
+            continue
+        if not s:
+            continue
+        if in_header:
+            if s.startswith("4-character ID"):
+                station = s.split(":", 1)[1].strip() or None
+            if s.startswith("*") or s.startswith("End Field Description"):
+                in_header = not s.startswith("*")
+            continue
+        w = s.split()
+        if len(w) < 24:
+            raise _err(path, lineno, f"expected 25 fields (YYYYMMDD HHMMSS MJD X Y Z Sx Sy Sz Rxy Rxz Ryz "
+                                     f"NLat Elong Height dN dE dU Sn Se Su Rne Rnu Reu Soln), found {len(w)}")
+        rows.append(_floats(w[2:24], path, lineno, "the numeric fields"))
+        lines.append(lineno)
+    if not rows:
+        raise ReaderError(path, None, "no data records")
+    a = np.asarray(rows)  # columns: 0 MJD, 1-3 XYZ, 4-6 sXYZ, 7-9 rXY rXZ rYZ, 10-12 lat lon h, 13-15 dN dE dU,
+    #                        16-18 sN sE sU, 19-21 rNE rNU rEU
+    mjd = a[:, 0]
+    _check_times(mjd, lines, path, _MJD_RANGE, "MJD")
+    t = (mjd - _MJD_J2000) * 86400.0
+    _check_increasing(t, lines, path)
+    enu = a[:, [14, 13, 15]]
+    corr_enu = np.stack([a[:, 19], a[:, 21], a[:, 20]], axis=1)  # en = ne, eu, nu
+    sig, corr, n_masked = _masked_positions(enu, a[:, [17, 16, 18]], lines, path, (PLANE_MAX_M,) * 3, corr_enu)
+    xyz = a[:, 1:4]
+    bad = np.flatnonzero(~np.all(np.abs(xyz) <= PLANE_MAX_M, axis=1))
+    if bad.size:
+        raise _err(path, lines[int(bad[0])], f"X, Y, Z = {xyz[bad[0]].tolist()} m are not finite or beyond "
+                                             f"{PLANE_MAX_M:g} m")
+    sxyz, cxyz, _ = _masked_positions(np.zeros_like(xyz), a[:, 4:7], lines, path, (1.0,) * 3, a[:, 7:10])
+    for j, name, lim in ((10, "latitude", 90.0), (11, "longitude", 360.0)):
+        bad = np.flatnonzero(~(np.abs(a[:, j]) <= lim))
+        if bad.size:
+            raise _err(path, lines[int(bad[0])], f"{name} = {float(a[bad[0], j]):g} deg is beyond +-{lim:g} deg")
+    bad = np.flatnonzero(~((a[:, 12] >= HEIGHT_RANGE_M[0]) & (a[:, 12] <= HEIGHT_RANGE_M[1])))
+    if bad.size:
+        raise _err(path, lines[int(bad[0])], f"height = {float(a[bad[0], 12]):g} m is outside {list(HEIGHT_RANGE_M)} m")
+    lon = (a[:, 11] + 180.0) % 360.0 - 180.0
+    llh = np.stack([a[:, 10] * DEG, lon * DEG, a[:, 12]], axis=1)
+    year = T0_YEAR + t / YEAR
+    return DailySeries(station=station or path.name[:4].upper(), path=str(path), fmt="pbo", t=t, year=year,
+                       enu=enu, cov=_cov(sig, corr), origin=np.zeros(3), llh=llh, n_masked=n_masked, xyz=xyz,
+                       cov_xyz=_cov(sxyz, cxyz))
+
+
 def read_daily(path) -> DailySeries:
-    """Read a daily series, choosing the reader by suffix: ``.tenv3``, ``.neu``, ``.col``.
+    """Read a daily series, choosing the reader by suffix: ``.tenv3``, ``.neu``, ``.col``, ``.pos``
+    (EarthScope/PBO daily series).
 
     Raises:
       ReaderError: unknown suffix (naming the file), or any reader error.
     """
     path = pathlib.Path(path)
-    readers = {".tenv3": read_tenv3, ".neu": read_neu, ".col": read_col}
+    readers = {".tenv3": read_tenv3, ".neu": read_neu, ".col": read_col, ".pos": read_pbo_pos}
     if path.suffix.lower() not in readers:
         raise ReaderError(path, None, f"unknown daily-series format {path.suffix!r}; expected one of "
                                       f"{sorted(readers)}")

@@ -136,3 +136,92 @@ def plot_daily_velocity(series, velocity, path, *, forecasts=None):
     fig.suptitle(f"{series.station}: daily positions ({series.fmt}), velocity estimates")
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _model_psd(f_cpy, fit, c):
+    """One-sided PSD (mm^2/cpy) of the fitted noise of component c at frequencies f (cycles/yr)."""
+    dt = 1.0 / 365.25  # yr
+    th = np.asarray(fit.noise.theta[c])
+    sw, spl, srw, kappa = np.exp(th[0]) / MM, np.exp(th[1]) / MM, np.exp(th[2]) / MM, th[3]
+    d = -0.5 * kappa
+    phi = 1.0 - 6.9e-6
+    z = np.abs(1.0 - phi * np.exp(-2j * np.pi * f_cpy * dt)) ** 2
+    pl = 2.0 * spl**2 * dt / z**d
+    rw = 2.0 * srw**2 * dt / np.abs(1.0 - np.exp(-2j * np.pi * f_cpy * dt)) ** 2 if np.any(fit.random_walk) else 0.0
+    return 2.0 * sw**2 * dt + pl + rw
+
+
+def _residual_psd(res_mm, valid, segments: int = 4):
+    """Welch periodogram (mm^2/cpy, one-sided; Hann, 50 % overlap) of daily residuals with gaps set to
+    zero and the power divided by the share of days present (an approximation for gappy series)."""
+    x = np.where(valid, res_mm, 0.0)
+    n = len(x)
+    L = min(n, max(64, 2 * n // (segments + 1)))  # ``segments`` half-overlapping windows
+    step = max(1, L // 2)
+    win = np.hanning(L)
+    acc, k = 0.0, 0
+    for s in range(0, n - L + 1, step):
+        seg = x[s:s + L] - np.mean(x[s:s + L][valid[s:s + L]]) * valid[s:s + L] if valid[s:s + L].any() else x[s:s + L]
+        share = max(valid[s:s + L].mean(), 1e-3)
+        F = np.fft.rfft(seg * win)
+        acc = acc + np.abs(F) ** 2 / (np.sum(win**2) * share)
+        k += 1
+    dt = 1.0 / 365.25
+    psd = 2.0 * dt * acc / max(k, 1)
+    f = np.fft.rfftfreq(L, d=dt)
+    return f[1:], psd[1:]
+
+
+def plot_station_fit(fit, path):
+    """Daily series with the fitted trajectory, residuals, and residual spectrum against the fitted noise.
+
+    Args:
+      fit: :class:`jaxnav.monitoring.StationFit`.
+      path: PNG file.
+    Returns:
+      The figure (closed after saving).
+    """
+    g = fit.grid
+    n = g.n_days
+    yr = 2000.0 + g.t[:n] / YEAR
+    model = fit.A[:n] @ np.asarray(fit.noise.beta).T  # (n, 3)
+    fig, ax = plt.subplots(3, 3, figsize=(15, 10))
+    for c, name in enumerate(AXES):
+        v = g.valid[:n, c]
+        y = np.where(v, g.y[:n, c], np.nan)
+        off = np.nanmedian(y)
+        ax[0, c].plot(yr, (y - off) / MM, ".", ms=1.5, color="0.55", label="daily position")
+        ax[0, c].plot(yr, (model[:, c] - off) / MM, "-", lw=1.0, color="tab:red",
+                      label="trajectory model")
+        rej = [d for d in fit.screening.records if d["component"] == name]
+        if rej:
+            ry = np.array([d["decimal_year"] for d in rej])
+            rv = np.array([d["value_m"] for d in rej])
+            ax[0, c].plot(ry, (rv - off) / MM, "x", ms=3, color="tab:orange", label=f"rejected ({len(rej)})")
+        for ts in fit.steps:
+            for a in ax[:2, c]:
+                a.axvline(2000.0 + ts / YEAR, color="tab:purple", lw=0.8, ls="--")
+        vel, sd = fit.velocity[c] / MM_PER_YEAR, fit.velocity_sigma[c] / MM_PER_YEAR
+        ax[0, c].set_title(f"{fit.station} {name}: {vel:+.2f} +- {sd:.2f} mm/yr (95 %: +-{1.96 * sd:.2f})",
+                           fontsize=9)
+        ax[0, c].set_ylabel(f"{name}, mm")
+        ax[0, c].legend(fontsize=7, loc="best", markerscale=4)
+        res = np.where(v, g.y[:n, c] - model[:, c], np.nan) / MM
+        ax[1, c].plot(yr, res, ".", ms=1.5, color="0.4")
+        ax[1, c].axhline(0.0, color="k", lw=0.5)
+        ax[1, c].set_ylabel(f"{name} residual, mm")
+        ax[1, c].set_xlabel("year")
+        f, p = _residual_psd(np.nan_to_num(res), v)
+        ax[2, c].loglog(f, p, "-", lw=0.7, color="0.4", label="residuals (Welch)")
+        ax[2, c].loglog(f, _model_psd(f, fit, c), "-", lw=1.5, color="tab:red", label="fitted noise model")
+        kap = float(fit.kappa[c])
+        amp = fit.powerlaw_amplitude[c] * YEAR ** (-kap / 4) / MM
+        rw = fit.random_walk[c] * np.sqrt(YEAR) / MM
+        ax[2, c].set_title(f"white {fit.white_sigma[c] / MM:.2f} mm, power law {amp:.2f} mm/yr^{-kap / 4:.2f}\n"
+                           f"(kappa {kap:.2f}), random walk {rw:.2f} mm/sqrt(yr)", fontsize=8)
+        ax[2, c].set_xlabel("frequency, cycles/yr")
+        ax[2, c].set_ylabel("PSD, mm^2/(cycle/yr)")
+        ax[2, c].legend(fontsize=7)
+    fig.suptitle(f"{fit.station}: trajectory (offset, rate, annual, semi-annual, steps) with {fit.model}", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)

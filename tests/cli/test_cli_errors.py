@@ -172,6 +172,10 @@ CASES = [
     ("monitor stations 0", ["monitor", "--simulate", "--stations", "0"], ["--stations"]),
     ("monitor epochs 1", ["monitor", "--simulate", "--epochs", "1"], ["--epochs"]),
     ("monitor seed -1", ["monitor", "--simulate", "--seed", "-1"], ["--seed"]),
+    ("monitor kappa 0", ["monitor", "{tenv3_inf}", "--kappa", "0"], ["--kappa 0", "(-2, 0)"]),
+    ("monitor kappa word", ["monitor", "{tenv3_inf}", "--kappa", "pink"], ["--kappa", "'estimate'"]),
+    ("monitor step no station", ["monitor", "{tenv3_inf}", "--step", "2003.5"], ["--step", "STATION:DATE"]),
+    ("monitor step bad date", ["monitor", "{tenv3_inf}", "--step", "LHAS:2003-13-01"], ["--step", "2003-13-01"]),
     ("monitor files and simulate", ["monitor", "--simulate", "{tenv3_inf}"], ["not both"]),
     ("sweep missing config", ["sweep", "{tmp}/none.toml"], ["jaxnav sweep:", "none.toml", "no such config"]),
     ("sweep seeds 0", ["sweep", "{t_seeds0}"], ["t_seeds0.toml", "problem.seeds = 0"]),
@@ -300,8 +304,9 @@ def test_monitor_masks_and_reports_a_nan_east_value(tmp_path, capsys):
         raise AssertionError(f"{name} token in monitor.json")
 
     st = json.loads((tmp_path / "o/monitor.json").read_text(), parse_constant=no_constants)["stations"]["LHAS"]
-    assert st["masked_values"] == 1
-    assert all(v is not None and math.isfinite(v) for v in st["velocity_mm_per_yr"] + st["ls_slope_mm_per_yr"])
+    assert st["masked_values"] == 1 and st["days_used"]["east"] == st["days_used"]["north"] - 1
+    vals = list(st["velocity_mm_per_yr"].values()) + list(st["velocity_sigma_mm_per_yr"].values())
+    assert all(v is not None and math.isfinite(v) for v in vals)
 
 
 def test_a_value_error_from_inside_numpy_is_internal(monkeypatch, capsys):

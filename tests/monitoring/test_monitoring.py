@@ -124,18 +124,34 @@ def test_daily_velocity_bjfs_against_published_slopes():
 
 
 def test_cli_monitor_files(tmp_path):
-    """jaxnav monitor FILE --out DIR: velocities (filter = weighted LS = SIO's slopes), statistics JSON, figure."""
+    """jaxnav monitor FILE --out DIR --s1: labelled velocities with coloured-noise sigmas (near SIO's
+    published slopes), noise, seasonal terms, outliers, the station figure; and S1's adaptive-filter
+    results (filter = weighted LS = SIO's slopes, forecast statistics) under s1_adaptive_filter."""
     from jaxnav.cli import main
 
-    assert main(["monitor", str(DATA / "bjfsCleanUnf.neu"), "--out", str(tmp_path)]) == 0
+    assert main(["monitor", str(DATA / "bjfsCleanUnf.neu"), "--out", str(tmp_path), "--s1"]) == 0
     res = json.loads((tmp_path / "monitor.json").read_text())
     st = res["stations"]["BJFS"]
-    np.testing.assert_allclose(st["velocity_mm_per_yr"], st["ls_slope_mm_per_yr"], rtol=1e-6)
-    np.testing.assert_allclose(st["velocity_mm_per_yr"], st["published_mm_per_yr"], atol=0.25)
-    assert st["random_walk_psd_m2_per_s3"][0] > mon.PSD_GRID[0]  # the ML random walk is not the smallest
-    assert set(st["forecast_statistics"]) == {"standard", "adaptive"}
-    assert len(st["forecast_statistics"]["adaptive"]["m_P_mm"]) == len(np.arange(st["epochs"] - 1)) // 365
-    assert (tmp_path / "velocity_BJFS.png").stat().st_size > 10_000
+    v, sd = st["velocity_mm_per_yr"], st["velocity_sigma_mm_per_yr"]
+    assert set(v) == set(sd) == {"east", "north", "up"}
+    pub = [-10.5, 30.4, 2.4]  # SIO's header slopes n, e, u (mm/yr)
+    for comp, p in zip(("north", "east", "up"), pub):
+        assert abs(v[comp] - p) < 2.0 * sd[comp] + 0.2, (comp, v[comp], p)
+        assert sd[comp] > 4.0 * st["velocity_sigma_white_noise_only_mm_per_yr"][comp]
+        n = st["noise"][comp]
+        assert n["spectral_index"] == -1.0 and n["white_mm"] > 0 and n["powerlaw_amplitude"] > 0
+        assert n["powerlaw_amplitude_unit"] == "mm/yr^0.250" and "white_mm" in n["bounds"]
+        assert st["seasonal"][comp]["annual_amplitude_mm"] >= 0
+    assert st["seasonal"]["up"]["annual_amplitude_mm"] > 5.0  # BJFS's large annual height cycle
+    assert st["outliers"]["count"] == len(st["outliers"]["list"]) == sum(st["outliers"]["by_reason"].values())
+    assert (tmp_path / "BJFS_fit.png").stat().st_size > 10_000
+    s1 = st["s1_adaptive_filter"]
+    np.testing.assert_allclose(s1["velocity_mm_per_yr"], s1["ls_slope_mm_per_yr"], rtol=1e-6)
+    np.testing.assert_allclose(s1["velocity_mm_per_yr"], s1["published_mm_per_yr"], atol=0.25)
+    assert s1["random_walk_psd_m2_per_s3"][0] > mon.PSD_GRID[0]  # the ML random walk is not the smallest
+    assert set(s1["forecast_statistics"]) == {"standard", "adaptive"}
+    assert len(s1["forecast_statistics"]["adaptive"]["m_P_mm"]) == len(np.arange(s1["epochs"] - 1)) // 365
+    assert (tmp_path / "s1/velocity_BJFS.png").stat().st_size > 10_000
     assert main(["monitor", "--out", str(tmp_path)]) == 2  # no files, no --simulate: one-line usage error
 
 

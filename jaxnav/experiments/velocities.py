@@ -1,0 +1,160 @@
+"""Station velocities with coloured noise on daily files (``jaxnav monitor FILES``), issue 19.
+
+:func:`run_monitor_velocities` reads each file, screens outliers, fits the trajectory model with
+white + power-law (+ random-walk) noise by maximum likelihood (:func:`jaxnav.monitoring.fit_station`),
+writes ``monitor.json`` (labelled east/north/up values, mm and mm/yr) and one figure per station.
+With ``s1=True`` the S1 adaptive-filter analysis of the same files
+(:func:`jaxnav.experiments.run_monitor_files`) runs as well, into ``OUT/s1``, and its per-station
+results are copied under ``s1_adaptive_filter``.
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import time
+
+import numpy as np
+
+from jaxnav import io
+from jaxnav.monitoring import COMPONENTS, fit_station
+from jaxnav.units import MM, MM_PER_YEAR, YEAR, powerlaw_amplitude_to_mm_yr, random_walk_to_mm_per_sqrt_yr
+
+UNITS = {"velocity": "mm/yr", "positions, sigmas, amplitudes, steps": "mm",
+         "powerlaw_amplitude": "mm/yr^(-kappa/4) (Hector's unit; mm/yr^0.25 for flicker)",
+         "random_walk": "mm/sqrt(yr)", "phase": "deg, of A cos(2 pi h (t - 2000.0 yr) - phase)",
+         "dates": "ISO 8601 calendar day of the daily solution"}
+
+
+def _enu(a, scale=1.0):
+    return {c: (None if not np.isfinite(v) else float(v) / scale) for c, v in zip(COMPONENTS, np.asarray(a, float))}
+
+
+def station_record(fit, *, file, figure=None) -> dict:
+    """The JSON-ready record of one :class:`jaxnav.monitoring.StationFit` (mm, mm/yr, labelled components)."""
+    nf = fit.noise
+    noise = {}
+    names = ("white_mm", "powerlaw_amplitude", "random_walk_mm_per_sqrt_yr", "spectral_index")
+    for c, comp in enumerate(COMPONENTS):
+        kap = float(fit.kappa[c])
+        lo, hi = np.asarray(nf.lo[c]), np.asarray(nf.hi[c])
+        bounds = {}
+        for j, nm in enumerate(names):
+            if not nf.free[c, j]:
+                continue
+            f = (1.0, 365.25 ** (-kap / 4.0), math.sqrt(365.25))[j] if j < 3 else 1.0  # per day -> per yr units
+            bounds[nm] = ([float(lo[j]), float(hi[j])] if j == 3
+                          else [math.exp(lo[j]) * f / MM, math.exp(hi[j]) * f / MM])
+        at = [names[j] + (" (upper)" if nf.at_upper[c, j] else " (lower)")
+              for j in range(4) if nf.at_lower[c, j] or nf.at_upper[c, j]]
+        noise[comp] = dict(
+            white_mm=float(fit.white_sigma[c] / MM),
+            powerlaw_amplitude=float(powerlaw_amplitude_to_mm_yr(fit.powerlaw_amplitude[c], kap)),
+            powerlaw_amplitude_unit=f"mm/yr^{-kap / 4:.3f}",
+            spectral_index=kap, spectral_index_estimated=bool(nf.free[c, 3]),
+            random_walk_mm_per_sqrt_yr=float(random_walk_to_mm_per_sqrt_yr(fit.random_walk[c])),
+            bounds=bounds, at_bound=at, loglik_reml=float(nf.loglik_reml[c]), loglik_ml=float(nf.loglik[c]),
+            bfgs_steps_accepted=int(nf.iterations[c]), gradient_max=float(nf.grad_norm[c]))
+    seasonal = {comp: dict(
+        annual_amplitude_mm=float(fit.annual_amplitude[c] / MM),
+        annual_amplitude_sigma_mm=float(fit.annual_amplitude_sigma[c] / MM),
+        annual_phase_deg=float(np.degrees(fit.annual_phase[c])),
+        semiannual_amplitude_mm=float(fit.semiannual_amplitude[c] / MM),
+        semiannual_amplitude_sigma_mm=float(fit.semiannual_amplitude_sigma[c] / MM),
+        semiannual_phase_deg=float(np.degrees(fit.semiannual_phase[c]))) for c, comp in enumerate(COMPONENTS)}
+    from jaxnav.monitoring._station import decimal_year, iso_date
+
+    steps = [dict(date=iso_date(ts), decimal_year=float(decimal_year(ts)), source=src,
+                  size_mm=_enu(fit.step_sizes[:, j], MM), sigma_mm=_enu(fit.step_sigmas[:, j], MM))
+             for j, (ts, src) in enumerate(zip(fit.steps, fit.step_sources))]
+    scr = fit.screening
+    outl = [dict(date=d["date"], decimal_year=d["decimal_year"], component=d["component"], reason=d["reason"],
+                 value_mm=d["value_m"] / MM, sigma_mm=d["sigma_m"] / MM,
+                 residual_mm=None if d["residual_m"] is None else d["residual_m"] / MM,
+                 threshold_mm=d["threshold_m"] / MM) for d in scr.records]
+    g = fit.grid
+    return dict(
+        file=str(file), format=fit.fmt, model=fit.model,
+        span_years=float((g.n_days - 1) / 365.25), grid_days=int(g.n_days),
+        days_used=_enu(g.valid.sum(axis=0)), missing_days=int(g.n_days - g.valid.any(axis=1).sum()),
+        duplicate_epochs_dropped=int(g.duplicates), masked_values=int(scr.counts["missing"]),
+        reference_epoch=iso_date(fit.t_ref),
+        velocity_mm_per_yr=_enu(fit.velocity / MM_PER_YEAR),
+        velocity_sigma_mm_per_yr=_enu(fit.velocity_sigma / MM_PER_YEAR),
+        velocity_sigma_white_noise_only_mm_per_yr=_enu(fit.velocity_sigma_white / MM_PER_YEAR),
+        noise=noise, seasonal=seasonal, steps=steps,
+        outliers=dict(count=len(outl), by_reason={k: v for k, v in scr.counts.items() if k != "missing"},
+                      sigma_limit_mm=_enu(scr.sigma_limit_m, MM), residual_limit_mm=_enu(scr.residual_limit_m, MM),
+                      list=outl),
+        warnings=list(fit.warnings), gauss_markov_max_relative_error=float(fit.gm_max_rel_error),
+        figure=None if figure is None else str(figure))
+
+
+def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.0, random_walk: bool = True,
+                           reml: bool = True, screen: bool = True, sigma_factor: float = 5.0,
+                           residual_k: float = 5.0, s1: bool = False, period: int = 365,
+                           robust: bool = False, command: str = "") -> dict:
+    """Velocities with coloured noise of daily station files; writes ``monitor.json`` and figures.
+
+    Args:
+      files: paths of daily series (.tenv3, .neu, .col, PBO .pos).
+      out: output folder (``monitor.json``, ``STATION_fit.png``).
+      steps: {station: [epochs s since J2000]} of known steps.
+      detect, kappa, random_walk, reml, screen, sigma_factor, residual_k: see
+        :func:`jaxnav.monitoring.fit_station`.
+      s1, period, robust: also run the S1 adaptive-filter analysis (into ``out/s1``).
+      command: the command line, recorded in the JSON.
+    Returns:
+      The dictionary written ("text": the table printed by ``jaxnav monitor``).
+    """
+    from jaxnav import __version__
+    from jaxnav.plot import plot_station_fit
+
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    steps = steps or {}
+    t0 = time.perf_counter()
+    series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
+    result = dict(
+        version=__version__, command=command, units=UNITS,
+        settings=dict(kappa="estimated" if kappa is None else kappa, random_walk=random_walk,
+                      likelihood="REML" if reml else "ML", screen=screen, sigma_factor=sigma_factor,
+                      residual_k=residual_k, detect_steps=detect, ggm_1mphi=6.9e-6),
+        stations={})
+    lines = [f"{'station':<8}{'axis':<6}{'velocity mm/yr':>15}{'+-1 sigma':>10}{'(white only)':>13}"
+             f"{'white mm':>9}{'PL amp':>8}{'kappa':>7}{'RW mm/yr^.5':>12}{'outliers':>9}"]
+    for f, s in zip(files, series):
+        fit = fit_station(s, steps=steps.get(s.station, ()), detect=detect, kappa=kappa, random_walk=random_walk,
+                          reml=reml, screen=screen, sigma_factor=sigma_factor, residual_k=residual_k)
+        fig = out / f"{s.station}_fit.png"
+        plot_station_fit(fit, fig)
+        rec = station_record(fit, file=f, figure=fig)
+        result["stations"][s.station] = rec
+        for c, comp in enumerate(COMPONENTS):
+            n = rec["noise"][comp]
+            no = sum(1 for d in rec["outliers"]["list"] if d["component"] == comp)
+            lines.append(f"{s.station:<8}{comp:<6}{rec['velocity_mm_per_yr'][comp]:>15.2f}"
+                         f"{rec['velocity_sigma_mm_per_yr'][comp]:>10.2f}"
+                         f"{rec['velocity_sigma_white_noise_only_mm_per_yr'][comp]:>13.3f}{n['white_mm']:>9.2f}"
+                         f"{n['powerlaw_amplitude']:>8.2f}{n['spectral_index']:>7.2f}"
+                         f"{n['random_walk_mm_per_sqrt_yr']:>12.2f}{no:>9d}")
+        for st in rec["steps"]:
+            lines.append(f"{'':<8}step {st['date']} ({st['source']}): " + ", ".join(
+                f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm" for k, v in st["size_mm"].items()))
+        for w in rec["warnings"]:
+            lines.append(f"{'':<8}warning: {w}")
+        if s.n_masked:
+            lines.append(f"{'':<8}{s.n_masked} position value(s) given as nan in {f}: masked")
+    if s1:
+        from jaxnav.experiments.s1 import run_monitor_files
+
+        r1 = run_monitor_files(files, out / "s1", period=period, robust=robust)
+        for name, st in r1["stations"].items():
+            if name in result["stations"]:
+                result["stations"][name]["s1_adaptive_filter"] = st
+        lines += ["", "S1 adaptive filter (constant-velocity Kalman filter, white noise; written to "
+                      f"{out / 's1'}):", r1["text"]]
+    result["wall_time_s"] = time.perf_counter() - t0
+    result["text"] = "\n".join(lines)
+    io.write_json(out / "monitor.json", result)
+    return result
