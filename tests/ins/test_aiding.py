@@ -443,3 +443,29 @@ def test_aid_parameters_are_array_leaves_under_grad(car):
     fd = np.array([(float(f(x.at[i].add(h))) - float(f(x.at[i].add(-h)))) / (2 * h) for i in range(2)])
     np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
     assert np.all(np.abs(g) > 0)
+
+
+def test_inactive_aids_leave_the_gnss_filter_unchanged_and_bad_aid_input_is_named(car):
+    """Reduction identity: an aid that is never active adds rows that are always masked (exactly removed by
+    the update) and no epochs: the result equals the GNSS-only filter to rounding."""
+    cfg, truth, r, params, meas, t_imu, base = car
+    N = t_imu.size
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
+                          aids=(ins.zupt(np.zeros(N, bool)),), save=("nav",))
+    assert res.epochs.t.shape == base.epochs.t.shape
+    d = np.abs(np.asarray(res.epochs.nav.pos) - np.asarray(base.epochs.nav.pos))[:, :2].max() * 6.4e6
+    assert d < 1e-6, d  # metres
+    np.testing.assert_allclose(float(res.loglik), float(base.loglik), rtol=1e-10)
+    run = lambda **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
+                                       dt_imu=cfg.dt, n_states=15, **kw)
+    with pytest.raises(ValueError, match="data leaves must have"):
+        run(aids=(ins.odometer(np.ones(N + 1), active=np.ones(N, bool)),))
+    with pytest.raises(ValueError, match="'gnss_nis' needs gate_prob"):
+        run(save=("nav", "gnss_nis"))
+    with pytest.raises(ValueError, match="at most one aid"):
+        run(aids=(ins.zaru(np.ones(N, bool)), ins.zaru(np.ones(N, bool))))
+    with pytest.raises(ValueError, match="tau_markov has shape"):
+        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas,
+                        LCParams(P0=jnp.eye(21), Qc=jnp.eye(18), tau_markov=jnp.ones(3)), n_states=21)
+    with pytest.raises(ValueError, match="aids must be Aid"):
+        run(aids=(ins.NavState,))
