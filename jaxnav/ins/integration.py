@@ -58,7 +58,7 @@ from jaxnav.filters import (
     init_state,
     rts_smoother,
 )
-from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, curvilinear_to_enu, enu_to_curvilinear
+from jaxnav.geodesy import WGS84, Ellipsoid, check_float64
 from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat
 from jaxnav.ins.error_model import ErrorModel, discretize_taylor, discretize_van_loan, error_model_for
 from jaxnav.ins.mechanization import (

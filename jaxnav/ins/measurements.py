@@ -380,31 +380,36 @@ def nhc(active=None, *, sigma=(0.1, 0.1), C_vb=None, lever_b=(0.0, 0.0, 0.0), ra
                VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))
 
 
-def odometer(speed, *, sigma=0.1, C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=None) -> Aid:
+def odometer(speed, *, sigma=0.1, C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=None, active=None) -> Aid:
     """Odometer / wheel speed: forward vehicle-frame speed of ``lever_b``.
 
     Args:
       speed: (N,) m/s per IMU sample; NaN where there is no reading.
       sigma: m/s.  C_vb, lever_b: as :func:`nhc`.  rate_hz: thinning (None: every reading).
+      active: (N,) bool samples with a reading (default: where ``speed`` is finite; give it when
+        ``speed`` is traced, e.g. under ``vmap``, since the epochs are built from it on the host).
     """
     sp = jnp.asarray(speed, float)
     if sp.ndim != 1:
         raise ValueError(f"speed must be 1-D (one value per IMU sample), got {sp.shape}")
-    return Aid(ODOMETER, np.isfinite(np.asarray(speed, float)), sp,
+    act = np.isfinite(np.asarray(speed, float)) if active is None else _mask(active, "active")
+    return Aid(ODOMETER, act, sp,
                VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))
 
 
-def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None) -> Aid:
+def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active=None) -> Aid:
     """Heading updates (dual-antenna GNSS, magnetometer, a given heading).
 
     Args:
       heading: (N,) rad clockwise from north of the body vector ``axis_b``; NaN where none.
       sigma: rad.  axis_b: (3,) body vector (forward by default).  rate_hz: thinning.
+      active: (N,) bool samples with a reading (default: where ``heading`` is finite), as :func:`odometer`.
     """
     hd = jnp.asarray(heading, float)
     if hd.ndim != 1:
         raise ValueError(f"heading must be 1-D (one value per IMU sample), got {hd.shape}")
-    return Aid(HEADING, np.isfinite(np.asarray(heading, float)), hd,
+    act = np.isfinite(np.asarray(heading, float)) if active is None else _mask(active, "active")
+    return Aid(HEADING, act, hd,
                HeadingParams(jnp.asarray(sigma, float), _v3(axis_b, "axis_b")), _rate(rate_hz))
 
 

@@ -59,7 +59,7 @@ def test_H_equals_the_jacobian_of_the_nonlinear_measurement(name):
         return model.fn(ctx, data, params, ins.IDX15, n).z
 
     x0 = jnp.zeros(n)
-    J = np.asarray(jax.jacfwd(z_of)(x0))
+    J = np.asarray(jax.jit(jax.jacfwd(z_of))(x0))
     ctx = ms.MeasContext(nav=nav, w_ib_b=w, w_mean_b=w, T_mean=jnp.asarray(2.0), dtx=jnp.asarray(0.0))
     rows = model.fn(ctx, data, params, ins.IDX15, n)
     H = np.asarray(rows.H)
@@ -239,6 +239,8 @@ def _inject_outliers(meas, idx, east_m):
 
 
 def test_chi2_gate_rejects_injected_gnss_outliers_and_counts_them(car):
+    """Measured: 8 of 8 outliers gated, no false alarm (p = 0.999 and 0.9999); RMS at the good epochs 0.46 m
+    gated, 0.79 m ungated, 0.45 m without outliers."""
     cfg, truth, r, params, meas, t_imu, base = car
     t = np.asarray(meas.t)
     idx = np.array([20, 45, 70, 95, 170, 190, 290, 310])  # outside the outages
@@ -281,7 +283,7 @@ def test_21_state_model_recovers_an_injected_gyro_scale_factor(car):
     Qc = ins.error_model_Qc21(_v3(g.white), _v3(a.white))  # random-constant biases and scale factors
     p21 = LCParams(P0=P0, Qc=Qc, tau_markov=jnp.full(6, jnp.inf))
     res = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, n_states=21,
-                          save=("nav", "biases", "covs"))
+                          save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections"))
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     est = np.asarray(res.final_biases.gyro_scale)
     sd = np.sqrt(np.asarray(res.epochs.covs[-1]).diagonal()[18 - 3:18])
@@ -296,9 +298,7 @@ def test_21_state_model_recovers_an_injected_gyro_scale_factor(car):
     np.testing.assert_allclose(np.asarray(r10.final_biases.gyro_scale), est, atol=1e-6)
     assert np.abs(np.asarray(r10.epochs.nav.pos) - np.asarray(res.epochs.nav.pos))[:, :2].max() * 6.4e6 < 5e-3
     # smoothing works on the 21 states (scale factors fed back too)
-    res_s = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, n_states=21,
-                            save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections"))
-    nav_s, b_s, P_s = ins.smooth(res_s, n_states=21)
+    nav_s, b_s, P_s = ins.smooth(res, n_states=21)
     assert P_s.shape[1:] == (21, 21) and np.all(np.isfinite(np.asarray(b_s.gyro_scale)))
 
 
@@ -387,3 +387,85 @@ def test_zupt_and_zaru_cut_the_drift_of_a_stop_and_go_walk():
     assert err_z < 0.1 * cfg.gyro.bias_sigma[2], err_z
     with pytest.raises(ValueError, match="active must be a"):
         run((ins.zupt(still[:-1]),))
+
+
+def test_odometer_and_heading_close_the_loop_on_the_car(car):
+    """Odometer speed (10 Hz, 0.05 m/s noise) and heading (1 Hz, 0.5 deg noise) from the truth with NHC: vehicle
+    dead reckoning through the outages. Checks the signs of z = predicted - measured in a closed loop (a
+    flipped sign diverges): the outage drift drops well below GNSS-only (and below NHC alone), the heading
+    error stays at the noise level. Measured: 0.39 m / 0.19 m. (Odometer and heading without NHC leave the lateral velocity to the
+    accelerometers: measured 3.0 m / 7.0 m against 26.4 m / 8.0 m GNSS-only.)"""
+    cfg, truth, r, params, meas, t_imu, base = car
+    rng = np.random.default_rng(1)
+    N = t_imu.size
+    k = np.arange(N)
+    v = np.asarray(truth.v_n)[1:]
+    speed = np.where((k + 1) % 5 == 0, np.linalg.norm(v, axis=1) + 0.05 * rng.standard_normal(N), np.nan)
+    u = np.asarray(A.quat_to_dcm(truth.q_bn[1:]))[:, :, 1]  # body forward axis in ENU
+    hdg = np.arctan2(u[:, 0], u[:, 1]) + np.radians(0.5) * rng.standard_normal(N)
+    hdg = np.where((k + 1) % 50 == 0, hdg, np.nan)
+    aids = (ins.odometer(speed, sigma=0.05), ins.heading(hdg, sigma=np.radians(0.5)), ins.nhc(sigma=0.1))
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
+                          aids=aids, save=("nav", "valid"))
+    assert int(res.status) & ~_status.INFO_FLAGS == 0
+    m0 = _outage_max(*_horizontal_error(base, truth))
+    m1 = _outage_max(*_horizontal_error(res, truth))
+    assert np.all(m1 < 0.1 * m0) and m1.max() < 2.0, (m0, m1)
+    t = np.asarray(res.epochs.t)
+    kk = np.searchsorted(np.asarray(truth.t), t - 1e-9)
+    dq = A.quat_mul(res.epochs.nav.q_bn, A.quat_conj(truth.q_bn[kk]))
+    yaw = np.abs(np.asarray(A.quat_to_rv(dq))[:, 2])
+    assert np.degrees(yaw[t > 30].max()) < 1.0
+    with pytest.raises(ValueError, match="speed must be 1-D"):
+        ins.odometer(speed[:, None])
+
+
+@pytest.mark.slow
+def test_aid_parameters_are_array_leaves_under_grad(car):
+    """d loglik / d log(NHC sigma) by forward mode through the whole run (first 20 s of the car) equals central
+    finite differences; the aid's parameters are ordinary pytree leaves. (Reverse mode with ``remat=True``
+    on 40 s agreed to 1e-5 as well, measured once: 159 s of compilation on the loaded test machine, not kept.)"""
+    cfg, truth, r, params, meas, t_imu, base = car
+    n = 1000
+    m = jax.tree_util.tree_map(lambda a: a[:20], meas)
+    t_i, dth, dvv = t_imu[:n], r.imu.dtheta[:n], r.imu.dv[:n]
+
+    def loglik(log_sigma):
+        aid = ins.nhc(sigma=0.1, rate_hz=2.0)
+        aid = aid._replace(params=aid.params._replace(sigma=jnp.exp(log_sigma)))
+        return loosely_coupled(r.nav0, t_i, dth, dvv, m, params, dt_imu=cfg.dt, n_states=15, aids=(aid,),
+                               save=("valid",)).loglik
+
+    x = jnp.log(jnp.array([0.1, 0.2]))
+    g = np.asarray(jax.jit(jax.jacfwd(loglik))(x))
+    f = jax.jit(loglik)
+    h = 1e-4
+    fd = np.array([(float(f(x.at[i].add(h))) - float(f(x.at[i].add(-h)))) / (2 * h) for i in range(2)])
+    np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+    assert np.all(np.abs(g) > 0)
+
+
+def test_inactive_aids_leave_the_gnss_filter_unchanged_and_bad_aid_input_is_named(car):
+    """Reduction identity: an aid that is never active adds rows that are always masked (exactly removed by
+    the update) and no epochs: the result equals the GNSS-only filter to rounding."""
+    cfg, truth, r, params, meas, t_imu, base = car
+    N = t_imu.size
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
+                          aids=(ins.zupt(np.zeros(N, bool)),), save=("nav",))
+    assert res.epochs.t.shape == base.epochs.t.shape
+    d = np.abs(np.asarray(res.epochs.nav.pos) - np.asarray(base.epochs.nav.pos))[:, :2].max() * 6.4e6
+    assert d < 1e-6, d  # metres
+    np.testing.assert_allclose(float(res.loglik), float(base.loglik), rtol=1e-10)
+    run = lambda **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
+                                       dt_imu=cfg.dt, n_states=15, **kw)
+    with pytest.raises(ValueError, match="data leaves must have"):
+        run(aids=(ins.odometer(np.ones(N + 1), active=np.ones(N, bool)),))
+    with pytest.raises(ValueError, match="'gnss_nis' needs gate_prob"):
+        run(save=("nav", "gnss_nis"))
+    with pytest.raises(ValueError, match="at most one aid"):
+        run(aids=(ins.zaru(np.ones(N, bool)), ins.zaru(np.ones(N, bool))))
+    with pytest.raises(ValueError, match="tau_markov has shape"):
+        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas,
+                        LCParams(P0=jnp.eye(21), Qc=jnp.eye(18), tau_markov=jnp.ones(3)), n_states=21)
+    with pytest.raises(ValueError, match="aids must be Aid"):
+        run(aids=(ins.NavState,))
