@@ -104,7 +104,7 @@ def main(argv=None):
     lines = [f"## A full INS/GNSS run: forward + RTS over {args.duration:.0f} s of 100 Hz data "
              "(`benchmarks/bench_ins_run.py`)", "",
              f"{_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {git_revision()}, {cpu_model()}, "
-             f"load average {load0} -> {load1}; jax {_version('jax')}, python-ins {_version('python-ins')}. "
+             f"load average {load0[0]:.1f} -> {load1[0]:.1f} (1 min); jax {_version('jax')}, python-ins {_version('python-ins')}. "
              f"N = {N} IMU increments, M = {M} GPS fixes (1 Hz position + velocity), 18 states, float64, one seed. "
              "Times: min / median of the timed calls after the first; 'first' includes tracing and compilation "
              "(numba compile for pyins).", "",
