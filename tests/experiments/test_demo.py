@@ -98,5 +98,5 @@ def test_cli_registry_has_every_command(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     printed = capsys.readouterr().out
-    for name in ("demo", "demo-filters", "walk", "rtk", "cadastral", "monitor", "sweep", "tune"):
+    for name in ("demo", "demo-filters", "ins", "walk", "rtk", "cadastral", "monitor", "sweep", "tune"):
         assert f"    {name} " in printed, name
