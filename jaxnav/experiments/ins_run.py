@@ -294,7 +294,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     off_info: dict = {"source": "config"}
     off = cfg.imu.time_offset_s
     if off == "estimate":
-        off, off_info = estimate_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
+        off, off_info = likelihood_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
     a = cfg.alignment
@@ -331,8 +331,7 @@ def run_filter(prep: Prepared, d: Optional[Densities] = None, *, meas=None, save
     n = prep.cfg.noise.states
     params = filter_params(d, prep.alignment.nav0.pos, n)
     m = prep.meas if meas is None else meas
-    m = m._replace(R=m.R.at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)) if isinstance(m.R, jax.Array)
-                   else jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
+    m = m._replace(R=jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
     z3 = np.zeros(3)
     b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
     return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
@@ -490,7 +489,7 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
                   densities=d, gnss_epochs=g)
 
 
-def estimate_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
+def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
     """IMU-GNSS time offset (s, added to IMU times): innovation likelihood over a grid around a first guess.
 
     The filter runs (no outages) on a 50 ms grid over +-``imu.time_offset_search_s`` plus the
@@ -561,10 +560,6 @@ def estimate_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=
         progress(f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
                  "imu.time_offset_search_s")
     return best, info
-
-
-def _densities_with(d: Densities, p: dict) -> Densities:
-    return d._replace(**{k: p[k] for k in ("arw", "vrw", "gyro_markov", "pos_sigma_scale") if k in p})
 
 
 #: ``[tune] params`` name -> (Densities field or "lever_arm", bijector)
