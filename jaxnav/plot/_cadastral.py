@@ -7,6 +7,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 _KIND_STYLE = {0: ("s", "tab:red", "known coordinate"), 1: ("D", "tab:orange", "known position"),
                2: ("^", "tab:purple", "levelling"), 3: ("o", "tab:gray", "ZUPT"), 4: ("*", "tab:green", "target")}
@@ -59,7 +60,7 @@ def plot_cadastral_route(path, route_enu, stops_enu, kinds, names, *, estimates=
         ax.legend(fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return fig
 
@@ -92,7 +93,7 @@ def plot_cadastral_errors(path, errors, *, title="target errors over Monte Carlo
         ax.tick_params(axis="x", labelrotation=20)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return fig
 
@@ -124,6 +125,6 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
     ax.set_title(title)
     ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return fig

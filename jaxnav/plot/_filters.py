@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxnav.units import MM  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 COLORS = {"classic": "tab:gray", "attenuated": "tab:orange", "fading": "tab:blue",
           "variance_compensation": "tab:green"}
@@ -50,6 +51,6 @@ def plot_filter_family(runs: dict, t, change, path, *, b=None):
     ax[0].set_title("Filter family on a constant-velocity series with an unmodelled acceleration burst (shaded)")
     fig.tight_layout()
     path = pathlib.Path(path)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return fig

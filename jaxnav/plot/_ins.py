@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 
 def _shade_outages(ax, windows, t0):
@@ -48,7 +49,7 @@ def plot_ins_differences(t, d_pos, sig_pos, d_vel, sig_vel, windows, path, *, ti
     ax[0, 0].legend(fontsize=8, loc="upper left")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -85,7 +86,7 @@ def plot_ins_attitude(t, fwd, sm, sig, windows, path, *, title: str) -> pathlib.
     ax[1, 0].legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -116,6 +117,6 @@ def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title
         a.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path

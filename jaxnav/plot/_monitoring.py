@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxnav.units import MM, MM_PER_YEAR, YEAR  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 COLORS = {"standard": "tab:gray", "adaptive": "tab:green", "standard_robust": "tab:red",
           "adaptive_robust": "tab:blue", "yang_robust": "tab:purple"}
@@ -20,7 +21,7 @@ AXES = ("east", "north", "up")
 def _save(fig, path):
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return fig
 

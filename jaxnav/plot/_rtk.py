@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxnav.units import CM, MM  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 
 def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015), sigma=None):
@@ -88,5 +89,5 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
     fig.tight_layout()
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     return fig

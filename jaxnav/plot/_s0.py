@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxnav.geodesy import geodetic_to_enu  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 AXES = ("E", "N", "U")
 
@@ -41,7 +42,7 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper):
     ax[1].set_ylabel("up, m")
     fig.tight_layout()
     paths.append(outdir / "trajectory.png")
-    fig.savefig(paths[-1], dpi=100)
+    save_figure(fig, paths[-1], dpi=100)
     plt.close(fig)
 
     fig, ax = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
@@ -53,7 +54,7 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper):
     ax[2].set_xlabel("time, s")
     fig.tight_layout()
     paths.append(outdir / "velocity.png")
-    fig.savefig(paths[-1], dpi=100)
+    save_figure(fig, paths[-1], dpi=100)
     plt.close(fig)
 
     for name, d in detail.items():
@@ -70,7 +71,7 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper):
         ax[2, 1].set_xlabel("time, s")
         fig.tight_layout()
         paths.append(outdir / f"errors_{name}.png")
-        fig.savefig(paths[-1], dpi=100)
+        save_figure(fig, paths[-1], dpi=100)
         plt.close(fig)
 
     fig, ax = plt.subplots(1, 2, figsize=(13, 4.5))
@@ -90,6 +91,6 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper):
     ax[1].legend()
     fig.tight_layout()
     paths.append(outdir / "factors_and_b_sweep.png")
-    fig.savefig(paths[-1], dpi=100)
+    save_figure(fig, paths[-1], dpi=100)
     plt.close(fig)
     return paths

@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 
 def plot_sweep(outdir, *, grid, axes, loss, loss_name, init):
@@ -55,7 +56,7 @@ def plot_sweep(outdir, *, grid, axes, loss, loss_name, init):
     ax[1].set_title("Monte Carlo distribution at the best grid point")
     fig.tight_layout()
     f = out / "sweep_landscape.png"
-    fig.savefig(f, dpi=110)
+    save_figure(fig, f, dpi=110)
     plt.close(fig)
     files.append(f)
     return files
@@ -107,6 +108,6 @@ def plot_tune(outdir, *, path, losses, final, final_loss, landscape, loss_name, 
     ax[2].set_title("Monte Carlo distribution")
     fig.tight_layout()
     f = out / "tune.png"
-    fig.savefig(f, dpi=110)
+    save_figure(fig, f, dpi=110)
     plt.close(fig)
     return [f]

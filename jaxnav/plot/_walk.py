@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from jaxnav.plot._save import save_figure
 
 
 def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathlib.Path:
@@ -60,6 +61,6 @@ def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathli
     b.grid(alpha=0.3)
     b.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
