@@ -1,0 +1,89 @@
+"""mkdocs hook: page content generated from the code at build time, so it cannot drift from it.
+
+* ``<!-- jaxnav-cli-reference -->``: one section per command of ``jaxnav.cli.COMMANDS`` with the
+  command's ``--help`` text. Only the parsers are built (``register``); no command runs.
+* ``<!-- jaxnav-status-flags -->``: the table of status bit flags and their messages.
+* ``<!-- jaxnav-reexports PACKAGE MODULE[,MODULE...] -->``: a mkdocstrings ``::: PACKAGE`` block
+  listing the names PACKAGE's ``__init__`` imports from those modules, for a package without
+  ``__all__`` (mkdocstrings shows only ``__all__`` re-exports by itself), read from the source
+  so that a new re-export appears without editing the page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import importlib
+import os
+import pathlib
+import re
+
+MARKER = "<!-- jaxnav-cli-reference -->"
+FLAGS_MARKER = "<!-- jaxnav-status-flags -->"
+REEXPORTS = re.compile(r"<!-- jaxnav-reexports (?P<pkg>[\w.]+) (?P<mods>[\w.,]+) -->")
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def _help_texts():
+    """(command name, help text) for ``jaxnav`` and each registered subcommand, at 100 columns."""
+    from jaxnav import cli
+
+    old = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"  # argparse wraps at $COLUMNS; fixed for a reproducible page
+    try:
+        parser = argparse.ArgumentParser(prog="jaxnav", description="jaxnav command line")
+        parser.add_argument("--debug", action="store_true", help="show the Python traceback of any error")
+        sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+        subparsers = []
+        for name in cli.COMMANDS:
+            mod = importlib.import_module(f"jaxnav.cli.{name}")
+            subparsers.append(mod.register(sub))
+        out = [("jaxnav", parser.format_help())]
+        out += [(p.prog, p.format_help()) for p in subparsers]
+    finally:
+        if old is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = old
+    return out
+
+
+def _flags_table():
+    """Markdown table of the status flags: bit value, name, whether it is informational, message."""
+    from jaxnav import _status
+
+    names = {v: k for k, v in vars(_status).items() if k.isupper() and isinstance(v, int) and v in _status._MESSAGES}
+    rows = ["| bit | flag | kind | meaning |", "|---:|---|---|---|"]
+    for bit, msg in _status._MESSAGES.items():
+        kind = "information" if bit & _status.INFO_FLAGS else "error"
+        rows.append(f"| {bit} | `{names.get(bit, '?')}` | {kind} | {msg.replace('|', '/')} |")
+    return "\n".join(rows) + "\n"
+
+
+def _reexports(m: re.Match) -> str:
+    """The ``:::`` block for one reexports marker (see the module docstring)."""
+    pkg, mods = m["pkg"], set(m["mods"].split(","))
+    init = ROOT.joinpath(*pkg.split(".")) / "__init__.py"
+    names = []
+    for node in ast.parse(init.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.ImportFrom) and node.module in mods:
+            names += [a.asname or a.name for a in node.names]
+    if not names:
+        raise ValueError(f"{init}: imports nothing from {sorted(mods)}")
+    members = "\n".join(f"        - {n}" for n in names)
+    return f"::: {pkg}\n    options:\n      show_root_heading: false\n      show_root_toc_entry: false\n" \
+           f"      show_docstring_description: false\n      members:\n{members}\n"
+
+
+def on_page_markdown(markdown, page, config, files):
+    """Replace the marker lines with the generated content."""
+    markdown = REEXPORTS.sub(_reexports, markdown)
+    if FLAGS_MARKER in markdown:
+        markdown = markdown.replace(FLAGS_MARKER, _flags_table())
+    if MARKER not in markdown:
+        return markdown
+    parts = []
+    for prog, text in _help_texts():
+        title = prog if prog == "jaxnav" else f"`{prog}`"
+        parts.append(f"## {title}\n\n```text\n{text.rstrip()}\n```\n")
+    return markdown.replace(MARKER, "\n".join(parts))

@@ -1,0 +1,110 @@
+"""griffe extension: turn the Sphinx roles of jaxnav's docstrings into mkdocstrings cross-references.
+
+jaxnav's docstrings are Google style (parsed by mkdocstrings-python's ``google`` style) but name
+other objects with Sphinx roles, e.g. ``:func:`kalman_filter``` or ``:class:`~jaxnav.io.ReaderError```.
+mkdocstrings does not know these roles and would print them literally. This extension rewrites
+each role, once the whole package is loaded, into an *optional* autorefs reference
+``<autoref identifier="jaxnav.filters.kalman_filter" optional><code>kalman_filter</code></autoref>``:
+a link when the target is documented on a page, plain code otherwise (optional references never
+fail a strict build). Short names are resolved like Python would from the docstring's module
+(its members and imports), then from the enclosing packages; ``~`` shows the last component only.
+
+The docstrings also document several arguments in one entry (``x, y: (N,) metres``), which the
+Google parser does not split: mkdocs.yml turns its ``warn_unknown_params`` off, and this extension
+does that check instead, name by name, so a misspelt or stale argument still fails the strict build.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+
+import griffe
+
+ROLE = re.compile(r":(?:py:)?(?P<role>func|class|mod|meth|attr|data|obj|exc|const):`(?P<body>[^`]+)`")
+
+
+def _target(body: str) -> tuple[str, str]:
+    """(shown text, dotted target) of a role body: ``~a.b`` -> ("b", "a.b"), ``text <a.b>`` -> ("text", "a.b")."""
+    body = body.strip()
+    m = re.fullmatch(r"(?P<text>.+?)\s*<(?P<target>[^>]+)>", body)
+    if m:
+        return m["text"], m["target"].lstrip("~.")
+    target = body.lstrip("!")
+    if target.startswith("~"):
+        target = target[1:].lstrip(".")
+        return target.rsplit(".", 1)[-1], target
+    return target, target.lstrip(".")
+
+
+def _resolve(obj: griffe.Object, target: str) -> str | None:
+    """The path of ``target`` seen from ``obj``'s scope (its class, module, enclosing packages), or None."""
+    if target.startswith("jaxnav"):
+        return target
+    head, _, rest = target.partition(".")
+    scope = obj
+    while scope is not None:
+        try:
+            member = scope.members.get(head) if hasattr(scope, "members") else None
+        except Exception:  # noqa: BLE001 - an alias that cannot be resolved: try the next scope
+            member = None
+        if member is not None:
+            try:
+                path = member.target_path if member.is_alias else member.path
+            except Exception:  # noqa: BLE001
+                path = member.path
+            return f"{path}.{rest}" if rest else path
+        scope = scope.parent
+    return None
+
+
+def _rewrite(obj: griffe.Object, text: str) -> str:
+    def sub(m: re.Match) -> str:
+        shown, target = _target(m["body"])
+        code = f"<code>{html.escape(shown)}</code>"
+        path = _resolve(obj, target)
+        if path is None:
+            return code
+        return f'<autoref identifier="{html.escape(path)}" optional>{code}</autoref>'
+
+    return ROLE.sub(sub, text)
+
+
+def _check_params(func: griffe.Function) -> None:
+    """Warn (as griffe would) for each name of an Args entry that is not a parameter of ``func``."""
+    if func.docstring is None:
+        return
+    names = {p.name for p in func.parameters}
+    variadic = any(p.kind in (griffe.ParameterKind.var_positional, griffe.ParameterKind.var_keyword)
+                   for p in func.parameters)
+    sections = griffe.parse_google(func.docstring, warn_unknown_params=False, warnings=False)
+    for section in sections:
+        if section.kind is not griffe.DocstringSectionKind.parameters:
+            continue
+        for entry in section.value:
+            for name in (n.strip().lstrip("*") for n in entry.name.split(",")):
+                if name not in names and not variadic:
+                    griffe.logger.warning(
+                        f"{func.relative_filepath}:{func.docstring.lineno}: Parameter '{name}' of "
+                        f"{func.path} (Args entry '{entry.name}') does not appear in the function signature")
+
+
+class SphinxRoles(griffe.Extension):
+    """Rewrite Sphinx roles in every docstring of a loaded package (see the module docstring)."""
+
+    def on_package(self, *, pkg: griffe.Module, **kwargs) -> None:
+        seen: set[int] = set()
+
+        def walk(obj):
+            if id(obj) in seen or obj.is_alias:
+                return
+            seen.add(id(obj))
+            if obj.docstring is not None:
+                obj.docstring.value = _rewrite(obj, obj.docstring.value)
+                if obj.is_function:
+                    _check_params(obj)
+            for member in list(obj.members.values()):
+                if not member.is_alias:
+                    walk(member)
+
+        walk(pkg)
