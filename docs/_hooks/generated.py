@@ -1,7 +1,8 @@
 """mkdocs hook: page content generated from the code at build time, so it cannot drift from it.
 
-* ``<!-- jaxnav-cli-reference -->``: one section per command of ``jaxnav.cli.COMMANDS`` with the
-  command's ``--help`` text. Only the parsers are built (``register``); no command runs.
+* ``<!-- jaxnav-cli-reference -->``: ``jaxnav --help`` and one section per command of
+  ``jaxnav.cli.COMMANDS`` with its ``--help`` text, from the real entry point (``--help`` only
+  parses and exits; no command runs).
 * ``<!-- jaxnav-status-flags -->``: the table of status bit flags and their messages.
 * ``<!-- jaxnav-reexports PACKAGE MODULE[,MODULE...] -->``: a mkdocstrings ``::: PACKAGE`` block
   listing the names PACKAGE's ``__init__`` imports from those modules, for a package without
@@ -24,22 +25,42 @@ REEXPORTS = re.compile(r"<!-- jaxnav-reexports (?P<pkg>[\w.]+) (?P<mods>[\w.,]+)
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
+def _help(argv):
+    """What ``jaxnav ARGV`` prints on stdout (argparse prints the help and exits with 0)."""
+    import contextlib
+    import io
+
+    from jaxnav import cli
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        try:
+            status = cli.main(list(argv))
+        except SystemExit as exc:
+            status = exc.code
+    if status not in (0, None):
+        raise RuntimeError(f"jaxnav {' '.join(argv)} exited with {status}")
+    return buf.getvalue()
+
+
 def _help_texts():
-    """(command name, help text) for ``jaxnav`` and each registered subcommand, at 100 columns."""
+    """(command line, help text) for ``jaxnav --help`` and ``jaxnav COMMAND --help``, at 100 columns.
+
+    The texts come from running the real entry point, so options that ``jaxnav.cli.main`` adds
+    itself appear as well as each command's own.
+    """
     from jaxnav import cli
 
     old = os.environ.get("COLUMNS")
     os.environ["COLUMNS"] = "100"  # argparse wraps at $COLUMNS; fixed for a reproducible page
     try:
-        parser = argparse.ArgumentParser(prog="jaxnav", description="jaxnav command line")
-        parser.add_argument("--debug", action="store_true", help="show the Python traceback of any error")
-        sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-        subparsers = []
+        out = [("jaxnav", _help(["--help"]))]
         for name in cli.COMMANDS:
             mod = importlib.import_module(f"jaxnav.cli.{name}")
-            subparsers.append(mod.register(sub))
-        out = [("jaxnav", parser.format_help())]
-        out += [(p.prog, p.format_help()) for p in subparsers]
+            # the subcommand's name as registered (demo_filters -> demo-filters)
+            sub = argparse.ArgumentParser(prog="jaxnav").add_subparsers()
+            command = mod.register(sub).prog.split()[-1]
+            out.append((f"jaxnav {command}", _help([command, "--help"])))
     finally:
         if old is None:
             os.environ.pop("COLUMNS", None)
