@@ -47,4 +47,4 @@ docs: $(DVENV)/.docs
 	NO_MKDOCS_2_WARNING=1 $(DVENV)/bin/mkdocs build --strict --site-dir site
 
 clean:
-	rm -rf $(VENV) $(BVENV) $(DVENV) site out .pytest_cache
+	rm -rf $(VENV) $(BVENV) $(DVENV) site .cache/mkdocs-jupyter out .pytest_cache
