@@ -9,6 +9,12 @@ a link when the target is documented on a page, plain code otherwise (optional r
 fail a strict build). Short names are resolved like Python would from the docstring's module
 (its members and imports), then from the enclosing packages; ``~`` shows the last component only.
 
+Many entries document several arguments on one line (``x0: (n,) initial mean.  P0: (n, n) ...``),
+which the Google parser reads as one entry whose description swallows the others. Where the text
+after a sentence's end and two spaces is ``name[, name]: `` and every name is a parameter (under
+``Args:``) or a member (under ``Attributes:``) of the documented object, the line is split there
+into its own entry; anything else stays as written.
+
 The docstrings also document several arguments in one entry (``x, y: (N,) metres``), which the
 Google parser does not split: mkdocs.yml turns its ``warn_unknown_params`` off, and this extension
 does that check instead, name by name, so a misspelt or stale argument still fails the strict build.
@@ -70,6 +76,44 @@ def _rewrite(obj: griffe.Object, text: str) -> str:
     return ROLE.sub(sub, text)
 
 
+_SECTION = re.compile(r"^(?P<indent>\s*)(?P<title>Args|Arguments|Parameters|Attributes):\s*$")
+_INLINE = re.compile(r"(?<=[.)])  +(?P<names>[A-Za-z_]\w*(?:, [A-Za-z_]\w*)*): ")
+
+
+def _split_inline_entries(text: str, known: set[str], title_ok: tuple[str, ...]) -> str:
+    """Put ``.  name: description`` runs of an Args/Attributes section on their own entry lines."""
+    lines = text.split("\n")
+    out, i = [], 0
+    while i < len(lines):
+        line = lines[i]
+        out.append(line)
+        m = _SECTION.match(line)
+        i += 1
+        if not m or m["title"] not in title_ok:
+            continue
+        base = len(m["indent"])
+        entry_indent = None
+        while i < len(lines) and (not lines[i].strip() or len(lines[i]) - len(lines[i].lstrip()) > base):
+            cur = lines[i]
+            i += 1
+            ind = len(cur) - len(cur.lstrip())
+            if cur.strip() and entry_indent is None:
+                entry_indent = ind
+            pieces, start = [], 0
+            for mm in _INLINE.finditer(cur):
+                names = [n.strip() for n in mm["names"].split(",")]
+                if all(n in known for n in names):
+                    pieces.append(cur[start:mm.start()].rstrip())
+                    start = mm.start("names")
+            if not pieces:
+                out.append(cur)
+                continue
+            pieces.append(cur[start:])
+            out.append(pieces[0])
+            out += [" " * (entry_indent or ind) + piece.strip() for piece in pieces[1:]]
+    return "\n".join(out)
+
+
 def _check_params(func: griffe.Function) -> None:
     """Warn (as griffe would) for each name of an Args entry that is not a parameter of ``func``."""
     if func.docstring is None:
@@ -101,6 +145,12 @@ class SphinxRoles(griffe.Extension):
             seen.add(id(obj))
             if obj.docstring is not None:
                 obj.docstring.value = _rewrite(obj, obj.docstring.value)
+                if obj.is_function:
+                    known = {p.name for p in obj.parameters}
+                    obj.docstring.value = _split_inline_entries(obj.docstring.value, known, ("Args", "Arguments", "Parameters"))
+                elif obj.is_class:
+                    known = set(obj.members) | {p.name for p in getattr(obj, "parameters", [])}
+                    obj.docstring.value = _split_inline_entries(obj.docstring.value, known, ("Attributes",))
                 if obj.is_function:
                     _check_params(obj)
             for member in list(obj.members.values()):
