@@ -4,8 +4,8 @@
   ``jaxnav.cli.COMMANDS`` with its ``--help`` text, from the real entry point (``--help`` only
   parses and exits; no command runs).
 * ``<!-- jaxnav-status-flags -->``: the table of status bit flags and their messages.
-* ``<!-- jaxnav-reexports PACKAGE MODULE[,MODULE...] -->``: a mkdocstrings ``::: PACKAGE`` block
-  listing the names PACKAGE's ``__init__`` imports from those modules, for a package without
+* ``<!-- jaxnav-reexports PACKAGE MODULE[,MODULE...] -->``: a mkdocstrings ``::: PACKAGE.NAME``
+  block for each of the names PACKAGE's ``__init__`` imports from those modules, for a package without
   ``__all__`` (mkdocstrings shows only ``__all__`` re-exports by itself), read from the source
   so that a new re-export appears without editing the page.
 """
@@ -91,9 +91,8 @@ def _reexports(m: re.Match) -> str:
             names += [a.asname or a.name for a in node.names]
     if not names:
         raise ValueError(f"{init}: imports nothing from {sorted(mods)}")
-    members = "\n".join(f"        - {n}" for n in names)
-    return f"::: {pkg}\n    options:\n      show_root_heading: false\n      show_root_toc_entry: false\n" \
-           f"      show_docstring_description: false\n      members:\n{members}\n"
+    # one block per name (a block for the package would repeat the package's docstring)
+    return "\n".join(f"::: {pkg}.{n}\n    options:\n      heading_level: 3\n" for n in names)
 
 
 def on_page_markdown(markdown, page, config, files):

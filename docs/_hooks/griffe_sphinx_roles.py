@@ -15,6 +15,12 @@ after a sentence's end and two spaces is ``name[, name]: `` and every name is a 
 ``Args:``) or a member (under ``Attributes:``) of the documented object, the line is split there
 into its own entry; anything else stays as written.
 
+Module-level constants documented by a ``#:`` comment above them or a trailing comment
+(``DEG = math.pi / 180.0  # rad per degree``, the style of :mod:`jaxnav.units`) get that comment
+as their docstring, and a class made by a call with its docstring as a string argument
+(``KalmanResult = _record("KalmanResult", fields, doc)``, ``doc`` a string literal) gets that
+string, so the pages show them.
+
 The docstrings also document several arguments in one entry (``x, y: (N,) metres``), which the
 Google parser does not split: mkdocs.yml turns its ``warn_unknown_params`` off, and this extension
 does that check instead, name by name, so a misspelt or stale argument still fails the strict build.
@@ -22,7 +28,9 @@ does that check instead, name by name, so a misspelt or stale argument still fai
 
 from __future__ import annotations
 
+import ast
 import html
+import inspect
 import re
 
 import griffe
@@ -133,6 +141,44 @@ def _check_params(func: griffe.Function) -> None:
                         f"{func.path} (Args entry '{entry.name}') does not appear in the function signature")
 
 
+_COMMENT = re.compile(r"#\s*(?P<text>.+?)\s*$")
+
+
+def _comment_docstring(attr: griffe.Attribute) -> None:
+    """Document a module-level assignment from its source (see the module docstring)."""
+    if attr.docstring is not None or not attr.parent or not attr.parent.is_module or attr.lineno is None:
+        return
+    try:
+        lines = attr.parent.lines
+        line = lines[attr.lineno - 1]
+    except (IndexError, TypeError):
+        return
+    above, k = [], attr.lineno - 2
+    while k >= 0 and lines[k].lstrip().startswith("#:"):
+        above.insert(0, lines[k].lstrip()[2:].strip())
+        k -= 1
+    if above:
+        attr.docstring = griffe.Docstring("\n".join(above), lineno=k + 2, endlineno=attr.lineno - 1, parent=attr)
+        return
+    end = attr.endlineno or attr.lineno
+    if end > attr.lineno:  # a multi-line value: a call that carries the docstring as a string argument
+        try:
+            node = ast.parse("\n".join(lines[attr.lineno - 1:end])).body[0]
+        except (SyntaxError, IndexError):
+            return
+        call = getattr(node, "value", None)
+        if isinstance(call, ast.Call) and call.args and isinstance(call.args[-1], ast.Constant) \
+                and isinstance(call.args[-1].value, str) and len(call.args) >= 2:
+            attr.docstring = griffe.Docstring(inspect.cleandoc(call.args[-1].value), lineno=attr.lineno,
+                                              endlineno=end, parent=attr)
+            attr.value = None  # the call holds the docstring itself: do not print it again as the value
+        return
+    m = _COMMENT.search(line.split("=", 1)[-1]) if "=" in line else None
+    if m is None or "'" in line or '"' in line or m["text"].startswith(("noqa", "type:", "pragma")):
+        return  # strings may hold a '#'; lint pragmas are not documentation
+    attr.docstring = griffe.Docstring(m["text"], lineno=attr.lineno, endlineno=attr.lineno, parent=attr)
+
+
 class SphinxRoles(griffe.Extension):
     """Rewrite Sphinx roles in every docstring of a loaded package (see the module docstring)."""
 
@@ -143,6 +189,8 @@ class SphinxRoles(griffe.Extension):
             if id(obj) in seen or obj.is_alias:
                 return
             seen.add(id(obj))
+            if obj.is_attribute:
+                _comment_docstring(obj)
             if obj.docstring is not None:
                 obj.docstring.value = _rewrite(obj, obj.docstring.value)
                 if obj.is_function:
