@@ -144,6 +144,26 @@ def _check_params(func: griffe.Function) -> None:
 _COMMENT = re.compile(r"#\s*(?P<text>.+?)\s*$")
 
 
+def _new_docstring(attr: griffe.Attribute, text: str, lineno: int, endlineno: int) -> griffe.Docstring:
+    """A docstring for ``attr`` parsed like the module's own (same parser and options)."""
+    ref = attr.parent.docstring
+    parser = ref.parser if ref is not None and ref.parser is not None else griffe.Parser.google
+    options = dict(ref.parser_options) if ref is not None and ref.parser_options else {}
+    return griffe.Docstring(text, lineno=lineno, endlineno=endlineno, parent=attr, parser=parser,
+                            parser_options=options)
+
+
+def _runtime_fields(attr: griffe.Attribute) -> set[str]:
+    """The ``_fields`` of the NamedTuple class a call built (importing the module), or an empty set."""
+    try:
+        import importlib
+
+        cls = getattr(importlib.import_module(attr.parent.path), attr.name)
+        return set(getattr(cls, "_fields", ()))
+    except Exception:  # noqa: BLE001 - documentation only: without the fields nothing is split
+        return set()
+
+
 def _comment_docstring(attr: griffe.Attribute) -> None:
     """Document a module-level assignment from its source (see the module docstring)."""
     if attr.docstring is not None or not attr.parent or not attr.parent.is_module or attr.lineno is None:
@@ -158,7 +178,7 @@ def _comment_docstring(attr: griffe.Attribute) -> None:
         above.insert(0, lines[k].lstrip()[2:].strip())
         k -= 1
     if above:
-        attr.docstring = griffe.Docstring("\n".join(above), lineno=k + 2, endlineno=attr.lineno - 1, parent=attr)
+        attr.docstring = _new_docstring(attr, "\n".join(above), k + 2, attr.lineno - 1)
         return
     end = attr.endlineno or attr.lineno
     if end > attr.lineno:  # a multi-line value: a call that carries the docstring as a string argument
@@ -169,14 +189,17 @@ def _comment_docstring(attr: griffe.Attribute) -> None:
         call = getattr(node, "value", None)
         if isinstance(call, ast.Call) and call.args and isinstance(call.args[-1], ast.Constant) \
                 and isinstance(call.args[-1].value, str) and len(call.args) >= 2:
-            attr.docstring = griffe.Docstring(inspect.cleandoc(call.args[-1].value), lineno=attr.lineno,
-                                              endlineno=end, parent=attr)
+            text = inspect.cleandoc(call.args[-1].value)
+            fields = _runtime_fields(attr)
+            if fields:
+                text = _split_inline_entries(text, fields, ("Attributes",))
+            attr.docstring = _new_docstring(attr, text, attr.lineno, end)
             attr.value = None  # the call holds the docstring itself: do not print it again as the value
         return
     m = _COMMENT.search(line.split("=", 1)[-1]) if "=" in line else None
     if m is None or "'" in line or '"' in line or m["text"].startswith(("noqa", "type:", "pragma")):
         return  # strings may hold a '#'; lint pragmas are not documentation
-    attr.docstring = griffe.Docstring(m["text"], lineno=attr.lineno, endlineno=attr.lineno, parent=attr)
+    attr.docstring = _new_docstring(attr, m["text"], attr.lineno, attr.lineno)
 
 
 class SphinxRoles(griffe.Extension):
