@@ -104,7 +104,7 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
     Args:
       path: output file.  t: (N,) s.  statistic: (N,).  threshold: scalar.
       detected: (K, 2) spans, s.  true: optional (J, 2) spans.  extra: optional (t, y, label) trace
-      on a second axis (e.g. GNSS speed).
+        on a second axis (e.g. GNSS speed).
     Returns:
       the figure.
     """

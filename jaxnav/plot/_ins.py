@@ -59,7 +59,7 @@ def plot_ins_attitude(t, fwd, sm, sig, windows, path, *, title: str) -> pathlib.
 
     Args:
       t: (M,) s.  fwd, sm: (M, 3) roll, pitch, heading, deg.  sig: (M, 3) smoothed 1-sigma misalignment
-      about east, north, up, deg.  windows: (K, 2) s.
+        about east, north, up, deg.  windows: (K, 2) s.
     """
     path = pathlib.Path(path)
     t0 = float(t[0])
