@@ -1,0 +1,54 @@
+"""Shared figure styling: readable tick labels and legends placed outside the data."""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator, NullFormatter
+
+
+def _fmt(v, _pos=None):
+    """Tick label: 3 significant digits, no offset text ("0.0025", "1e-05", "120")."""
+    return f"{v:.3g}"
+
+
+def _log_ticks(lo, hi, most: int = 6):
+    """At most ``most`` tick values in [lo, hi] (lo > 0): decades, else 1-2-5 x 10^k, else 1..9 x 10^k."""
+    ks = range(int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi))) + 1)
+    ticks = []
+    for subs, need in (((1.0,), 3), ((1.0, 2.0, 5.0), 3), (tuple(np.arange(1.0, 10.0)), 2)):
+        ticks = [m * 10.0**k for k in ks for m in subs if lo * (1 - 1e-9) <= m * 10.0**k <= hi * (1 + 1e-9)]
+        if len(ticks) >= need:
+            break
+    if len(ticks) < 2:  # under a factor ~1.1: three values at 3 significant digits
+        ticks = [float(f"{v:.3g}") for v in np.geomspace(lo, hi, 3)]
+    step = int(np.ceil(len(ticks) / most))
+    return ticks[::step]
+
+
+def readable_ticks(ax, which="both"):
+    """Few, short tick labels on ``ax`` (call after the data and limits are set).
+
+    Log axes: decades, or 1-2-5 x 10^k (or 1..9 x 10^k) on a narrow range, at most 6, minor labels
+    off (matplotlib labels every minor tick of a narrow log axis, and they overlap); linear axes:
+    at most 5 ticks. Labels use 3 significant digits, no offset text.
+    """
+    for name in ("x", "y") if which == "both" else (which,):
+        axis = getattr(ax, f"{name}axis")
+        if axis.get_scale() == "log":
+            lo, hi = sorted(getattr(ax, f"get_{name}lim")())
+            if lo > 0:
+                axis.set_major_locator(FixedLocator(_log_ticks(lo, hi)))
+            axis.set_minor_formatter(NullFormatter())
+        else:
+            axis.set_major_locator(MaxNLocator(nbins=5))
+        axis.set_major_formatter(FuncFormatter(_fmt))
+
+
+def legend_outside(ax, handles=None, labels=None, *, fontsize=8, x=1.01, **kw):
+    """Legend beside ``ax`` (upper left corner at axes x = ``x``, top aligned): it never covers data.
+
+    Call ``fig.tight_layout()`` afterwards so the figure makes room for it; ``kw`` go to
+    ``ax.legend``. Returns the legend.
+    """
+    args = () if handles is None else (handles, labels)
+    return ax.legend(*args, fontsize=fontsize, loc="upper left", bbox_to_anchor=(x, 1.0), borderaxespad=0.0, **kw)
