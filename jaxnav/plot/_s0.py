@@ -39,11 +39,16 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, swee
     ax[0].set_ylabel("north, km")
     ax[0].axis("equal")
     ax[0].legend()
-    ax[0].set_title("S0 trajectory (108E 39N, heading 30 deg)")
+    lat0, lon0 = np.rad2deg(pos[0, 0]), np.rad2deg(pos[0, 1])  # the truth's start, not a fixed text
+    ax[0].set_title(f"S0 true trajectory, start {abs(lon0):.2f} deg {'E' if lon0 >= 0 else 'W'}, "
+                    f"{abs(lat0):.2f} deg {'N' if lat0 >= 0 else 'S'}")
     tt = np.asarray(truth.t)
     ax[1].plot(tt, u)
     ax[1].set_xlabel("time, s")
-    ax[1].set_ylabel("up, m")
+    ax[1].set_ylabel("up from the start, m")
+    ax[1].set_title("true height profile")
+    for a in ax:
+        a.grid(alpha=0.3)
     fig.tight_layout()
     paths.append(outdir / "trajectory.png")
     save_figure(fig, paths[-1], dpi=100)
@@ -54,7 +59,9 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, swee
     for i in range(3):
         ax[i].plot(tt, v[:, i])
         ax[i].set_ylabel(f"V{AXES[i]}, m/s")
-    ax[0].set_title("true velocity")
+    ax[0].set_title("S0 true velocity (local east, north, up)")
+    for a in ax:
+        a.grid(alpha=0.3)
     ax[2].set_xlabel("time, s")
     fig.tight_layout()
     paths.append(outdir / "velocity.png")

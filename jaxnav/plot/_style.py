@@ -12,17 +12,24 @@ def _fmt(v, _pos=None):
 
 
 def _log_ticks(lo, hi, most: int = 6):
-    """At most ``most`` tick values in [lo, hi] (lo > 0): decades, else 1-2-5 x 10^k, else 1..9 x 10^k."""
-    ks = range(int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi))) + 1)
-    ticks = []
-    for subs, need in (((1.0,), 3), ((1.0, 2.0, 5.0), 3), (tuple(np.arange(1.0, 10.0)), 2)):
-        ticks = [m * 10.0**k for k in ks for m in subs if lo * (1 - 1e-9) <= m * 10.0**k <= hi * (1 + 1e-9)]
-        if len(ticks) >= need:
-            break
-    if len(ticks) < 2:  # under a factor ~1.1: three values at 3 significant digits
-        ticks = [float(f"{v:.3g}") for v in np.geomspace(lo, hi, 3)]
-    step = int(np.ceil(len(ticks) / most))
-    return ticks[::step]
+    """Up to ``most`` tick values in [lo, hi] (0 < lo < hi), spread evenly on a log axis.
+
+    Candidates by preference: 1 x 10^k, then 2 and 5 x 10^k, then 3, 4, 6, 7, 8, 9 x 10^k; one is
+    taken when it is at least 1/(most + 1) of the span (in decades) from every tick already taken.
+    """
+    ks = range(int(np.floor(np.log10(lo))) - 1, int(np.ceil(np.log10(hi))) + 1)
+    gap = np.log10(hi / lo) / (most + 1)
+    chosen = []
+    for subs in ((1,), (2, 5), (3, 4, 6, 7, 8, 9)):
+        for k in ks:
+            for m in subs:
+                v = float(f"{m * 10.0**k:.12g}")
+                if lo * (1 - 1e-9) <= v <= hi * (1 + 1e-9) and all(
+                        abs(np.log10(v / c)) >= gap * (1 - 1e-9) for c in chosen):
+                    chosen.append(v)
+    if len(chosen) < 2:  # under a factor ~1.1: three values at 3 significant digits
+        chosen = [float(f"{v:.3g}") for v in np.geomspace(lo, hi, 3)]
+    return sorted(chosen)
 
 
 def readable_ticks(ax, which="both"):

@@ -105,7 +105,7 @@ def plot_tune(outdir, *, path, losses, final, final_loss, landscape, loss_name, 
     # the loss itself (not "loss - min", which dips to ~0 by construction at the best step)
     losses = np.asarray(losses, float)
     steps = np.arange(len(losses))
-    ax[1].plot(steps, losses, "o-", ms=3, lw=1, label="loss at each step's start values")
+    ax[1].plot(steps, losses, "o-" if len(losses) <= 40 else "-", ms=3, lw=1, label="loss at each step's start values")
     ax[1].axhline(float(final_loss), color="g", ls="--", lw=1, label=f"tuned: {float(final_loss):.4g}")
     finite = np.concatenate([losses[np.isfinite(losses)], [float(final_loss)]])
     if np.all(finite > 0) and finite.max() / finite.min() > 10:
