@@ -59,3 +59,14 @@ def legend_outside(ax, handles=None, labels=None, *, fontsize=8, x=1.01, **kw):
     """
     args = () if handles is None else (handles, labels)
     return ax.legend(*args, fontsize=fontsize, loc="upper left", bbox_to_anchor=(x, 1.0), borderaxespad=0.0, **kw)
+
+
+def legend_below(fig, ax, *, ncol=3, fontsize=8, height=0.07):
+    """One legend for the whole figure (the entries of ``ax``), centred below the axes grid.
+
+    Lays the figure out with ``tight_layout`` leaving ``height`` (figure fraction) at the bottom for
+    it; use when every panel shares the same entries and a legend inside a panel would cover data.
+    """
+    handles, labels = ax.get_legend_handles_labels()
+    fig.tight_layout(rect=(0.0, height, 1.0, 1.0))
+    return fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=fontsize, frameon=False)
