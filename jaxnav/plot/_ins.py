@@ -117,7 +117,7 @@ def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title
         a.set_xlabel("time since start, s")
         a.grid(alpha=0.3)
     fig.suptitle(title)
-    legend_below(fig, ax[0], ncol=4, height=0.15)  # one legend for both panels, below them
+    legend_below(fig, ax[0], ncol=4, height=0.11)  # one legend for both panels, below them
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path

@@ -15,6 +15,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.container import ErrorbarContainer  # noqa: E402
 
 from jaxnav import plot  # noqa: E402
+import jaxnav.plot._ins as _ins  # noqa: E402
 import jaxnav.plot._s0 as _s0  # noqa: E402
 import jaxnav.plot._tune as _tune  # noqa: E402
 
@@ -30,7 +31,7 @@ def _out(tmp_path, name):
 
 @pytest.fixture
 def captured(monkeypatch):
-    """Figures saved by the functions that return paths (plot_s0, plot_sweep, plot_tune), by file name;
+    """Figures saved by the functions that return paths (plot_s0, plot_sweep, plot_tune, plot_ins_*), by name;
     not rendered to files (time) unless JAXNAV_KEEP_FIGURES is set."""
     figs = {}
 
@@ -40,7 +41,7 @@ def captured(monkeypatch):
             return save(fig, path, **kw) if KEEP else pathlib.Path(path)
         return wrapper
 
-    for mod in (_s0, _tune):
+    for mod in (_s0, _tune, _ins):
         monkeypatch.setattr(mod, "save_figure", keep(mod.save_figure))
     return figs
 
@@ -247,3 +248,29 @@ def test_rtk_title_names_files_and_points(tmp_path):
     many = plot.plot_rtk(_rtk_result(40), tmp_path / "rtk40.png", names=[f"Q{i}" for i in range(40)])
     assert many._suptitle.get_text() == "RTK point means: 40 points (Q0 .. Q39)"
     assert many.axes[-1].get_xlabel() == "point number 1..40 (in order of occupation)"
+
+
+def test_ins_figures_keep_legends_off_the_panels(tmp_path, captured):
+    M = 60
+    rng = np.random.default_rng(8)
+    t = np.linspace(100.0, 160.0, M)
+    win = np.array([[120.0, 130.0]])
+    a3 = lambda s=1.0: s * rng.normal(size=(M, 3))  # noqa: E731
+    d = _out(tmp_path, "ins")
+    d.mkdir(exist_ok=True)
+    plot.plot_ins_differences(t, a3(), np.abs(a3()), a3(.1), np.abs(a3(.1)), win, d / "differences_to_gnss.png",
+                              title="synthetic")
+    plot.plot_ins_attitude(t, a3(10), a3(10), np.abs(a3(.1)) + 0.05, win, d / "attitude.png", title="synthetic")
+    plot.plot_ins_biases(t, a3(100), np.abs(a3(10)), a3(5), np.abs(a3()), win, d / "biases.png",
+                         title="synthetic", gyro_sm=a3(100), accel_sm=a3(5))
+    want = {"differences_to_gnss.png": {"simulated GNSS outage", "filter +-3 sigma", "filter - GNSS"},
+            "attitude.png": {"simulated GNSS outage", "forward", "RTS smoothed", "smoothed 1-sigma"},
+            "biases.png": {"simulated GNSS outage", "x (right), forward +-1 sigma", "z (up), RTS smoothed"}}
+    for name, labels in want.items():
+        fig = captured[name]
+        assert all(ax.get_legend() is None for ax in fig.axes)  # no legend over a panel's data
+        (leg,) = fig.legends
+        assert labels <= {tx.get_text() for tx in leg.get_texts()}
+        r = _renderer(fig)
+        lb = leg.get_window_extent(r)
+        assert all(lb.y1 <= ax.get_window_extent(r).y0 + 1 for ax in fig.axes)  # below every panel
