@@ -300,7 +300,9 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
                                  target_errors={s: errs[s][0] for s in ("forward", "preprocessed", "smoothed",
                                                                        "fused", "rts")})
             plot_cadastral_errors(f_err, errs,
-                                  title=f"S3 target errors, {g} IMU, {seeds} seeds x {len(tnames)} targets")
+                                  title=f"S3 target errors, {g} IMU, {seeds} seed{'s' if seeds != 1 else ''} x "
+                                        f"{len(tnames)} target{'s' if len(tnames) != 1 else ''} (boxes: quartiles, "
+                                        f"whiskers: 1.5 IQR)")
             plot_stop_detection(f_det, t_imu, np.asarray(res["statistic"][0], float), float(mc["detector"].threshold),
                                 static_spans(res["static"][0], t_imu, min_duration=2.0, min_gap=0.5), true_spans,
                                 title=f"stop detector (GLRT) on the simulated survey, {g} IMU, seed 0 of {seeds}")

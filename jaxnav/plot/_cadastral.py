@@ -8,6 +8,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from jaxnav.plot._save import save_figure
+from jaxnav.plot._style import readable_ticks
 
 _KIND_STYLE = {0: ("s", "tab:red", "known coordinate"), 1: ("D", "tab:orange", "known position"),
                2: ("^", "tab:purple", "levelling"), 3: ("o", "tab:gray", "ZUPT"), 4: ("*", "tab:green", "target")}
@@ -56,9 +57,12 @@ def plot_cadastral_route(path, route_enu, stops_enu, kinds, names, *, estimates=
         ax.set_xticks(x + 0.4 - wdt / 2)
         tnames = [nm for nm, k in zip(names, kinds) if k == 4]
         ax.set_xticklabels(tnames[:T])
-        ax.set_ylabel("horizontal target error, m (this run)")
+        ax.set_ylabel("horizontal target error, m")
+        ax.set_xlabel("target point")
+        ax.set_title("horizontal error at each target, per processing stage (this run)", fontsize=10)
         ax.legend(fontsize=8)
-        ax.grid(True, which="both", alpha=0.3)
+        ax.grid(True, which="major", alpha=0.3)
+        readable_ticks(ax, "y")
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
     plt.close(fig)
@@ -88,7 +92,9 @@ def plot_cadastral_errors(path, errors, *, title="target errors over Monte Carlo
         ax.plot(np.arange(1, len(stages) + 1), rms, "kx", ms=9, label="RMS")
         ax.set_yscale("log")
         ax.set_ylabel(f"{lab} error, m")
-        ax.grid(True, which="both", alpha=0.3)
+        ax.set_xlabel("processing stage")
+        ax.grid(True, which="major", alpha=0.3)
+        readable_ticks(ax, "y")
         ax.legend(fontsize=8)
         ax.tick_params(axis="x", labelrotation=20)
     fig.suptitle(title)

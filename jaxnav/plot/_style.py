@@ -14,13 +14,16 @@ def _fmt(v, _pos=None):
 def _log_ticks(lo, hi, most: int = 6):
     """Up to ``most`` tick values in [lo, hi] (0 < lo < hi), spread evenly on a log axis.
 
-    Candidates by preference: 1 x 10^k, then 2 and 5 x 10^k, then 3, 4, 6, 7, 8, 9 x 10^k; one is
-    taken when it is at least 1/(most + 1) of the span (in decades) from every tick already taken.
+    Candidates by preference: 1 x 10^k, then 2 and 5 x 10^k, then 3, 4, 6, 7, 8, 9 x 10^k (a group
+    is only tried while fewer than 3 ticks are taken); one is taken when it is at least
+    1/(most + 1) of the span (in decades) from every tick already taken.
     """
     ks = range(int(np.floor(np.log10(lo))) - 1, int(np.ceil(np.log10(hi))) + 1)
     gap = np.log10(hi / lo) / (most + 1)
     chosen = []
     for subs in ((1,), (2, 5), (3, 4, 6, 7, 8, 9)):
+        if len(chosen) >= 3:  # three decades or more: decades only
+            break
         for k in ks:
             for m in subs:
                 v = float(f"{m * 10.0**k:.12g}")
