@@ -201,8 +201,9 @@ def walk_detection(data_dir, out_dir=None):
     if out_dir is not None:
         fig = str(pathlib.Path(out_dir) / "cadastral_walk_detection.png")
         plot_stop_detection(fig, t - t[0], r.statistic, prm.threshold, r.spans - t[0], ref - t[0],
-                            title="stop detector on the real walk set walk_0827 (red: RTK speed < 0.1 m/s)",
-                            extra=(gt[sel] - t[0], speed[sel], "RTK horizontal speed, m/s"))
+                            title="stop detector (GLRT) on the real walk set walk_0827",
+                            extra=(gt[sel] - t[0], speed[sel], "RTK horizontal speed, m/s"),
+                            true_label="RTK static (speed < 0.1 m/s)")
     return {"n_samples": int(t.size), "rate_hz": float(1 / np.median(dt)),
             "threshold": float(prm.threshold), "window": win,
             "detected_spans_s": (r.spans - t[0]).round(2).tolist(), "rtk_static_spans_s": (ref - t[0]).round(2).tolist(),

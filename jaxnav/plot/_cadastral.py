@@ -104,7 +104,8 @@ def plot_cadastral_errors(path, errors, *, title="target errors over Monte Carlo
     return fig
 
 
-def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, title="stop detection", extra=None):
+def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, title="stop detection", extra=None,
+                        true_label="true stop"):
     """The detector's GLRT statistic over time, its threshold, the detected (and true) stop spans.
 
     The statistic T_k of :func:`jaxnav.survey.stance_statistic` (dimensionless, ~1 when static) is
@@ -115,7 +116,8 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
       path: output file.  t: (N,) s.  statistic: (N,) detector statistic (not a 0/1 mask).
       threshold: scalar, the detector's threshold on ``statistic``.
       detected: (K, 2) spans, s.  true: optional (J, 2) spans.  extra: optional (t, y, label) trace
-        on a second axis (e.g. GNSS speed).
+        on a second axis (e.g. GNSS speed).  true_label: legend entry of the ``true`` spans (e.g. what
+        they come from on real data).
     Returns:
       the figure.
     Raises:
@@ -138,7 +140,7 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
     if true is not None:
         for i, (a, b) in enumerate(np.asarray(true, float).reshape(-1, 2)):  # along the top, in axes y units
             ax.plot([a, b], [0.97, 0.97], color="tab:red", lw=5, solid_capstyle="butt",
-                    transform=ax.get_xaxis_transform(), label="true stop" if i == 0 else None)
+                    transform=ax.get_xaxis_transform(), label=true_label if i == 0 else None)
     handles, labels = ax.get_legend_handles_labels()
     if extra is not None:
         ax2 = ax.twinx()
