@@ -69,8 +69,6 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
         sg = np.asarray(sigma, float)
         ax[a].plot(k, np.hypot(sg[:, 0], sg[:, 1]) / MM, "^-", ms=3, lw=1.0, color="tab:orange",
                    label="correlated epochs (acf_ess_segment)")
-        ax[a + 1].plot(k, sg[:, 2] / MM, "^-", ms=3, lw=1.0, color="tab:orange",
-                       label="correlated epochs (acf_ess_segment)")
     ax[a].set_title("Precision of each point's mean (log scale)")
     ax[a].set_ylabel("plane precision, mm")
     legend_outside(ax[a])
@@ -79,6 +77,9 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
     ax[a + 1].plot(k, np.asarray(result.precision)[:, 2] / MM, "o-", ms=3, lw=0.8, color="tab:blue",
                    label="filtered")
     ax[a + 1].plot(k, fp[:, 2] / MM, ":", lw=1.0, color="tab:red", label="from reported sigmas")
+    if sigma is not None:  # after the others: the same legend order as the plane panel
+        ax[a + 1].plot(k, np.asarray(sigma, float)[:, 2] / MM, "^-", ms=3, lw=1.0, color="tab:orange",
+                       label="correlated epochs (acf_ess_segment)")
     ax[a].set_yscale("log")
     ax[a + 1].set_yscale("log")
     ax[a + 1].set_ylabel("height precision, mm")
