@@ -228,7 +228,10 @@ def plot_station_fit(fit, path):
         ax[0, c].set_title(f"{fit.station} {name}: {vel:+.2f} +- {sd:.2f} mm/yr (95 %: +-{1.96 * sd:.2f})",
                            fontsize=9)
         ax[0, c].set_ylabel(f"{name}, mm")
-        ax[0, c].legend(fontsize=7, loc="best", markerscale=4)
+        leg = ax[0, c].legend(fontsize=7, loc="best")
+        for h in leg.legend_handles:  # legible markers in the key (the daily dots are 1.5 pt)
+            if hasattr(h, "set_markersize"):
+                h.set_markersize(6)
         res = np.where(v, g.y[:n, c] - model[:, c], np.nan) / MM
         ax[1, c].plot(yr, res, ".", ms=1.5, color="0.4")
         ax[1, c].axhline(0.0, color="k", lw=0.5)
