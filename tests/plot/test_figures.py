@@ -274,3 +274,17 @@ def test_ins_figures_keep_legends_off_the_panels(tmp_path, captured):
         r = _renderer(fig)
         lb = leg.get_window_extent(r)
         assert all(lb.y1 <= ax.get_window_extent(r).y0 + 1 for ax in fig.axes)  # below every panel
+
+
+@pytest.mark.parametrize("lo,hi", [(0.68, 3.6), (0.25, 4.0), (2.2e-6, 9.5e-6), (1.1e-3, 3.3e-3), (1e-3, 1e3),
+                                   (1.8e-4, 2.0), (1.0, 1.05), (1e-12, 1e6)])
+def test_log_ticks_few_inside_and_apart(lo, hi):
+    from jaxnav.plot._style import _log_ticks
+
+    ticks = np.asarray(_log_ticks(lo, hi))
+    assert 2 <= ticks.size <= 7
+    assert np.all((ticks >= lo * (1 - 1e-9)) & (ticks <= hi * (1 + 1e-9)))
+    gaps = np.diff(np.log10(ticks))
+    assert np.all(gaps >= np.log10(hi / lo) / 7 * (1 - 1e-9))  # never crowded
+    if np.log10(hi / lo) >= 1 and lo <= 1 <= hi:
+        assert 1.0 in ticks  # round values first
