@@ -150,7 +150,8 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
         handles, labels = handles + h2, labels + l2
     ax.set_xlabel("time, s")
     ax.set_ylabel("GLRT statistic T_k (dimensionless)")
-    ax.set_xlim(t[0], t[-1]) if t.size > 1 else None
+    if t.size > 1:
+        ax.set_xlim(t[0], t[-1])
     ax.grid(alpha=0.3, which="major")
     ax.set_title(title, fontsize=10)
     # outside the data: the last stop is no longer hidden under the legend
