@@ -368,7 +368,9 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         from jaxnav.plot import plot_s0
 
         figs = plot_s0(outdir, truth=S.truth, gidx=S.gidx, t=S.t_gnss, detail=detail, sweep_b=bs,
-                       sweep_rms=sweep_mean, b_paper=exp["filter"]["b"])
+                       sweep_rms=sweep_mean, b_paper=exp["filter"]["b"],
+                       sweep_per_seed=np.asarray(sweep[:, :, :3]).mean(-1),  # (B, seeds): the spread bars
+                       seed_label=f"seed 0 of {seeds}")
     wall = time.perf_counter() - t_all
     results = dict(
         settings=dict(seeds=seeds, experiment=exp, duration_s=S.cfg.duration, imu_rate_hz=S.cfg.imu_rate_hz,
