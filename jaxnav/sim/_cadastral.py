@@ -401,9 +401,22 @@ def load_cadastral(path: str | os.PathLike | None = None) -> tuple[dict, dict]:
 
 
 def short_survey(scn: CadastralScenario, n_legs: int = 4) -> CadastralScenario:
-    """The first ``n_legs`` legs of a scenario, with the last stop turned into a known-coordinate point."""
+    """The first ``n_legs`` legs of a scenario, with the last stop turned into a known-coordinate point.
+
+    Raises:
+      ValueError: ``n_legs`` < 1, or the shortened survey would have no target point left to
+        score (naming the smallest ``n_legs`` that keeps one).
+    """
     import dataclasses
 
+    if n_legs < 1:
+        raise ValueError(f"n_legs must be >= 1, got {n_legs}")
+    kinds = [leg.kind for leg in scn.legs]
+    if "target" not in kinds[: n_legs - 1]:
+        first = next((i for i, k in enumerate(kinds[:-1]) if k == "target"), None)
+        need = "no number of legs keeps one" if first is None else f"use at least {first + 2} legs"
+        raise ValueError(f"the first {n_legs} leg(s) end at no target point once the last stop becomes a known "
+                         f"point, so there is nothing to score; {need} (the survey has {len(kinds)})")
     legs = list(scn.legs[:n_legs])
     legs[-1] = dataclasses.replace(legs[-1], kind="known_coordinate")
     return dataclasses.replace(scn, legs=tuple(legs))

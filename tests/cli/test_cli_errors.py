@@ -193,6 +193,7 @@ CASES = [
     ("cadastral seeds 0", ["cadastral", "--out", "{tmp}/c", "--seeds", "0"], ["jaxnav cadastral:", "--seeds"]),
     ("cadastral chunk 0", ["cadastral", "--out", "{tmp}/c", "--chunk", "0"], ["--chunk"]),
     ("cadastral legs 0", ["cadastral", "--out", "{tmp}/c", "--legs", "0"], ["--legs"]),
+    ("cadastral legs without a target", ["cadastral", "--out", "{tmp}/c", "--legs", "2"], ["first 2 leg(s)", "at least 3 legs"]),
     ("cadastral no out", ["cadastral"], ["--out"]),
     ("cadastral grade", ["cadastral", "--out", "{tmp}/c", "--grade", "navy"], ["--grade 'navy'", "tactical"]),
     ("cadastral config missing", ["cadastral", "--out", "{tmp}/c", "--config", "{tmp}/c.toml"], ["c.toml", "no such"]),
