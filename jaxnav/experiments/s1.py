@@ -288,6 +288,13 @@ def _tolist(a):
     return np.asarray(a).tolist()
 
 
+def _enu_dict(a):
+    """A (3,) east/north/up array as {"east": ., "north": ., "up": .} (None stays None)."""
+    if a is None:
+        return None
+    return dict(zip(("east", "north", "up"), (float(v) for v in np.asarray(a, float).reshape(3))))
+
+
 def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, window: int = 30,
                       horizon: int = 10) -> dict:
     """Velocities, forecasts and S1 statistics of daily station files; writes JSON and figures.
@@ -334,12 +341,13 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
         ref = v.reference_velocity
         result["stations"][s.station] = dict(
             file=str(f), format=s.fmt, epochs=v.n, span_years=v.span_years, masked_values=s.n_masked,
-            velocity_mm_per_yr=_tolist(v.velocity / MM_PER_YEAR), sigma_formal_mm_per_yr=_tolist(v.sigma / MM_PER_YEAR),
-            sigma_ar1_mm_per_yr=_tolist(v.sigma_ar1 / MM_PER_YEAR),
-            ls_slope_mm_per_yr=_tolist(v.ls_velocity / MM_PER_YEAR),
-            published_mm_per_yr=None if ref is None else _tolist(ref / MM_PER_YEAR),
-            published_sigma_mm_per_yr=None if ref is None else _tolist(v.reference_sigma / MM_PER_YEAR),
-            random_walk_psd_m2_per_s3=_tolist(v.accel_psd), forecast_statistics=st, figure=str(fig),
+            velocity_mm_per_yr=_enu_dict(v.velocity / MM_PER_YEAR),
+            sigma_formal_mm_per_yr=_enu_dict(v.sigma / MM_PER_YEAR),
+            sigma_ar1_mm_per_yr=_enu_dict(v.sigma_ar1 / MM_PER_YEAR),
+            ls_slope_mm_per_yr=_enu_dict(v.ls_velocity / MM_PER_YEAR),
+            published_mm_per_yr=None if ref is None else _enu_dict(ref / MM_PER_YEAR),
+            published_sigma_mm_per_yr=None if ref is None else _enu_dict(v.reference_sigma / MM_PER_YEAR),
+            random_walk_psd_m2_per_s3=_enu_dict(v.accel_psd), forecast_statistics=st, figure=str(fig),
         )
         for i, ax in enumerate("ENU"):
             pub = "" if ref is None else f"{ref[i] / MM_PER_YEAR:+.2f}+-{v.reference_sigma[i] / MM_PER_YEAR:.2f}"

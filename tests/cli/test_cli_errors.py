@@ -193,7 +193,6 @@ CASES = [
     ("cadastral seeds 0", ["cadastral", "--out", "{tmp}/c", "--seeds", "0"], ["jaxnav cadastral:", "--seeds"]),
     ("cadastral chunk 0", ["cadastral", "--out", "{tmp}/c", "--chunk", "0"], ["--chunk"]),
     ("cadastral legs 0", ["cadastral", "--out", "{tmp}/c", "--legs", "0"], ["--legs"]),
-    ("cadastral no out", ["cadastral"], ["--out"]),
     ("cadastral grade", ["cadastral", "--out", "{tmp}/c", "--grade", "navy"], ["--grade 'navy'", "tactical"]),
     ("cadastral config missing", ["cadastral", "--out", "{tmp}/c", "--config", "{tmp}/c.toml"], ["c.toml", "no such"]),
     ("cadastral stops latitude", ["cadastral", "--out", "{tmp}/c", "--stops", "{stops_bad}"],
