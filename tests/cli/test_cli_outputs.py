@@ -16,39 +16,14 @@ import jaxnav
 from jaxnav._progress import Progress
 from jaxnav.cli import main
 
+from _outputs import check_provenance, no_constants
+
 #: a 2-point epoch log, 5 epochs each, mm-level scatter (x, y, h and B, L, H)
 EPOCHS = ("point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h\n"
           + "".join(f"P{p},{2 * k},{3631500 + 0.004 * ((3 * k) % 5 - 2):.4f},{39486000.5 + 0.003 * ((2 * k) % 5 - 2):.4f},"
                     f"{22.1 + 0.006 * ((4 * k) % 5 - 2):.4f},{32.81 + 1e-8 * ((3 * k) % 5 - 2):.10f},"
                     f"{116.85 + 1e-8 * ((2 * k) % 5 - 2):.10f},{18.6 + 0.006 * ((4 * k) % 5 - 2):.4f},0.008,0.008,0.015\n"
                     for p in range(2) for k in range(5)))
-#: keys every provenance block has
-PROVENANCE_KEYS = {"jaxnav_version", "git_commit", "python_version", "jax_version", "date_utc", "finished_utc",
-                   "wall_time_s", "command", "argv", "cwd", "options", "config_file", "config", "subcommand"}
-
-
-def no_constants(name):
-    raise AssertionError(f"{name} token in a JSON file")  # strict JSON: null + reason instead
-
-
-def check_provenance(out, argv, *, json_name="results.json", config=False) -> dict:
-    """The provenance block and files list of ``out/results.json`` (shared by the command tests)."""
-    res = json.loads((out / "results.json").read_text(), parse_constant=no_constants)
-    prov = res["provenance"]
-    assert PROVENANCE_KEYS <= set(prov), PROVENANCE_KEYS - set(prov)
-    assert prov["jaxnav_version"] == jaxnav.__version__ and prov["argv"] == [str(a) for a in argv]
-    assert prov["command"].startswith("jaxnav ") and prov["date_utc"].endswith("+00:00")
-    assert prov["subcommand"] == next(a for a in argv if not a.startswith("-")) and isinstance(prov["options"], dict) and "out" in prov["options"]
-    if config:
-        assert prov["config_file"] and isinstance(prov["config"], dict) and prov["config"]
-    files = res["files"]
-    assert "results.json" in files and all((out / f).is_file() for f in files)
-    if json_name != "results.json":
-        own = json.loads((out / json_name).read_text(), parse_constant=no_constants)
-        assert own["provenance"]["argv"] == prov["argv"] and json_name in files
-    return res
-
-
 def test_version(capsys):
     assert main(["--version"]) == 0
     assert capsys.readouterr().out == f"jaxnav {jaxnav.__version__}\n"

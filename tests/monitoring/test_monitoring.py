@@ -129,7 +129,11 @@ def test_cli_monitor_files(tmp_path):
     results (filter = weighted LS = SIO's slopes, forecast statistics) under s1_adaptive_filter."""
     from jaxnav.cli import main
 
-    assert main(["monitor", str(DATA / "bjfsCleanUnf.neu"), "--out", str(tmp_path), "--s1"]) == 0
+    argv = ["monitor", str(DATA / "bjfsCleanUnf.neu"), "--out", str(tmp_path), "--s1"]
+    assert main(argv) == 0
+    from _outputs import check_provenance
+
+    assert "BJFS_fit.png" in check_provenance(tmp_path, argv, json_name="monitor.json")["files"]
     res = json.loads((tmp_path / "monitor.json").read_text())
     st = res["stations"]["BJFS"]
     v, sd = st["velocity_mm_per_yr"], st["velocity_sigma_mm_per_yr"]
