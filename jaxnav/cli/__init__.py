@@ -185,7 +185,15 @@ def main(argv=None) -> int:
         jaxnav.enable_x64()  # navigation states and absolute coordinates are float64
         args._argv = argv  # the words after "jaxnav", as given
         start = _Start(args)
-        logging.getLogger("jaxnav").debug("jaxnav %s, %s", jaxnav.__version__, " ".join(argv))
+        log = logging.getLogger("jaxnav")
+        if log.isEnabledFor(logging.DEBUG):  # no jax.devices() here: it would start JAX before jax.distributed
+            from jaxnav.io import git_commit
+
+            log.debug("jaxnav %s (commit %s), Python %s, command: jaxnav %s", jaxnav.__version__, git_commit(),
+                      sys.version.split()[0], " ".join(argv))
+            log.debug("options: %s", ", ".join(f"{k}={v!r}" for k, v in sorted(vars(args).items())
+                                               if not k.startswith("_") and k != "version"))
+            log.debug("figures written as: %s", ", ".join(["png", *[f for f in args.figure_formats if f != "png"]]))
         with figure_formats(*args.figure_formats):
             rc = args._run(args)
         if rc == 0:

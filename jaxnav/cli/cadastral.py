@@ -61,5 +61,5 @@ def run(args) -> int:
     if not writer:
         return 0
     print(format_cadastral(res))
-    print(f"wrote {args.out}/results.json and figures")
+    print(f"wrote {args.out}/results.json and the figures ({len(res.get('figures', []))}) into {args.out}")
     return 0
