@@ -163,7 +163,11 @@ def main(argv=None) -> int:
 
         print(f"jaxnav {jaxnav.__version__}")
         return 0
-    parser = _Parser(prog="jaxnav", description="jaxnav command line")
+    parser = _Parser(prog="jaxnav", description="jaxnav command line", epilog=(
+        "-q, -v, --debug and --figure-format go before or after the command. Each command writes into --out "
+        "(default out/<command>) and records there results.json: jaxnav version, git commit, UTC date, the "
+        "command line, every option, the config file and its contents, and the files written. Messages and "
+        "progress go to stderr (a bar on a terminal, plain lines otherwise), the summary to stdout."))
     parser.add_argument("--version", action="store_true", help="print 'jaxnav X.Y.Z' and exit")
     _add_common(parser, top=True)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)

@@ -61,5 +61,6 @@ def run(args) -> int:
     if not writer:
         return 0
     print(format_cadastral(res))
-    print(f"wrote {args.out}/results.json and the figures ({len(res.get('figures', []))}) into {args.out}")
+    n_fig = sum(len(r.get("figures", [])) for r in res.get("grades", {}).values())
+    print(f"wrote {args.out}/results.json and {n_fig} figure(s) into {args.out}")
     return 0
