@@ -295,6 +295,17 @@ def _enu_dict(a):
     return dict(zip(("east", "north", "up"), (float(v) for v in np.asarray(a, float).reshape(3))))
 
 
+#: the share threshold of each axis in S1's Tables 3-5, mm
+_S1_SHARE_THRESHOLD_MM = {"X": 0.5, "Y": 0.4, "H": 1.0}
+
+
+def _labelled_table3_5(t3: dict) -> dict:
+    """S1 Tables 3-5 ({axis: {filter: (max, mean, share %)}}) with labelled fields for the JSON file."""
+    return {ax: {name: dict(max_abs_mm=v[0], mean_abs_mm=v[1], share_below_threshold_percent=v[2],
+                            threshold_mm=_S1_SHARE_THRESHOLD_MM.get(ax))
+                 for name, v in per.items()} for ax, per in t3.items()}
+
+
 def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, window: int = 30,
                       horizon: int = 10) -> dict:
     """Velocities, forecasts and S1 statistics of daily station files; writes JSON and figures.
@@ -400,7 +411,11 @@ def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs:
     plot_s1_statistics(res, out / "s1_statistics.png")
     plot_s1_period(res["series"][0], out / "s1_period.png")
     result = dict(
-        settings=st._asdict(), tables=tables, published=S1_PUBLISHED, text=text,
+        settings={**{k: v for k, v in st._asdict().items() if k != "sigma"},
+                  "sigma_m": _enu_dict(st.sigma)},
+        tables={**tables, "table3_5": _labelled_table3_5(tables["table3_5"])},
+        published={**S1_PUBLISHED, **_labelled_table3_5({ax: S1_PUBLISHED[ax] for ax in ("X", "Y", "H")})},
+        text=text,
         forecast_rms_mm={k: float(np.mean(v) / MM) for k, v in res["forecast_rms"].items()},
         episode_rms_mm={k: float(np.mean(v) / MM) for k, v in res["episode_rms"].items()},
         ratio_standard_adaptive=float(ratio), ratio_standard_adaptive_episodes=float(ratio_ep),
