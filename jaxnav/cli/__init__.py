@@ -261,12 +261,15 @@ class _Start:
         prov["subcommand"] = args.command
         prov["finished_utc"] = utc_now()
         prov["wall_time_s"] = time.perf_counter() - self.t0
-        own = tuple(getattr(args, "_json_outputs", ()))
-        for name in ("results.json", *own):
-            _complete(out / name, prov, None)
         snapshot = getattr(args, "_snapshot", self.snapshot)  # a command that resolves --out itself takes its own
-        files = sorted(set(files_written(out, snapshot, self.ns)) | {"results.json"})
-        _complete(out / "results.json", prov, files, results_in=own)
+        written = set(files_written(out, snapshot, self.ns))
+        own = tuple(n for n in getattr(args, "_json_outputs", ()) if n in written)
+        for name in own:
+            _complete(out / name, prov, None)
+        # a results.json left by an earlier run (of another command) in the same folder is replaced, not merged
+        _complete(out / "results.json", prov, sorted(written | {"results.json"}), results_in=own,
+                  fresh="results.json" not in written)
+        files = written | {"results.json"}
         logging.getLogger("jaxnav").info("wrote the provenance and the list of the %d files written into %s",
                                          len(files), out / "results.json")
 
@@ -280,15 +283,18 @@ def _is_writer() -> bool:
     return tune.is_writer()
 
 
-def _complete(path: pathlib.Path, prov: dict, files, results_in=()):
+def _complete(path: pathlib.Path, prov: dict, files, results_in=(), fresh=False):
     """Add ``provenance`` (merged over one the command wrote) and ``files`` to the JSON object at ``path``
-    (created if missing and ``files`` is given, then with ``results_in``: the command's own JSON files)."""
+    (created -- or replaced with ``fresh`` -- if ``files`` is given, then with ``results_in``: the
+    command's own JSON files)."""
     import json
 
     from jaxnav.io import write_json
 
-    if path.is_file():
+    if path.is_file() and not fresh:
         data = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(data, dict):
+            data = {"results": data}
     elif files is not None:
         data = {"results_in": list(results_in)} if results_in else {}
     else:

@@ -50,10 +50,16 @@ def test_quiet_verbose_and_outputs_of_rtk(epochs, tmp_path, capsys, where):
         argv = (opts + ["rtk", f, "--out", str(out)]) if where == "before" else (["rtk", f, "--out", str(out)] + opts)
         if flag == "-v":
             argv += ["--figure-format", "pdf,svg"]
+        if flag == "":  # a folder used before: its old results.json is replaced, its old files not listed
+            out.mkdir()
+            (out / "results.json").write_text('{"stale": true}')
+            (out / "old.txt").write_text("x")
         assert main(argv) == 0
         cap = capsys.readouterr()
         runs[flag] = (cap.out, cap.err, out, argv)
-    out_d, err_d, _, _ = runs[""]
+    out_d, err_d, out0, argv0 = runs[""]
+    res0 = check_provenance(out0, argv0, json_name="rtk_results.json")
+    assert "stale" not in res0 and "old.txt" not in res0["files"] and res0["results_in"] == ["rtk_results.json"]
     assert "reading 1 file(s)" in err_d and "filtering 2 point(s)" in err_d and "debug:" not in err_d
     out_q, err_q, _, _ = runs["-q"]
     assert err_q == "" and "S2 pipeline: 2 points" in out_q  # the summary still shows
