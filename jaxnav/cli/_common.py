@@ -6,7 +6,9 @@ A command's ``run(args)`` raises :class:`UsageError` for a wrong combination of 
 ``type=`` helpers here (:func:`int_range`, :func:`float_range`), and :func:`prepare_out` creates
 and checks the output folder before any work. The study commands (Monte Carlo, sweeps, tuning)
 take the multi-process options of :func:`add_process_args` and join the study's processes with
-:func:`start_processes` before any JAX work.
+:func:`start_processes` before any JAX work. A command that reads a configuration file notes it
+with :func:`record_config` (``main`` writes it into the provenance block of ``results.json``);
+:func:`figure_format_list` parses ``--figure-format``.
 """
 
 from __future__ import annotations
