@@ -1,10 +1,11 @@
 # Two commands: `make demo` and `make test`. Each creates .venv on first use.
+# `make docs` builds the API documentation (strict) into site/, in its own .venv-docs.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out/demo
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench docs clean
 
 $(VENV)/.base:
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +25,15 @@ $(BVENV)/.bench: pyproject.toml
 	$(BVENV)/bin/python -m pip install --quiet -e '.[bench]'
 	touch $@
 
+# The documentation tools live in their own environment too (jaxnav itself is installed there:
+# the command reference is generated from its argparse parsers).
+DVENV := .venv-docs
+$(DVENV)/.docs: pyproject.toml
+	$(PYTHON) -m venv $(DVENV)
+	$(DVENV)/bin/python -m pip install --quiet --upgrade pip
+	$(DVENV)/bin/python -m pip install --quiet -e '.[docs]'
+	touch $@
+
 demo: $(VENV)/.base
 	$(VENV)/bin/jaxnav demo --out $(OUT)
 
@@ -33,5 +43,8 @@ test: $(VENV)/.test
 bench: $(BVENV)/.bench
 	$(BVENV)/bin/python benchmarks/bench_filters.py
 
+docs: $(DVENV)/.docs
+	NO_MKDOCS_2_WARNING=1 $(DVENV)/bin/mkdocs build --strict --site-dir site
+
 clean:
-	rm -rf $(VENV) $(BVENV) out .pytest_cache
+	rm -rf $(VENV) $(BVENV) $(DVENV) site .cache/mkdocs-jupyter out .pytest_cache

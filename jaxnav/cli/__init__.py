@@ -21,8 +21,10 @@ Options of every command, accepted before or after the command's name (``jaxnav 
   Messages go through the ``logging`` logger ``"jaxnav"`` (INFO by default, WARNING with ``-q``,
   DEBUG with ``-v``), one line each on stderr; progress follows :mod:`jaxnav._progress` (a tqdm
   bar on a terminal, plain lines otherwise). The last of ``-q``/``-v`` given wins.
-* ``--figure-format FMT[,FMT...]``: also write every figure as PDF and/or SVG beside the PNG
-  (png, pdf, svg; repeatable; default png), through :func:`jaxnav.plot.figure_formats`.
+* ``--figure-format FMT [FMT ...]``: also write every figure as PDF and/or SVG beside the PNG
+  (png, pdf, svg; ``pdf svg``, ``pdf,svg`` or the option repeated; default png), through
+  :func:`jaxnav.plot.figure_formats`. Only the words png/pdf/svg after the option are taken as
+  formats, so ``--figure-format pdf FILE`` leaves FILE to the command.
 
 Outputs: each command writes into ``--out`` (default ``out/<command>``; ``jaxnav ins``:
 ``out/ins/<config name>``) and, after it succeeds, :func:`main` completes ``results.json`` there
@@ -104,9 +106,9 @@ def _add_common(p, top: bool):
     p.add_argument("-v", "--verbose", dest="verbosity", action="store_const", const=1,
                    help="also debug lines (timings, devices, configuration)", **d)
     p.add_argument("--figure-format", dest="figure_formats", action="extend", type=figure_format_list,
-                   metavar="FMT[,FMT...]",
-                   help="also write every figure in these formats beside the PNG: png, pdf, svg (e.g. pdf,svg; "
-                        "repeatable); default png", **({"default": []} if top else d))
+                   metavar="FMT",
+                   help="also write every figure in these formats beside the PNG: png, pdf, svg (several: "
+                        "'pdf svg' or 'pdf,svg'); default png", **({"default": []} if top else d))
 
 
 class _LineFormatter(logging.Formatter):
@@ -178,7 +180,7 @@ def main(argv=None) -> int:
     prog = "jaxnav"
     undo = None
     try:
-        args, extra = parser.parse_known_args(argv)
+        args, extra = parser.parse_known_args(_join_figure_formats(argv))
         prog = args._parser.prog
         if extra:
             raise UsageError(f"unrecognized arguments: {' '.join(extra)}", prog)
@@ -228,6 +230,32 @@ def main(argv=None) -> int:
     finally:
         if undo is not None:
             undo()
+
+
+def _join_figure_formats(argv):
+    """``--figure-format pdf svg`` -> ``--figure-format pdf,svg``: the format words after the option (png,
+    pdf, svg, or comma lists of them) become its one value; anything else is left to the command."""
+    from jaxnav.plot._save import FORMATS
+
+    def is_formats(word):
+        parts = [w.strip().lower().lstrip(".") for w in word.split(",") if w.strip()]
+        return bool(parts) and all(w in FORMATS for w in parts)
+
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a == "--":
+            return out + argv[i:]
+        out.append(a)
+        i += 1
+        if a == "--figure-format":
+            j = i
+            while j < len(argv) and is_formats(argv[j]):
+                j += 1
+            if j > i + 1:
+                out.append(",".join(argv[i:j]))
+                i = j
+    return out
 
 
 def _command_names():

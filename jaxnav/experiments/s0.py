@@ -22,7 +22,7 @@ import numpy as np
 
 from jaxnav.io import write_json
 from jaxnav import filters as jf
-from jaxnav import ins, sim, tune
+from jaxnav import sim, tune
 from jaxnav.geodesy import meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_conj, quat_mul, quat_to_rv
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled
@@ -132,23 +132,9 @@ def cut_timeline(cfg, duration: float):
 
 
 def filter_params(cfg, exp: dict) -> LCParams:
-    """P0 and Qc from the scenario's sigmas, scaled by the experiment's assumed-noise mismatch."""
-    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
-    ie, g, a = cfg.initial_errors, cfg.gyro, cfg.accel
-    lat, h = float(cfg.origin[0]), float(cfg.origin[2])
-    RM, RN = float(meridian_radius(lat)) + h, float(prime_vertical_radius(lat)) + h
-    pe = v3(ie.position)
-    n = exp["filter"]["n_states"]
-    p0 = [v3(ie.attitude) ** 2, v3(ie.velocity) ** 2,
-          np.array([pe[1] / RM, pe[0] / (RN * np.cos(lat)), pe[2]]) ** 2, v3(g.bias_sigma) ** 2]
-    if n == 18:
-        p0.append(v3(g.markov_sigma) ** 2)
-        Qc = ins.error_model_Qc(v3(g.white), v3(g.markov_sigma), v3(g.markov_tau), v3(a.white))
-    else:
-        Qc = ins.error_model_Qc15(v3(g.white), v3(a.white))
-    p0.append(v3(a.bias_sigma) ** 2)
-    return LCParams(P0=jnp.diag(jnp.asarray(np.concatenate(p0))), Qc=Qc * exp["filter"]["q_scale"],
-                    tau_markov=jnp.asarray(v3(g.markov_tau)), R_scale=exp["filter"]["r_scale"])
+    """P0 and Qc from the scenario's sigmas (:func:`jaxnav.sim.lc_params`), scaled by the experiment's mismatch."""
+    f = exp["filter"]
+    return sim.lc_params(cfg, n_states=f["n_states"], q_scale=f["q_scale"], r_scale=f["r_scale"])
 
 
 def inflated_states(exp: dict):
@@ -166,18 +152,8 @@ def rules(exp: dict, b=None) -> dict:
 
 
 def s0_measurements(cfg, gnss, t) -> PVMeasurements:
-    """The GPS position/velocity measurements of one S0 run (no lever arm).
-
-    Args:
-      cfg: the scenario (its ``gnss.pos_sigma`` (m) and ``gnss.vel_sigma`` (m/s) give R).
-      gnss: with ``pos`` (M, 3) lat, lon (rad), h (m); ``vel`` (M, 3) ENU m/s; ``valid`` (M,) bool.
-      t: (M,) epoch times, s.
-    """
-    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
-    M = t.shape[0]
-    R = np.diag(np.concatenate([v3(cfg.gnss.pos_sigma) ** 2, v3(cfg.gnss.vel_sigma) ** 2]))
-    return PVMeasurements(t=t, pos=gnss.pos, vel=gnss.vel, R=jnp.broadcast_to(R, (M, 6, 6)),
-                          mask=jnp.broadcast_to(gnss.valid[:, None], (M, 6)), lever=jnp.zeros((M, 3)))
+    """The GPS position/velocity measurements of one S0 run (no lever arm): :func:`jaxnav.sim.gnss_measurements`."""
+    return sim.gnss_measurements(cfg, gnss, t)
 
 
 def _rms9(pe, ve, ae):
@@ -392,7 +368,9 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         from jaxnav.plot import plot_s0
 
         figs = plot_s0(outdir, truth=S.truth, gidx=S.gidx, t=S.t_gnss, detail=detail, sweep_b=bs,
-                       sweep_rms=sweep_mean, b_paper=exp["filter"]["b"])
+                       sweep_rms=sweep_mean, b_paper=exp["filter"]["b"],
+                       sweep_per_seed=np.asarray(sweep[:, :, :3]).mean(-1),  # (B, seeds): the spread bars
+                       seed_label=f"seed 0 of {seeds}")
     wall = time.perf_counter() - t_all
     results = dict(
         settings=dict(seeds=seeds, experiment=exp, duration_s=S.cfg.duration, imu_rate_hz=S.cfg.imu_rate_hz,

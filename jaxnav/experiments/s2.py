@@ -252,8 +252,10 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     write_rtk_results(out / "rtk_results.csv", names, res, h_level, sigma=ps.sigma, sigma_method=ps.method,
                       crs=csv_crs, zone=f"central meridian {', '.join(f'{z:g}' for z in zones)} deg{width}",
                       height_system=csv_height)
+    fnames = [pathlib.Path(f).name for f in files]
     plot_rtk(res, out / "rtk.png", h_level=h_level if np.any(np.isfinite(h_level)) else None, names=names,
-             sigma=ps.sigma)
+             sigma=ps.sigma, title=f"RTK {len(names)} point{'s' if len(names) != 1 else ''} from "
+                                   f"{', '.join(fnames[:3])}{f' and {len(fnames) - 3} more' if len(fnames) > 3 else ''}")
     pts = []
     for i, n in enumerate(names):
         tv = t_arr[i][m_arr[i]]

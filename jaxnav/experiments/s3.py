@@ -82,7 +82,8 @@ def survey_monte_carlo(scn, pipe: dict, seeds: int, *, stops=None, chunk: int = 
 
     Returns:
       dict with truth, plan, per-seed target errors (stage -> (S, T, 3) E, N, U m), sigmas, weights, wild-value
-      counts, status, static masks (for detection), seed-0 routes and timing.
+      counts, status, static masks and the detector statistic (float32, (S, N)) for detection, seed-0 routes
+      and timing.
     """
     truth = survey_truth(scn)
     stop_list = truth.stops if stops is None else stops
@@ -105,7 +106,7 @@ def survey_monte_carlo(scn, pipe: dict, seeds: int, *, stops=None, chunk: int = 
         route = {k: v[route_every - 1::route_every] for k, v in out.route.items()}
         return dict(errors=errs, sigma_f=out.sigma_forward, sigma_b=out.sigma_backward, weight=out.weight_forward,
                     n_rejected=out.n_rejected, n_wild=run.n_wild, status=out.status, static=stat < det.threshold,
-                    route=route)
+                    statistic=stat.astype(jnp.float32), route=route)
 
     keys = jax.random.split(jax.random.PRNGKey(seed0), seeds)
     t0 = time.perf_counter()
@@ -200,8 +201,9 @@ def walk_detection(data_dir, out_dir=None):
     if out_dir is not None:
         fig = str(pathlib.Path(out_dir) / "cadastral_walk_detection.png")
         plot_stop_detection(fig, t - t[0], r.statistic, prm.threshold, r.spans - t[0], ref - t[0],
-                            title="stop detector on the real walk set walk_0827 (red: RTK speed < 0.1 m/s)",
-                            extra=(gt[sel] - t[0], speed[sel], "RTK horizontal speed, m/s"))
+                            title="stop detector (GLRT) on the real walk set walk_0827",
+                            extra=(gt[sel] - t[0], speed[sel], "RTK horizontal speed, m/s"),
+                            true_label="RTK static (speed < 0.1 m/s)")
     return {"n_samples": int(t.size), "rate_hz": float(1 / np.median(dt)),
             "threshold": float(prm.threshold), "window": win,
             "detected_spans_s": (r.spans - t[0]).round(2).tolist(), "rtk_static_spans_s": (ref - t[0]).round(2).tolist(),
@@ -299,11 +301,12 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
                                  target_errors={s: errs[s][0] for s in ("forward", "preprocessed", "smoothed",
                                                                        "fused", "rts")})
             plot_cadastral_errors(f_err, errs,
-                                  title=f"S3 target errors, {g} IMU, {seeds} seeds x {len(tnames)} targets")
-            plot_stop_detection(f_det, t_imu, np.where(res["static"][0], 0.5, 5.0), 1.0,
+                                  title=f"S3 target errors, {g} IMU, {seeds} seed{'s' if seeds != 1 else ''} x "
+                                        f"{len(tnames)} target{'s' if len(tnames) != 1 else ''} (boxes: quartiles, "
+                                        f"whiskers: 1.5 IQR)")
+            plot_stop_detection(f_det, t_imu, np.asarray(res["statistic"][0], float), float(mc["detector"].threshold),
                                 static_spans(res["static"][0], t_imu, min_duration=2.0, min_gap=0.5), true_spans,
-                                title=f"stop detector on the simulated survey (seed 0), {g}: 0.5 = static, "
-                                      f"5 = moving")
+                                title=f"stop detector (GLRT) on the simulated survey, {g} IMU, seed 0 of {seeds}")
         status = np.bitwise_or.reduce(np.asarray(res["status"]).ravel())
         results["grades"][g] = {
             "survey": {"duration_s": scn.duration, "n_imu": int(t_imu.size), "n_stops": len(plan.stops.t_start),

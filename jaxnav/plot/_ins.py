@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from jaxnav.plot._save import save_figure
+from jaxnav.plot._style import legend_below, readable_ticks
 
 
 def _shade_outages(ax, windows, t0):
@@ -46,9 +47,8 @@ def plot_ins_differences(t, d_pos, sig_pos, d_vel, sig_vel, windows, path, *, ti
             a.set_yscale("symlog", linthresh=lin)
     for a in ax[1]:
         a.set_xlabel("time since start, s")
-    ax[0, 0].legend(fontsize=8, loc="upper left")
     fig.suptitle(title)
-    fig.tight_layout()
+    legend_below(fig, ax[0, 0], ncol=3, height=0.05)  # below the panels: inside one it covered data
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
@@ -59,7 +59,7 @@ def plot_ins_attitude(t, fwd, sm, sig, windows, path, *, title: str) -> pathlib.
 
     Args:
       t: (M,) s.  fwd, sm: (M, 3) roll, pitch, heading, deg.  sig: (M, 3) smoothed 1-sigma misalignment
-      about east, north, up, deg.  windows: (K, 2) s.
+        about east, north, up, deg.  windows: (K, 2) s.
     """
     path = pathlib.Path(path)
     t0 = float(t[0])
@@ -82,10 +82,12 @@ def plot_ins_attitude(t, fwd, sm, sig, windows, path, *, title: str) -> pathlib.
         b.set_ylabel(f"1-sigma {('tilt about east', 'tilt about north', 'heading')[c]}, deg")
         b.set_xlabel("time since start, s")
         b.grid(alpha=0.3, which="both")
-    ax[0, 0].legend(fontsize=8)
-    ax[1, 0].legend(fontsize=8)
+        readable_ticks(b, "y")
+    h0, l0 = ax[0, 0].get_legend_handles_labels()
+    h1, l1 = ax[1, 0].get_legend_handles_labels()
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.05, 1.0, 1.0))
+    fig.legend(h0 + h1[1:], l0 + l1[1:], loc="lower center", ncol=4, fontsize=8, frameon=False)
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
@@ -114,9 +116,8 @@ def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title
         a.set_ylabel(f"{what}, {unit}")
         a.set_xlabel("time since start, s")
         a.grid(alpha=0.3)
-        a.legend(fontsize=8)
     fig.suptitle(title)
-    fig.tight_layout()
+    legend_below(fig, ax[0], ncol=4, height=0.11)  # one legend for both panels, below them
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path

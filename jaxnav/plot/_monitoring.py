@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 
 from jaxnav.units import MM, MM_PER_YEAR, YEAR  # noqa: E402
 from jaxnav.plot._save import save_figure
+from jaxnav.plot._style import legend_outside, readable_ticks
 
 COLORS = {"standard": "tab:gray", "adaptive": "tab:green", "standard_robust": "tab:red",
           "adaptive_robust": "tab:blue", "yang_robust": "tab:purple"}
@@ -41,7 +42,7 @@ def plot_s1_period(series: dict, path, *, station: int = 0, skip: int = 60):
     ep = series["episode"][skip:, station]
     for a in ax:
         if ep.any():
-            a.axvspan(t[ep][0], t[ep][-1], color="orange", alpha=0.12, lw=0)
+            a.axvspan(t[ep][0], t[ep][-1], color="orange", alpha=0.12, lw=0, label="subsidence episode")
     ax[0].plot(t, series["zs"][skip:, station, 2] / MM, ".", ms=1, color="0.7", label="measured")
     ax[0].plot(t, series["pos"][skip:, station, 2] / MM, "k-", lw=1, label="truth")
     for name, o in series["filters"].items():
@@ -50,12 +51,13 @@ def plot_s1_period(series: dict, path, *, station: int = 0, skip: int = 60):
         for i in range(3):
             ax[i + 1].plot(t, o["error"][skip:, station, i] / MM, lw=0.6, color=c, label=name)
     ax[0].set_ylabel("up, mm")
-    ax[0].legend(fontsize=7, loc="lower left", ncol=3)
+    legend_outside(ax[0], fontsize=7, markerscale=6)
     for i, name in enumerate(AXES):
         ax[i + 1].set_ylabel(f"{name} forecast - truth, mm")
-    ax[1].legend(fontsize=7, loc="upper right", ncol=3)
-    ax[-1].set_xlabel("epoch (1 Hz)")
-    ax[0].set_title("S1 on a simulated station: Knothe subsidence episode (shaded), one-step forecasts X(k/k-1)")
+    legend_outside(ax[1], fontsize=7)
+    ax[-1].set_xlabel("epoch (1 Hz), s from the period start")
+    ax[0].set_title(f"S1 on simulated station {station + 1}: Knothe subsidence episode (shaded), "
+                    "one-step forecasts X(k/k-1)", fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
 
@@ -69,24 +71,44 @@ def plot_s1_statistics(result: dict, path):
     Returns:
       The figure.
     """
-    fig, ax = plt.subplots(3, 1, figsize=(10, 10))
-    for name, st in result["stats"].items():
-        c = COLORS.get(name)
-        mP = np.asarray(st.m_P).reshape(-1) / MM
-        mH = np.asarray(st.m_H).reshape(-1) / MM
-        k = np.arange(1, mP.size + 1)
-        ax[0].plot(k, mP, "o-", ms=3, lw=0.8, color=c, label=name)
-        ax[1].plot(k, mH, "o-", ms=3, lw=0.8, color=c, label=name)
-        fr = np.asarray(result["forecast_rms"][name]).reshape(-1) / MM
-        ax[2].plot(k, fr, "o-", ms=3, lw=0.8, color=c, label=name)
+    fig, ax = plt.subplots(3, 1, figsize=(11, 10), sharex=True)
+    names = list(result["stats"])
+    width = 0.8 / max(len(names), 1)  # periods are independent: markers side by side per period, no lines
+    _STATION_MARKERS = ("o", "s", "^", "D", "v")
+    S = 1
+    for j, name in enumerate(names):
+        st = result["stats"][name]
+        c = COLORS.get(name, f"C{j}")
+        for a, arr in ((ax[0], st.m_P), (ax[1], st.m_H), (ax[2], result["forecast_rms"][name])):
+            v = np.asarray(arr, float)
+            v = (v.reshape(v.shape[0], -1) if v.ndim >= 2 else v.reshape(-1, 1)) / MM  # (periods, stations)
+            P, S = v.shape
+            x = np.arange(1, P + 1) - 0.4 + (j + 0.5) * width
+            for s_ in range(S):
+                m = _STATION_MARKERS[s_] if S <= len(_STATION_MARKERS) else "o"
+                a.plot(x, v[:, s_], m, ls="none", ms=4, color=c, mec="k", mew=0.3, alpha=0.9,
+                       label=name if s_ == 0 else None)
+    if 1 < S <= len(_STATION_MARKERS):  # station key: grey markers
+        for s_ in range(S):
+            ax[0].plot([], [], _STATION_MARKERS[s_], ls="none", color="0.5", label=f"station {s_ + 1}")
     ax[0].set_ylabel("m_P plane, mm")
     ax[1].set_ylabel("m_H height, mm")
     ax[2].set_ylabel("forecast - truth RMS, mm")
-    ax[2].set_xlabel("period x station")
+    ax[2].set_xlabel("period (independent simulated periods; filters side by side)")
+    n_per = ax[2].get_xlim()
+    P = int(round(n_per[1]))
     for a in ax:
         a.set_yscale("log")
-        a.legend(fontsize=7, ncol=3)
-    ax[0].set_title("Forecast precision per period (forecast - measurement), and against the simulated truth")
+        a.grid(alpha=0.3, which="major", axis="y")
+        if P <= 60:  # thin separators between the periods
+            for k in range(1, P):
+                a.axvline(k + 0.5, color="0.85", lw=0.6, zorder=0)
+        a.set_xlim(n_per)
+        readable_ticks(a, "y")
+    legend_outside(ax[0], fontsize=7)
+    ax[2].xaxis.get_major_locator().set_params(integer=True)
+    ax[0].set_title("Forecast precision per period: m_P, m_H (forecast - measurement, S1 Tables 1-2)\n"
+                    "and forecast - simulated truth (bottom)", fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
 
@@ -206,7 +228,10 @@ def plot_station_fit(fit, path):
         ax[0, c].set_title(f"{fit.station} {name}: {vel:+.2f} +- {sd:.2f} mm/yr (95 %: +-{1.96 * sd:.2f})",
                            fontsize=9)
         ax[0, c].set_ylabel(f"{name}, mm")
-        ax[0, c].legend(fontsize=7, loc="best", markerscale=4)
+        leg = ax[0, c].legend(fontsize=7, loc="best")
+        for h in leg.legend_handles:  # legible markers in the key (the daily dots are 1.5 pt)
+            if hasattr(h, "set_markersize"):
+                h.set_markersize(6)
         res = np.where(v, g.y[:n, c] - model[:, c], np.nan) / MM
         ax[1, c].plot(yr, res, ".", ms=1.5, color="0.4")
         ax[1, c].axhline(0.0, color="k", lw=0.5)

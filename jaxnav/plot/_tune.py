@@ -9,7 +9,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
+
 from jaxnav.plot._save import save_figure
+from jaxnav.plot._style import readable_ticks as _readable_ticks
 
 
 def plot_sweep(outdir, *, grid, axes, loss, loss_name, init):
@@ -48,12 +51,16 @@ def plot_sweep(outdir, *, grid, axes, loss, loss_name, init):
             ax[0].set_yscale("log")
         ax[0].set_xlabel(b)
         ax[0].set_ylabel(a)
-        ax[0].legend()
-    ax[0].set_title("loss landscape")
+        ax[0].legend(fontsize=8, framealpha=0.6)
+    ax[0].set_title(f"loss landscape (mean over {loss.shape[1]} runs)")
     ax[1].hist(loss[best], bins=min(20, max(5, loss.shape[1] // 2)), alpha=0.7, label="best point")
     ax[1].set_xlabel(loss_name)
     ax[1].set_ylabel("runs")
     ax[1].set_title("Monte Carlo distribution at the best grid point")
+    _readable_ticks(ax[0])
+    _readable_ticks(ax[1], "x")
+    for a in ax:
+        plt.setp(a.get_xticklabels(), rotation=30, ha="right")
     fig.tight_layout()
     f = out / "sweep_landscape.png"
     save_figure(fig, f, dpi=110)
@@ -95,10 +102,21 @@ def plot_tune(outdir, *, path, losses, final, final_loss, landscape, loss_name, 
             ax[0].set_yscale("log")
     ax[0].legend()
     ax[0].set_title("optimiser path")
-    ax[1].semilogy(np.arange(len(losses)), losses - min(losses.min(), final_loss) + 1e-12 * abs(final_loss) + 1e-300)
-    ax[1].set_xlabel("step")
-    ax[1].set_ylabel(f"loss - min ({loss_name})")
+    # the loss itself (not "loss - min", which dips to ~0 by construction at the best step)
+    losses = np.asarray(losses, float)
+    steps = np.arange(len(losses))
+    ax[1].plot(steps, losses, "o-" if len(losses) <= 40 else "-", ms=3, lw=1, label="loss at each step's start values")
+    ax[1].axhline(float(final_loss), color="g", ls="--", lw=1, label=f"tuned: {float(final_loss):.4g}")
+    finite = np.concatenate([losses[np.isfinite(losses)], [float(final_loss)]])
+    if np.all(finite > 0) and finite.max() / finite.min() > 10:
+        ax[1].set_yscale("log")
+    _readable_ticks(ax[1], "y")
+    ax[1].xaxis.set_major_locator(MaxNLocator(nbins=6, integer=True))
+    ax[1].set_xlabel("optimiser step")
+    ax[1].set_ylabel(f"loss: {loss_name}")
     ax[1].set_title("convergence")
+    ax[1].grid(alpha=0.3, which="both")
+    ax[1].legend(fontsize=8)
     bins = min(20, max(5, len(final_runs) // 2))
     ax[2].hist(start_runs, bins=bins, alpha=0.6, label="initial values")
     ax[2].hist(final_runs, bins=bins, alpha=0.6, label="tuned values")
@@ -106,6 +124,10 @@ def plot_tune(outdir, *, path, losses, final, final_loss, landscape, loss_name, 
     ax[2].set_ylabel("runs")
     ax[2].legend()
     ax[2].set_title("Monte Carlo distribution")
+    _readable_ticks(ax[0])
+    _readable_ticks(ax[2], "x")
+    for a in ax:
+        plt.setp(a.get_xticklabels(), rotation=30, ha="right")
     fig.tight_layout()
     f = out / "tune.png"
     save_figure(fig, f, dpi=110)

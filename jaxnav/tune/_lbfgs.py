@@ -115,7 +115,11 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
         # converged: the step just taken gained less than ftol, or (once the memory holds curvature)
         # the quadratic model's decrease for the next unit step, -g.d / 2, is below ftol
         conv = ((s.f - f) <= tol) | ((s.steps > 0) & (-0.5 * slope <= tol)) | (jnp.max(jnp.abs(g)) <= gtol)
-        ls = _LS(alpha=jnp.ones((), dtype), lo=jnp.zeros((), dtype), f_lo=f, g_lo=slope, hi=inf, f_hi=inf,
+        # first direction (empty memory: -g): a step of unit length in the unconstrained space, so
+        # the search does not depend on the loss's units (Nocedal & Wright Sec. 3.5); then 1
+        norm = jnp.sqrt(jnp.dot(d, d))
+        alpha0 = jnp.where((s.steps == 0) & (norm > 0.0), 1.0 / jnp.where(norm > 0.0, norm, 1.0), 1.0)
+        ls = _LS(alpha=alpha0.astype(dtype), lo=jnp.zeros((), dtype), f_lo=f, g_lo=slope, hi=inf, f_hi=inf,
                  g_hi=inf, bracketed=jnp.zeros((), bool))
         return _State(u=x, f=f, g=g, d=d, slope=slope, ls=ls, lbfgs=lbs, steps=s.steps + 1,
                       done=s.done | conv)

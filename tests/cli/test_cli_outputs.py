@@ -48,8 +48,9 @@ def test_quiet_verbose_and_outputs_of_rtk(epochs, tmp_path, capsys, where):
         out = tmp_path / (flag.strip("-") or "default")
         opts = [flag] if flag else []
         argv = (opts + ["rtk", f, "--out", str(out)]) if where == "before" else (["rtk", f, "--out", str(out)] + opts)
-        if flag == "-v":
-            argv += ["--figure-format", "pdf,svg"]
+        if flag == "-v":  # the formats as words (before the FILE) or as a comma list
+            argv = argv[:-3] + ["--figure-format", "pdf", "svg", f] + argv[-2:] if where == "before" else \
+                argv + ["--figure-format", "pdf,svg"]
         if flag == "":  # a folder used before: its old results.json is replaced, its old files not listed
             out.mkdir()
             (out / "results.json").write_text('{"stale": true}')
