@@ -154,7 +154,7 @@ def test_notebooks_import_public_names_only(path):
 #: order, except that the simulators sit above the S1/S2/S3 processing (sim builds their records,
 #: e.g. the S3 stop list of a simulated survey; no processing module needs a simulator)
 LAYERS = [
-    ("_numerics", "_status", "units", "_config"),
+    ("_numerics", "_status", "units", "_config", "_progress"),
     ("geodesy",),
     ("filters",),
     ("ins",),

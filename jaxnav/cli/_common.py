@@ -6,7 +6,9 @@ A command's ``run(args)`` raises :class:`UsageError` for a wrong combination of 
 ``type=`` helpers here (:func:`int_range`, :func:`float_range`), and :func:`prepare_out` creates
 and checks the output folder before any work. The study commands (Monte Carlo, sweeps, tuning)
 take the multi-process options of :func:`add_process_args` and join the study's processes with
-:func:`start_processes` before any JAX work.
+:func:`start_processes` before any JAX work. A command that reads a configuration file notes it
+with :func:`record_config` (``main`` writes it into the provenance block of ``results.json``);
+:func:`figure_format_list` parses ``--figure-format``.
 """
 
 from __future__ import annotations
@@ -195,3 +197,37 @@ def start_processes(args) -> bool:
         raise CommandError(f"cannot join the processes of this study at {where}: {type(exc).__name__}: "
                            f"{str(exc).strip().splitlines()[0] if str(exc).strip() else ''}") from None
     return tune.is_writer()
+
+
+def figure_format_list(text: str) -> list:
+    """An argparse ``type=``: ``"pdf,svg"`` -> ["pdf", "svg"] (each one of png, pdf, svg), else a one-line error."""
+    from jaxnav.plot._save import FORMATS
+
+    out = []
+    for f in str(text).split(","):
+        f = f.strip().lower().lstrip(".")
+        if not f:
+            continue
+        if f not in FORMATS:
+            raise argparse.ArgumentTypeError(f"unknown figure format {f!r}; choose from {', '.join(FORMATS)} "
+                                             f"(several: pdf,svg)")
+        out.append(f)
+    if not out:
+        raise argparse.ArgumentTypeError(f"expected figure formats ({', '.join(FORMATS)}), got {text!r}")
+    return out
+
+
+def record_config(args, path, contents=None) -> None:
+    """Note the configuration a command runs with, for the provenance block of its ``results.json``.
+
+    Args:
+      args: the command's parsed arguments (``_config_file`` and ``_config`` are set on it).
+      path: the configuration file (a shipped default included), or None.
+      contents: its contents as a dict (default: the TOML file read again).
+    """
+    from jaxnav.io import load_toml
+
+    args._config_file = None if path is None else str(path)
+    if contents is None and path is not None:
+        contents = load_toml(path)
+    args._config = None if contents is None else {k: v for k, v in dict(contents).items() if not str(k).startswith("_")}

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from jaxnav.cli._common import (DATA_ENV, MAX_SEEDS, CommandError, add_process_args, data_dir, input_file, int_range,
-                                prepare_out, start_processes)
+                                prepare_out, record_config, start_processes)
 from jaxnav.cli.walk import WALK_SET
 
 
@@ -13,7 +13,8 @@ def register(subparsers):
     p = subparsers.add_parser("cadastral", help="S3: cadastral-survey IMU post-processing (preprocessing, stops, "
                                                 "KF/RTS at stops, strapdown, reverse navigation) over Monte Carlo "
                                                 "seeds")
-    p.add_argument("--out", required=True, help="output folder (results.json and figures)")
+    p.add_argument("--out", default="out/cadastral", help="output folder (results.json and figures); default "
+                                                          "out/cadastral")
     p.add_argument("--config", default=None, help="cadastral TOML (default: jaxnav/sim/scenarios/cadastral.toml)")
     p.add_argument("--seeds", type=int_range(1, MAX_SEEDS), default=64,
                    help="Monte Carlo seeds per IMU grade (vmapped), >= 1; default 64")
@@ -34,7 +35,7 @@ def run(args) -> int:
     """Run the S3 experiment, print its summary, write results.json and figures into ``--out``."""
     from jaxnav.experiments import format_cadastral, run_cadastral
 
-    from jaxnav.io import read_stop_list
+    from jaxnav.io import loads_toml, read_stop_list
     from jaxnav.sim import load_cadastral
 
     writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
@@ -42,6 +43,13 @@ def run(args) -> int:
     if args.config is not None:
         input_file(args.config, "--config")
     scns, _ = load_cadastral(args.config)  # checked before any work
+    if args.config is None:
+        import importlib.resources
+
+        shipped = importlib.resources.files("jaxnav.sim").joinpath("scenarios/cadastral.toml")
+        record_config(args, "jaxnav/sim/scenarios/cadastral.toml", loads_toml(shipped.read_text(encoding="utf-8")))
+    else:
+        record_config(args, args.config)
     unknown = [g for g in (args.grade or []) if g not in scns]
     if unknown:
         raise CommandError(f"--grade {unknown[0]!r}: the config has the IMU grades {sorted(scns)}")
@@ -53,5 +61,6 @@ def run(args) -> int:
     if not writer:
         return 0
     print(format_cadastral(res))
-    print(f"wrote {args.out}/results.json and figures")
+    n_fig = sum(len(r.get("figures", [])) for r in res.get("grades", {}).values())
+    print(f"wrote {args.out}/results.json and {n_fig} figure(s) into {args.out}")
     return 0

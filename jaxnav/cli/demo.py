@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import MAX_SEEDS, add_process_args, input_file, int_range, prepare_out, start_processes
+from jaxnav.cli._common import (MAX_SEEDS, add_process_args, input_file, int_range, prepare_out, record_config,
+                                start_processes)
 
 
 def register(subparsers):
@@ -26,11 +27,13 @@ def register(subparsers):
 def run(args) -> int:
     """Run the reproduction, print its table, write results.json and figures into ``--out``."""
     from jaxnav.experiments import format_s0, load_experiment, run_s0
+    from jaxnav.experiments.s0 import EXPERIMENT
 
     writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     if args.config is not None:
         input_file(args.config, "--config")
-        load_experiment(args.config)  # every key checked before any work
+    load_experiment(args.config or EXPERIMENT)  # every key checked before any work
+    record_config(args, args.config or EXPERIMENT)
     prepare_out(args.out)
     res = run_s0(args.out, seeds=args.seeds, config=args.config, sweep_points=args.sweep_points,
                  progress=not args.no_progress)

@@ -11,7 +11,7 @@ def register(subparsers):
     """Add the ``demo-filters`` subcommand; returns its parser."""
     p = subparsers.add_parser("demo-filters", help="filter-family demonstration on a constant-velocity series "
                                                    "with a change of dynamics (S1/S2 model)")
-    p.add_argument("--out", default="out/demo", help="output folder (created); default out/demo")
+    p.add_argument("--out", default="out/demo-filters", help="output folder (created); default out/demo-filters")
     p.add_argument("--seeds", type=int_range(1, MAX_SEEDS), default=64,
                    help="Monte Carlo seeds (vmapped), >= 1; default 64")
     p.add_argument("--epochs", type=int_range(100, 10**6), default=1200,

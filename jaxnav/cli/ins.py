@@ -7,11 +7,11 @@ environment or from ``--data``.
 
 from __future__ import annotations
 
+import logging
 import os
-import shlex
-import sys
+import pathlib
 
-from jaxnav.cli._common import DATA_ENV, CommandError, prepare_out
+from jaxnav.cli._common import DATA_ENV, CommandError, prepare_out, record_config
 
 
 def register(subparsers):
@@ -26,14 +26,12 @@ def register(subparsers):
                         "likelihood over the whole run, then rerun and report before/after")
     p.add_argument("--data", default=None,
                    help=f"folder that holds the data sets; sets ${{{DATA_ENV}}} for the paths in CONFIG")
-    p.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     return p
 
 
 def run(args) -> int:
     """Check the config and the output folder, run, write the outputs, print the summary."""
     from jaxnav.experiments.ins_config import load_ins_config
-    from jaxnav.experiments.ins_output import format_ins, process
 
     if args.data:
         if not os.path.isdir(args.data):
@@ -43,10 +41,19 @@ def run(args) -> int:
     for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag")):
         if p is not None and not p.is_file():
             raise CommandError(f"{p}: no such file ({cfg.path}: {key})")
-    out = prepare_out(args.out or f"out/ins/{cfg.name}")
-    say = None if args.quiet else (lambda msg: print(msg, flush=True))
-    results = process(cfg, out, tune=args.tune, command=" ".join(shlex.quote(a) for a in ["jaxnav", *sys.argv[1:]]),
-                      progress=say)
+    record_config(args, cfg.path, cfg.raw)
+    return run_config(args, cfg, args.out or f"out/ins/{cfg.name}", tune=args.tune)
+
+
+def run_config(args, cfg, out, *, tune: bool = False) -> int:
+    """``jaxnav ins`` / ``jaxnav walk`` on a checked config: the stages as INFO lines, the summary on stdout."""
+    from jaxnav.experiments.ins_output import format_ins, process
+    from jaxnav.io import files_snapshot
+
+    args._snapshot = files_snapshot(out)  # before anything is written (main lists the files written)
+    out = prepare_out(out)
+    args.out = str(out)
+    results = process(cfg, out, tune=tune, progress=logging.getLogger("jaxnav").info)
     print(format_ins(results))
-    print(f"wrote {len(results['files'])} files into {out}")
+    print(f"wrote {len(results['files'])} files into {pathlib.Path(out)}")
     return 0

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import re
-import sys
+import shlex
 
 from jaxnav.cli._common import MAX_SEEDS, UsageError, float_range, input_file, int_range, prepare_out
 
@@ -109,6 +109,7 @@ def run(args) -> int:
     files = [input_file(f, "FILES") for f in args.files]
     steps, kappa = _steps(args.step), _kappa(args.kappa)
     out = prepare_out(args.out)
+    args._json_outputs = ("monitor.json",)  # main adds the provenance block to it
     if args.simulate:
         res = run_monitor_simulation(out, periods=args.periods, stations=args.stations, epochs=args.epochs,
                                      robust=args.robust, gross=args.gross, seed=args.seed,
@@ -120,7 +121,7 @@ def run(args) -> int:
     res = run_monitor_velocities(files, out, steps=steps, detect=args.detect_steps, kappa=kappa,
                                  random_walk=not args.no_random_walk, reml=not args.ml, screen=not args.no_screen,
                                  sigma_factor=args.sigma_factor, residual_k=args.residual_k, s1=args.s1,
-                                 period=args.period, robust=args.robust, command="jaxnav " + " ".join(sys.argv[1:]))
+                                 period=args.period, robust=args.robust, command=shlex.join(["jaxnav", *args._argv]))
     print(res["text"])
     print(f"wrote {out / 'monitor.json'} and {len(args.files)} figure(s) in {out} ({res['wall_time_s']:.1f} s)")
     return 0

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 from jaxnav.cli._common import UsageError, float_range, input_file, int_range, prepare_out
 
 
@@ -54,7 +56,10 @@ def run(args) -> int:
     control = None if args.control is None else input_file(args.control, "--control")
     levelling = None if args.levelling is None else input_file(args.levelling, "--levelling")
     prepare_out(args.out)
+    args._json_outputs = ("rtk_results.json",)  # main adds the provenance block to it
     if args.simulate is not None:
+        logging.getLogger("jaxnav").info("simulating the 45-point S2 survey (seed %d) into %s", args.simulate,
+                                         args.out)
         f_ep, f_cp, f_lv, _ = write_simulated_survey(args.out, seed=args.simulate)
         files.append(f_ep)
         control = control or f_cp

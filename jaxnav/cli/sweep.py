@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pathlib
 
-from jaxnav.cli._common import add_config_parser, prepare_out, start_processes
+from jaxnav.cli._common import add_config_parser, prepare_out, record_config, start_processes
 
 
 def register(subparsers):
@@ -22,7 +22,8 @@ def run(args) -> int:
     from jaxnav.experiments import format_sweep, load_config, run_sweep
 
     writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
-    load_config(args.config)  # every section and key checked before any work
+    cfg = load_config(args.config)  # every section and key checked before any work
+    record_config(args, cfg.get("_path", args.config), cfg)
     prepare_out(args.out)
     res = run_sweep(args.config, args.out, progress=not args.no_progress)
     out = pathlib.Path(args.out)

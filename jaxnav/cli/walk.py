@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import shlex
-import sys
-
-from jaxnav.cli._common import DATA_ENV, data_dir, prepare_out
+from jaxnav.cli._common import DATA_ENV, data_dir, record_config
 
 #: the walk set's folder inside ``$JAXNAV_DATA``
 WALK_SET = "rtklibexplorer-gnss-imu"
@@ -23,13 +20,10 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the shipped ``walk_0827`` config of ``jaxnav ins`` on the walk set, write its outputs into ``--out``."""
-    from jaxnav.experiments import format_ins, process, walk_config
+    from jaxnav.cli.ins import run_config
+    from jaxnav.experiments import walk_config
 
     data = data_dir(args.data, WALK_SET)
     cfg = walk_config(data.resolve().parent)
-    out = prepare_out(args.out)
-    results = process(cfg, out, command=" ".join(shlex.quote(a) for a in ["jaxnav", *sys.argv[1:]]),
-                      progress=lambda m: print(m, flush=True))
-    print(format_ins(results))
-    print(f"wrote {len(results['files'])} files into {out}")
-    return 0
+    record_config(args, cfg.path, cfg.raw)
+    return run_config(args, cfg, args.out)

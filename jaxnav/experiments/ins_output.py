@@ -228,23 +228,6 @@ def _densities_dict(d) -> dict:
             "init_accel_bias_mg": float(d.init_accel_bias) / MG, "pos_sigma_scale": float(d.pos_sigma_scale)}
 
 
-def _commit():
-    """Short git commit of the jaxnav checkout (with '+dirty' for local changes), or None outside a checkout."""
-    import subprocess
-
-    root = pathlib.Path(__file__).resolve().parents[2]
-    if not (root / ".git").exists():
-        return None
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
-                             timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jaxnav"], cwd=root, capture_output=True,
-                               text=True, timeout=10).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return (rev + ("+dirty" if dirty else "")) or None
-
-
 def _constraints(prep, run) -> dict:
     """What the pseudo-measurements did: standstill detection, ZUPT/ZARU/NHC epochs."""
     from jaxnav.ins import standstill_intervals
@@ -266,13 +249,16 @@ def _constraints(prep, run) -> dict:
 def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) -> dict:
     """The whole ``jaxnav ins`` job: run (and with ``tune`` tune, then rerun), write every output into ``out``.
 
+    ``progress``: a callable taking one line of text for the stages ("reading ...", "tuning ..."), or None.
+
     Returns:
-      the ``results.json`` dict (also written), with "files" listing everything written.
+      the ``results.json`` dict (also written), with "provenance" (:func:`jaxnav.io.provenance`: version,
+      commit, date, config file and contents; ``command`` where given) and "files" (everything
+      written, paths relative to ``out``).
     """
-    import jaxnav
     from jaxnav._status import INFO_FLAGS, describe
     from jaxnav.experiments.ins_run import prepare, run_ins, tune_noise
-    from jaxnav.io import write_json
+    from jaxnav.io import provenance, write_json
 
     out = pathlib.Path(out)
     say = progress or (lambda *_: None)
@@ -281,9 +267,10 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
     say(f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
         f"running the filter and the smoother")
     run = run_ins(prep)
-    results = {"jaxnav_version": jaxnav.__version__, "git_commit": _commit(), "command": command,
-               "date_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-               "config_file": str(cfg.path), "config": cfg.raw,
+    prov = provenance(config_file=cfg.path, config=cfg.raw)
+    if command:
+        prov["command"] = command
+    results = {"provenance": prov,
                "mounting": {"source": cfg.imu.mounting_source,
                             "C_vehicle_sensor": np.asarray(cfg.imu.mounting).tolist(),
                             "C_body_rfu_sensor": np.asarray(prep.C_bs).tolist()},
@@ -328,7 +315,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                    ("track.geojson", lambda p: write_geojson(p, run)), ("track.kml", lambda p: write_kml(p, run))):
         files.append(str(fn(out / nm)))
     files += write_figures(run, out)
-    results["files"] = files + [str(out / "results.json")]
+    results["files"] = sorted(pathlib.Path(f).relative_to(out).as_posix() for f in files) + ["results.json"]
     write_json(out / "results.json", results)
     return results
 
@@ -336,7 +323,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
 def format_ins(results: dict) -> str:
     """Summary of :func:`process` with units."""
     r = results
-    lines = [f"jaxnav ins: {r['config_file']}",
+    lines = [f"jaxnav ins: {r['provenance']['config_file']}",
              f"  IMU {r['imu']['n_samples']} samples, GNSS {r['gnss']['n_epochs_used']} of "
              f"{r['gnss']['n_epochs_in_imu_span']} epochs used ({r['gnss']['n_withheld']} withheld on simulated outages)",
              f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "

@@ -288,6 +288,24 @@ def _tolist(a):
     return np.asarray(a).tolist()
 
 
+def _enu_dict(a):
+    """A (3,) east/north/up array as {"east": ., "north": ., "up": .} (None stays None)."""
+    if a is None:
+        return None
+    return dict(zip(("east", "north", "up"), (float(v) for v in np.asarray(a, float).reshape(3))))
+
+
+#: the share threshold of each axis in S1's Tables 3-5, mm
+_S1_SHARE_THRESHOLD_MM = {"X": 0.5, "Y": 0.4, "H": 1.0}
+
+
+def _labelled_table3_5(t3: dict) -> dict:
+    """S1 Tables 3-5 ({axis: {filter: (max, mean, share %)}}) with labelled fields for the JSON file."""
+    return {ax: {name: dict(max_abs_mm=v[0], mean_abs_mm=v[1], share_below_threshold_percent=v[2],
+                            threshold_mm=_S1_SHARE_THRESHOLD_MM.get(ax))
+                 for name, v in per.items()} for ax, per in t3.items()}
+
+
 def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, window: int = 30,
                       horizon: int = 10) -> dict:
     """Velocities, forecasts and S1 statistics of daily station files; writes JSON and figures.
@@ -334,12 +352,13 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
         ref = v.reference_velocity
         result["stations"][s.station] = dict(
             file=str(f), format=s.fmt, epochs=v.n, span_years=v.span_years, masked_values=s.n_masked,
-            velocity_mm_per_yr=_tolist(v.velocity / MM_PER_YEAR), sigma_formal_mm_per_yr=_tolist(v.sigma / MM_PER_YEAR),
-            sigma_ar1_mm_per_yr=_tolist(v.sigma_ar1 / MM_PER_YEAR),
-            ls_slope_mm_per_yr=_tolist(v.ls_velocity / MM_PER_YEAR),
-            published_mm_per_yr=None if ref is None else _tolist(ref / MM_PER_YEAR),
-            published_sigma_mm_per_yr=None if ref is None else _tolist(v.reference_sigma / MM_PER_YEAR),
-            random_walk_psd_m2_per_s3=_tolist(v.accel_psd), forecast_statistics=st, figure=str(fig),
+            velocity_mm_per_yr=_enu_dict(v.velocity / MM_PER_YEAR),
+            sigma_formal_mm_per_yr=_enu_dict(v.sigma / MM_PER_YEAR),
+            sigma_ar1_mm_per_yr=_enu_dict(v.sigma_ar1 / MM_PER_YEAR),
+            ls_slope_mm_per_yr=_enu_dict(v.ls_velocity / MM_PER_YEAR),
+            published_mm_per_yr=None if ref is None else _enu_dict(ref / MM_PER_YEAR),
+            published_sigma_mm_per_yr=None if ref is None else _enu_dict(v.reference_sigma / MM_PER_YEAR),
+            random_walk_psd_m2_per_s3=_enu_dict(v.accel_psd), forecast_statistics=st, figure=str(fig),
         )
         for i, ax in enumerate("ENU"):
             pub = "" if ref is None else f"{ref[i] / MM_PER_YEAR:+.2f}+-{v.reference_sigma[i] / MM_PER_YEAR:.2f}"
@@ -392,7 +411,11 @@ def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs:
     plot_s1_statistics(res, out / "s1_statistics.png")
     plot_s1_period(res["series"][0], out / "s1_period.png")
     result = dict(
-        settings=st._asdict(), tables=tables, published=S1_PUBLISHED, text=text,
+        settings={**{k: v for k, v in st._asdict().items() if k != "sigma"},
+                  "sigma_m": _enu_dict(st.sigma)},
+        tables={**tables, "table3_5": _labelled_table3_5(tables["table3_5"])},
+        published={**S1_PUBLISHED, **_labelled_table3_5({ax: S1_PUBLISHED[ax] for ax in ("X", "Y", "H")})},
+        text=text,
         forecast_rms_mm={k: float(np.mean(v) / MM) for k, v in res["forecast_rms"].items()},
         episode_rms_mm={k: float(np.mean(v) / MM) for k, v in res["episode_rms"].items()},
         ratio_standard_adaptive=float(ratio), ratio_standard_adaptive_episodes=float(ratio_ep),

@@ -8,6 +8,7 @@ and the figure. :func:`write_simulated_survey` writes the simulated survey's fil
 
 from __future__ import annotations
 
+import logging
 import math
 import pathlib
 
@@ -39,6 +40,8 @@ from jaxnav.survey.rtk import (
     windows_from_pos,
 )
 from jaxnav.units import CM, MM, rad_to_deg
+
+_log = logging.getLogger(__name__)
 
 
 def _read_inputs(files, *, step, window, min_epochs, fixed_only, motion):
@@ -100,6 +103,11 @@ def gpst_iso(t) -> str:
     return (GPS_EPOCH + _dt.timedelta(seconds=float(t))).isoformat(timespec="milliseconds")
 
 
+def _ratio(a: float, b: float) -> float:
+    """a / b, NaN where b is 0 or either is not finite (identical epochs give a zero precision)."""
+    return a / b if math.isfinite(a) and math.isfinite(b) and b != 0.0 else float("nan")
+
+
 def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_width=3, step=2.0, window=60,
             min_epochs=30, fixed_only=True, smoother=False, surface="auto", quiet=False,
             motion: MotionParams | None = MotionParams()):
@@ -134,6 +142,7 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     files = [pathlib.Path(f) for f in files]
     if not files:
         raise ValueError("jaxnav rtk: give at least one .pos or CSV epoch-log file")
+    _log.info("reading %d file(s): %s", len(files), ", ".join(f.name for f in files))
     ep, motion_counts = _read_inputs(files, step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only,
                                      motion=motion)
     if not len(ep["t"]):
@@ -185,6 +194,8 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
             summary["height_anomaly"] = dict(surface=anomaly.kind, sigma0_mm=float(anomaly.sigma0) / MM,
                                              n_control=int(anomaly.residuals.shape[0]),
                                              residuals_mm=[float(v) / MM for v in anomaly.residuals])
+    _log.info("filtering %d point(s) (%d epochs, %s)", len(names), int(np.size(ep["t"])),
+              "forward filter + RTS" if smoother else "forward filter")
     res = process_points(series, lon0=jnp.asarray(lon0), transform=transform, anomaly=anomaly,
                          smoother=smoother)
     res = type(res)(*[np.asarray(a) if not isinstance(a, tuple) else a for a in res])
@@ -213,9 +224,9 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
             for key, p in (("filtered", res.precision), ("conventional", res.raw_precision),
                            ("formal", res.formal_precision))}
     for key in ("conventional", "formal"):
-        prec[f"factor_{key}_over_filtered"] = dict(
-            plane=prec[key]["plane_mm"] / prec["filtered"]["plane_mm"],
-            height=prec[key]["height_mm"] / prec["filtered"]["height_mm"])
+        prec[f"factor_{key}_over_filtered"] = dict(  # NaN (null in the JSON) where the filtered precision is 0
+            plane=_ratio(prec[key]["plane_mm"], prec["filtered"]["plane_mm"]),
+            height=_ratio(prec[key]["height_mm"], prec["filtered"]["height_mm"]))
     summary["internal_precision_mean"] = prec
     if np.any(np.isfinite(h_level)):
         for key, h in (("filtered", res.xyh[:, 2]), ("conventional_terminal", res.terminal_xyh[:, 2]),
@@ -226,9 +237,21 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
                     max_abs_cm=c.max_abs / CM, mean_cm=c.mean / CM, std_cm=c.std / CM, rms_cm=c.rms / CM,
                     thresholds_cm=[float(v) / CM for v in c.thresholds], count_within=[int(v) for v in c.count_within],
                     share_within=[float(v) for v in c.share_within])
+    _log.info("writing rtk_results.csv, rtk_results.json and rtk.png into %s", out)
+    proj = "; ".join(f"+proj=tmerc +lat_0=0 +lon_0={z:g} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m" for z in zones)
+    csv_crs = (f"{crs}; no EPSG code: a local grid fitted to {summary['datum_transformation']['n_control']} control "
+               f"points from WGS-84 Gauss-Krueger ({proj})" if transform is not None
+               else f"{crs}; no EPSG code, PROJ definition: {proj}")
+    if anomaly is not None:
+        csv_height = (f"normal height h = ellipsoidal H - height anomaly, the anomaly a {anomaly.kind} surface fitted "
+                      f"to {int(anomaly.residuals.shape[0])} control points (sigma0 "
+                      f"{float(anomaly.sigma0) / MM:.1f} mm); H_ellipsoidal_m is WGS-84 ellipsoidal")
+    else:
+        csv_height = "WGS-84 ellipsoidal height (no control points, no height anomaly): h = H"
+    width = "" if lon0_deg is not None else f", {zone_width} deg zones"
     write_rtk_results(out / "rtk_results.csv", names, res, h_level, sigma=ps.sigma, sigma_method=ps.method,
-                      crs=crs, zone=f"central meridian {', '.join(f'{z:g}' for z in zones)} deg",
-                      height_system=summary["height_system"])
+                      crs=csv_crs, zone=f"central meridian {', '.join(f'{z:g}' for z in zones)} deg{width}",
+                      height_system=csv_height)
     fnames = [pathlib.Path(f).name for f in files]
     plot_rtk(res, out / "rtk.png", h_level=h_level if np.any(np.isfinite(h_level)) else None, names=names,
              sigma=ps.sigma, title=f"RTK {len(names)} point{'s' if len(names) != 1 else ''} from "

@@ -359,9 +359,9 @@ def format_cadastral(results: dict) -> str:
                      f"(min {d['precision_min']:.3f}), recall {d['recall_mean']:.3f} (min {d['recall_min']:.3f}), "
                      f"sample precision {d['sample_precision_mean']:.3f} / recall {d['sample_recall_mean']:.3f}")
         p = r["preprocessing"]
-        for sn in ("gyro", "accel"):
+        for sn, unit in (("gyro", "(rad/s)^2"), ("accel", "(m/s^2)^2")):
             q = p[sn]
-            lines.append(f"  preprocessing {sn}: residual variance raw {q['var_raw']:.3e} -> outliers "
+            lines.append(f"  preprocessing {sn}: residual variance {unit} raw {q['var_raw']:.3e} -> outliers "
                          f"{q['var_outliers_rejected']:.3e} -> AR({q['ar_order_bic']}) Kalman {q['var_ar_kalman']:.3e} "
                          f"(x{q['reduction_total']:.1f} lower)")
     a = results["ar_identification"]

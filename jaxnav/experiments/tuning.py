@@ -11,6 +11,7 @@ trainable), ``[sweep]`` (grid axes) and ``[tune]`` (optimiser). :func:`run_sweep
 from __future__ import annotations
 
 import csv
+import logging
 import pathlib
 import time
 
@@ -33,6 +34,8 @@ from jaxnav.experiments.s0 import (
 )
 from jaxnav.io import load_toml
 from jaxnav.sim import simulate_linear
+
+_log = logging.getLogger(__name__)
 
 #: the shipped sweep/tune configs (``s0_b``, ``cv_noise``)
 CONFIGS = pathlib.Path(__file__).with_name("configs")
@@ -212,9 +215,12 @@ class Problem:
             self.keys = jax.random.split(jax.random.PRNGKey(prob["seed"]), prob["seeds"])
             self.loss_name = {"rms": "mean position RMS, m", "nll": "innovation NLL per component",
                               "nis": "NIS consistency (log ratio)^2"}[prob["loss"]]
+            self.loss_column = {"rms": "loss_rms_m", "nll": "loss_nll_per_component",
+                                "nis": "loss_nis_log_ratio_sq"}[prob["loss"]]
         else:
             self.keys = jax.random.split(jax.random.PRNGKey(prob["seed"]), prob["series"])
             self.loss_name = "innovation NLL per component"
+            self.loss_column = "loss_nll_per_component"
 
     def point(self, params, key, remat=False):
         """Metrics of one run (one Monte Carlo seed / one series) at ``params``."""
@@ -261,6 +267,8 @@ def run_sweep(config, out, *, progress=True) -> dict:
     if not axes:
         raise ValueError(f"{cfg['_path']}: [sweep] has no axes")
     g = _grid(P, axes)
+    _log.info("sweep of %s: %d grid points x %d Monte Carlo runs", ", ".join(axes), len(next(iter(g.values()))),
+              len(P.keys))
     res = tune.sweep(lambda p, k: P.point(p, k), g, P.keys, chunk=cfg["sweep"].get("chunk"), progress=progress,
                      desc="sweep")
     loss = res.values["loss"]  # (G, K)
@@ -268,7 +276,9 @@ def run_sweep(config, out, *, progress=True) -> dict:
     best = int(np.argmin(mean))
     figs = []
     if writer:
-        rows = tune.table(res, lambda v: {"loss": v["loss"]})
+        # columns: the parameters (dimensionless scale factors), then the loss's mean/std/min/max over the
+        # Monte Carlo runs, its name carrying its unit (loss_rms_m: m; the likelihood losses are pure numbers)
+        rows = tune.table(res, lambda v: {P.loss_column: v["loss"]})
         with open(out / "table.csv", "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(rows[0]))
             w.writeheader()
@@ -285,6 +295,8 @@ def run_sweep(config, out, *, progress=True) -> dict:
         peak_bytes_per_chunk=res.peak_bytes,
         wall_time_s=dict(total=time.perf_counter() - t0, sweep=res.wall_time_s, compile=res.compile_time_s),
         figures=[str(f) for f in figs], table=str(out / "table.csv"),
+        table_columns=dict(parameters="dimensionless scale factors (as in the config)",
+                           loss=f"{P.loss_column}_mean/_std/_min/_max over the Monte Carlo runs: {P.loss_name}"),
         jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
     )
     if "rms" in res.values:
@@ -325,6 +337,9 @@ def run_tune(config, out, *, progress=True) -> dict:
         out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
     P = Problem(cfg)
     tn = cfg["tune"]
+    _log.info("tuning %s of %s: %s, %d %s over %d Monte Carlo runs (one compiled lax.scan: no progress until it "
+              "returns)", ", ".join(P.init), cfg["problem"].get("kind", "?"), tn["optimizer"], tn["steps"],
+              "loss evaluations" if tn["optimizer"] == "lbfgs_wolfe" else "steps", len(P.keys))
     if tn["optimizer"] == "lbfgs_wolfe":  # steps = evaluation budget; the loss is compiled once
         res = tune.minimize_lbfgs(P.loss, P.init, P.space, max_evals=tn["steps"], mode=tn["mode"])
         done = np.isfinite(np.asarray(res.losses))
@@ -334,6 +349,9 @@ def run_tune(config, out, *, progress=True) -> dict:
         res = tune.minimize(P.loss, P.init, P.space, optimizer=_optimizer(tn), steps=tn["steps"], mode=tn["mode"])
     t_tune = time.perf_counter() - t0
     final = {k: float(v) for k, v in res.params.items()}
+    _log.info("tuned in %.1f s (compilation included): %s; %s %.4g -> %.4g", t_tune,
+              ", ".join(f"{k} {float(P.init[k]):.4g} -> {v:.4g}" for k, v in final.items()), P.loss_name,
+              float(res.losses[0]), float(res.loss))
     landscape = None
     if tn["landscape"] and len(P.init) == 1:
         (name,) = P.init
@@ -344,6 +362,7 @@ def run_tune(config, out, *, progress=True) -> dict:
                             progress=progress, desc="landscape")
             landscape = dict(values=vals, loss=sw.values["loss"].mean(1), wall_time_s=sw.wall_time_s)
     # Monte Carlo distribution of the per-run loss at the start and at the tuned values (a 2-point sweep)
+    _log.info("scoring the start and the tuned values over %d Monte Carlo runs", len(P.keys))
     ends = tune.sweep(lambda p, k: P.point(p, k)["loss"], {k: [P.init[k], final[k]] for k in P.init}, P.keys,
                       chunk=cfg["sweep"].get("chunk"), progress=False).values
     start_runs, final_runs = ends[0], ends[1]

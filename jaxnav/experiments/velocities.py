@@ -10,6 +10,7 @@ results are copied under ``s1_adaptive_filter``.
 
 from __future__ import annotations
 
+import logging
 import math
 import pathlib
 import time
@@ -24,6 +25,7 @@ UNITS = {"velocity": "mm/yr", "positions, sigmas, amplitudes, steps": "mm",
          "powerlaw_amplitude": "mm/yr^(-kappa/4) (Hector's unit; mm/yr^0.25 for flicker)",
          "random_walk": "mm/sqrt(yr)", "phase": "deg, of A cos(2 pi h (t - 2000.0 yr) - phase)",
          "dates": "ISO 8601 calendar day of the daily solution"}
+_log = logging.getLogger(__name__)
 
 
 def _enu(a, scale=1.0):
@@ -114,6 +116,7 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
     out.mkdir(parents=True, exist_ok=True)
     steps = steps or {}
     t0 = time.perf_counter()
+    _log.info("reading %d daily series file(s)", len(files))
     series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
     result = dict(
         version=__version__, command=command, units=UNITS,
@@ -123,12 +126,17 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
         stations={})
     lines = [f"{'station':<8}{'axis':<6}{'velocity mm/yr':>15}{'+-1 sigma':>10}{'(white only)':>13}"
              f"{'white mm':>9}{'PL amp':>8}{'kappa':>7}{'RW mm/yr^.5':>12}{'outliers':>9}"]
-    for f, s in zip(files, series):
+    for k, (f, s) in enumerate(zip(files, series)):
+        _log.info("station %d/%d %s: %d days, fitting trajectory model and %s noise (%s)", k + 1, len(files),
+                  s.station, int(np.size(s.t)), "white + power-law" + (" + random-walk" if random_walk else ""),
+                  "REML" if reml else "ML")
+        t_st = time.perf_counter()
         fit = fit_station(s, steps=steps.get(s.station, ()), detect=detect, kappa=kappa, random_walk=random_walk,
                           reml=reml, screen=screen, sigma_factor=sigma_factor, residual_k=residual_k)
         fig = out / f"{s.station}_fit.png"
         plot_station_fit(fit, fig)
         rec = station_record(fit, file=f, figure=fig)
+        _log.debug("station %s fitted in %.1f s", s.station, time.perf_counter() - t_st)
         result["stations"][s.station] = rec
         for c, comp in enumerate(COMPONENTS):
             n = rec["noise"][comp]
@@ -148,6 +156,7 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
     if s1:
         from jaxnav.experiments.s1 import run_monitor_files
 
+        _log.info("S1 adaptive-filter forecasts of %d station(s)", len(files))
         r1 = run_monitor_files(files, out / "s1", period=period, robust=robust)
         for name, st in r1["stations"].items():
             if name in result["stations"]:

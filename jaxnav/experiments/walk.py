@@ -84,10 +84,29 @@ def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None
     return scores, extras
 
 
-def write_walk_scores(out_dir, scores: OutageScores) -> pathlib.Path:
-    """Write :class:`OutageScores` as ``out_dir/scores.json`` (arrays as lists; units as in the record)."""
+#: ``scores.json`` key of each :class:`OutageScores` field: unit-suffixed (m, s), horizontal errors
+WALK_SCORE_KEYS = {
+    "windows": "outage_windows_gpst_s", "n_ref": "n_fixed_epochs_per_outage",
+    "fwd_max": "forward_max_h_m", "sm_max": "smoothed_max_h_m", "fwd_rms": "forward_rms_h_m",
+    "sm_rms": "smoothed_rms_h_m", "fwd_rms_all": "forward_rms_h_all_outages_m",
+    "sm_rms_all": "smoothed_rms_h_all_outages_m", "fwd_max_mean": "forward_max_h_mean_over_outages_m",
+    "sm_max_mean": "smoothed_max_h_mean_over_outages_m", "fwd_rms_outside": "forward_rms_h_outside_outages_m",
+    "t": "epoch_gpst_s", "err_fwd": "forward_error_h_m", "err_sm": "smoothed_error_h_m",
+    "withheld": "gnss_withheld", "runtime_s": "runtime_s", "figure": "figure",
+    "n_nonfinite_nav": "n_nonfinite_nav_values", "sig_fwd": "forward_sigma_h_m", "sig_sm": "smoothed_sigma_h_m",
+}
+
+
+def write_walk_scores(out_dir, scores: OutageScores, *, extra: Optional[dict] = None) -> pathlib.Path:
+    """Write :class:`OutageScores` as ``out_dir/scores.json``: strict JSON (:func:`jaxnav.io.write_json`:
+    a NaN -- an epoch that is not a fixed reference, an outage without one -- is null with a
+    ``<key>_null_reason``), keys with units (:data:`WALK_SCORE_KEYS`), a ``"units"`` note; ``extra``
+    (e.g. a provenance block) is added at the top."""
     path = pathlib.Path(out_dir) / "scores.json"
-    write_json(path, scores._asdict())
+    d = {WALK_SCORE_KEYS.get(k, k): v for k, v in scores._asdict().items()}
+    d = {**(extra or {}), "units": "suffix _m metres, _s seconds (GPST); errors and sigmas horizontal "
+                                  "(east-north) against the withheld RTK-fixed positions", **d}
+    write_json(path, d)
     return path
 
 

@@ -5,12 +5,13 @@ CSV tables with a column map and units (issue 18).
 
 Errors are :class:`ReaderError` (a ValueError) naming the file and line; units are converted to SI
 here, at the edge. :func:`write_json` is the one strict JSON writer (non-finite numbers as null
-with a reason).
+with a reason); :func:`provenance` is the block every command's ``results.json`` carries.
 """
 
 from jaxnav._config import load_toml, loads_toml  # the one TOML parser sits below every layer (sim reads scenarios)
 from jaxnav.io._errors import ReaderError
 from jaxnav.io._json import json_ready, write_json
+from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
 from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_pbo_pos, read_tenv3, year_to_seconds
 from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, read_rtklib_imu, read_rtklib_tag
 from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
@@ -37,4 +38,5 @@ __all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags",
            "loads_toml",
            "imu_increments", "RTK_RESULT_COLUMNS", "write_rtk_results", "read_stop_list", "write_stop_list",
            "WalkData", "load_walk", "ReaderError", "json_ready", "write_json",
+           "provenance", "git_commit", "utc_now", "files_snapshot", "files_written",
            "read_kfgins_imu", "read_kfgins_gnss", "read_csv_imu", "read_csv_gnss"]

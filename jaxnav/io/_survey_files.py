@@ -283,6 +283,7 @@ def write_levelling(path, point, height) -> pathlib.Path:
     """Write a levelling file (``point, height``)."""
     path = pathlib.Path(path)
     with path.open("w", encoding="utf-8", newline="") as fh:
+        fh.write("# levelling (jaxnav S2 format): height = levelled (normal) height, m\n")
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(LEVELLING_COLUMNS)
         for p, hh in zip(point, height):
@@ -319,6 +320,8 @@ def write_control_points(path, point, lat, lon, H, x, y, h) -> pathlib.Path:
     path = pathlib.Path(path)
     fmt = lambda v, f: "" if not math.isfinite(v) else format(v, f)  # noqa: E731
     with path.open("w", encoding="utf-8", newline="") as fh:
+        fh.write("# control points (jaxnav S2 format): B L deg and H ellipsoidal height m (WGS-84); x north, y east "
+                 "m in the local grid and h normal height m (empty: not given)\n")
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(CONTROL_COLUMNS)
         for k in range(len(point)):

@@ -19,8 +19,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.experimental import multihost_utils
 from jax.sharding import NamedSharding, PartitionSpec
-from tqdm.auto import tqdm
 
+from jaxnav._progress import Progress
 from jaxnav.tune._distributed import batch_mesh, is_writer, spans_processes
 
 
@@ -30,8 +30,9 @@ def map_chunked(call: Callable, n: int, *, chunk: int, desc: str = "Monte Carlo"
 
     Every call gets exactly ``chunk`` indices (the last chunk repeats index ``n - 1``), so a
     compiled batched function is compiled once; the padded rows are dropped. Results move to host
-    memory per chunk, so device memory stays bounded by one chunk. The progress bar shows on the
-    writing process only (:func:`jaxnav.tune.is_writer`).
+    memory per chunk, so device memory stays bounded by one chunk. Progress (:class:`jaxnav._progress.Progress`:
+    a tqdm bar on a terminal, plain lines otherwise, none under ``jaxnav -q``) shows on the writing
+    process only (:func:`jaxnav.tune.is_writer`).
 
     Args:
       call: ``idx -> pytree`` of arrays with leading axis ``chunk``; ``idx`` is a (chunk,) int
@@ -43,7 +44,7 @@ def map_chunked(call: Callable, n: int, *, chunk: int, desc: str = "Monte Carlo"
     """
     n, chunk = int(n), max(1, int(chunk))
     outs = []
-    with tqdm(total=n, desc=desc, disable=not (progress and is_writer()), unit=unit) as bar:
+    with Progress(n, desc, unit=unit, enabled=progress and is_writer()) as bar:
         for s in range(0, n, chunk):
             m = min(chunk, n - s)
             idx = np.minimum(np.arange(s, s + chunk), n - 1)

@@ -12,11 +12,15 @@ from jaxnav.cli import main
 from jaxnav.experiments import EXPERIMENT, load_experiment
 from jaxnav.tune import run_chunked
 
+from _outputs import check_provenance
+
 
 def test_demo_writes_results_and_figure(tmp_path, capsys):
     out = tmp_path / "demo"
-    assert main(["demo-filters", "--out", str(out), "--seeds", "5", "--epochs", "300", "--no-progress"]) == 0
-    res = json.loads((out / "results.json").read_text())
+    argv = ["demo-filters", "--out", str(out), "--seeds", "5", "--epochs", "300", "--no-progress"]
+    assert main(argv) == 0
+    res = check_provenance(out, argv)  # issue 21: version, commit, date, command, options, files written
+    assert "filter_family.png" in res["files"]
     assert set(res["table"]) == {"classic", "attenuated", "fading", "variance_compensation"}
     assert res["settings"]["seeds"] == 5 and res["settings"]["b"] == 0.254
     t = res["table"]
@@ -40,8 +44,10 @@ def test_run_chunked_pads_last_chunk_and_matches_vmap():
 def test_s0_demo_writes_table_json_and_figures(tmp_path, capsys):
     """The S0 reproduction on 2 seeds and a 2-point b sweep (the full run is ``make demo``)."""
     out = tmp_path / "s0"
-    assert main(["demo", "--out", str(out), "--seeds", "2", "--sweep-points", "2", "--no-progress"]) == 0
-    res = json.loads((out / "results.json").read_text())
+    argv = ["demo", "--out", str(out), "--seeds", "2", "--sweep-points", "2", "--no-progress"]
+    assert main(argv) == 0
+    res = check_provenance(out, argv, config=True)  # the shipped s0_experiment.toml and its contents
+    assert res["provenance"]["config_file"].endswith("s0_experiment.toml") and "filter" in res["provenance"]["config"]
     assert set(res["filters"]) == {"classic", "attenuated", "fading"}
     for name, f in res["filters"].items():
         assert len(f["per_seed"]["pos_rms_m"]) == 2 and len(f["mean"]["vel_rms_mps"]) == 3

@@ -27,8 +27,11 @@ def done(tmp_path_factory):
                      extra='[constraints]\nzupt = "auto"\nzaru = true\nnhc = true\ndetector_threshold = 30.0\n'
                            "detector_sigma_a_m_s2 = 0.01\ndetector_sigma_w_deg_s = 0.05\ndetector_min_s = 1.0\n")
     out = folder / "out"
-    assert main(["ins", str(cfg), "--out", str(out), "-q"]) == 0
-    return rec, out, json.loads((out / "results.json").read_text())
+    argv = ["ins", str(cfg), "--out", str(out), "-q"]
+    assert main(argv) == 0
+    from _outputs import check_provenance
+
+    return rec, out, check_provenance(out, argv, config=True)
 
 
 def test_time_offset_recovered(done):
@@ -107,5 +110,6 @@ def test_output_files_readable(done):
     assert "<kml" in (out / "track.kml").read_text()[:400]
     text = (out / "results.json").read_text()
     assert "NaN" not in text and "Infinity" not in text
-    assert r["config"]["imu"]["format"] == "kf-gins" and r["jaxnav_version"]
+    assert r["provenance"]["config"]["imu"]["format"] == "kf-gins" and r["provenance"]["jaxnav_version"]
+    assert {"trajectory.csv", "track.kml", "biases.png", "results.json"} <= set(r["files"])
     assert r["mounting"]["source"].startswith("mounting_rpy_deg")

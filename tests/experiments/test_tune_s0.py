@@ -125,8 +125,12 @@ def test_sweep_and_tune_cli_write_results_and_figures(tmp_path, kind, capsys):
     """Both commands on the CV problem; the sweep on a 150 s S0 problem (its tune path is the same
     code with the S0 loss, exercised by notebook 05 and benchmarks/bench_tune.py)."""
     cfg = _config(tmp_path, kind)
-    assert main(["sweep", str(cfg), "--out", str(tmp_path / "sw"), "--no-progress"]) == 0
-    sw = json.loads((tmp_path / "sw" / "results.json").read_text())
+    from _outputs import check_provenance
+
+    argv = ["sweep", str(cfg), "--out", str(tmp_path / "sw"), "--no-progress"]
+    assert main(argv) == 0
+    sw = check_provenance(tmp_path / "sw", argv, config=True)
+    assert "table.csv" in sw["files"] and "params" in sw["provenance"]["config"]
     G = 3 if kind == "s0" else 6
     assert len(sw["loss_mean"]) == G and np.asarray(sw["loss_per_run"]).shape == (G, sw["runs"])
     assert sw["best"]["loss"] == pytest.approx(min(sw["loss_mean"]))
@@ -135,8 +139,9 @@ def test_sweep_and_tune_cli_write_results_and_figures(tmp_path, kind, capsys):
     if kind == "s0":
         assert np.asarray(sw["rms_best_mean"]).shape == (9,)
     else:
-        assert main(["tune", str(cfg), "--out", str(tmp_path / "tu"), "--no-progress"]) == 0
-        tu = json.loads((tmp_path / "tu" / "results.json").read_text())
+        argv = ["tune", str(cfg), "--out", str(tmp_path / "tu"), "--no-progress"]
+        assert main(argv) == 0
+        tu = check_provenance(tmp_path / "tu", argv, config=True)
         assert tu["loss_final"] < tu["loss_init"]
         assert set(tu["tuned"]) == set(tu["init"]) and tu["wall_time_s"]["tune"] > 0
         assert np.asarray(tu["loss_per_run"]["tuned"]).shape == (8,)

@@ -129,7 +129,11 @@ def test_cli_monitor_files(tmp_path):
     results (filter = weighted LS = SIO's slopes, forecast statistics) under s1_adaptive_filter."""
     from jaxnav.cli import main
 
-    assert main(["monitor", str(DATA / "bjfsCleanUnf.neu"), "--out", str(tmp_path), "--s1"]) == 0
+    argv = ["monitor", str(DATA / "bjfsCleanUnf.neu"), "--out", str(tmp_path), "--s1"]
+    assert main(argv) == 0
+    from _outputs import check_provenance
+
+    assert "BJFS_fit.png" in check_provenance(tmp_path, argv, json_name="monitor.json")["files"]
     res = json.loads((tmp_path / "monitor.json").read_text())
     st = res["stations"]["BJFS"]
     v, sd = st["velocity_mm_per_yr"], st["velocity_sigma_mm_per_yr"]
@@ -146,9 +150,13 @@ def test_cli_monitor_files(tmp_path):
     assert st["outliers"]["count"] == len(st["outliers"]["list"]) == sum(st["outliers"]["by_reason"].values())
     assert (tmp_path / "BJFS_fit.png").stat().st_size > 10_000
     s1 = st["s1_adaptive_filter"]
-    np.testing.assert_allclose(s1["velocity_mm_per_yr"], s1["ls_slope_mm_per_yr"], rtol=1e-6)
-    np.testing.assert_allclose(s1["velocity_mm_per_yr"], s1["published_mm_per_yr"], atol=0.25)
-    assert s1["random_walk_psd_m2_per_s3"][0] > mon.PSD_GRID[0]  # the ML random walk is not the smallest
+    enu = ("east", "north", "up")  # labelled components, no bare triplets (issue 21)
+    assert all(set(s1[k]) == set(enu) for k in ("velocity_mm_per_yr", "ls_slope_mm_per_yr", "published_mm_per_yr"))
+    vel, ls, pub = ([s1[k][c] for c in enu] for k in ("velocity_mm_per_yr", "ls_slope_mm_per_yr",
+                                                       "published_mm_per_yr"))
+    np.testing.assert_allclose(vel, ls, rtol=1e-6)
+    np.testing.assert_allclose(vel, pub, atol=0.25)
+    assert s1["random_walk_psd_m2_per_s3"]["east"] > mon.PSD_GRID[0]  # the ML random walk is not the smallest
     assert set(s1["forecast_statistics"]) == {"standard", "adaptive"}
     assert len(s1["forecast_statistics"]["adaptive"]["m_P_mm"]) == len(np.arange(s1["epochs"] - 1)) // 365
     assert (tmp_path / "s1/velocity_BJFS.png").stat().st_size > 10_000

@@ -177,4 +177,6 @@ def test_cli_on_a_drive_only_file_says_why_nothing_is_left(tmp_path, capsys):
 
     assert main(["rtk", str(DRIVE), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "no window of 30 epochs" in err[0] and "506 moving" in err[0]
+    # the stage line of the reading, then the one-line error (-q: the error alone)
+    assert err[0].startswith("reading 1 file(s)") and len(err) == 2
+    assert "no window of 30 epochs" in err[1] and "506 moving" in err[1]

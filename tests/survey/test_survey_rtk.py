@@ -148,7 +148,12 @@ def test_errors(survey):
 def test_cli_on_simulated_survey(survey, tmp_path):
     from jaxnav.cli import main
 
-    assert main(["rtk", "--simulate", "0", "--out", str(tmp_path)]) == 0
+    argv = ["rtk", "--simulate", "0", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    from _outputs import check_provenance
+
+    written = check_provenance(tmp_path, argv, json_name="rtk_results.json")["files"]
+    assert {"sim_epochs.csv", "rtk.png", "rtk_results.csv"} <= set(written)
 
     def no_constants(name):
         raise AssertionError(f"{name} token in rtk_results.json")  # strict JSON: null + reason instead
@@ -162,8 +167,12 @@ def test_cli_on_simulated_survey(survey, tmp_path):
     assert abs(f["std_cm"] - c.std * 100) < 0.01 and abs(f["mean_cm"] - c.mean * 100) < 0.01
     assert summary["levelling_conventional_terminal"]["mean_cm"] > 7
     rows = (tmp_path / "rtk_results.csv").read_text().splitlines()
-    assert len(rows) == 47 and rows[1].startswith("point,n,x,y,h,H,m_x_mm") and rows[1].endswith("sigma_h_mm")
-    assert rows[0].startswith("# units:") and "normal height" in rows[0] and "acf_ess_segment" in rows[0]
+    head = "\n".join(r for r in rows if r.startswith("#"))
+    rows = [r for r in rows if not r.startswith("#")]
+    assert len(rows) == 46 and rows[0].startswith("point,n_epochs,x_m,y_m,h_m,H_ellipsoidal_m,m_x_mm")
+    assert rows[0].endswith("sigma_h_mm") and "# units:" in head and "acf_ess_segment" in head
+    assert "# height system: normal height" in head and "quadratic surface fitted to" in head
+    assert "# crs: reference grid" in head and "+proj=tmerc" in head
     assert summary["crs"].startswith("reference grid") and summary["excluded_moving_epochs"] == 0
     p = summary["points"][0]
     assert p["sigma_method"] == "acf_ess_segment" and p["sigma_x_m"] >= 0.8 * p["sigma_naive_x_m"]
