@@ -157,6 +157,9 @@ def main(argv=None) -> int:
       0 on success, 2 for an error the user must fix (one line on stderr), 3 for an internal error.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
+    import matplotlib
+
+    matplotlib.use("Agg")  # the commands write figures to files; the library leaves the backend to the user
     head = argv[: argv.index("--")] if "--" in argv else argv
     debug = "--debug" in head
     first_command = next((i for i, a in enumerate(head) if a in _command_names()), len(head))

@@ -1,4 +1,8 @@
-"""Figures (matplotlib, Agg backend); every function saves a file and returns the figure."""
+"""Figures (matplotlib); every function saves a file and returns the figure.
+
+The library does not choose a matplotlib backend: in a notebook the figures show inline, on a
+headless machine matplotlib falls back to Agg; the ``jaxnav`` commands select Agg themselves.
+"""
 
 from jaxnav.plot._cadastral import plot_cadastral_errors, plot_cadastral_route, plot_stop_detection
 from jaxnav.plot._filters import plot_filter_family

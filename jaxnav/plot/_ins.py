@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import pathlib
 
-import matplotlib
 
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from jaxnav.plot._save import save_figure
