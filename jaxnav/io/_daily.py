@@ -120,6 +120,55 @@ def _masked_positions(enu, sig, lines, path, limits, corr=None):
     return sig, corr, int(miss.sum())
 
 
+_MONTHS = {m: i + 1 for i, m in enumerate(("JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT",
+                                              "NOV", "DEC"))}
+_MJD_GPS0 = 44244.0  # MJD of the GPS time origin, 1980-01-06
+#: largest antenna height (tenv3 column ``_ant(m)``) accepted, m
+ANTENNA_HEIGHT_MAX_M = 100.0
+#: largest disagreement accepted between a record's calendar date and its MJD (or decimal year), days
+DATE_TOLERANCE_DAYS = 2.0
+
+
+def _mjd_of_date(y, m, d):
+    """MJD of the Gregorian date y-m-d at 0 h (integers), or None if no such date."""
+    import datetime as _dt
+
+    try:
+        return float((_dt.date(y, m, d) - _dt.date(1858, 11, 17)).days)
+    except (ValueError, OverflowError):
+        return None
+
+
+def _check_column(v, lines, path, lo, hi, what, unit=""):
+    """Every value of the (N,) column ``v`` finite and in [lo, hi], else a ReaderError at its line."""
+    bad = np.flatnonzero(~((v >= lo) & (v <= hi)))
+    if bad.size:
+        i = int(bad[0])
+        raise _err(path, lines[i], f"{what} = {float(v[i])!r}{unit} is not finite or outside [{lo:g}, {hi:g}]{unit}")
+
+
+def _check_mjd_agrees(mjd_date, mjd, lines, path, what, tol_days=DATE_TOLERANCE_DAYS, ref="MJD", unit="days"):
+    """The (N,) time from a record's calendar columns agrees with its ``ref`` column within ``tol_days``
+    (both in ``unit``)."""
+    bad = np.flatnonzero(~(np.abs(mjd_date - mjd) <= tol_days))
+    if bad.size:
+        i = int(bad[0])
+        raise _err(path, lines[i], f"{what} disagrees with the {ref} {float(mjd[i]):.4f} by more than "
+                                   f"{tol_days:.4g} {unit} (a corrupted date or time)")
+
+
+def _check_field_count(w, expected, first, path, lineno, names):
+    """A record has exactly one of the ``expected`` field counts, and the same count as the file's first
+    record (``first``: (count, line) or None); returns the (count, line) to compare later records with."""
+    n = len(w)
+    if n not in expected:
+        want = " or ".join(str(k) for k in expected)
+        raise _err(path, lineno, f"expected {want} fields ({names}), found {n}")
+    if first is not None and n != first[0]:
+        raise _err(path, lineno, f"{n} fields where line {first[1]} has {first[0]} (a column added or lost)")
+    return first or (n, lineno)
+
+
 def _check_increasing(t, lines, path):
     d = np.diff(t)
     bad = np.flatnonzero(~(d > 0))
@@ -156,34 +205,61 @@ def read_tenv3(path) -> DailySeries:
     sig_u, corr_en, corr_eu, corr_nu, latitude, longitude, height. Positions are integer +
     fraction (the integer part may be re-initialised after a jump; the sum is what counts). Time
     is taken from the MJD (exact days); longitudes such as -268.9 are wrapped to [-180, 180).
+    A record has exactly 23 fields (or 20, without latitude, longitude and height), as many as the
+    header line and the first record; the date, decimal year, GPS week and day must agree with the
+    MJD, the reference longitude lie within +-360 deg and the antenna height within
+    +-:data:`ANTENNA_HEIGHT_MAX_M`.
 
     Args:
       path: file path.
     Returns:
       :class:`DailySeries` (fmt "tenv3").
     Raises:
-        ReaderError: naming file and line of a record with too few columns, a non-numeric field, a
-        non-UTF-8 byte, an infinite or impossible value (latitude beyond 90 deg, MJD outside
+        ReaderError: naming file and line of a record with another number of fields, a non-numeric
+        field, a date disagreeing with the MJD, a non-UTF-8 byte, an infinite or impossible value (latitude beyond 90 deg, MJD outside
         1950-2150), a bad sigma, a correlation outside [-1, 1], or time not increasing; or no
         records. ``nan`` positions are masked and counted (module docstring).
     """
     path = pathlib.Path(path)
-    rows, lines, station = [], [], None
+    rows, lines, station, first, dates = [], [], None, None, []
     for lineno, w in _data_lines(path):
         if w[0] == "site" or w[0].startswith("site"):
+            if len(w) in (20, 23):
+                first = first or (len(w), lineno)  # the header names the columns every record has
             continue  # header line
-        if len(w) < 20:
-            raise _err(path, lineno, f"expected at least 20 columns (site ... corr_nu), found {len(w)}")
+        first = _check_field_count(w, (20, 23), first, path, lineno, "site YYMMMDD yyyy.yyyy MJD week d reflon "
+                                   "e0 east n0 north u0 up ant sig_e sig_n sig_u corr_en corr_eu corr_nu "
+                                   "[latitude longitude height]")
         station = station or w[0]
-        rows.append(_floats(w[2:4] + w[7:20] + (w[20:23] if len(w) >= 23 else ["nan"] * 3), path, lineno,
+        rows.append(_floats(w[2:20] + (w[20:23] if len(w) == 23 else ["nan"] * 3), path, lineno,
                             "the numeric columns"))
+        m = re.fullmatch(r"(\d\d)([A-Za-z]{3})(\d\d)", w[1])
+        d = None
+        if m and m.group(2).upper() in _MONTHS:
+            yy = int(m.group(1))
+            d = _mjd_of_date(yy + (1900 if yy >= 50 else 2000), _MONTHS[m.group(2).upper()], int(m.group(3)))
+        if d is None:
+            raise _err(path, lineno, f"date {w[1][:20]!r} is not a date YYMMMDD (e.g. 95MAY19)")
+        dates.append(d)
         lines.append(lineno)
     if not rows:
         raise ReaderError(path, None, "no data records")
     a = np.asarray(rows)
+    a = np.concatenate([a[:, :2], a[:, 5:]], axis=1)  # drop week, day, reflon (checked here) for the indices below
+    raw = np.asarray(rows)
     year, mjd = a[:, 0], a[:, 1]
     _check_times(mjd, lines, path, _MJD_RANGE, "MJD")
     _check_times(year, lines, path, YEAR_RANGE, "decimal year")
+    _check_mjd_agrees(np.asarray(dates), mjd, lines, path, "the date (column 2)", 0.5)
+    _check_mjd_agrees(_MJD_J2000 + (year - T0_YEAR) * YEAR / 86400.0, mjd, lines, path, "the decimal year")
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = np.flatnonzero(~(raw[:, 2] * 7.0 + raw[:, 3] == np.floor(mjd - _MJD_GPS0)) | ~(np.abs(raw[:, 3]) <= 6))
+    if bad.size:
+        i = int(bad[0])
+        raise _err(path, lines[i], f"GPS week {raw[i, 2]!r} and day {raw[i, 3]!r} disagree with the MJD "
+                                   f"{float(mjd[i]):.4f} (a corrupted date)")
+    _check_column(raw[:, 4], lines, path, -360.0, 360.0, "reference longitude", " deg")
+    _check_column(a[:, 8], lines, path, -ANTENNA_HEIGHT_MAX_M, ANTENNA_HEIGHT_MAX_M, "antenna height", " m")
     t = (mjd - _MJD_J2000) * 86400.0
     _check_increasing(t, lines, path)
     e, n, u = a[:, 2] + a[:, 3], a[:, 4] + a[:, 5], a[:, 6] + a[:, 7]
@@ -223,7 +299,8 @@ def read_neu(path) -> DailySeries:
       :class:`DailySeries` (fmt "neu"); the station name is the file name up to the first
       non-letter (``bjfsCleanUnf.neu`` -> "BJFS").
     Raises:
-      ReaderError: naming file and line of a record without 9 numeric columns, a non-UTF-8 byte,
+      ReaderError: naming file and line of a record without exactly 9 numeric columns, a year and
+        day of year (whole numbers) disagreeing with the decimal year, a non-UTF-8 byte,
         an infinite or impossible value, a bad sigma, or time not increasing; or no records.
         ``nan`` positions are masked and counted.
     """
@@ -245,9 +322,7 @@ def read_neu(path) -> DailySeries:
                     slopes[comp] = tuple(v)
             continue
         w = s.split()
-        if len(w) < 9:
-            raise _err(path, lineno,
-                       f"expected 9 columns (year, yyyy, doy, dN, dE, dU, sN, sE, sU), found {len(w)}")
+        _check_field_count(w, (9,), None, path, lineno, "year, yyyy, doy, dN, dE, dU, sN, sE, sU")
         rows.append(_floats(w[:9], path, lineno, "the numeric columns"))
         lines.append(lineno)
     if not rows:
@@ -255,6 +330,15 @@ def read_neu(path) -> DailySeries:
     a = np.asarray(rows)
     year = a[:, 0]
     _check_times(year, lines, path, YEAR_RANGE, "decimal year")
+    _check_column(a[:, 1], lines, path, *YEAR_RANGE, "year (column 2)")
+    _check_column(a[:, 2], lines, path, 1.0, 366.0, "day of year (column 3)")
+    bad = np.flatnonzero((a[:, 1] != np.round(a[:, 1])) | (a[:, 2] != np.round(a[:, 2])))
+    if bad.size:
+        raise _err(path, lines[int(bad[0])], f"year {a[bad[0], 1]!r} and day of year {a[bad[0], 2]!r} "
+                                             "must be whole numbers")
+    _check_mjd_agrees(a[:, 1] + (a[:, 2] - 0.5) / 365.25, year, lines, path,
+                      "the year and day of year (columns 2, 3)", DATE_TOLERANCE_DAYS / 365.25, "decimal year",
+                      "years")
     t = year_to_seconds(year)
     _check_increasing(t, lines, path)
     enu = a[:, [4, 3, 5]]
@@ -350,12 +434,14 @@ def read_pbo_pos(path) -> DailySeries:
       :class:`DailySeries` (fmt "pbo"), ``origin`` zeros (the offsets are the file's).
     Raises:
       ReaderError: naming file and line of a first line that is not the PBO title (e.g. an
-        RTKLIB .pos: use ``jaxnav rtk``), a record with fewer than 24 fields, a non-numeric field,
+        RTKLIB .pos: use ``jaxnav rtk``), a record without exactly 25 fields, a YYYYMMDD HHMMSS
+        disagreeing with the MJD by more than a minute, a non-numeric field,
         a non-UTF-8 byte, an infinite or impossible value, a bad sigma, a correlation outside
         [-1, 1] or time not increasing; or no records. ``nan`` offsets are masked and counted.
     """
     path = pathlib.Path(path)
     rows, lines, station, in_header, first = [], [], None, True, True
+    first_rec, dates = None, []
     for lineno, line in text_lines(path):
         s = line.strip()
         if first:
@@ -373,10 +459,21 @@ def read_pbo_pos(path) -> DailySeries:
                 in_header = not s.startswith("*")
             continue
         w = s.split()
-        if len(w) < 24:
-            raise _err(path, lineno, f"expected 25 fields (YYYYMMDD HHMMSS MJD X Y Z Sx Sy Sz Rxy Rxz Ryz "
-                                     f"NLat Elong Height dN dE dU Sn Se Su Rne Rnu Reu Soln), found {len(w)}")
+        first_rec = _check_field_count(w, (25,), first_rec, path, lineno, "YYYYMMDD HHMMSS MJD X Y Z Sx Sy Sz "
+                                       "Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su Rne Rnu Reu Soln")
         rows.append(_floats(w[2:24], path, lineno, "the numeric fields"))
+        dd, hh = w[0], w[1]
+        d = None
+        if len(dd) == 8 and dd.isdigit() and len(hh) == 6 and hh.isdigit():
+            d = _mjd_of_date(int(dd[:4]), int(dd[4:6]), int(dd[6:]))
+            hs = (int(hh[:2]), int(hh[2:4]), int(hh[4:]))
+            if d is None or hs[0] > 23 or hs[1] > 59 or hs[2] > 60:
+                d = None
+            else:
+                d += (hs[0] * 3600 + hs[1] * 60 + hs[2]) / 86400.0
+        if d is None:
+            raise _err(path, lineno, f"date and time {dd[:20]!r} {hh[:20]!r} are not YYYYMMDD HHMMSS")
+        dates.append(d)
         lines.append(lineno)
     if not rows:
         raise ReaderError(path, None, "no data records")
@@ -384,6 +481,7 @@ def read_pbo_pos(path) -> DailySeries:
     #                        16-18 sN sE sU, 19-21 rNE rNU rEU
     mjd = a[:, 0]
     _check_times(mjd, lines, path, _MJD_RANGE, "MJD")
+    _check_mjd_agrees(np.asarray(dates), mjd, lines, path, "YYYYMMDD HHMMSS", 60.0 / 86400.0)
     t = (mjd - _MJD_J2000) * 86400.0
     _check_increasing(t, lines, path)
     enu = a[:, [14, 13, 15]]

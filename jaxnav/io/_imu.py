@@ -115,6 +115,11 @@ class TimeTags(NamedTuple):
     fpos_bytes: int
 
 
+#: the longest pause accepted between two writes of a tag file, ms; a longer one is a wrapped or
+#: corrupted uint32 tick (a jump to near 2^32 ms), not a logging pause
+TAG_GAP_MAX_MS = 3_600_000
+
+
 def _decode_tag_records(buf, path, fpos_bytes):
     rec = 4 + fpos_bytes
     n = (len(buf) - TAG_DATA_START) // rec
@@ -131,6 +136,13 @@ def _decode_tag_records(buf, path, fpos_bytes):
             raise ReaderError(path, None, f"record {k} (file offset {TAG_DATA_START + k * rec}): {name} {a[k]} is "
                                           f"smaller than the previous {a[k - 1]}; not a {rec}-byte-record RTKLIB "
                                           "tag file")
+    gap = np.diff(tick)
+    bad = np.flatnonzero(gap > TAG_GAP_MAX_MS)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise ReaderError(path, None, f"record {k} (file offset {TAG_DATA_START + k * rec}): tick {tick[k]} ms is "
+                                      f"{gap[k - 1] / 1e3:g} s after the previous {tick[k - 1]} ms, more than "
+                                      f"{TAG_GAP_MAX_MS / 1e3:g} s (a wrapped or corrupted tick)")
     return tick, fpos
 
 
@@ -145,8 +157,8 @@ def read_rtklib_tag(path, *, fpos_bytes=None) -> TimeTags:
       :class:`TimeTags`.
     Raises:
       ReaderError: (a ValueError) naming the file, for a wrong header, a short file, a header
-        without records, a start time before 1980 or after 2100, a partial record, or decreasing
-        ticks/positions.
+        without records, a start time before 1980 or after 2100, a partial record, decreasing
+        ticks/positions, or two writes more than :data:`TAG_GAP_MAX_MS` apart (a wrapped tick).
       FileNotFoundError: if the file does not exist.
     """
     path = pathlib.Path(path)

@@ -28,7 +28,7 @@ CONTROL = ("point,B,L,H,x,y,h\n"
                      f"{39486000 + 90 * i},21.5\n" for i in range(6)))
 TENV3 = ("site YYMMMDD yyyy.yyyy __MJD week d reflon _e0(m) __east(m) ____n0(m) _north(m) u0(m) ____up(m) _ant(m) "
          "sig_e(m) sig_n(m) sig_u(m) __corr_en __corr_eu __corr_nu _latitude(deg) _longitude(deg) __height(m)\n"
-         + "".join(f"LHAS 95MAY{19 + k} {1995.3785 + k / 365.25:.4f} {49856 + k}  801 5   91.1    385  0.888603   "
+         + "".join(f"LHAS 95MAY{19 + k} {1995.3785 + k / 365.25:.4f} {49856 + k}  {801 + (5 + k) // 7} {(5 + k) % 7}   91.1    385  0.888603   "
                    f"3282129  0.602585  3624  0.707878  0.0000 0.002231 0.001932 0.008643 -0.009728 -0.044382 "
                    f"-0.198749  29.6573392384 -268.8960142076  3624.70788\n" for k in range(6)))
 

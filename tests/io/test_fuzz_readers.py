@@ -229,6 +229,7 @@ READERS = {
                 io.read_rtklib_tag, _check_tag, "binary"),
     "tenv3": (lambda: _head("gnss_daily_timeseries/LHAS.tenv3", 300), ".tenv3", io.read_daily, _check_daily, None),
     "neu": (lambda: _head("gnss_daily_timeseries/bjfsCleanUnf.neu", 320), ".neu", io.read_daily, _check_daily, None),
+    "pbo": (lambda: _pbo_fixture(), ".pos", io.read_daily, _check_daily, None),
     "col": (lambda: _head("gnss_daily_timeseries/UH01_GOM20_neu_cm.col", 300), ".col", io.read_daily, _check_daily,
             None),
     "epoch_log": (_epoch_log_fixture, ".csv", io.read_epoch_log, _check_epoch_log, b","),
@@ -394,7 +395,10 @@ def test_reader_fuzz(name, tmp_path):
     print(f"\nfuzz {name}: {N_MUTATIONS} mutations -> {counts}; file-level errors by mutation: {file_only}")
     assert sum(counts.values()) == N_MUTATIONS
     if delim != "binary" and name != "s0_experiment_toml":  # text: only whole-file faults go without a line
-        assert set(file_only) <= {"empty", "header_only", "truncate", "delete", "flip"}, file_only
+        whole_file = {"empty", "header_only", "truncate", "delete", "flip"}
+        if name == "pbo":  # fields swapped in the header's last line: no header end, so no records
+            whole_file.add("swap_fields")
+        assert set(file_only) <= whole_file, file_only
     assert counts["error_file_and_line"] + counts["error_file_only"] > N_MUTATIONS // 10  # the fuzzing bites
 
 
@@ -438,3 +442,111 @@ def test_named_examples_of_the_issue(tmp_path):
 
     v, sd = weighted_slope(s.t, s.enu, np.sqrt(np.diagonal(s.cov, axis1=1, axis2=2)))
     assert np.all(np.isfinite(v)) and np.all(np.isfinite(sd))
+
+
+# ----------------------------------------------------------------------------- exact field counts, skipped columns
+
+def _pbo_fixture():
+    """A small EarthScope/PBO daily .pos (format 1.1): 40 daily records of 25 fields."""
+    import datetime as dt
+
+    head = ["PBO Station Position Time Series. Reference Frame : IGS14", "Format Version: 1.1.0",
+            "4-character ID: TEST", "Start Field Description", "End Field Description",
+            "*YYYYMMDD HHMMSS JJJJJ.JJJJ X Y Z Sx Sy Sz Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su "
+            "Rne Rnu Reu Soln"]
+    rows = []
+    for k in range(40):
+        d = dt.date(2015, 3, 1) + dt.timedelta(days=k)
+        mjd = (d - dt.date(1858, 11, 17)).days + 0.5
+        rows.append(f" {d:%Y%m%d} 120000 {mjd:.4f} -1.0e6 5.0e6 3.0e6 0.002 0.003 0.004 0.1 -0.2 0.3 "
+                    f"29.657 91.104 3624.7 {1e-4 * k:.5f} {2e-4 * k:.5f} {-1e-4 * k:.5f} 0.00100 0.00120 0.00400 "
+                    "0.010 -0.020 0.030 final")
+    return ("\n".join(head + rows) + "\n").encode()
+
+
+#: name -> (source, suffix, [(field index, bad value, what)]) of the columns a reader parses only to check
+SKIPPED_COLUMNS = {
+    "tenv3": (lambda: _head("gnss_daily_timeseries/LHAS.tenv3", 120), ".tenv3",
+              [(6, "1e400", "reference longitude"), (13, "inf", "antenna height"), (4, "-1e308", "GPS week"),
+               (4, "nan", "GPS week"), (5, "9", "GPS day"), (1, "95MAY32", "date"), (1, "nan", "date"),
+               (2, "2011.5", "decimal year vs MJD")]),
+    "pbo": (_pbo_fixture, ".pos", [(0, "-inf", "YYYYMMDD"), (1, "Infinity", "HHMMSS"), (0, "20150302", "date vs MJD"),
+                                   (1, "235900", "time vs MJD"), (0, "20151399", "no such date")]),
+    "neu": (lambda: _head("gnss_daily_timeseries/bjfsCleanUnf.neu", 120), ".neu",
+            [(2, "NaN", "day of year"), (2, "inf", "day of year"), (1, "1e400", "year"), (2, "400", "day of year"),
+             (1, "2005", "year vs decimal year"), (2, "12.5", "fractional day")]),
+}
+FIELD_COUNT_SOURCES = {
+    "tenv3": (lambda: _head("gnss_daily_timeseries/LHAS.tenv3", 120), ".tenv3", None),
+    "pbo": (_pbo_fixture, ".pos", None),
+    "neu": (lambda: _head("gnss_daily_timeseries/bjfsCleanUnf.neu", 120), ".neu", None),
+    "col": (lambda: _head("gnss_daily_timeseries/UH01_GOM20_neu_cm.col", 120), ".col", None),
+}
+
+
+def _data_line_indices(lines):
+    """Indices of the records: lines of 7 or more fields starting with a number or the tenv3 site."""
+    return [i for i, l in enumerate(lines) if len(l.split()) >= 7 and (l.split()[0][:1].isdigit()
+                                                                         or l.startswith(b"LHAS "))]
+
+
+@pytest.mark.parametrize("name", list(FIELD_COUNT_SOURCES))
+def test_wrong_field_count_is_an_error_at_its_line(name, tmp_path):
+    """A record with one field more or fewer (or cut to the short variant) is a ReaderError naming file
+    and line, never a read with shifted columns."""
+    source, suffix, _ = FIELD_COUNT_SOURCES[name]
+    lines = source().split(b"\n")[:-1]
+    rng = random.Random(f"{SEED}-fields-{name}")
+    idx = _data_line_indices(lines)
+    cases = [("drop", rng.choice(idx)) for _ in range(4)] + [("add", rng.choice(idx)) for _ in range(4)]
+    if name == "tenv3":
+        cases.append(("cut20", idx[len(idx) // 2]))
+    for kind, i in cases:
+        mut = list(lines)
+        w = mut[i].split()
+        w = w[:-1] if kind == "drop" else w[:20] if kind == "cut20" else w[:7] + [b"0.5"] + w[7:]
+        mut[i] = b" ".join(w)
+        p = _write(tmp_path / f"{kind}{i}{suffix}", b"\n".join(mut) + b"\n")
+        with pytest.raises(ReaderError) as exc:
+            io.read_daily(p)
+        assert exc.value.line == i + 1 and str(exc.value).startswith(f"{p}:{i + 1}:"), (kind, str(exc.value))
+    io.read_daily(_write(tmp_path / f"clean{suffix}", b"\n".join(lines) + b"\n"))
+
+
+@pytest.mark.parametrize("name", list(SKIPPED_COLUMNS))
+def test_non_finite_skipped_columns_are_errors_at_their_line(name, tmp_path):
+    """Columns read only for consistency (reference longitude, antenna height, GPS week and day, the
+    calendar date against the MJD, day of year) are validated: a bad value is an error at its line."""
+    source, suffix, cases = SKIPPED_COLUMNS[name]
+    lines = source().split(b"\n")[:-1]
+    idx = _data_line_indices(lines)
+    i = idx[len(idx) // 3]
+    for j, bad, what in cases:
+        mut = list(lines)
+        w = mut[i].split()
+        w[j] = bad.encode()
+        mut[i] = b" ".join(w)
+        p = _write(tmp_path / f"c{j}{suffix}", b"\n".join(mut) + b"\n")
+        with pytest.raises(ReaderError) as exc:
+            io.read_daily(p)
+        assert exc.value.line == i + 1, (what, str(exc.value))
+
+
+def test_wrapped_tag_ticks_are_rejected_for_every_timing(tmp_path):
+    """Tag ticks set to 0xFFFFFFF0 over the second half of the walk's tag file (a wrapped uint32 clock):
+    the tag reader, and so every timing that reads the tag, refuses the file, naming it."""
+    rel = "rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv"
+    if not (DATA_ROOT / rel).exists():
+        pytest.skip("shared data not present")
+    b = bytearray((DATA_ROOT / (rel + ".tag")).read_bytes())
+    n = (len(b) - 76) // 8
+    for k in range(n // 2, n):
+        struct.pack_into("<I", b, 76 + 8 * k, 0xFFFFFFF0)
+    csv = tmp_path / "imu.csv"
+    csv.write_bytes((DATA_ROOT / rel).read_bytes())
+    tag = _write(tmp_path / "imu.csv.tag", bytes(b))
+    with pytest.raises(ReaderError, match=r"imu\.csv\.tag: .*wrapped or corrupted tick"):
+        io.read_rtklib_tag(tag)
+    for timing in ("counter", "arrival", "endpoints"):
+        with pytest.raises(ReaderError, match=r"imu\.csv\.tag: "):
+            io.read_rtklib_imu(csv, tag, timing=timing)
