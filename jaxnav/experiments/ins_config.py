@@ -45,6 +45,46 @@ TUNABLE = ("arw", "vrw", "gyro_bias_instability", "pos_sigma_scale", "lever_arm"
 
 _NUM = (int, float)
 
+#: plausible range [lo, hi] of every numeric key, in the key's own (config) unit: a value outside is a
+#: typing slip or a unit mix-up, refused before anything is read (documented in docs/guide/ins.md)
+RANGES = {
+    "imu.time_offset_s": (-10.0, 10.0),
+    "imu.time_offset_search_s": (1e-3, 10.0),
+    "gnss.pos_sigma_floor_m": (0.0, 100.0),
+    "gnss.vel_sigma_floor_m_s": (0.0, 100.0),
+    "gnss.gate_probability": (0.5, 1.0 - 1e-12),
+    "noise.arw_deg_per_sqrt_h": (1e-5, 30.0),
+    "noise.vrw_m_per_s_per_sqrt_h": (1e-5, 30.0),
+    "noise.gyro_bias_instability_deg_per_h": (1e-5, 1e4),
+    "noise.accel_bias_instability_mg": (1e-5, 100.0),
+    "noise.bias_correlation_time_s": (0.1, 1e7),
+    "noise.accel_bias_correlation_time_s": (0.1, 1e7),
+    "noise.gyro_bias_rw_deg_per_h_per_sqrt_h": (1e-7, 1e4),
+    "noise.accel_bias_rw_mg_per_sqrt_h": (1e-7, 100.0),
+    "noise.init_velocity_m_s": (1e-4, 100.0),
+    "noise.init_position_m": (1e-4, 1e4),
+    "noise.init_gyro_bias_deg_per_s": (1e-7, 10.0),
+    "noise.init_accel_bias_mg": (1e-4, 1000.0),
+    "noise.init_gyro_scale_ppm": (1e-2, 1e5),
+    "noise.init_accel_scale_ppm": (1e-2, 1e5),
+    "alignment.static_s": (1e-2, 3600.0),
+    "alignment.min_speed_m_s": (1e-2, 100.0),
+    "alignment.course_s": (1e-2, 600.0),
+    "constraints.zupt_sigma_m_s": (1e-5, 10.0),
+    "constraints.zupt_rate_hz": (1e-3, 1000.0),
+    "constraints.zaru_density_deg_per_sqrt_h": (1e-5, 1e3),
+    "constraints.nhc_sigma_m_s": (1e-5, 100.0),
+    "constraints.nhc_rate_hz": (1e-3, 1000.0),
+    "constraints.detector_threshold": (1e-6, 1e12),
+    "constraints.detector_sigma_a_m_s2": (1e-6, 100.0),
+    "constraints.detector_sigma_w_deg_s": (1e-6, 1000.0),
+    "constraints.detector_min_s": (0.0, 3600.0),
+    "evaluate.outage_s": (0.1, 3600.0),
+    "evaluate.first_s": (0.0, 1e6),
+    "evaluate.gap_s": (0.1, 1e5),
+    "evaluate.end_margin_s": (0.0, 1e5),
+}
+
 
 class ConfigError(ValueError):
     """A config problem; the text names the file and the key (``FILE: section.key ...``)."""
@@ -239,6 +279,10 @@ class _Reader:
             self.fail(key, f"= {v!r} must be {'>' if lo_open else '>='} {lo:g}")
         if hi is not None and v > hi:
             self.fail(key, f"= {v!r} must be <= {hi:g}")
+        rng = RANGES.get(f"{self.section}.{key}")
+        if rng is not None and kind is float and not rng[0] <= v <= rng[1]:
+            self.fail(key, f"= {v!r} is outside the plausible range [{rng[0]:g}, {rng[1]:g}] (a typing slip or "
+                           "a unit mix-up?)")
         return v
 
     def file(self, key, required=True):
@@ -436,7 +480,7 @@ def _constraints(path, d) -> ConstraintSection:
                           nhc=r.get("nhc", bool, False),
                           nhc_sigma=r.get("nhc_sigma_m_s", float, 0.1, **pos),
                           nhc_rate_hz=r.get("nhc_rate_hz", float, 10.0, **pos),
-                          nhc_lever_frd=r.get("nhc_lever_frd_m", "vec3", np.zeros(3)),
+                          nhc_lever_frd=_lever(r, "nhc_lever_frd_m"),
                           detector_window=r.get("detector_window", int, 31, lo=3, hi=100_000),
                           detector_threshold=r.get("detector_threshold", float, 100.0, **pos),
                           detector_sigma_a=r.get("detector_sigma_a_m_s2", float, 0.05, **pos),
@@ -511,3 +555,11 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
                      constraints=_constraints(path, d.get("constraints", {})),
                      evaluate=_evaluate(path, d["evaluate"]) if "evaluate" in d else None,
                      tune=_tune(path, d.get("tune", {})), raw=d)
+
+
+def _lever(r: _Reader, key):
+    """A lever arm ``key`` (3 numbers, m), each within +-100 m."""
+    v = r.get(key, "vec3", np.zeros(3))
+    if np.max(np.abs(v)) > 100.0:
+        r.fail(key, f"= {v.tolist()} m: a lever arm beyond 100 m is not plausible")
+    return v

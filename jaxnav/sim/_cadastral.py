@@ -309,6 +309,70 @@ _KNOWN = {"known_coordinate_sigma_m": ("sigma_known", 1.0), "known_position_sigm
           "levelling_sigma_m": ("sigma_levelling", 1.0)}
 
 
+#: plausible range [lo, hi] of every numeric key of a cadastral TOML, in the key's (config) unit
+#: ("imu.gyro.*" holds for every grade); a value outside is refused naming the key (docs/api/survey.md)
+RANGES = {
+    "survey.lat_deg": (-90.0, 90.0), "survey.lon_deg": (-180.0, 360.0), "survey.height_m": (-500.0, 9000.0),
+    "survey.heading_deg": (-360.0, 360.0), "survey.speed_mps": (0.05, 10.0), "survey.accel_s": (0.05, 60.0),
+    "survey.turn_s": (0.05, 600.0), "survey.pitch_s": (0.05, 60.0), "survey.first_stop_s": (1.0, 3600.0),
+    "survey.imu_rate_hz": (10.0, 10000.0), "survey.gait_hz": (0.0, 10.0), "survey.gait_pitch_deg": (0.0, 30.0),
+    "legs.walk_s": (0.1, 36000.0), "legs.turn_deg": (-360.0, 360.0), "legs.slope_deg": (-45.0, 45.0),
+    "legs.stop_s": (0.5, 3600.0),
+    "wild.prob": (0.0, 0.1), "wild.gyro_deg_per_s": (0.0, 1e4), "wild.accel_g": (0.0, 100.0),
+    "known_points.known_coordinate_sigma_m": (1e-5, 100.0), "known_points.known_position_sigma_m": (1e-5, 100.0),
+    "known_points.levelling_sigma_m": (1e-5, 100.0),
+    "imu.gyro.bias_deg_per_h": (0.0, 1e5), "imu.gyro.markov_deg_per_h": (0.0, 1e5),
+    "imu.gyro.markov_tau_s": (0.1, 1e7), "imu.gyro.arw_deg_per_sqrt_h": (0.0, 30.0),
+    "imu.gyro.scale_factor_ppm": (0.0, 1e5), "imu.gyro.saturation_deg_per_s": (1.0, 1e5),
+    "imu.gyro.bandwidth_hz": (0.1, 1e4),
+    "imu.accel.bias_mg": (0.0, 1000.0), "imu.accel.markov_mg": (0.0, 1000.0), "imu.accel.markov_tau_s": (0.1, 1e7),
+    "imu.accel.vrw_ug_per_sqrt_hz": (0.0, 1e5), "imu.accel.scale_factor_ppm": (0.0, 1e5),
+    "imu.accel.saturation_g": (0.5, 1000.0), "imu.accel.bandwidth_hz": (0.1, 1e4),
+    "imu.initial_errors.attitude_arcsec": (0.0, 3.6e5), "imu.initial_errors.velocity_mps": (0.0, 100.0),
+    "imu.initial_errors.position_m": (0.0, 1e4),
+    "pipeline.meas_rate_hz": (0.01, 1000.0), "pipeline.margin_s": (0.0, 60.0), "pipeline.zupt_sigma_mps": (1e-5, 10.0),
+    "pipeline.outlier_k": (1.0, 100.0), "pipeline.lowpass_hz": (0.1, 1e4),
+    "pipeline.velocity_sigma0_mps": (1e-5, 100.0), "pipeline.position_sigma0_m": (1e-5, 1e4),
+}
+
+
+def _check_range(v, key, where):
+    """``v`` (a number or a list of numbers, config units) inside ``RANGES[key]``; ``where`` names it."""
+    lo, hi = RANGES[key]
+    for x in (v if isinstance(v, list) else [v]):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise ScenarioError(f"{where} must be a finite number, got {x!r}")
+        if not lo <= x <= hi:
+            raise ScenarioError(f"{where} = {x!r} is outside the plausible range [{lo:g}, {hi:g}]")
+
+
+def _check_ranges(d: dict):
+    """Every numeric key of a cadastral TOML dict inside :data:`RANGES` (before any conversion)."""
+    for sec in ("survey", "wild", "known_points", "pipeline"):
+        t = d.get(sec, {})
+        if not isinstance(t, dict):
+            raise ScenarioError(f"[{sec}] must be a table")
+        for k, v in t.items():
+            if f"{sec}.{k}" in RANGES:
+                _check_range(v, f"{sec}.{k}", f"{sec}.{k}")
+            elif sec == "pipeline":
+                names = sorted(q.split(".", 1)[1] for q in RANGES if q.startswith("pipeline."))
+                raise ScenarioError(f"pipeline.{k}: unknown field (expected one of {names})")
+    legs = d.get("legs", [])
+    if not isinstance(legs, list) or not all(isinstance(x, dict) for x in legs):
+        raise ScenarioError("[[legs]] must be a list of tables")
+    for i, leg in enumerate(legs):
+        for k, v in leg.items():
+            if f"legs.{k}" in RANGES:
+                _check_range(v, f"legs.{k}", f"legs[{i}].{k}")
+    imu = d.get("imu", {})
+    for g, gd in (imu.items() if isinstance(imu, dict) else ()):
+        for sec, t in (gd.items() if isinstance(gd, dict) else ()):
+            for k, v in (t.items() if isinstance(t, dict) else ()):
+                if f"imu.{sec}.{k}" in RANGES:
+                    _check_range(v, f"imu.{sec}.{k}", f"imu.{g}.{sec}.{k}")
+
+
 def _num(v, path):
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ScenarioError(f"{path} must be a finite number, got {v!r}")
@@ -330,6 +394,7 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
     sv = d.get("survey")
     if not isinstance(sv, dict):
         raise ScenarioError("[survey] section is required")
+    _check_ranges(d)
     kw = {}
     for k, v in sv.items():
         if k == "first_name":

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import pathlib
 import subprocess
 import sys
 
@@ -102,10 +103,40 @@ def _files(tmp_path):
                                            .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
                                            .replace('file = "sol.pos"', f'file = "{d["a_file"]}"'))
     d["ins_pos"] = tmp_path / "ins_pos.toml"
+    for name, sec, line in INS_RANGE_CASES:
+        text = ins.replace('grade = "consumer"\n', 'grade = "consumer"\n' + line + "\n") if sec == "noise" \
+            else ins + f"[{sec}]\n{line}\n"
+        (tmp_path / f"ins_{name}.toml").write_text(text)
+        d[f"ins_{name}"] = tmp_path / f"ins_{name}.toml"
+    from jaxnav.sim import _cadastral
+
+    cad = (pathlib.Path(_cadastral.__file__).parent / "scenarios/cadastral.toml").read_text()
+    for name, old, new in CADASTRAL_RANGE_CASES:
+        assert old in cad, old
+        (tmp_path / f"cad_{name}.toml").write_text(cad.replace(old, new, 1))
+        d[f"cad_{name}"] = tmp_path / f"cad_{name}.toml"
     d["stops_bad"] = tmp_path / "stops.csv"
     d["stops_bad"].write_text("K0, known_coordinate, 0, 10, 132.0, 118.0, 10.0\n")
     return d
 
+
+#: (name, section, TOML line) of ``jaxnav ins`` config values outside their plausible range
+INS_RANGE_CASES = [
+    ("arw_huge", "noise", "arw_deg_per_sqrt_h = 1e300"), ("arw_1e6", "noise", "arw_deg_per_sqrt_h = 1e6"),
+    ("vrw_tiny", "noise", "vrw_m_per_s_per_sqrt_h = 1e-300"), ("abias", "noise", "init_accel_bias_mg = 150000"),
+    ("gbi", "noise", "gyro_bias_instability_deg_per_h = 1e9"), ("tau", "noise", "bias_correlation_time_s = 1e-9"),
+    ("gbias", "noise", "init_gyro_bias_deg_per_s = 500.0"), ("scale", "noise", "init_gyro_scale_ppm = 1e9"),
+    ("static", "alignment", "static_s = 1e-9"), ("zupt_rate", "constraints", "zupt_rate_hz = 1e9"),
+    ("nhc_lever", "constraints", "nhc_lever_frd_m = [0, 0, 1e6]"),
+    ("first", "evaluate", "first_s = 1e9"), ("outage", "evaluate", "outage_s = 1e6"),
+]
+#: (name, text in the shipped cadastral.toml, its replacement) outside the plausible ranges
+CADASTRAL_RANGE_CASES = [
+    ("rate0", "imu_rate_hz = 100.0", "imu_rate_hz = 0.0"), ("speed", "speed_mps = 1.2", "speed_mps = -1.2"),
+    ("lat", "lat_deg = 32.06", "lat_deg = 132.06"), ("stop", "stop_s = 10.0", "stop_s = 1e9"),
+    ("arw", "arw_deg_per_sqrt_h = 0.05", "arw_deg_per_sqrt_h = 1e300"), ("bias", "bias_mg = 0.3", "bias_mg = -0.3"),
+    ("pipe", "outlier_k = 6.0", "outlier_k = 0.0"), ("pipe_key", "outlier_k = 6.0", "outlier_kk = 6.0"),
+]
 
 #: (case id, argv with {name} placeholders for _files, strings the one stderr line must contain)
 CASES = [
@@ -199,7 +230,10 @@ CASES = [
     ("cadastral stops latitude", ["cadastral", "--out", "{tmp}/c", "--stops", "{stops_bad}"],
      ["stops.csv:1:", "lat_deg = 132"]),
     ("cadastral out is a file", ["cadastral", "--out", "{a_file}"], ["a_file", "existing file"]),
-]
+] + [(f"ins range {n}", ["ins", f"{{ins_{n}}}", "--out", "{tmp}/o"],
+      [f"ins_{n}.toml", f"{sec}.{line.split(' =')[0]}", "plausible"]) for n, sec, line in INS_RANGE_CASES] \
+  + [(f"cadastral range {n}", ["cadastral", "--out", "{tmp}/c", "--config", f"{{cad_{n}}}"],
+      [f"cad_{n}.toml", new.split(" =")[0]]) for n, old, new in CADASTRAL_RANGE_CASES]
 
 
 @pytest.fixture(scope="module")
@@ -322,3 +356,14 @@ def test_a_value_error_from_inside_numpy_is_internal(monkeypatch, capsys):
     monkeypatch.setattr(walk, "run", lambda args: np.ones(3) + np.ones(4))
     assert main(["walk", "--data", "."]) == 3
     assert "internal error: ValueError: operands could not be broadcast" in capsys.readouterr().err
+
+
+def test_config_ranges_are_documented_beside_their_keys():
+    """Every range of the ``ins`` and cadastral configs appears in the docs as ``| `key` | lo | hi |``."""
+    from jaxnav.experiments.ins_config import RANGES as INS
+    from jaxnav.sim._cadastral import RANGES as CAD
+
+    for doc, ranges in (("docs/guide/ins.md", INS), ("docs/api/survey.md", CAD)):
+        text = (ROOT / doc).read_text()
+        for k, (lo, hi) in ranges.items():
+            assert f"| `{k}` | {lo:g} | {hi:g} |" in text, (doc, k)
