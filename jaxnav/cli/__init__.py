@@ -9,7 +9,9 @@ One error path (:func:`main`): a problem the user must fix -- a bad option or va
 (:class:`~jaxnav.cli._common.CommandError`, :class:`jaxnav.io.ReaderError` and the other
 ``ValueError`` raised by jaxnav's own checks, ``OSError``) -- prints one line
 ``jaxnav COMMAND: FILE:LINE: message`` to stderr and exits with 2; anything else (a ValueError from
-inside numpy or JAX included) is an internal error: one line saying so, exit 3.
+inside numpy or JAX included, and a plain ValueError raised after the command has called
+:func:`~jaxnav.cli._common.begin_computation`, with the seconds it ran) is an internal error: one
+line saying so, exit 3.
 ``--debug`` (before or after the command) shows the traceback instead.
 
 Options of every command, accepted before or after the command's name (``jaxnav -q rtk ...`` and
@@ -42,6 +44,7 @@ import logging
 import pathlib
 import sys
 import time
+from typing import Optional
 
 from jaxnav.cli._common import CommandError, UsageError, figure_format_list
 
@@ -181,7 +184,7 @@ def main(argv=None) -> int:
         _add_common(p, top=False)
         p.set_defaults(_run=mod.run, _parser=p)
     prog = "jaxnav"
-    undo = None
+    undo = args = None
     try:
         args, extra = parser.parse_known_args(_join_figure_formats(argv))
         prog = args._parser.prog
@@ -219,6 +222,9 @@ def main(argv=None) -> int:
             raise
         if isinstance(exc, ValueError) and not _raised_by_jaxnav(exc):
             return _internal(prog, exc)
+        since = getattr(args, "_computing_since", None) if args is not None else None
+        if type(exc) is ValueError and since is not None:
+            return _internal(prog, exc, after_s=time.perf_counter() - since)
         print(f"{prog}: {_message(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
@@ -338,8 +344,14 @@ def _complete(path: pathlib.Path, prov: dict, files, results_in=(), fresh=False)
     write_json(path, data)
 
 
-def _internal(prog: str, exc: BaseException) -> int:
-    """Print the one line of an internal error; returns :data:`EXIT_INTERNAL`."""
+def _internal(prog: str, exc: BaseException, after_s: Optional[float] = None) -> int:
+    """Print the one line of an internal error (``after_s``: raised that long into the computation,
+    after the input was checked); returns :data:`EXIT_INTERNAL`."""
+    if after_s is not None:
+        print(f"{prog}: stopped {after_s:.1f} s into the computation, after the input was checked: "
+              f"{_one_line(exc)[:300]} (if this names a setting or file of yours, change it; otherwise it is a bug "
+              f"in jaxnav: rerun with --debug for the traceback and report it)", file=sys.stderr)
+        return EXIT_INTERNAL
     print(f"{prog}: internal error: {type(exc).__name__}: {_one_line(exc)[:300]} (a bug in jaxnav: rerun with "
           f"--debug for the traceback and report it)", file=sys.stderr)
     return EXIT_INTERNAL

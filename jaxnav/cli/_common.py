@@ -30,6 +30,15 @@ class CommandError(Exception):
     """A problem the user must fix; ``jaxnav`` prints ``jaxnav COMMAND: MESSAGE`` and exits with 2."""
 
 
+def begin_computation(args) -> None:
+    """Note that the checks of the input are done and the computation starts: from here on a plain
+    ``ValueError`` (not a reader, config or command error) is not an input problem ``main`` can name,
+    so it exits with 3 and says how long the computation ran."""
+    import time
+
+    args._computing_since = time.perf_counter()
+
+
 class UsageError(CommandError):
     """Wrong or missing arguments; ``jaxnav`` prints ``jaxnav COMMAND: MESSAGE (see ... --help)``, exits with 2."""
 

@@ -11,7 +11,7 @@ import logging
 import os
 import pathlib
 
-from jaxnav.cli._common import DATA_ENV, CommandError, prepare_out, record_config
+from jaxnav.cli._common import DATA_ENV, CommandError, begin_computation, prepare_out, record_config
 
 
 def register(subparsers):
@@ -53,6 +53,7 @@ def run_config(args, cfg, out, *, tune: bool = False) -> int:
     args._snapshot = files_snapshot(out)  # before anything is written (main lists the files written)
     out = prepare_out(out)
     args.out = str(out)
+    begin_computation(args)
     results = process(cfg, out, tune=tune, progress=logging.getLogger("jaxnav").info)
     print(format_ins(results))
     print(f"wrote {len(results['files'])} files into {pathlib.Path(out)}")

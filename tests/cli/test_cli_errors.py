@@ -367,3 +367,35 @@ def test_config_ranges_are_documented_beside_their_keys():
         text = (ROOT / doc).read_text()
         for k, (lo, hi) in ranges.items():
             assert f"| `{k}` | {lo:g} | {hi:g} |" in text, (doc, k)
+
+
+def test_a_value_error_deep_in_the_computation_is_not_an_input_error(monkeypatch, capsys, tmp_path):
+    """A plain ValueError raised by jaxnav code after ``jaxnav ins`` has checked its input and started
+    computing (here: from inside the processing) exits 3 saying how long it ran, not 2 ("fix your
+    input"); a ReaderError at that stage still exits 2."""
+    import jaxnav.experiments.ins_output as ins_output
+    from jaxnav.experiments.ins_config import load_ins_config
+
+    def broken(cfg, out, **kw):  # a check inside jaxnav's own code, met with internal data
+        from jaxnav.sim._cadastral import short_survey
+
+        short_survey(None, 0)
+
+    cfg = load_ins_config(ROOT / "jaxnav/experiments/configs/ins/walk_0827.toml", variables={"JAXNAV_DATA": "."})
+    monkeypatch.setattr(ins_output, "process", broken)
+    import jaxnav.cli.ins as ins_cli
+    import jaxnav.cli.walk as walk
+
+    monkeypatch.setattr(walk, "run", lambda args: ins_cli.run_config(args, cfg, tmp_path / "o"))
+    assert main(["-q", "walk", "--data", "."]) == 3
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "into the computation" in err and "n_legs must be >= 1" in err and "--debug" in err
+
+    def unreadable(cfg, out, **kw):
+        from jaxnav import io
+
+        io.read_daily("series.xyz")
+
+    monkeypatch.setattr(ins_output, "process", unreadable)
+    assert main(["-q", "walk", "--data", "."]) == 2
+    assert capsys.readouterr().err.startswith("jaxnav walk: series.xyz: unknown daily-series format")
