@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.experiments.ins_config import InsConfig
+from jaxnav.experiments.ins_config import ConfigError, InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, StandstillParams, coarse_alignment, detect_standstill,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
@@ -297,6 +297,12 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         off, off_info = likelihood_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
+    ev = cfg.evaluate
+    if ev is not None and len(outage_windows(t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
+                                             end_margin_s=ev.end_margin_s)) == 0:
+        raise ConfigError(f"{cfg.path}: evaluate.first_s = {ev.first_s:g} + outage_s = {ev.outage_s:g} + "
+                          f"end_margin_s = {ev.end_margin_s:g} s leave no outage window in the {t[-1] - t[0]:.1f} s "
+                          "IMU span, so nothing would be withheld: lower them, or drop [evaluate]")
     a = cfg.alignment
     dens = densities(cfg)
     att = None if a.attitude is None else np.array([a.attitude[1], a.attitude[0], -a.attitude[2]])

@@ -118,6 +118,10 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
     t0 = time.perf_counter()
     _log.info("reading %d daily series file(s)", len(files))
     series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
+    unknown = sorted(set(steps) - {s.station for s in series})
+    if unknown:
+        raise ValueError(f"--step {', '.join(unknown)}: no such station in the file(s) read (stations: "
+                         f"{', '.join(sorted({s.station for s in series}))})")
     result = dict(
         version=__version__, command=command, units=UNITS,
         settings=dict(kappa="estimated" if kappa is None else kappa, random_walk=random_walk,

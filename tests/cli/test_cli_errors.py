@@ -70,6 +70,8 @@ def _files(tmp_path):
     d["tenv3_inf"] = tmp_path / "bad.tenv3"
     (tmp_path / "lat.tenv3").write_text(TENV3.replace("29.6573392384", "129.6573392384", 1))
     d["tenv3_lat"] = tmp_path / "lat.tenv3"
+    (tmp_path / "LHAS.tenv3").write_text(TENV3)
+    d["tenv3_ok"] = tmp_path / "LHAS.tenv3"
     (tmp_path / "a_file").write_text("not a folder")
     d["a_file"] = tmp_path / "a_file"
     d["b15"] = _s0_config(tmp_path, "b15.toml", "b = 0.254", "b = 1.5")
@@ -207,6 +209,8 @@ CASES = [
     ("monitor kappa word", ["monitor", "{tenv3_inf}", "--kappa", "pink"], ["--kappa", "'estimate'"]),
     ("monitor step no station", ["monitor", "{tenv3_inf}", "--step", "2003.5"], ["--step", "STATION:DATE"]),
     ("monitor step bad date", ["monitor", "{tenv3_inf}", "--step", "LHAS:2003-13-01"], ["--step", "2003-13-01"]),
+    ("monitor step unknown station", ["monitor", "{tenv3_ok}", "--step", "XXXX:2010-01-01", "--out", "{tmp}/o"],
+     ["--step XXXX", "no such station", "LHAS"]),
     ("monitor files and simulate", ["monitor", "--simulate", "{tenv3_inf}"], ["not both"]),
     ("sweep missing config", ["sweep", "{tmp}/none.toml"], ["jaxnav sweep:", "none.toml", "no such config"]),
     ("sweep seeds 0", ["sweep", "{t_seeds0}"], ["t_seeds0.toml", "problem.seeds = 0"]),
@@ -399,3 +403,22 @@ def test_a_value_error_deep_in_the_computation_is_not_an_input_error(monkeypatch
     monkeypatch.setattr(ins_output, "process", unreadable)
     assert main(["-q", "walk", "--data", "."]) == 2
     assert capsys.readouterr().err.startswith("jaxnav walk: series.xyz: unknown daily-series format")
+
+
+@pytest.mark.parametrize("key,value", [("first_s", "1e5"), ("outage_s", "3000.0")])
+def test_evaluate_windows_that_withhold_nothing_are_refused(key, value, tmp_path, capsys):
+    """``[evaluate]`` settings that leave no outage window inside the recording are a config error
+    naming the file and the keys (exit 2), not a run that reports "0 withheld" and a null evaluation."""
+    from _paths import DATA_ROOT
+
+    if not (DATA_ROOT / "rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv").exists():
+        pytest.skip("shared data not present")
+    text = (ROOT / "jaxnav/experiments/configs/ins/walk_0827.toml").read_text()
+    old = {"first_s": "first_s = 40.0", "outage_s": "outage_s = 15.0"}[key]
+    assert old in text
+    f = tmp_path / "late.toml"
+    f.write_text(text.replace(old, f"{key} = {value}", 1))
+    rc = main(["-q", "ins", str(f), "--data", str(DATA_ROOT), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1, err
+    assert "late.toml: evaluate.first_s" in err and "nothing would be withheld" in err
