@@ -40,7 +40,7 @@ def run(args) -> int:
     cfg = load_ins_config(args.config)
     for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag")):
         if p is not None and not p.is_file():
-            raise CommandError(f"{p}: no such file ({cfg.path}: {key})")
+            raise CommandError(f"{p}: {'a folder, not a file' if p.is_dir() else 'no such file'} ({cfg.path}: {key})")
     record_config(args, cfg.path, cfg.raw)
     return run_config(args, cfg, args.out or f"out/ins/{cfg.name}", tune=args.tune)
 

@@ -162,6 +162,12 @@ def _evaluation(sc) -> dict:
                     "smoothed_rms_h_m": float(sc.sm_rms[k]), "smoothed_max_h_m": float(sc.sm_max[k]),
                     "forward_sigma_h_at_end_m": float(sc.sig_fwd[w][-1]) if w.any() else float("nan"),
                     "smoothed_sigma_h_max_m": float(np.max(sc.sig_sm[w])) if w.any() else float("nan")})
+        if not sc.n_ref[k]:
+            per[-1].update({f"{key}_null_reason": "no fixed GNSS epoch in the window" for key in
+                            ("forward_rms_h_m", "forward_max_h_m", "smoothed_rms_h_m", "smoothed_max_h_m")})
+        if not w.any():
+            per[-1].update({f"{key}_null_reason": "no scored epoch in the window" for key in
+                            ("forward_sigma_h_at_end_m", "smoothed_sigma_h_max_m")})
     sc_w = sc.withheld & np.isfinite(sc.err_fwd)
     # consistency: share of scored outage epochs whose horizontal error is within 3 of its own sigma
     # (the horizontal sigma sqrt(var_E + var_N); for a circular 2-D Gaussian P(r < 3 sigma_h / sqrt 2) = 98.9 %)

@@ -47,7 +47,8 @@ def read_inputs(cfg: InsConfig):
     imu_c, g = cfg.imu, cfg.gnss
     for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag")):
         if p is not None and not p.is_file():
-            raise FileNotFoundError(f"{p}: no such file ({cfg.path}: {key})")
+            what = "a folder, not a file" if p.is_dir() else "no such file"
+            raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
     if imu_c.format == "rtklib-csv":
         imu = read_rtklib_imu(imu_c.file, imu_c.tag)
     elif imu_c.format == "kf-gins":

@@ -76,7 +76,7 @@ def _read_inputs(files, *, step, window, min_epochs, fixed_only, motion):
     for f, p in zip(files, parts):
         for name in dict.fromkeys(p["point"]):
             if name in names_seen:
-                raise ValueError(f"{f}: point {name!r} also appears in {names_seen[name]}")
+                raise ValueError(f"{f}: point {str(name)!r} also appears in {names_seen[name]}")
             names_seen[name] = f
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, motion_counts
 

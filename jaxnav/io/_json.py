@@ -3,8 +3,9 @@
 
 JSON has no NaN or infinity. :func:`json_ready` turns arrays and numpy/JAX scalars into lists and
 numbers and every non-finite number into ``null``; beside each key whose value holds such nulls
-it adds ``"<key>_null_reason"`` (e.g. ``"nan"``, or ``"2 of 45 values not finite (nan 2)"``), so a
-reader of the file sees why a value is missing. :func:`write_json` writes with ``allow_nan=False``.
+it adds ``"<key>_null_reason"`` (the producer's own reason where it gives one, such as "no fixed
+epoch in the window"; else e.g. "not computed (nan): ..." or "2 of 45 values not finite (nan 2)"),
+so a reader of the file sees why a value is missing. :func:`write_json` writes with ``allow_nan=False``.
 """
 
 from __future__ import annotations
@@ -23,19 +24,29 @@ def _kind(v: float) -> str:
     return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
 
 
+#: the reason written for a single non-finite number when its producer gives none
+SCALAR_REASONS = {"nan": "not computed (nan): the data held nothing to compute it from",
+                  "inf": "infinite (inf): no finite value exists for these data",
+                  "-inf": "infinite (-inf): no finite value exists for these data"}
+
+
 def _convert(obj, counts):
-    """JSON-ready copy of ``obj``; adds the non-finite numbers it replaced to ``counts`` (kind -> n)."""
+    """JSON-ready copy of ``obj``; adds the non-finite numbers it replaced to ``counts`` (kind -> n).
+    A ``"<key>_null_reason"`` the producer put beside a key is kept (it knows why better)."""
     if isinstance(obj, dict):
         out = {}
         for k, v in obj.items():
             c = {}
             out[str(k)] = _convert(v, c)
-            if c:
+            if c and f"{k}{NULL_REASON}" in obj:
+                for kind, m in c.items():
+                    counts[kind] = counts.get(kind, 0) + m
+            elif c:
                 n = sum(c.values())
                 kinds = ", ".join(f"{kind} {m}" for kind, m in sorted(c.items()))
                 size = _size(v)
                 if size == 1 and not isinstance(v, (list, tuple, dict)) and np.ndim(v) == 0:
-                    reason = next(iter(c))
+                    reason = SCALAR_REASONS[next(iter(c))]
                 elif isinstance(v, dict):
                     reason = f"{n} value(s) inside not finite ({kinds}); see the inner *{NULL_REASON} keys"
                 else:

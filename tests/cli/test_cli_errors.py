@@ -105,6 +105,10 @@ def _files(tmp_path):
                                            .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
                                            .replace('file = "sol.pos"', f'file = "{d["a_file"]}"'))
     d["ins_pos"] = tmp_path / "ins_pos.toml"
+    (tmp_path / "ins_dir.toml").write_text(ins.replace('file = "imu.csv"', f'file = "{d["a_file"]}"')
+                                           .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
+                                           .replace('file = "sol.pos"', f'file = "{tmp_path}"'))
+    d["ins_dir"] = tmp_path / "ins_dir.toml"
     for name, sec, line in INS_RANGE_CASES:
         text = ins.replace('grade = "consumer"\n', 'grade = "consumer"\n' + line + "\n") if sec == "noise" \
             else ins + f"[{sec}]\n{line}\n"
@@ -177,6 +181,9 @@ CASES = [
     ("ins data file missing", ["ins", "{ins_nofile}", "--out", "{tmp}/o"], ["imu.csv", "no such file", "imu.file"]),
     ("ins unknown key", ["ins", "{ins_badkey}"], ["ins_badkey.toml", "evaluate has unknown key(s) ['outage']"]),
     ("ins unreadable files", ["ins", "{ins_pos}", "--out", "{tmp}/o"], ["a_file"]),
+    ("ins gnss file is a folder", ["ins", "{ins_dir}", "--out", "{tmp}/o"],
+     ["a folder, not a file", "gnss.file"]),
+    ("rtk same file twice", ["rtk", "{ep}", "{ep}", "--out", "{tmp}/o"], ["point 'P0' also appears in"]),
     ("ins data folder missing", ["ins", "walk_0827", "--data", "{tmp}/no_data"], ["no_data", "no such data folder"]),
     ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
     ("rtk nothing", ["rtk"], ["jaxnav rtk:", "give FILES or --simulate"]),
@@ -261,6 +268,7 @@ def test_bad_input_is_one_line_exit_2(case, argv, needles, files, capsys, monkey
     assert err.endswith("\n") and err.count("\n") == 1, err  # exactly one line
     assert err.startswith("jaxnav"), err
     assert "Traceback" not in err and "internal error" not in err, err
+    assert "np.str_" not in err and "np.float64" not in err, err  # values, not numpy reprs
     for s in needles:
         assert s.format(**files) in err, (s, err)
     created = {p for p in set(files["tmp"].rglob("*")) - before if p.is_file()}
@@ -300,11 +308,14 @@ def test_json_is_strict_with_null_reasons(tmp_path):
         raise AssertionError(f"{name} token in JSON")
 
     back = json.loads(p.read_text(), parse_constant=no_constants)
-    assert back["rms"] is None and back["rms_null_reason"] == "nan"
+    assert back["rms"] is None and back["rms_null_reason"].startswith("not computed (nan)")
     assert back["per_seed"] == [1.0, None, None] and back["per_seed_null_reason"].startswith("2 of 3 values not finite")
-    assert back["inner"]["x"] is None and back["inner"]["x_null_reason"] == "-inf" and back["inner"]["ok"] == 2
+    assert back["inner"]["x"] is None and back["inner"]["x_null_reason"].startswith("infinite (-inf)") and back["inner"]["ok"] == 2
     assert back["n"] == 3 and back["flag"] is True and back["ok"] == [1.5] and "ok_null_reason" not in back
     assert json_ready({"a": 1.0})[1] == {}
+    given = json_ready({"rms": float("nan"), "rms_null_reason": "no fixed epoch in the window"})[0]
+    assert given == {"rms": None, "rms_null_reason": "no fixed epoch in the window"}
+    assert '"nan"' not in p.read_text()  # no bare kind as a reason
 
 
 def _run(args, tmp_path):
