@@ -76,6 +76,14 @@ def describe(status) -> list[str]:
     return [msg for bit, msg in _MESSAGES.items() if s & bit]
 
 
+def status_words(status) -> str:
+    """``status`` (any shape; flags OR-ed) as its value and the names of its flags, for printing:
+    ``"65536 (GNSS_GATED)"``, ``"0 (ok)"``."""
+    s = int(np.bitwise_or.reduce(np.asarray(status, dtype=np.int64).ravel(), initial=0))
+    names = [n for n, v in globals().items() if n.isupper() and isinstance(v, int) and v in _MESSAGES and s & v]
+    return f"{s} ({' | '.join(names) if names else 'ok'})"
+
+
 def raise_for_status(status, *, ignore: int = INFO_FLAGS) -> None:
     """Raise :class:`StatusError` if any flag outside ``ignore`` is set in ``status``.
 

@@ -328,13 +328,15 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
 
 def format_ins(results: dict) -> str:
     """Summary of :func:`process` with units."""
+    from jaxnav._status import status_words
+
     r = results
     lines = [f"jaxnav ins: {r['provenance']['config_file']}",
              f"  IMU {r['imu']['n_samples']} samples, GNSS {r['gnss']['n_epochs_used']} of "
              f"{r['gnss']['n_epochs_in_imu_span']} epochs used ({r['gnss']['n_withheld']} withheld on simulated outages)",
              f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "
              f"({r['time_offset']['source']}); initial heading {r['alignment']['heading_deg']:.1f} deg",
-             f"  {r['n_states']}-state filter + RTS: status {r['status']}, log-likelihood {r['loglik']:.1f}, "
+             f"  {r['n_states']}-state filter + RTS: status {status_words(r['status'])}, log-likelihood {r['loglik']:.1f}, "
              f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
              f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s"]
     for msg in r.get("status_flags", []):

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav._status import status_words
 from jaxnav.io import write_json
 from jaxnav import io
 from jaxnav.monitoring import (
@@ -403,7 +404,7 @@ def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs:
          "Forecast minus truth, RMS over all periods and stations (mm): whole periods / inside the episodes"]
     for name in res["forecast_rms"]:
         whole, ep = np.mean(res["forecast_rms"][name]) / MM, np.mean(res["episode_rms"][name]) / MM
-        L.append(f"  {name:<18}{whole:>8.2f}{ep:>10.2f}   status {res['status'][name]}")
+        L.append(f"  {name:<18}{whole:>8.2f}{ep:>10.2f}   status {status_words(res['status'][name])}")
     ratio = np.mean(res["forecast_rms"]["standard"]) / np.mean(res["forecast_rms"]["adaptive"])
     ratio_ep = np.mean(res["episode_rms"]["standard"]) / np.mean(res["episode_rms"]["adaptive"])
     L.append(f"standard / adaptive forecast RMS: {ratio:.2f} (whole periods), {ratio_ep:.2f} (episodes)")

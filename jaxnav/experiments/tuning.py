@@ -250,6 +250,12 @@ def _grid(P: Problem, axes: dict):
     return tune.grid(**full)
 
 
+def csv_number(v):
+    """A table cell: a float to 12 significant digits (a grid point 0.035 built as 0.01 + 5 * 0.005
+    reads 0.035, not its float's repr 0.034999999999999996); anything else as it is."""
+    return f"{v:.12g}" if isinstance(v, float) else v
+
+
 def run_sweep(config, out, *, progress=True) -> dict:
     """Sweep the config's grid x Monte Carlo runs; write results.json, table.csv and figures into ``out``.
 
@@ -282,7 +288,7 @@ def run_sweep(config, out, *, progress=True) -> dict:
         with open(out / "table.csv", "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(rows[0]))
             w.writeheader()
-            w.writerows(rows)
+            w.writerows([{k: csv_number(v) for k, v in r.items()} for r in rows])
         from jaxnav.plot import plot_sweep
 
         figs = plot_sweep(out, grid=g, axes=list(axes), loss=loss, loss_name=P.loss_name, init=P.init)

@@ -129,7 +129,7 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
                       residual_k=residual_k, detect_steps=detect, ggm_1mphi=6.9e-6),
         stations={})
     lines = [f"{'station':<8}{'axis':<6}{'velocity mm/yr':>15}{'+-1 sigma':>10}{'(white only)':>13}"
-             f"{'white mm':>9}{'PL amp':>8}{'kappa':>7}{'RW mm/yr^.5':>12}{'outliers':>9}"]
+             f"{'white mm':>9}{'PL mm/yr^-k/4':>14}{'kappa':>7}{'RW mm/yr^.5':>12}{'outliers':>9}"]
     for k, (f, s) in enumerate(zip(files, series)):
         _log.info("station %d/%d %s: %d days, fitting trajectory model and %s noise (%s)", k + 1, len(files),
                   s.station, int(np.size(s.t)), "white + power-law" + (" + random-walk" if random_walk else ""),
@@ -148,7 +148,7 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
             lines.append(f"{s.station:<8}{comp:<6}{rec['velocity_mm_per_yr'][comp]:>15.2f}"
                          f"{rec['velocity_sigma_mm_per_yr'][comp]:>10.2f}"
                          f"{rec['velocity_sigma_white_noise_only_mm_per_yr'][comp]:>13.3f}{n['white_mm']:>9.2f}"
-                         f"{n['powerlaw_amplitude']:>8.2f}{n['spectral_index']:>7.2f}"
+                         f"{n['powerlaw_amplitude']:>14.2f}{n['spectral_index']:>7.2f}"
                          f"{n['random_walk_mm_per_sqrt_yr']:>12.2f}{no:>9d}")
         for st in rec["steps"]:
             lines.append(f"{'':<8}step {st['date']} ({st['source']}): " + ", ".join(

@@ -353,7 +353,9 @@ def test_monitor_masks_and_reports_a_nan_east_value(tmp_path, capsys):
     f = tmp_path / "LHAS.tenv3"
     f.write_text("\n".join(lines) + "\n")
     assert main(["monitor", str(f), "--out", str(tmp_path / "o"), "--period", "100"]) == 0
-    assert "1 position value(s) given as nan" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "1 position value(s) given as nan" in printed
+    assert "PL mm/yr^-k/4" in printed  # the power-law amplitude column carries its unit
 
     def no_constants(name):
         raise AssertionError(f"{name} token in monitor.json")
@@ -433,3 +435,13 @@ def test_evaluate_windows_that_withhold_nothing_are_refused(key, value, tmp_path
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1, err
     assert "late.toml: evaluate.first_s" in err and "nothing would be withheld" in err
+
+
+def test_summaries_print_words_and_short_numbers():
+    """A status is printed with its flag names; a sweep table cell reads 0.035, not 0.034999999999999996."""
+    from jaxnav._status import GNSS_GATED, NONFINITE_MEASUREMENT, status_words
+    from jaxnav.experiments.tuning import csv_number
+
+    assert status_words(65536) == "65536 (GNSS_GATED)" and status_words(0) == "0 (ok)"
+    assert status_words(np.array([GNSS_GATED, NONFINITE_MEASUREMENT])) == "65537 (NONFINITE_MEASUREMENT | GNSS_GATED)"
+    assert csv_number(0.034999999999999996) == "0.035" and csv_number(3) == 3 and csv_number(1.2345678901234567e-9) == "1.23456789012e-09"
