@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from jaxnav import io
-from jaxnav.monitoring import COMPONENTS, fit_station
+from jaxnav.monitoring import COMPONENTS, fit_station, midas_velocity
 from jaxnav.units import MM, MM_PER_YEAR, YEAR, powerlaw_amplitude_to_mm_yr, random_walk_to_mm_per_sqrt_yr
 
 UNITS = {"velocity": "mm/yr", "positions, sigmas, amplitudes, steps": "mm",
@@ -30,6 +30,38 @@ _log = logging.getLogger(__name__)
 
 def _enu(a, scale=1.0):
     return {c: (None if not np.isfinite(v) else float(v) / scale) for c, v in zip(COMPONENTS, np.asarray(a, float))}
+
+
+def station_midas(fit):
+    """MIDAS rates of a fitted station's screened daily values, with the fit's steps (m/yr, (3,) each).
+
+    Returns:
+      (:class:`jaxnav.monitoring.MidasVelocity`, warnings): a warning per component where MIDAS and
+      the model rate differ by more than their combined sigma sqrt(s_midas^2 + s_fit^2), and where
+      the ordinary least-squares rate of the residuals exceeds 3 MIDAS sigmas (a misfit that an
+      inflated random walk would hide from the model's own sigma).
+    """
+    from jaxnav.monitoring._station import decimal_year
+
+    g = fit.grid
+    t_yr = decimal_year(g.t[:g.n_days])
+    m = midas_velocity(t_yr, np.where(g.valid, g.y, np.nan)[:g.n_days], decimal_year(fit.steps))
+    v_fit, s_fit = fit.velocity * YEAR, fit.velocity_sigma * YEAR
+    warnings = []
+    for c, comp in enumerate(COMPONENTS):
+        d, s = m.velocity[c] - v_fit[c], math.hypot(m.sigma[c], s_fit[c])
+        if np.isfinite(d) and abs(d) > s:
+            warnings.append(f"{comp}: MIDAS rate {m.velocity[c] / MM:+.2f} +- {m.sigma[c] / MM:.2f} mm/yr differs from "
+                            f"the model rate {v_fit[c] / MM:+.2f} +- {s_fit[c] / MM:.2f} mm/yr by more than their "
+                            "combined sigma: a step, transient or outliers the model misses?")
+    span = (g.n_days - 1) / 365.25
+    for c, comp in enumerate(COMPONENTS):
+        r = float(fit.residual_trend[c] * YEAR)
+        if np.isfinite(r) and np.isfinite(m.sigma[c]) and abs(r) > 3.0 * m.sigma[c]:
+            warnings.append(f"{comp}: the residuals keep a trend of {r / MM:+.2f} mm/yr ({r * span / MM:+.0f} mm over "
+                            f"{span:.1f} yr), more than 3 x the MIDAS rate sigma {m.sigma[c] / MM:.2f} mm/yr: the "
+                            "model misfits (a missed step or transient, absorbed by the noise model?)")
+    return m, warnings
 
 
 def station_record(fit, *, file, figure=None) -> dict:
@@ -66,8 +98,10 @@ def station_record(fit, *, file, figure=None) -> dict:
         semiannual_phase_deg=float(np.degrees(fit.semiannual_phase[c]))) for c, comp in enumerate(COMPONENTS)}
     from jaxnav.monitoring._station import decimal_year, iso_date
 
+    gains = np.asarray(fit.step_gains, float) if len(fit.step_gains) else np.full(len(fit.steps), np.nan)
     steps = [dict(date=iso_date(ts), decimal_year=float(decimal_year(ts)), source=src,
-                  size_mm=_enu(fit.step_sizes[:, j], MM), sigma_mm=_enu(fit.step_sigmas[:, j], MM))
+                  size_mm=_enu(fit.step_sizes[:, j], MM), sigma_mm=_enu(fit.step_sigmas[:, j], MM),
+                  gain_2lnL=None if not np.isfinite(gains[j]) else float(gains[j]))
              for j, (ts, src) in enumerate(zip(fit.steps, fit.step_sources))]
     scr = fit.screening
     outl = [dict(date=d["date"], decimal_year=d["decimal_year"], component=d["component"], reason=d["reason"],
@@ -75,6 +109,7 @@ def station_record(fit, *, file, figure=None) -> dict:
                  residual_mm=None if d["residual_m"] is None else d["residual_m"] / MM,
                  threshold_mm=d["threshold_m"] / MM) for d in scr.records]
     g = fit.grid
+    mid, mid_warn = station_midas(fit)
     return dict(
         file=str(file), format=fit.fmt, model=fit.model,
         span_years=float((g.n_days - 1) / 365.25), grid_days=int(g.n_days),
@@ -84,11 +119,14 @@ def station_record(fit, *, file, figure=None) -> dict:
         velocity_mm_per_yr=_enu(fit.velocity / MM_PER_YEAR),
         velocity_sigma_mm_per_yr=_enu(fit.velocity_sigma / MM_PER_YEAR),
         velocity_sigma_white_noise_only_mm_per_yr=_enu(fit.velocity_sigma_white / MM_PER_YEAR),
+        residual_trend_mm_per_yr=_enu(np.asarray(fit.residual_trend, float) / MM_PER_YEAR),
+        midas_velocity_mm_per_yr=_enu(mid.velocity, MM), midas_velocity_sigma_mm_per_yr=_enu(mid.sigma, MM),
+        midas_pairs=dict(zip(COMPONENTS, mid.pairs_kept.tolist())),
         noise=noise, seasonal=seasonal, steps=steps,
         outliers=dict(count=len(outl), by_reason={k: v for k, v in scr.counts.items() if k != "missing"},
                       sigma_limit_mm=_enu(scr.sigma_limit_m, MM), residual_limit_mm=_enu(scr.residual_limit_m, MM),
                       list=outl),
-        warnings=list(fit.warnings), gauss_markov_max_relative_error=float(fit.gm_max_rel_error),
+        warnings=list(fit.warnings) + mid_warn, gauss_markov_max_relative_error=float(fit.gm_max_rel_error),
         figure=None if figure is None else str(figure))
 
 
@@ -146,6 +184,10 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
                          f"{rec['velocity_sigma_white_noise_only_mm_per_yr'][comp]:>13.3f}{n['white_mm']:>9.2f}"
                          f"{n['powerlaw_amplitude']:>8.2f}{n['spectral_index']:>7.2f}"
                          f"{n['random_walk_mm_per_sqrt_yr']:>12.2f}{no:>9d}")
+        mv, ms = rec["midas_velocity_mm_per_yr"], rec["midas_velocity_sigma_mm_per_yr"]
+        lines.append(f"{'':<8}MIDAS mm/yr: " + ", ".join(
+            f"{k} {'n/a' if mv[k] is None else format(mv[k], '+.2f')} +- "
+            f"{'n/a' if ms[k] is None else format(ms[k], '.2f')}" for k in COMPONENTS))
         for st in rec["steps"]:
             lines.append(f"{'':<8}step {st['date']} ({st['source']}): " + ", ".join(
                 f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm" for k, v in st["size_mm"].items()))
