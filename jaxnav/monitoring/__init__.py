@@ -26,7 +26,9 @@ from jaxnav.monitoring._station import (
     detect_steps,
     fit_series_batch,
     fit_station,
+    residual_trend,
     screen_outliers,
+    step_penalty,
 )
 from jaxnav.monitoring._trajectory import (
     COMPONENTS,
@@ -58,5 +60,5 @@ __all__ = [
     "COMPONENTS", "DailyGrid", "Design", "GGM_ONE_MINUS_PHI", "GaussMarkovSum", "NoiseFit", "NoiseSpec", "Screening",
     "StationFit", "component_loglik", "daily_grid", "design_matrix", "detect_steps", "fit_component",
     "fit_series_batch", "fit_station", "gauss_markov_sum", "ggm_autocovariance", "noise_spec", "noise_state_space",
-    "robust_scale", "screen_outliers", "simulate_powerlaw_series",
+    "residual_trend", "robust_scale", "screen_outliers", "step_penalty", "simulate_powerlaw_series",
 ]

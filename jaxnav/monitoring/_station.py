@@ -328,7 +328,8 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
                  threshold=None):
     """Best single step epoch under the fitted noise (likelihood-ratio scan), or None.
 
-    For candidate epochs every ``spacing_days`` days (30 days from either end), a step column is
+    For candidate epochs every ``spacing_days`` days (30 days from either end; then every day
+    within ``spacing_days`` of the best of them), a step column is
     whitened with each component's fitted noise (the whitening is linear, so all candidates go
     through one ``vmap``) and the reduction of the weighted residual sum of squares
     (a~^T e~)^2 / (a~^T P a~) summed over the three components is computed (P the projector
@@ -348,25 +349,38 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
     if cand.size == 0:
         return None
     T = len(grid.t)
-    S = (np.arange(T)[:, None] >= cand[None, :]).astype(float)  # (T, M)
     est = spec.kappa is None
-    stat = np.zeros(cand.size)
+    whitened = []
     for c in range(3):
-        th = jnp.asarray(fit.theta[c])
-        v = jnp.asarray(grid.valid[:, c])
-        yy = jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0))
-        allA = jnp.asarray(np.concatenate([A, S], axis=1))
-        yt, At, _ = _whitened(th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W),
-                              jnp.asarray(spec.d_grid), est, random_walk)
-        yt, At = np.asarray(yt), np.asarray(At)
-        X, Sw = At[:, :A.shape[1]], At[:, A.shape[1]:]
-        Q, _ = np.linalg.qr(X)
-        e = yt - Q @ (Q.T @ yt)
-        Sp = Sw - Q @ (Q.T @ Sw)
-        num = (Sp.T @ e) ** 2
-        den = np.maximum(np.sum(Sp * Sp, axis=0), 1e-300)
-        stat += num / den
+        args = (jnp.asarray(fit.theta[c]), jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0)),
+                jnp.asarray(grid.valid[:, c]))
+        whitened.append(args)
+
+    def scan(cand):
+        S = (np.arange(T)[:, None] >= cand[None, :]).astype(float)  # (T, M)
+        stat = np.zeros(cand.size)
+        for th, yy, v in whitened:
+            allA = jnp.asarray(np.concatenate([A, S], axis=1))
+            yt, At, _ = _whitened(th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W),
+                                  jnp.asarray(spec.d_grid), est, random_walk)
+            yt, At = np.asarray(yt), np.asarray(At)
+            X, Sw = At[:, :A.shape[1]], At[:, A.shape[1]:]
+            Q, _ = np.linalg.qr(X)
+            e = yt - Q @ (Q.T @ yt)
+            Sp = Sw - Q @ (Q.T @ Sw)
+            num = (Sp.T @ e) ** 2
+            den = np.sum(Sp * Sp, axis=0)
+            # a candidate the design already holds (a known step's epoch) adds nothing
+            stat += np.where(den > 1e-9 * np.maximum(np.sum(Sw * Sw, axis=0), 1e-300), num / np.maximum(den, 1e-300),
+                             0.0)
+        return stat
+
+    stat = scan(cand)
     j = int(np.argmax(stat))
+    if spacing_days > 1:  # refine to the day around the best candidate
+        fine = np.arange(max(30, cand[j] - spacing_days + 1), min(n - 30, cand[j] + spacing_days))
+        cand, stat = fine, scan(fine)
+        j = int(np.argmax(stat))
     if stat[j] < (step_penalty(grid) if threshold is None else threshold):
         return None
     return float(grid.t[cand[j]]), float(stat[j])
