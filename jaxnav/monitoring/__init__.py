@@ -26,6 +26,7 @@ from jaxnav.monitoring._station import (
     detect_steps,
     fit_series_batch,
     fit_station,
+    period_amplitudes,
     residual_trend,
     screen_outliers,
     step_penalty,
@@ -60,5 +61,5 @@ __all__ = [
     "COMPONENTS", "DailyGrid", "Design", "GGM_ONE_MINUS_PHI", "GaussMarkovSum", "NoiseFit", "NoiseSpec", "Screening",
     "StationFit", "component_loglik", "daily_grid", "design_matrix", "detect_steps", "fit_component",
     "fit_series_batch", "fit_station", "gauss_markov_sum", "ggm_autocovariance", "noise_spec", "noise_state_space",
-    "residual_trend", "robust_scale", "screen_outliers", "step_penalty", "simulate_powerlaw_series",
+    "period_amplitudes", "residual_trend", "robust_scale", "screen_outliers", "step_penalty", "simulate_powerlaw_series",
 ]

@@ -101,7 +101,7 @@ def _day_index(series):
     return cal if dups(cal) < dups(jul) and np.all(np.diff(cal) >= 0) else jul
 
 
-def screen_outliers(series, *, steps=(), sigma_factor: float = 5.0, sigma_max_m=None, residual_k: float = 5.0,
+def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 5.0, sigma_max_m=None, residual_k: float = 5.0,
                     window_days: int = 15, max_passes: int = 10) -> Screening:
     """Reject days with implausible formal sigmas and values far from the trajectory (per component).
 
@@ -118,6 +118,7 @@ def screen_outliers(series, *, steps=(), sigma_factor: float = 5.0, sigma_max_m=
 
     Args:
       series: :class:`jaxnav.io.DailySeries`.  steps: step epochs, s since J2000.
+      periods_days: further periodic terms of the trajectory (:func:`design_matrix`).
       sigma_factor, sigma_max_m, residual_k, window_days, max_passes: as above.
     Returns:
       :class:`Screening`.
@@ -137,7 +138,7 @@ def screen_outliers(series, *, steps=(), sigma_factor: float = 5.0, sigma_max_m=
         records.append(dict(index=int(i), date=iso_date(t[i]), decimal_year=float(decimal_year(t[i])),
                             component=COMPONENTS[c], reason="sigma", value_m=float(y[i, c]),
                             sigma_m=float(sig[i, c]), residual_m=None, threshold_m=float(lim[c])))
-    A = design_matrix(t, steps=steps).A if len(t) > 1 else np.ones((len(t), 1))
+    A = design_matrix(t, steps=steps, periods_days=periods_days).A if len(t) > 1 else np.ones((len(t), 1))
     day = _day_index(series)
     res_lim = np.full(3, np.nan)
     for c in range(3):
@@ -386,6 +387,15 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
     return float(grid.t[cand[j]]), float(stat[j])
 
 
+def period_amplitudes(fit: StationFit) -> dict:
+    """{"<P>d": (amplitude (3,) m, its linearised sigma (3,) m, phase (3,) rad)} of the further periodic terms."""
+    out = {}
+    for i, nm in enumerate(fit.design_names):
+        if nm.startswith("period_") and nm.endswith("_cos"):
+            out[nm[len("period_"):-len("_cos")]] = _amplitude(fit.noise.beta, fit.noise.beta_cov, i)
+    return out
+
+
 def residual_trend(grid: DailyGrid, A, beta):
     """Ordinary least-squares rate of the residuals y - A beta per component (m/yr, (3,)).
 
@@ -412,7 +422,7 @@ def residual_trend(grid: DailyGrid, A, beta):
 
 def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: bool = True, reml: bool = True,
                 screen: bool = True, sigma_factor: float = 5.0, residual_k: float = 5.0,
-                per_decade: float = 1.5, iterations: int = 40) -> StationFit:
+                per_decade: float = 1.5, iterations: int = 40, periods_days=()) -> StationFit:
     """Velocity, its uncertainty under coloured noise, seasonal terms, steps and outliers of one station.
 
     Args:
@@ -424,8 +434,9 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
       screen: run :func:`screen_outliers` first (else only the file's nan values are left out).
       sigma_factor, residual_k: screening thresholds.  per_decade: Gauss-Markov terms per decade.
       iterations: BFGS iterations of the noise fit.
+      periods_days: further periodic terms, days (:func:`jaxnav.monitoring.design_matrix`).
     Returns:
-      :class:`StationFit`.
+      :class:`StationFit` (amplitudes of the further periods: :func:`period_amplitudes`).
     Raises:
       ValueError: a series shorter than 60 days or with fewer valid days than model terms + 10.
     """
@@ -436,7 +447,7 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
     if len(t) < 2 or (t[-1] - t[0]) / DAY < 60:
         raise ValueError(f"{series.station}: the series spans {(t[-1] - t[0]) / DAY if len(t) > 1 else 0:.0f} days; "
                          "a trajectory with seasonal terms needs at least 60")
-    scr = screen_outliers(series, steps=steps, sigma_factor=sigma_factor, residual_k=residual_k) if screen else \
+    scr = screen_outliers(series, steps=steps, periods_days=periods_days, sigma_factor=sigma_factor, residual_k=residual_k) if screen else \
         Screening(keep=np.isfinite(series.enu), records=[], counts={"sigma": 0, "residual": 0,
                                                                       "missing": int((~np.isfinite(series.enu)).sum())},
                   sigma_limit_m=np.full(3, np.nan), residual_limit_m=np.full(3, np.nan))
@@ -449,7 +460,7 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
             if not grid.t[0] < ts <= grid.t[grid.n_days - 1]:
                 raise ValueError(f"{series.station}: step epoch {decimal_year(ts):.4f} is outside the series "
                                  f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})")
-        D = design_matrix(grid.t, steps=sorted(steps), t_ref=t_ref)
+        D = design_matrix(grid.t, steps=sorted(steps), t_ref=t_ref, periods_days=periods_days)
         A = D.A
         nvalid = grid.valid.sum(axis=0)
         if np.any(nvalid < A.shape[1] + 10):
