@@ -21,6 +21,10 @@ import shlex
 from jaxnav.cli._common import MAX_SEEDS, UsageError, float_range, input_file, int_range, prepare_out
 
 
+#: steps detected per station by default (each must beat the BIC penalty)
+DETECT_DEFAULT = 5
+
+
 def register(subparsers):
     """Add the ``monitor`` subcommand; returns its parser."""
     p = subparsers.add_parser("monitor", help="daily station files (.tenv3, .neu, .col, PBO .pos) -> velocities "
@@ -31,8 +35,13 @@ def register(subparsers):
     p.add_argument("--step", action="append", default=[], metavar="STATION:DATE",
                    help="a known step (antenna change) at DATE (YYYY-MM-DD or decimal year) for STATION; "
                         "repeat for more")
-    p.add_argument("--detect-steps", type=int_range(0, 10), default=0,
-                   help="detect up to this many further steps per station, 0 .. 10; default 0")
+    p.add_argument("--detect-steps", type=int_range(0, 10), default=DETECT_DEFAULT,
+                   help="detect up to this many further steps per station (added one at a time while the "
+                        f"likelihood gain beats the BIC penalty), 0 .. 10; default {DETECT_DEFAULT}")
+    p.add_argument("--no-detect-steps", action="store_true", help="no step detection (same as --detect-steps 0)")
+    p.add_argument("--extra-period", type=float_range(1.0), action="append", default=[], metavar="DAYS",
+                   help="a further periodic term of DAYS days (e.g. 351.6, the GPS draconitic year), >= 1; "
+                        "repeat for more")
     p.add_argument("--kappa", default="-1",
                    help="spectral index of the power-law noise in (-2, 0) (-1 flicker, the default) or "
                         "'estimate'")
@@ -118,10 +127,11 @@ def run(args) -> int:
         print(f"\nwrote {out / 'monitor.json'}, {out / 's1_statistics.png'}, {out / 's1_period.png'} "
               f"({res['wall_time_s']:.1f} s)")
         return 0
-    res = run_monitor_velocities(files, out, steps=steps, detect=args.detect_steps, kappa=kappa,
+    res = run_monitor_velocities(files, out, steps=steps, detect=0 if args.no_detect_steps else args.detect_steps, kappa=kappa,
                                  random_walk=not args.no_random_walk, reml=not args.ml, screen=not args.no_screen,
                                  sigma_factor=args.sigma_factor, residual_k=args.residual_k, s1=args.s1,
-                                 period=args.period, robust=args.robust, command=shlex.join(["jaxnav", *args._argv]))
+                                 period=args.period, robust=args.robust, command=shlex.join(["jaxnav", *args._argv]),
+                                 periods_days=tuple(args.extra_period))
     print(res["text"])
     print(f"wrote {out / 'monitor.json'} and {len(args.files)} figure(s) in {out} ({res['wall_time_s']:.1f} s)")
     return 0

@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from jaxnav import io
-from jaxnav.monitoring import COMPONENTS, fit_station
+from jaxnav.monitoring import COMPONENTS, fit_station, midas_velocity
 from jaxnav.units import MM, MM_PER_YEAR, YEAR, powerlaw_amplitude_to_mm_yr, random_walk_to_mm_per_sqrt_yr
 
 UNITS = {"velocity": "mm/yr", "positions, sigmas, amplitudes, steps": "mm",
@@ -30,6 +30,38 @@ _log = logging.getLogger(__name__)
 
 def _enu(a, scale=1.0):
     return {c: (None if not np.isfinite(v) else float(v) / scale) for c, v in zip(COMPONENTS, np.asarray(a, float))}
+
+
+def station_midas(fit):
+    """MIDAS rates of a fitted station's screened daily values, with the fit's steps (m/yr, (3,) each).
+
+    Returns:
+      (:class:`jaxnav.monitoring.MidasVelocity`, warnings): a warning per component where MIDAS and
+      the model rate differ by more than their combined sigma sqrt(s_midas^2 + s_fit^2), and where
+      the ordinary least-squares rate of the residuals exceeds 3 MIDAS sigmas (a misfit that an
+      inflated random walk would hide from the model's own sigma).
+    """
+    from jaxnav.monitoring._station import decimal_year
+
+    g = fit.grid
+    t_yr = decimal_year(g.t[:g.n_days])
+    m = midas_velocity(t_yr, np.where(g.valid, g.y, np.nan)[:g.n_days], decimal_year(fit.steps))
+    v_fit, s_fit = fit.velocity * YEAR, fit.velocity_sigma * YEAR
+    warnings = []
+    for c, comp in enumerate(COMPONENTS):
+        d, s = m.velocity[c] - v_fit[c], math.hypot(m.sigma[c], s_fit[c])
+        if np.isfinite(d) and abs(d) > s:
+            warnings.append(f"{comp}: MIDAS rate {m.velocity[c] / MM:+.2f} +- {m.sigma[c] / MM:.2f} mm/yr differs from "
+                            f"the model rate {v_fit[c] / MM:+.2f} +- {s_fit[c] / MM:.2f} mm/yr by more than their "
+                            "combined sigma: a step, transient or outliers the model misses?")
+    span = (g.n_days - 1) / 365.25
+    for c, comp in enumerate(COMPONENTS):
+        r = float(fit.residual_trend[c] * YEAR)
+        if np.isfinite(r) and np.isfinite(m.sigma[c]) and abs(r) > 3.0 * m.sigma[c]:
+            warnings.append(f"{comp}: the residuals keep a trend of {r / MM:+.2f} mm/yr ({r * span / MM:+.0f} mm over "
+                            f"{span:.1f} yr), more than 3 x the MIDAS rate sigma {m.sigma[c] / MM:.2f} mm/yr: the "
+                            "model misfits (a missed step or transient, absorbed by the noise model?)")
+    return m, warnings
 
 
 def station_record(fit, *, file, figure=None) -> dict:
@@ -64,10 +96,18 @@ def station_record(fit, *, file, figure=None) -> dict:
         semiannual_amplitude_mm=float(fit.semiannual_amplitude[c] / MM),
         semiannual_amplitude_sigma_mm=float(fit.semiannual_amplitude_sigma[c] / MM),
         semiannual_phase_deg=float(np.degrees(fit.semiannual_phase[c]))) for c, comp in enumerate(COMPONENTS)}
-    from jaxnav.monitoring._station import decimal_year, iso_date
+    from jaxnav.monitoring._station import decimal_year, iso_date, period_amplitudes
 
+    for per, (a, asd, ph) in period_amplitudes(fit).items():
+        for c, comp in enumerate(COMPONENTS):
+            seasonal[comp][f"period_{per}_amplitude_mm"] = float(a[c] / MM)
+            seasonal[comp][f"period_{per}_amplitude_sigma_mm"] = float(asd[c] / MM)
+            seasonal[comp][f"period_{per}_phase_deg"] = float(np.degrees(ph[c]))
+
+    gains = np.asarray(fit.step_gains, float) if len(fit.step_gains) else np.full(len(fit.steps), np.nan)
     steps = [dict(date=iso_date(ts), decimal_year=float(decimal_year(ts)), source=src,
-                  size_mm=_enu(fit.step_sizes[:, j], MM), sigma_mm=_enu(fit.step_sigmas[:, j], MM))
+                  size_mm=_enu(fit.step_sizes[:, j], MM), sigma_mm=_enu(fit.step_sigmas[:, j], MM),
+                  gain_2lnL=None if not np.isfinite(gains[j]) else float(gains[j]))
              for j, (ts, src) in enumerate(zip(fit.steps, fit.step_sources))]
     scr = fit.screening
     outl = [dict(date=d["date"], decimal_year=d["decimal_year"], component=d["component"], reason=d["reason"],
@@ -75,6 +115,7 @@ def station_record(fit, *, file, figure=None) -> dict:
                  residual_mm=None if d["residual_m"] is None else d["residual_m"] / MM,
                  threshold_mm=d["threshold_m"] / MM) for d in scr.records]
     g = fit.grid
+    mid, mid_warn = station_midas(fit)
     return dict(
         file=str(file), format=fit.fmt, model=fit.model,
         span_years=float((g.n_days - 1) / 365.25), grid_days=int(g.n_days),
@@ -84,18 +125,58 @@ def station_record(fit, *, file, figure=None) -> dict:
         velocity_mm_per_yr=_enu(fit.velocity / MM_PER_YEAR),
         velocity_sigma_mm_per_yr=_enu(fit.velocity_sigma / MM_PER_YEAR),
         velocity_sigma_white_noise_only_mm_per_yr=_enu(fit.velocity_sigma_white / MM_PER_YEAR),
+        residual_trend_mm_per_yr=_enu(np.asarray(fit.residual_trend, float) / MM_PER_YEAR),
+        midas_velocity_mm_per_yr=_enu(mid.velocity, MM), midas_velocity_sigma_mm_per_yr=_enu(mid.sigma, MM),
+        midas_pairs=dict(zip(COMPONENTS, mid.pairs_kept.tolist())),
         noise=noise, seasonal=seasonal, steps=steps,
         outliers=dict(count=len(outl), by_reason={k: v for k, v in scr.counts.items() if k != "missing"},
                       sigma_limit_mm=_enu(scr.sigma_limit_m, MM), residual_limit_mm=_enu(scr.residual_limit_m, MM),
                       list=outl),
-        warnings=list(fit.warnings), gauss_markov_max_relative_error=float(fit.gm_max_rel_error),
+        warnings=list(fit.warnings) + mid_warn, gauss_markov_max_relative_error=float(fit.gm_max_rel_error),
         figure=None if figure is None else str(figure))
+
+
+def write_velocity_table(path, records: dict, *, command: str = "") -> pathlib.Path:
+    """``velocities.csv``: one row per station (coordinates, model and MIDAS rates with sigmas, noise, span).
+
+    Args:
+      path: output file.  records: {station: :func:`station_record` dict with latitude_deg, longitude_deg}.
+      command: the command line, for the header.
+    """
+    cols = ["station", "latitude_deg", "longitude_deg", "ve_mm_per_yr", "vn_mm_per_yr", "vu_mm_per_yr",
+            "se_mm_per_yr", "sn_mm_per_yr", "su_mm_per_yr", "corr_en", "midas_ve_mm_per_yr", "midas_vn_mm_per_yr",
+            "midas_vu_mm_per_yr", "midas_se_mm_per_yr", "midas_sn_mm_per_yr", "midas_su_mm_per_yr", "first_day",
+            "last_day", "span_yr", "steps", "noise_model", "file"]
+
+    def num(v, fmt=".3f"):
+        return "" if v is None or not np.isfinite(v) else format(v, fmt)
+
+    lines = ["# jaxnav station velocities" + (f": {command}" if command else ""),
+             "# units: rates and sigmas mm/yr (1 sigma), latitude/longitude deg (geodetic, from the file; empty where "
+             "the file has none), span yr, dates ISO 8601",
+             "# reference frame: as in each input file (not transformed); east/north/up local to the station",
+             "# ve..su: trajectory model (offset, rate, annual, semi-annual, steps) with the coloured noise named in "
+             "noise_model; corr_en: east-north rate correlation (0: the components are fitted independently)",
+             "# midas_*: MIDAS (Blewitt et al. 2016, with the same steps); steps: steps in the model (given + detected)",
+             ",".join(cols)]
+    for name, r in records.items():
+        v, sd = r["velocity_mm_per_yr"], r["velocity_sigma_mm_per_yr"]
+        mv, ms = r["midas_velocity_mm_per_yr"], r["midas_velocity_sigma_mm_per_yr"]
+        row = [name, num(r.get("latitude_deg"), ".7f"), num(r.get("longitude_deg"), ".7f"),
+               *(num(v[c]) for c in COMPONENTS), *(num(sd[c]) for c in COMPONENTS), "0",
+               *(num(mv[c]) for c in COMPONENTS), *(num(ms[c]) for c in COMPONENTS),
+               r["first_day"], r["last_day"], num(r["span_years"], ".2f"), str(len(r["steps"])),
+               '"' + r["model"].replace('"', "'") + '"', '"' + r["file"] + '"']
+        lines.append(",".join(row))
+    path = pathlib.Path(path)
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.0, random_walk: bool = True,
                            reml: bool = True, screen: bool = True, sigma_factor: float = 5.0,
                            residual_k: float = 5.0, s1: bool = False, period: int = 365,
-                           robust: bool = False, command: str = "") -> dict:
+                           robust: bool = False, command: str = "", periods_days=()) -> dict:
     """Velocities with coloured noise of daily station files; writes ``monitor.json`` and figures.
 
     Args:
@@ -106,10 +187,12 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
         :func:`jaxnav.monitoring.fit_station`.
       s1, period, robust: also run the S1 adaptive-filter analysis (into ``out/s1``).
       command: the command line, recorded in the JSON.
+      periods_days: further periodic terms of the trajectory, days.
     Returns:
       The dictionary written ("text": the table printed by ``jaxnav monitor``).
     """
     from jaxnav import __version__
+    from jaxnav.monitoring._station import iso_date
     from jaxnav.plot import plot_station_fit
 
     out = pathlib.Path(out)
@@ -126,7 +209,8 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
         version=__version__, command=command, units=UNITS,
         settings=dict(kappa="estimated" if kappa is None else kappa, random_walk=random_walk,
                       likelihood="REML" if reml else "ML", screen=screen, sigma_factor=sigma_factor,
-                      residual_k=residual_k, detect_steps=detect, ggm_1mphi=6.9e-6),
+                      residual_k=residual_k, detect_steps=detect, ggm_1mphi=6.9e-6,
+                      extra_periods_days=[float(p) for p in periods_days]),
         stations={})
     lines = [f"{'station':<8}{'axis':<6}{'velocity mm/yr':>15}{'+-1 sigma':>10}{'(white only)':>13}"
              f"{'white mm':>9}{'PL mm/yr^-k/4':>14}{'kappa':>7}{'RW mm/yr^.5':>12}{'outliers':>9}"]
@@ -136,10 +220,16 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
                   "REML" if reml else "ML")
         t_st = time.perf_counter()
         fit = fit_station(s, steps=steps.get(s.station, ()), detect=detect, kappa=kappa, random_walk=random_walk,
-                          reml=reml, screen=screen, sigma_factor=sigma_factor, residual_k=residual_k)
+                          reml=reml, screen=screen, sigma_factor=sigma_factor, residual_k=residual_k,
+                          periods_days=periods_days)
         fig = out / f"{s.station}_fit.png"
         plot_station_fit(fit, fig)
         rec = station_record(fit, file=f, figure=fig)
+        llh = np.asarray(s.llh, float)
+        ok = np.isfinite(llh[:, :2]).all(axis=1)
+        rec["latitude_deg"] = float(np.degrees(np.median(llh[ok, 0]))) if ok.any() else None
+        rec["longitude_deg"] = float(np.degrees(np.median(llh[ok, 1]))) if ok.any() else None
+        rec["first_day"], rec["last_day"] = iso_date(fit.grid.t[0]), iso_date(fit.grid.t[fit.grid.n_days - 1])
         _log.debug("station %s fitted in %.1f s", s.station, time.perf_counter() - t_st)
         result["stations"][s.station] = rec
         for c, comp in enumerate(COMPONENTS):
@@ -150,6 +240,10 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
                          f"{rec['velocity_sigma_white_noise_only_mm_per_yr'][comp]:>13.3f}{n['white_mm']:>9.2f}"
                          f"{n['powerlaw_amplitude']:>14.2f}{n['spectral_index']:>7.2f}"
                          f"{n['random_walk_mm_per_sqrt_yr']:>12.2f}{no:>9d}")
+        mv, ms = rec["midas_velocity_mm_per_yr"], rec["midas_velocity_sigma_mm_per_yr"]
+        lines.append(f"{'':<8}MIDAS mm/yr: " + ", ".join(
+            f"{k} {'n/a' if mv[k] is None else format(mv[k], '+.2f')} +- "
+            f"{'n/a' if ms[k] is None else format(ms[k], '.2f')}" for k in COMPONENTS))
         for st in rec["steps"]:
             lines.append(f"{'':<8}step {st['date']} ({st['source']}): " + ", ".join(
                 f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm" for k, v in st["size_mm"].items()))
@@ -167,6 +261,23 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
                 result["stations"][name]["s1_adaptive_filter"] = st
         lines += ["", "S1 adaptive filter (constant-velocity Kalman filter, white noise; written to "
                       f"{out / 's1'}):", r1["text"]]
+    if len(files) > 1:
+        from jaxnav.plot import plot_velocity_map
+
+        recs = result["stations"]
+        write_velocity_table(out / "velocities.csv", recs, command=command)
+        nan = float("nan")
+        pts = [dict(name=n, lat_deg=nan if r["latitude_deg"] is None else r["latitude_deg"],
+                    lon_deg=nan if r["longitude_deg"] is None else r["longitude_deg"],
+                    ve=r["velocity_mm_per_yr"]["east"], vn=r["velocity_mm_per_yr"]["north"],
+                    se=r["velocity_sigma_mm_per_yr"]["east"], sn=r["velocity_sigma_mm_per_yr"]["north"])
+               for n, r in recs.items()]
+        missing = [p["name"] for p in pts if not np.isfinite(p["lat_deg"])]
+        plot_velocity_map(pts, out / "velocity_map.png",
+                          title=f"Horizontal velocities of {len(pts) - len(missing)} of {len(pts)} stations "
+                                "(those with coordinates), frame as in the files")
+        lines.append(f"wrote {out / 'velocities.csv'} and {out / 'velocity_map.png'}"
+                     + (f" (no coordinates in the file, not on the map: {', '.join(missing)})" if missing else ""))
     result["wall_time_s"] = time.perf_counter() - t0
     result["text"] = "\n".join(lines)
     io.write_json(out / "monitor.json", result)

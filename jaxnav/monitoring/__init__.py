@@ -6,6 +6,7 @@ The S1 experiment itself (simulation, Tables 1-6) is :mod:`jaxnav.experiments.s1
 """
 
 from jaxnav.monitoring._daily import PSD_GRID, StationVelocity, daily_forecasts, station_velocity, weighted_slope
+from jaxnav.monitoring._midas import MidasVelocity, midas_pairs, midas_velocity
 from jaxnav.monitoring._network import (
     Forecast,
     forecast,
@@ -25,7 +26,10 @@ from jaxnav.monitoring._station import (
     detect_steps,
     fit_series_batch,
     fit_station,
+    period_amplitudes,
+    residual_trend,
     screen_outliers,
+    step_penalty,
 )
 from jaxnav.monitoring._trajectory import (
     COMPONENTS,
@@ -53,9 +57,9 @@ __all__ = [
     "Forecast", "InternalPrecision", "PSD_GRID", "PeriodStatistics", "S1_THRESHOLDS_XYH", "StationVelocity",
     "daily_forecasts", "forecast", "improvement", "initial_state", "internal_precision", "network_model",
     "network_model_irregular", "outlier_flags", "period_statistics", "rms", "s1_filters", "station_velocity",
-    "weighted_slope",
+    "weighted_slope", "MidasVelocity", "midas_pairs", "midas_velocity",
     "COMPONENTS", "DailyGrid", "Design", "GGM_ONE_MINUS_PHI", "GaussMarkovSum", "NoiseFit", "NoiseSpec", "Screening",
     "StationFit", "component_loglik", "daily_grid", "design_matrix", "detect_steps", "fit_component",
     "fit_series_batch", "fit_station", "gauss_markov_sum", "ggm_autocovariance", "noise_spec", "noise_state_space",
-    "robust_scale", "screen_outliers", "simulate_powerlaw_series",
+    "period_amplitudes", "residual_trend", "robust_scale", "screen_outliers", "step_penalty", "simulate_powerlaw_series",
 ]

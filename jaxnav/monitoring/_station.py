@@ -101,7 +101,7 @@ def _day_index(series):
     return cal if dups(cal) < dups(jul) and np.all(np.diff(cal) >= 0) else jul
 
 
-def screen_outliers(series, *, steps=(), sigma_factor: float = 5.0, sigma_max_m=None, residual_k: float = 5.0,
+def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 5.0, sigma_max_m=None, residual_k: float = 5.0,
                     window_days: int = 15, max_passes: int = 10) -> Screening:
     """Reject days with implausible formal sigmas and values far from the trajectory (per component).
 
@@ -118,6 +118,7 @@ def screen_outliers(series, *, steps=(), sigma_factor: float = 5.0, sigma_max_m=
 
     Args:
       series: :class:`jaxnav.io.DailySeries`.  steps: step epochs, s since J2000.
+      periods_days: further periodic terms of the trajectory (:func:`design_matrix`).
       sigma_factor, sigma_max_m, residual_k, window_days, max_passes: as above.
     Returns:
       :class:`Screening`.
@@ -137,7 +138,7 @@ def screen_outliers(series, *, steps=(), sigma_factor: float = 5.0, sigma_max_m=
         records.append(dict(index=int(i), date=iso_date(t[i]), decimal_year=float(decimal_year(t[i])),
                             component=COMPONENTS[c], reason="sigma", value_m=float(y[i, c]),
                             sigma_m=float(sig[i, c]), residual_m=None, threshold_m=float(lim[c])))
-    A = design_matrix(t, steps=steps).A if len(t) > 1 else np.ones((len(t), 1))
+    A = design_matrix(t, steps=steps, periods_days=periods_days).A if len(t) > 1 else np.ones((len(t), 1))
     day = _day_index(series)
     res_lim = np.full(3, np.nan)
     for c in range(3):
@@ -253,6 +254,8 @@ class StationFit(NamedTuple):
       model: text naming the noise model.  warnings: list of str.  screening: :class:`Screening`.
       grid: :class:`DailyGrid`.  design_names: column names.  A: (T, k) design.
       gm_max_rel_error: of the Gauss-Markov approximation of the power-law covariance.
+      step_gains: (S,) 2 ln L gain of each detected step at its detection (NaN for given steps).
+      residual_trend: (3,) m/s, least-squares rate of the fit's residuals (:func:`residual_trend`).
     """
 
     station: str
@@ -285,6 +288,8 @@ class StationFit(NamedTuple):
     design_names: tuple
     A: Any
     gm_max_rel_error: float
+    step_gains: Any = ()
+    residual_trend: Any = None
 
 
 def _amplitude(beta, cov, i):
@@ -310,18 +315,30 @@ def _white_sigma(A, y, valid):
     return np.array(out)
 
 
+def step_penalty(grid: DailyGrid) -> float:
+    """BIC penalty of one more step: 4 ln(n) (three step sizes and the epoch; n valid values, all components).
+
+    Schwarz (1978): a model term is worth adding when it raises 2 ln L by more than ln(n) per
+    parameter; for a 3-year daily series 4 ln(3300) = 32, for 10 years 4 ln(11000) = 37.
+    """
+    n = int(np.asarray(grid.valid)[:grid.n_days].sum())
+    return 4.0 * float(np.log(max(n, 2)))
+
+
 def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_days: int = 7,
-                 threshold: float = 30.0):
+                 threshold=None):
     """Best single step epoch under the fitted noise (likelihood-ratio scan), or None.
 
-    For candidate epochs every ``spacing_days`` days (30 days from either end), a step column is
+    For candidate epochs every ``spacing_days`` days (30 days from either end; then every day
+    within ``spacing_days`` of the best of them), a step column is
     whitened with each component's fitted noise (the whitening is linear, so all candidates go
     through one ``vmap``) and the reduction of the weighted residual sum of squares
     (a~^T e~)^2 / (a~^T P a~) summed over the three components is computed (P the projector
-    orthogonal to the whitened design). The largest reduction is a step when it exceeds
-    ``threshold`` (a chi-square with 3 degrees of freedom; 30 leaves a false detection every few
-    thousand station-years of pure coloured noise, on the conservative side because the scan
-    picks the maximum over many epochs).
+    orthogonal to the whitened design): twice the log-likelihood gain of the step under the fitted
+    noise. The largest gain is a step when it exceeds ``threshold``, by default the BIC penalty
+    :func:`step_penalty` (32-37 for 3-10 year series; a chi-square with 3 degrees of freedom above
+    30 leaves a false detection every few thousand station-years of pure coloured noise, on the
+    conservative side because the scan picks the maximum over many epochs).
 
     Returns:
       (epoch s since J2000, statistic) or None.
@@ -333,33 +350,79 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
     if cand.size == 0:
         return None
     T = len(grid.t)
-    S = (np.arange(T)[:, None] >= cand[None, :]).astype(float)  # (T, M)
     est = spec.kappa is None
-    stat = np.zeros(cand.size)
+    whitened = []
     for c in range(3):
-        th = jnp.asarray(fit.theta[c])
-        v = jnp.asarray(grid.valid[:, c])
-        yy = jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0))
-        allA = jnp.asarray(np.concatenate([A, S], axis=1))
-        yt, At, _ = _whitened(th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W),
-                              jnp.asarray(spec.d_grid), est, random_walk)
-        yt, At = np.asarray(yt), np.asarray(At)
-        X, Sw = At[:, :A.shape[1]], At[:, A.shape[1]:]
-        Q, _ = np.linalg.qr(X)
-        e = yt - Q @ (Q.T @ yt)
-        Sp = Sw - Q @ (Q.T @ Sw)
-        num = (Sp.T @ e) ** 2
-        den = np.maximum(np.sum(Sp * Sp, axis=0), 1e-300)
-        stat += num / den
+        args = (jnp.asarray(fit.theta[c]), jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0)),
+                jnp.asarray(grid.valid[:, c]))
+        whitened.append(args)
+
+    def scan(cand):
+        S = (np.arange(T)[:, None] >= cand[None, :]).astype(float)  # (T, M)
+        stat = np.zeros(cand.size)
+        for th, yy, v in whitened:
+            allA = jnp.asarray(np.concatenate([A, S], axis=1))
+            yt, At, _ = _whitened(th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W),
+                                  jnp.asarray(spec.d_grid), est, random_walk)
+            yt, At = np.asarray(yt), np.asarray(At)
+            X, Sw = At[:, :A.shape[1]], At[:, A.shape[1]:]
+            Q, _ = np.linalg.qr(X)
+            e = yt - Q @ (Q.T @ yt)
+            Sp = Sw - Q @ (Q.T @ Sw)
+            num = (Sp.T @ e) ** 2
+            den = np.sum(Sp * Sp, axis=0)
+            # a candidate the design already holds (a known step's epoch) adds nothing
+            stat += np.where(den > 1e-9 * np.maximum(np.sum(Sw * Sw, axis=0), 1e-300), num / np.maximum(den, 1e-300),
+                             0.0)
+        return stat
+
+    stat = scan(cand)
     j = int(np.argmax(stat))
-    if stat[j] < threshold:
+    if spacing_days > 1:  # refine to the day around the best candidate
+        fine = np.arange(max(30, cand[j] - spacing_days + 1), min(n - 30, cand[j] + spacing_days))
+        cand, stat = fine, scan(fine)
+        j = int(np.argmax(stat))
+    if stat[j] < (step_penalty(grid) if threshold is None else threshold):
         return None
     return float(grid.t[cand[j]]), float(stat[j])
 
 
+def period_amplitudes(fit: StationFit) -> dict:
+    """{"<P>d": (amplitude (3,) m, its linearised sigma (3,) m, phase (3,) rad)} of the further periodic terms."""
+    out = {}
+    for i, nm in enumerate(fit.design_names):
+        if nm.startswith("period_") and nm.endswith("_cos"):
+            out[nm[len("period_"):-len("_cos")]] = _amplitude(fit.noise.beta, fit.noise.beta_cov, i)
+    return out
+
+
+def residual_trend(grid: DailyGrid, A, beta):
+    """Ordinary least-squares rate of the residuals y - A beta per component (m/yr, (3,)).
+
+    The generalised least-squares rate leaves the residuals with no trend the noise model cannot
+    explain; the plain rate of the residuals differs from zero by well under the rate sigma when
+    the trajectory model fits (both rates are unbiased, the ordinary one hardly less efficient
+    under power-law noise), and by more where a step or transient is missing.
+
+    Args:
+      grid: :class:`DailyGrid`.  A: (T, k) design (column 1 the rate per yr).  beta: (3, k).
+    """
+    out = np.zeros(3)
+    n = grid.n_days
+    tt = (grid.t[:n] - grid.t[0]) / YEAR
+    for c in range(3):
+        k = grid.valid[:n, c]
+        if k.sum() < 3:
+            out[c] = np.nan
+            continue
+        e = grid.y[:n, c][k] - A[:n][k] @ beta[c]
+        out[c] = np.polyfit(tt[k], e, 1)[0]
+    return out
+
+
 def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: bool = True, reml: bool = True,
                 screen: bool = True, sigma_factor: float = 5.0, residual_k: float = 5.0,
-                per_decade: float = 1.5, iterations: int = 40) -> StationFit:
+                per_decade: float = 1.5, iterations: int = 40, periods_days=()) -> StationFit:
     """Velocity, its uncertainty under coloured noise, seasonal terms, steps and outliers of one station.
 
     Args:
@@ -371,18 +434,20 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
       screen: run :func:`screen_outliers` first (else only the file's nan values are left out).
       sigma_factor, residual_k: screening thresholds.  per_decade: Gauss-Markov terms per decade.
       iterations: BFGS iterations of the noise fit.
+      periods_days: further periodic terms, days (:func:`jaxnav.monitoring.design_matrix`).
     Returns:
-      :class:`StationFit`.
+      :class:`StationFit` (amplitudes of the further periods: :func:`period_amplitudes`).
     Raises:
       ValueError: a series shorter than 60 days or with fewer valid days than model terms + 10.
     """
     steps = [float(s) for s in np.atleast_1d(np.asarray(steps, float))]
     sources = ["given"] * len(steps)
+    gains = [np.nan] * len(steps)
     t = np.asarray(series.t, float)
     if len(t) < 2 or (t[-1] - t[0]) / DAY < 60:
         raise ValueError(f"{series.station}: the series spans {(t[-1] - t[0]) / DAY if len(t) > 1 else 0:.0f} days; "
                          "a trajectory with seasonal terms needs at least 60")
-    scr = screen_outliers(series, steps=steps, sigma_factor=sigma_factor, residual_k=residual_k) if screen else \
+    scr = screen_outliers(series, steps=steps, periods_days=periods_days, sigma_factor=sigma_factor, residual_k=residual_k) if screen else \
         Screening(keep=np.isfinite(series.enu), records=[], counts={"sigma": 0, "residual": 0,
                                                                       "missing": int((~np.isfinite(series.enu)).sum())},
                   sigma_limit_m=np.full(3, np.nan), residual_limit_m=np.full(3, np.nan))
@@ -395,7 +460,7 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
             if not grid.t[0] < ts <= grid.t[grid.n_days - 1]:
                 raise ValueError(f"{series.station}: step epoch {decimal_year(ts):.4f} is outside the series "
                                  f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})")
-        D = design_matrix(grid.t, steps=sorted(steps), t_ref=t_ref)
+        D = design_matrix(grid.t, steps=sorted(steps), t_ref=t_ref, periods_days=periods_days)
         A = D.A
         nvalid = grid.valid.sum(axis=0)
         if np.any(nvalid < A.shape[1] + 10):
@@ -409,17 +474,24 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
         fit = fit_series_batch(grid.y.T, grid.valid.T, A, spec, np.array(scale), random_walk=random_walk, reml=reml,
                                iterations=iterations)
         fit = jax.tree_util.tree_map(np.asarray, fit)
-        if detect <= sum(s == "detected" for s in sources):
-            break
+        limit = detect <= sum(s == "detected" for s in sources)
         found = detect_steps(grid, A, fit, spec, random_walk=random_walk)
         if found is None:
             break
+        if limit:
+            warnings.append(f"a further step at {iso_date(found[0])} would raise 2 ln L by {found[1]:.0f}, more "
+                            f"than the BIC penalty {step_penalty(grid):.0f}; not added (detection limit {detect}): "
+                            "the model misfits")
+            break
         steps.append(found[0])
         sources.append("detected")
-        warnings.append(f"step detected at {iso_date(found[0])} (likelihood-ratio statistic {found[1]:.0f})")
+        gains.append(found[1])
+        warnings.append(f"step detected at {iso_date(found[0])} (2 ln L gain {found[1]:.0f} > BIC penalty "
+                        f"{step_penalty(grid):.0f})")
     order = np.argsort(steps) if steps else np.array([], int)
     steps_sorted = np.array(steps)[order] if steps else np.zeros(0)
     sources = tuple(np.array(sources)[order].tolist()) if steps else ()
+    gains = np.array(gains, float)[order] if steps else np.zeros(0)
     beta, cov = fit.beta, fit.beta_cov
     names = D.names
     ia = names.index("annual_cos")
@@ -452,6 +524,7 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
             else:
                 warnings.append(f"{comp}: {lab[j]} estimate at the {edge} bound of its box {bounds} "
                                 f"(within {AT_BOUND_TOL} in ln units): the estimate is limited by the box")
+    r_rate = residual_trend(grid, A, beta)
     kap = fit.theta[:, 3]
     model = ("white + power-law (GGM, 1-phi = 6.9e-6, kappa " + ("estimated" if kappa is None else f"{kappa:g}")
              + ")" + (" + random walk" if random_walk else "") + f", {'REML' if reml else 'ML'}")
@@ -467,4 +540,4 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
         white_sigma=np.exp(fit.theta[:, 0]), kappa=kap, powerlaw_amplitude=powerlaw_amplitude(fit.theta),
         random_walk=random_walk_amplitude(fit.theta) if random_walk else np.zeros(3), noise=fit, model=model,
         warnings=warnings, screening=scr, grid=grid, design_names=names, A=A,
-        gm_max_rel_error=spec.max_rel_error)
+        gm_max_rel_error=spec.max_rel_error, step_gains=gains, residual_trend=r_rate / YEAR)

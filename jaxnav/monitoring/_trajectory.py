@@ -70,7 +70,7 @@ class Design(NamedTuple):
     steps: Any
 
 
-def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None) -> Design:
+def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_days=()) -> Design:
     """Trajectory-model design matrix at epochs ``t`` (s since J2000).
 
     Args:
@@ -79,6 +79,8 @@ def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None) -> Design:
         span (or with no epoch on one side) raise ValueError.
       seasonal: include the annual and semi-annual cos/sin terms (periods 365.25 and 182.625 days).
       t_ref: reference epoch of offset and rate (default mid-span), s.
+      periods_days: further periodic terms (e.g. the GPS draconitic year 351.6 d): cos/sin columns
+        "period_<P>d_cos", "period_<P>d_sin" of 2 pi t / P, t from J2000.
     Returns:
       :class:`Design` (columns scaled to order one: rate in years, so its coefficient is m/yr).
     """
@@ -90,6 +92,12 @@ def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None) -> Design:
         ph = 2.0 * np.pi * t / YEAR
         cols += [np.cos(ph), np.sin(ph), np.cos(2 * ph), np.sin(2 * ph)]
         names += ["annual_cos", "annual_sin", "semiannual_cos", "semiannual_sin"]
+    for p in np.atleast_1d(np.asarray(periods_days, float)):
+        if not p > 0:
+            raise ValueError(f"periods_days must be > 0, got {p}")
+        ph = 2.0 * np.pi * t / (p * 86400.0)
+        cols += [np.cos(ph), np.sin(ph)]
+        names += [f"period_{p:g}d_cos", f"period_{p:g}d_sin"]
     steps = np.atleast_1d(np.asarray(steps, float))
     for j, ts in enumerate(steps):
         if not (t[0] < ts <= t[-1]):

@@ -249,3 +249,55 @@ def plot_station_fit(fit, path):
     fig.suptitle(f"{fit.station}: trajectory (offset, rate, annual, semi-annual, steps) with {fit.model}", fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
+
+
+#: 95 % of a 2-D Gaussian lies within this many sigmas (sqrt of the chi-square 2-dof 95 % point, 5.991)
+ELLIPSE_95 = 2.4477
+
+
+def plot_velocity_map(stations: list, path, *, title: str = "Station velocities"):
+    """Horizontal velocity arrows with 95 % error ellipses, a scale arrow and names on a lat/lon grid.
+
+    Args:
+      stations: dicts with name, lat_deg, lon_deg, ve, vn (mm/yr), se, sn (mm/yr, 1 sigma) and
+        optional corr_en (default 0); stations without coordinates (NaN) are left out.
+      path: output file.  title: figure title.
+    """
+    st = [s for s in stations if np.isfinite(s["lat_deg"]) and np.isfinite(s["lon_deg"])]
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    if not st:
+        ax.text(0.5, 0.5, "no station with coordinates in its file", ha="center", va="center", transform=ax.transAxes)
+        ax.set_axis_off()
+        return _save(fig, path)
+    lat = np.array([s["lat_deg"] for s in st])
+    lon = np.array([s["lon_deg"] for s in st])
+    vmax = max(max(np.hypot(s["ve"], s["vn"]) for s in st), 1e-3)
+    span = max(np.ptp(lat), np.ptp(lon) * np.cos(np.radians(lat.mean())), 1.0)
+    k = 0.3 * span / vmax  # degrees of latitude per mm/yr: the longest arrow is 30 % of the map
+    coslat = np.cos(np.radians(lat.mean()))
+    for s in st:
+        dx, dy = s["ve"] * k / coslat, s["vn"] * k
+        ax.annotate("", xy=(s["lon_deg"] + dx, s["lat_deg"] + dy), xytext=(s["lon_deg"], s["lat_deg"]),
+                    arrowprops=dict(arrowstyle="-|>", color="tab:red", lw=1.5, shrinkA=0, shrinkB=0))
+        c = s.get("corr_en", 0.0) or 0.0
+        cov = np.array([[s["se"] ** 2, c * s["se"] * s["sn"]], [c * s["se"] * s["sn"], s["sn"] ** 2]])
+        L = np.linalg.cholesky(cov + 1e-12 * np.eye(2))
+        th = np.linspace(0.0, 2.0 * np.pi, 73)
+        e, n = ELLIPSE_95 * (L @ np.stack([np.cos(th), np.sin(th)]))  # mm/yr, around the arrow tip
+        ax.plot(s["lon_deg"] + dx + e * k / coslat, s["lat_deg"] + dy + n * k, color="tab:red", lw=0.8)
+        ax.plot(s["lon_deg"], s["lat_deg"], "k^", ms=6)
+        ax.annotate(s["name"], (s["lon_deg"], s["lat_deg"]), xytext=(4, -12), textcoords="offset points", fontsize=9)
+    pad = 0.45 * span + 0.5
+    ax.set_xlim(lon.min() - pad / coslat, lon.max() + pad / coslat)
+    ax.set_ylim(lat.min() - pad, lat.max() + pad)
+    ax.set_aspect(1.0 / coslat)
+    ref = float(f"{vmax / 2:.0g}") if vmax >= 2 else round(vmax, 1) or 1.0
+    x0, y0 = ax.get_xlim()[0] + 0.05 * np.ptp(ax.get_xlim()), ax.get_ylim()[0] + 0.06 * np.ptp(ax.get_ylim())
+    ax.annotate("", xy=(x0 + ref * k / coslat, y0), xytext=(x0, y0),
+                arrowprops=dict(arrowstyle="-|>", color="k", lw=1.5, shrinkA=0, shrinkB=0))
+    ax.text(x0, y0 + 0.02 * np.ptp(ax.get_ylim()), f"{ref:g} mm/yr (ellipses: 95 %)", fontsize=9)
+    ax.grid(True, lw=0.4, alpha=0.6)
+    ax.set_xlabel("longitude (deg)")
+    ax.set_ylabel("latitude (deg)")
+    ax.set_title(title)
+    return _save(fig, path)
