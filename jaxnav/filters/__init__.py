@@ -13,12 +13,15 @@
 * :func:`log_likelihood`: the classic filter's innovation log-likelihood with exact gradients
   from one backward smoothing pass (no tape through the filter).
 * :func:`parallel_filter`, :func:`parallel_smoother`: associative-scan forms.
+* :class:`NonlinearGaussian` models: :func:`extended_kalman_filter` (and iterated),
+  :func:`unscented_kalman_filter`, :func:`cubature_kalman_filter`, :func:`extended_rts_smoother`,
+  :func:`unscented_rts_smoother`, on the same step and plug-ins.
 * :func:`predict`, :func:`update`, :func:`filter_step`, :func:`init_state`: the pure pieces,
   for custom scans.
 
 Module layout (imports point down): ``_plugins`` (protocols, contexts, defaults) <- ``_rules``,
 ``_estimators``, ``_robust`` <- ``_step`` (records, predict, update, filter_step) <- ``_kalman``
-(the driver) <- ``_smoother`` <- ``_batch``, ``_loglik``, ``_parallel``.
+(the driver) <- ``_smoother`` <- ``_batch``, ``_loglik``, ``_parallel``, ``_nonlinear``.
 """
 
 from jaxnav.filters._batch import kalman_filter_batch, rts_smoother_batch
@@ -34,6 +37,14 @@ from jaxnav.filters._kalman import KalmanResult, kalman_filter
 from jaxnav.filters._loglik import LoglikGradients, log_likelihood, loglik_and_gradients
 from jaxnav.filters._model import LinearGaussian, check_shapes, validate_model
 from jaxnav.filters._models import constant_velocity
+from jaxnav.filters._nonlinear import (
+    NonlinearGaussian,
+    cubature_kalman_filter,
+    extended_kalman_filter,
+    extended_rts_smoother,
+    unscented_kalman_filter,
+    unscented_rts_smoother,
+)
 from jaxnav.filters._parallel import parallel_filter, parallel_smoother
 from jaxnav.filters._plugins import (
     InflationRule,
@@ -92,4 +103,6 @@ __all__ = [
     "LoglikGradients", "log_likelihood", "loglik_and_gradients",
     "kalman_filter_batch", "rts_smoother_batch",
     "InflationRule", "NoiseEstimator", "NoInflation", "NoEstimator", "PostUpdate",
+    "NonlinearGaussian", "extended_kalman_filter", "unscented_kalman_filter", "cubature_kalman_filter",
+    "extended_rts_smoother", "unscented_rts_smoother",
 ]

@@ -194,10 +194,13 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
 
 
 def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, check_finite: bool,
-                   joseph: bool = True):
+                   joseph: bool = True, lin=None):
     """:func:`filter_step` returning (state, every output by name, the gain K (n, m) applied).
 
     The batch entry points run it once on zero data for the batch's shared covariances and gains.
+    ``lin`` (static): None for the linear model, else a linearisation of a nonlinear model at this
+    epoch (:mod:`._nonlinear`) giving the prediction f(x), F P F^T and the affine measurement
+    z ~ H x + b; everything else (plug-ins, masking, Joseph update, flags) is this step's.
     """
     model, rule, est = params
     F, H, Q, R, G = (getattr(model, f) if getattr(inp, f) is None else getattr(inp, f) for f in LinearGaussian._fields)
@@ -209,15 +212,24 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
     valid = inp.mask & finite if check_finite else inp.mask
     observed = jnp.any(valid)
     z = jnp.where(valid, inp.z, 0.0) if check_finite else inp.z
-    Hm = jnp.where(valid[:, None], H, 0.0)
 
     # the plug-ins choose the noise, then the inflation factor, from the prior and the innovation
     k = state.k + 1.0
-    x_pred = mm(F, state.x)
-    FPF = mm(mm(F, state.P), F.T)
-    v = jnp.where(valid, z - mm(Hm, x_pred), 0.0)
     Gm = jnp.eye(n, dtype=dt) if G is None else G
     GQG = Q if G is None else mm(mm(G, Q), G.T)
+    if lin is None:
+        x_pred = mm(F, state.x)
+        FPF = mm(mm(F, state.P), F.T)
+        Hm = jnp.where(valid[:, None], H, 0.0)
+        v = jnp.where(valid, z - mm(Hm, x_pred), 0.0)
+    else:
+        F, x_pred, FPF = lin.predict(state.x, state.P)
+        first = lin.measure(x_pred, symmetrize(FPF + GQG))
+        H, z_hat = first[0], first[1]
+        Hm = jnp.where(valid[:, None], H, 0.0)
+        v = jnp.where(valid, z - z_hat, 0.0)
+        z_obs = z
+        z = jnp.where(valid, z - z_hat + mm(H, x_pred), 0.0)  # the affine model's z - b
     ctx = StepContext(k=k, v=v, z=z, x_pred=x_pred, valid=valid, observed=observed, F=F, H=Hm, G=Gm, Q=Q, R=R,
                       FPF=FPF, GQG=GQG, R_used=R)
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
@@ -230,8 +242,13 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
     else:
         factor_used = factor
 
-    x_pred, P_pred = predict(state.x, state.P, F, GQG, factor_used, FPF=FPF)
-    up = update(x_pred, P_pred, z, H, R_used, valid, joseph)
+    x_lin, P_pred = predict(state.x, state.P, F, GQG, factor_used, FPF=FPF)
+    if lin is None:
+        x_pred = x_lin
+        up = update(x_pred, P_pred, z, H, R_used, valid, joseph)
+    else:
+        redo = not (isinstance(rule, NoInflation) and isinstance(est, NoEstimator))
+        up, Hm, z = lin.update(x_pred, P_pred, z_obs, R_used, valid, joseph, first, redo)
     post = PostUpdate(x=up.x, P=up.P, K=up.K, eps=jnp.where(valid, z - mm(Hm, up.x), 0.0), P_pred=P_pred)
     est_state = est.after(est_state, ctx, post)
 

@@ -1,0 +1,360 @@
+"""Nonlinear filters on the shared step: extended (and iterated), unscented and cubature Kalman
+filters and their RTS smoothers.
+
+Each filter linearises the model at every epoch into an affine Gaussian one and hands it to
+:func:`~jaxnav.filters._step.step_with_gain`, so the plug-ins (inflation rules, noise
+estimators, robust reweighting), masking, the Joseph update, status flags and the
+log-likelihood are the linear filter's:
+
+* Taylor (EKF): F = df/dx at x_{k-1}, H = dh/dx at x_{k,k-1}, b = h(x_{k,k-1}) - H x_{k,k-1}
+  (the iterated EKF re-expands h at each Gauss-Newton iterate, Bell & Cathey 1993).
+* Sigma points (UKF, CKF): statistical linear regression of f and h on the sigma points
+  (Van der Merwe 2004 scaled points; Arasaratnam & Haykin 2009 third-degree cubature):
+  F P F^T is the points' covariance of f, H = P_xz^T P^{-1}, and the regression residual
+  P_zz - H P_xz is added to R, so that S = P_zz + R and K = P_xz S^{-1} as in the UKF.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any, Callable, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+
+from jaxnav._numerics import cho_solve, mm, safe_cholesky, symmetrize
+from jaxnav.filters._kalman import KalmanResult
+from jaxnav.filters._model import LinearGaussian
+from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, rts_smoother, smoothed_covs, smoothed_means
+from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, scan_setup, step_with_gain, update
+from jaxnav import _status
+
+
+@jax.tree_util.register_pytree_node_class
+class NonlinearGaussian:
+    """Nonlinear Gaussian model X_k = f(X_{k-1}, t) + W_{k-1},  Z_k = h(X_k, t) + V_k.
+
+    ``t`` is the epoch index (0 for ``zs[0]``; ``f(x, t)`` predicts into epoch t), or the t-th
+    slice of the ``inputs`` pytree given to the filter. f and h are pure JAX functions; model
+    parameters they close over (or take from ``inputs``) may be traced (``grad``, ``vmap``).
+
+    Attributes:
+      f: (n,), t -> (n,) transition.  h: (n,), t -> (m,) measurement.
+      Q: (n, n) or (T, n, n) process-noise covariance.  R: (m, m) or (T, m, m) measurement noise.
+      F_jac, H_jac: optional Jacobians (x, t) -> (n, n), (m, n); default ``jax.jacfwd`` of f, h.
+    """
+
+    def __init__(self, f: Callable, h: Callable, Q, R, F_jac: Optional[Callable] = None,
+                 H_jac: Optional[Callable] = None):
+        self.f, self.h, self.Q, self.R = f, h, Q, R
+        self.F_jac = jax.jacfwd(f) if F_jac is None else F_jac
+        self.H_jac = jax.jacfwd(h) if H_jac is None else H_jac
+        self._user_jac = (F_jac, H_jac)
+
+    def tree_flatten(self):
+        return (self.Q, self.R), (self.f, self.h) + self._user_jac
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        f, h, Fj, Hj = aux
+        return cls(f, h, *children, F_jac=Fj, H_jac=Hj)
+
+    def __repr__(self):
+        return f"NonlinearGaussian(f={self.f!r}, h={self.h!r}, Q={self.Q!r}, R={self.R!r})"
+
+
+# ---------------------------------------------------------------------------------------------
+# sigma points
+
+
+def merwe_weights(n: int, alpha, beta, kappa, dtype):
+    """Van der Merwe scaled sigma-point weights (Wm, Wc) (2n+1,) and the scale c = n + lambda.
+
+    lambda = alpha^2 (n + kappa) - n; Wm_0 = lambda / c, Wc_0 = Wm_0 + 1 - alpha^2 + beta,
+    W_i = 1 / (2c). alpha = 1, beta = kappa = 0 is the third-degree cubature rule (zero centre weight).
+    """
+    lam = alpha ** 2 * (n + kappa) - n
+    c = n + lam
+    w = jnp.full((2 * n + 1,), 0.5 / c, dtype)
+    Wm = w.at[0].set(lam / c)
+    Wc = w.at[0].set(lam / c + 1.0 - alpha ** 2 + beta)
+    return Wm, Wc, c
+
+
+def sigma_points(x, P, c):
+    """The 2n+1 points x, x + sqrt(c) L_i, x - sqrt(c) L_i (L the lower Cholesky factor of P): (2n+1, n)."""
+    L, _ = safe_cholesky(P)
+    U = jnp.sqrt(c) * L.T  # row i: the i-th column of sqrt(c) L
+    return jnp.concatenate([x[None], x[None] + U, x[None] - U], axis=0)
+
+
+def _moments(points, fx, Wm, Wc):
+    """Weighted mean of fx (N, d), its covariance and the cross-covariance with the points (N, n)."""
+    mean = Wm @ fx
+    D = fx - mean
+    X = points - points[0]
+    return mean, mm((D * Wc[:, None]).T, D), mm((X * Wc[:, None]).T, D)
+
+
+def _spd_solve(P, B):
+    """P^{-1} B for symmetric positive definite P (n, n), B (n, k)."""
+    L, _ = safe_cholesky(P)
+    return cho_solve(L, B)
+
+
+# ---------------------------------------------------------------------------------------------
+# linearisations (one per epoch; the shared step calls predict, measure, update)
+
+
+class _Taylor(NamedTuple):
+    model: Any
+    t: Any
+    iterations: int
+
+    def predict(self, x, P):
+        F = self.model.F_jac(x, self.t)
+        return F, self.model.f(x, self.t), mm(mm(F, P), F.T)
+
+    def measure(self, x, P):
+        return self.model.H_jac(x, self.t), self.model.h(x, self.t)
+
+    def update(self, x_pred, P_pred, z, R, valid, joseph, first, redo):
+        H, z_hat = first
+        xi = x_pred
+        for it in range(self.iterations):
+            if it > 0:  # Gauss-Newton: re-expand h at the last iterate
+                H, z_hat = self.measure(xi, P_pred)
+            z_lin = jnp.where(valid, z - z_hat + mm(H, xi), 0.0)
+            up = update(x_pred, P_pred, z_lin, H, R, valid, joseph)
+            xi = up.x
+        return up, jnp.where(valid[:, None], H, 0.0), z_lin
+
+
+class _SigmaPoints(NamedTuple):
+    model: Any
+    t: Any
+    weights: Any  # (Wm, Wc, c)
+
+    def predict(self, x, P):
+        Wm, Wc, c = self.weights
+        pts = sigma_points(x, P, c)
+        fx = jax.vmap(lambda p: self.model.f(p, self.t))(pts)
+        mean, FPF, Pxf = _moments(pts, fx, Wm, Wc)
+        return _spd_solve(P, Pxf).T, mean, FPF  # F = P_xf^T P^{-1}, only for the plug-ins
+
+    def measure(self, x, P):
+        Wm, Wc, c = self.weights
+        pts = sigma_points(x, P, c)
+        hx = jax.vmap(lambda p: self.model.h(p, self.t))(pts)
+        z_hat, Pzz, Pxz = _moments(pts, hx, Wm, Wc)
+        H = _spd_solve(P, Pxz).T
+        return H, z_hat, symmetrize(Pzz - mm(H, Pxz))
+
+    def update(self, x_pred, P_pred, z, R, valid, joseph, first, redo):
+        H, z_hat, Om = self.measure(x_pred, P_pred) if redo else first
+        z_lin = jnp.where(valid, z - z_hat + mm(H, x_pred), 0.0)
+        up = update(x_pred, P_pred, z_lin, H, R + Om, valid, joseph)
+        return up, jnp.where(valid[:, None], H, 0.0), z_lin
+
+
+# ---------------------------------------------------------------------------------------------
+# drivers
+
+
+def _epochs(inputs, T):
+    return jnp.arange(T) if inputs is None else inputs
+
+
+def _check_model(model, x0, zs, inputs):
+    """Trace-time checks of f, h (and user Jacobians) against x0 (n,) and zs (T, m)."""
+    if not isinstance(model, NonlinearGaussian):
+        raise ValueError(f"model must be a jaxnav.filters.NonlinearGaussian, got {type(model).__name__}")
+    xs, zsh = tuple(jnp.shape(x0)), tuple(jnp.shape(zs))
+    if len(xs) != 1:
+        raise ValueError(f"x0 has shape {xs}; expected (n,)")
+    if len(zsh) != 2:
+        raise ValueError(f"zs has shape {zsh}; expected (T, m)")
+    (n,), (T, m) = xs, zsh
+    t0 = jax.tree_util.tree_map(lambda a: a[0], _epochs(inputs, T))
+    x = jax.ShapeDtypeStruct((n,), jnp.result_type(x0, float))
+    for name, fn, want in (("f", model.f, (n,)), ("h", model.h, (m,)),
+                           ("F_jac", model.F_jac, (n, n)), ("H_jac", model.H_jac, (m, n))):
+        got = tuple(jax.eval_shape(fn, x, t0).shape)
+        if got != want:
+            raise ValueError(f"model.{name}(x, t) has shape {got}; expected {want} for x0 {xs} and zs {zsh}")
+    return n, m, T
+
+
+def _run(model, x0, P0, zs, lin_of, *, inflation, estimator, mask, save, inputs, unroll, allow_float32,
+         check_finite, joseph):
+    n, m, T = _check_model(model, x0, zs, inputs)
+    lg = LinearGaussian(F=jnp.eye(n), H=jnp.zeros((m, n)), Q=model.Q, R=model.R)
+    params, init, xs, save, _, _, dtype = scan_setup(lg, x0, P0, zs, inflation, estimator, mask, save,
+                                                     allow_float32)
+    params = params._replace(model=params.model._replace(F=None, H=None))
+    ts = _epochs(inputs, T)
+
+    def body(state, inp):
+        step_in, t = inp
+        new, allv, _ = step_with_gain(state, step_in, params, check_finite, joseph, lin=lin_of(t, dtype))
+        return new, StepInfo(**{name: allv[name] for name in save})
+
+    final, info = jax.lax.scan(jax.checkpoint(body, prevent_cse=False), init, (xs, ts), unroll=unroll)
+    return KalmanResult(
+        **info._asdict(), loglik=final.loglik, n_nonfinite=final.n_nonfinite,
+        n_skipped=final.n_skipped, status=final.status, x_final=final.x, P_final=final.P,
+    )
+
+
+_STATIC = ("save", "unroll", "allow_float32", "check_finite", "joseph")
+
+
+@partial(jax.jit, static_argnames=_STATIC + ("iterations",))
+def _ekf(model, x0, P0, zs, *, iterations, **kw):
+    return _run(model, x0, P0, zs, lambda t, dt: _Taylor(model, t, iterations), **kw)
+
+
+@partial(jax.jit, static_argnames=_STATIC)
+def _spkf(model, x0, P0, zs, alpha, beta, kappa, **kw):
+    n = jnp.shape(x0)[0]
+    return _run(model, x0, P0, zs, lambda t, dt: _SigmaPoints(model, t, merwe_weights(n, alpha, beta, kappa, dt)), **kw)
+
+
+_COMMON_DOC = """
+    Args:
+      model: :class:`NonlinearGaussian`.
+      x0: (n,) initial mean.  P0: (n, n) initial covariance.
+      zs: (T, m) measurements; NaN/inf elements are masked and counted.
+      inflation, estimator, mask, save, unroll, allow_float32, check_finite, joseph: as for
+        :func:`~jaxnav.filters.kalman_filter` (the plug-ins see the linearised model: F, H and the
+        innovation z - h at the prior).
+      inputs: optional pytree of (T, ...) arrays; its t-th slice is the ``t`` given to f and h
+        (default: the epoch index t).
+    Returns:
+      :class:`~jaxnav.filters.KalmanResult` (pred_means are f(x_{k-1}) or the sigma-point means).
+    Raises:
+      ValueError: at trace time, for inconsistent shapes of x0, P0, zs, Q, R, mask or of the
+        outputs of f, h and their Jacobians (naming them).
+"""
+
+
+def extended_kalman_filter(model: NonlinearGaussian, x0, P0, zs, *, iterations: int = 1, inflation=None,
+                           estimator=None, mask=None, save=ALL_OUTPUTS, inputs=None, unroll: int = 1,
+                           allow_float32: bool = False, check_finite: bool = True,
+                           joseph: bool = True) -> KalmanResult:
+    """Extended Kalman filter: the shared step on the first-order Taylor expansion of f and h.
+
+    x_{k,k-1} = f(x_{k-1}), P_{k,k-1} = F P F^T + Q with F = df/dx(x_{k-1}); the update uses
+    v = z - h(x_{k,k-1}) and H = dh/dx(x_{k,k-1}). ``iterations`` > 1 (static) is the iterated
+    EKF: Gauss-Newton on the update, x_{i+1} = x_pred + K_i (z - h(x_i) - H_i (x_pred - x_i)),
+    with H_i, K_i at the iterate x_i; the saved innovations, NIS and log-likelihood are those of
+    the last linearisation.
+    """
+    return _ekf(model, x0, P0, zs, iterations=int(iterations), inflation=inflation, estimator=estimator,
+                mask=mask, save=tuple(save), inputs=inputs, unroll=unroll, allow_float32=allow_float32,
+                check_finite=check_finite, joseph=joseph)
+
+
+def unscented_kalman_filter(model: NonlinearGaussian, x0, P0, zs, *, alpha=1e-3, beta=2.0, kappa=0.0,
+                            inflation=None, estimator=None, mask=None, save=ALL_OUTPUTS, inputs=None,
+                            unroll: int = 1, allow_float32: bool = False, check_finite: bool = True,
+                            joseph: bool = True) -> KalmanResult:
+    """Unscented Kalman filter with Van der Merwe's scaled sigma points (alpha, beta, kappa as in
+    filterpy's ``MerweScaledSigmaPoints``; array leaves, so they may be traced).
+
+    Prediction: points of (x_{k-1}, P_{k-1}) through f give x_{k,k-1} and P_{k,k-1} (+ Q); update:
+    new points of (x_{k,k-1}, P_{k,k-1}) through h give z_hat, P_zz, P_xz; K = P_xz (P_zz + R)^{-1}.
+    With alpha = 1e-3 the centre weight is about -1e6 and the moments lose about 12 digits of
+    their relative precision to cancellation; a larger alpha (0.1-1) is better conditioned.
+    """
+    return _spkf(model, x0, P0, zs, alpha, beta, kappa, inflation=inflation, estimator=estimator, mask=mask,
+                 save=tuple(save), inputs=inputs, unroll=unroll, allow_float32=allow_float32,
+                 check_finite=check_finite, joseph=joseph)
+
+
+def cubature_kalman_filter(model: NonlinearGaussian, x0, P0, zs, **kwargs) -> KalmanResult:
+    """Cubature Kalman filter (third-degree spherical-radial rule, Arasaratnam & Haykin 2009).
+
+    The 2n points x +/- sqrt(n) L e_i with weights 1/(2n): the scaled unscented filter with
+    alpha = 1, beta = 0, kappa = 0 (whose centre point has zero weight). Keywords as for
+    :func:`unscented_kalman_filter` (without alpha, beta, kappa).
+    """
+    for bad in ("alpha", "beta", "kappa"):
+        if bad in kwargs:
+            raise ValueError(f"cubature_kalman_filter has no '{bad}' (the rule fixes alpha=1, beta=0, kappa=0)")
+    return unscented_kalman_filter(model, x0, P0, zs, alpha=1.0, beta=0.0, kappa=0.0, **kwargs)
+
+
+for _fn in (extended_kalman_filter, unscented_kalman_filter):
+    _fn.__doc__ += _COMMON_DOC
+
+
+# ---------------------------------------------------------------------------------------------
+# smoothers
+
+
+def extended_rts_smoother(model: NonlinearGaussian, filtered, *, inputs=None, unroll: int = 1,
+                          save=SMOOTHER_OUTPUTS) -> SmootherResult:
+    """Extended RTS smoother: :func:`~jaxnav.filters.rts_smoother` with F_{t+1} = df/dx at the
+    filtered mean x_t, over the filter's saved moments.
+
+    Args:
+      model: the :class:`NonlinearGaussian` given to the filter (only f's Jacobian is used).
+      filtered: a :class:`~jaxnav.filters.KalmanResult` with means, covs, pred_means, pred_covs.
+      inputs: the filter's ``inputs`` (if any).  unroll, save: as for ``rts_smoother``.
+    Returns:
+      :class:`~jaxnav.filters.SmootherResult`.
+    """
+    return _erts(model, filtered, inputs=inputs, unroll=unroll, save=tuple(save))
+
+
+@partial(jax.jit, static_argnames=("unroll", "save"))
+def _erts(model, filtered, *, inputs, unroll, save):
+    T, n = filtered.means.shape
+    ts = _epochs(inputs, T)
+    t_next = jax.tree_util.tree_map(lambda a: a[1:], ts)
+    Fn = jax.vmap(model.F_jac)(filtered.means[:-1], t_next)
+    Fs = jnp.concatenate([jnp.eye(n, dtype=Fn.dtype)[None], Fn], axis=0)
+    return rts_smoother(LinearGaussian(F=Fs, H=None, Q=None, R=None), filtered, unroll=unroll, save=save)
+
+
+def unscented_rts_smoother(model: NonlinearGaussian, filtered, *, alpha=1e-3, beta=2.0, kappa=0.0, inputs=None,
+                           unroll: int = 1, save=SMOOTHER_OUTPUTS) -> SmootherResult:
+    """Unscented RTS smoother (Saerkkae 2008): C_t = P_{x,f} P_{t+1|t}^{-1} from sigma points of
+    (x_t, P_t) through f, then the RTS recursions over the saved predicted moments.
+
+    For a :func:`cubature_kalman_filter` result pass alpha=1, beta=0, kappa=0.
+
+    Args:
+      model: the :class:`NonlinearGaussian` given to the filter.
+      filtered: a :class:`~jaxnav.filters.KalmanResult` with means, covs, pred_means, pred_covs.
+      alpha, beta, kappa: the filter's sigma-point parameters.
+      inputs: the filter's ``inputs`` (if any).  unroll, save: as for ``rts_smoother``.
+    Returns:
+      :class:`~jaxnav.filters.SmootherResult`.
+    """
+    return _urts(model, filtered, alpha, beta, kappa, inputs=inputs, unroll=unroll, save=tuple(save))
+
+
+@partial(jax.jit, static_argnames=("unroll", "save"))
+def _urts(model, filtered, alpha, beta, kappa, *, inputs, unroll, save):
+    for name in ("means", "covs", "pred_means", "pred_covs"):
+        if getattr(filtered, name, None) is None:
+            raise ValueError(f"unscented_rts_smoother needs the filter output '{name}': run the filter with it in save=")
+    T, n = filtered.means.shape
+    dt = filtered.means.dtype
+    Wm, Wc, c = merwe_weights(n, alpha, beta, kappa, dt)
+    t_next = jax.tree_util.tree_map(lambda a: a[1:], _epochs(inputs, T))
+
+    def cross(x, P, t):
+        pts = sigma_points(x, P, c)
+        return _moments(pts, jax.vmap(lambda p: model.f(p, t))(pts), Wm, Wc)[2]
+
+    Pxf = jax.vmap(cross)(filtered.means[:-1], filtered.covs[:-1], t_next)
+    L, ok = safe_cholesky(filtered.pred_covs[1:])
+    C = jnp.where(ok[:, None, None], jnp.swapaxes(cho_solve(L, jnp.swapaxes(Pxf, -1, -2)), -1, -2), 0.0)
+    C = jnp.concatenate([C, jnp.zeros((1, n, n), dt)], axis=0)
+    status = jnp.where(jnp.all(ok), 0, _status.SMOOTHER_FAILED).astype(jnp.int32)
+    means = smoothed_means(C, filtered.means, filtered.pred_means, unroll) if "means" in save else None
+    covs = smoothed_covs(C, filtered.covs, filtered.pred_covs, unroll) if "covs" in save else None
+    return SmootherResult(means=means, covs=covs, gains=C if "gains" in save else None, status=status)
