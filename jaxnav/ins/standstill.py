@@ -95,6 +95,11 @@ def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, w
     return (acc / params.sigma_a**2 + sww / params.sigma_w**2) / n
 
 
+def keep_runs(d, min_samples: int):
+    """(N,) bool ``d`` with its runs of True shorter than ``min_samples`` dropped (binary opening)."""
+    return _min_run(jnp.asarray(d), int(min_samples))
+
+
 def _min_run(d, m: int):
     """Keep only runs of True at least ``m`` samples long (binary opening with a length-m segment)."""
     if m <= 1:
@@ -172,3 +177,111 @@ def detection_scores(detected, truth) -> DetectionScores:
     fn, tn = int(np.sum(~d & s)), int(np.sum(~d & ~s))
     return DetectionScores(precision=tp / (tp + fp) if tp + fp else float("nan"),
                            recall=tp / (tp + fn) if tp + fn else float("nan"), tp=tp, fp=fp, fn=fn, tn=tn)
+
+
+#: platform presets of the standstill detector: SHOE window (s), shortest standstill kept (s), and the
+#: margin on the quiet-period quantile of T_n that sets the threshold (see :func:`quiet_threshold`)
+PLATFORMS = {
+    "foot": {"window_s": 0.03, "min_s": 0.05, "margin": 3.0},
+    "handheld": {"window_s": 0.3, "min_s": 1.0, "margin": 2.0},
+    "car": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5},
+    "rover": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5},
+}
+
+
+def gnss_speed_test(t, pos_enu, vel_enu, R, pos_ok, vel_ok):
+    """Normalised GNSS speed q = sqrt(v^T C_v^-1 v) per epoch (host side).
+
+    Where the solution carries a velocity (``vel_ok``) it is used with its covariance; elsewhere the
+    velocity is the position difference to the neighbouring usable epoch, (p_{i+1} - p_{i-1}) /
+    (t_{i+1} - t_{i-1}) over the nearest usable epochs on each side (one side at the ends), with
+    C_v = (C_p,a + C_p,b) / dt^2. At rest q^2 ~ chi^2(3); q is NaN where no usable epoch exists.
+
+    Args:
+      t: (M,) s.  pos_enu: (M, 3) positions in a local ENU frame, m.  vel_enu: (M, 3) m/s.
+      R: (M, 6, 6) covariance of [pos ENU (m), vel ENU (m/s)].  pos_ok, vel_ok: (M,) bool.
+    Returns:
+      (q (M,), speed (M,) m/s, speed sigma (M,) m/s: sqrt(trace C_v / 3)).
+    """
+    t = np.asarray(t, float)
+    M = t.size
+    p, v, R = np.asarray(pos_enu, float), np.asarray(vel_enu, float), np.asarray(R, float)
+    if p.shape != (M, 3) or v.shape != (M, 3) or R.shape != (M, 6, 6):
+        raise ValueError(f"t {t.shape}, pos_enu {p.shape}, vel_enu {v.shape}, R {R.shape}: need (M,), (M, 3), (M, 3), "
+                         "(M, 6, 6)")
+    pos_ok = np.asarray(pos_ok, bool) & np.all(np.isfinite(p), 1)
+    vel_ok = np.asarray(vel_ok, bool) & np.all(np.isfinite(v), 1)
+    vv, C = np.full((M, 3), np.nan), np.full((M, 3, 3), np.nan)
+    vv[vel_ok], C[vel_ok] = v[vel_ok], R[vel_ok, 3:, 3:]
+    ip = np.flatnonzero(pos_ok)
+    if ip.size >= 2:
+        need = ~vel_ok & pos_ok
+        k = np.searchsorted(ip, np.flatnonzero(need))  # position of each epoch in the usable list
+        a, b = ip[np.maximum(k - 1, 0)], ip[np.minimum(k + 1, ip.size - 1)]
+        dt = t[b] - t[a]
+        good = dt > 0
+        i = np.flatnonzero(need)[good]
+        a, b, dt = a[good], b[good], dt[good]
+        vv[i] = (p[b] - p[a]) / dt[:, None]
+        C[i] = (R[a, :3, :3] + R[b, :3, :3]) / dt[:, None, None] ** 2
+    q = np.full(M, np.nan)
+    ok = np.all(np.isfinite(vv), 1) & np.all(np.isfinite(C.reshape(M, 9)), 1)
+    if ok.any():
+        q[ok] = np.sqrt(np.einsum("mi,mi->m", vv[ok], np.linalg.solve(C[ok], vv[ok][..., None])[..., 0]))
+    sig = np.sqrt(np.trace(C, axis1=1, axis2=2) / 3.0)
+    return q, np.linalg.norm(vv, axis=1), sig
+
+
+def gnss_motion_labels(t_imu, t_gnss, q, *, k_moving: float = 3.0, q_static: float = 2.8, max_gap_s: float = 1.5):
+    """Per-IMU-sample GNSS labels from the normalised speeds ``q`` of :func:`gnss_speed_test` (host side).
+
+    The neighbours of a sample are the usable GNSS epochs just before and just after it, if within
+    ``max_gap_s``. A sample is *moving* when it has a neighbour and every neighbour has q >
+    ``k_moving`` (two epochs must agree where there are two: at rest a single epoch beyond 3 sigma
+    has a probability of 3 %, two in a row 0.1 %), and *static* when both neighbours exist and
+    have q < ``q_static`` (default sqrt(chi^2_3(0.95)) = 2.8: a speed within its own 95 %
+    uncertainty of zero); samples far from any epoch get neither label.
+
+    Args:
+      t_imu: (N,) s.  t_gnss: (M,) s, increasing.  q: (M,) normalised speed (NaN: not usable).
+    Returns:
+      (moving (N,) bool, static (N,) bool, covered (N,) bool: usable epochs within ``max_gap_s`` on both sides).
+    """
+    t_imu, t_gnss, q = np.asarray(t_imu, float), np.asarray(t_gnss, float), np.asarray(q, float)
+    if t_gnss.shape != q.shape:
+        raise ValueError(f"t_gnss {t_gnss.shape} and q {q.shape} must have the same shape")
+    use = np.isfinite(q)
+    tg, qg = t_gnss[use], q[use]
+    N = t_imu.size
+    if tg.size == 0:
+        return np.zeros(N, bool), np.zeros(N, bool), np.zeros(N, bool)
+    j = np.searchsorted(tg, t_imu)
+    jb, ja = np.clip(j - 1, 0, tg.size - 1), np.clip(j, 0, tg.size - 1)
+    near_b = (t_imu - tg[jb] <= max_gap_s) & (tg[jb] <= t_imu + 1e-9)
+    near_a = (tg[ja] - t_imu <= max_gap_s) & (tg[ja] >= t_imu - 1e-9)
+    mb, ma = qg[jb] > k_moving, qg[ja] > k_moving
+    moving = (near_b | near_a) & (mb | ~near_b) & (ma | ~near_a)
+    static = near_b & near_a & (qg[jb] < q_static) & (qg[ja] < q_static)
+    return moving, static, near_b & near_a
+
+
+def quiet_threshold(stat, quiet, *, margin: float = 2.0, quantile: float = 0.95, min_samples: int = 20):
+    """SHOE threshold from the recording's own quiet samples: gamma = margin * Q_quantile(T_n | quiet).
+
+    The statistic's spread at rest depends on the true noise (and a running engine), not only on the
+    configured sigmas, so the threshold is placed above its observed distribution over samples known
+    to be at rest (GNSS-static, the declared static start). Returns NaN when fewer than
+    ``min_samples`` quiet samples exist (the caller then uses its fixed threshold).
+
+    Args:
+      stat: (N,) T_n.  quiet: (N,) bool.
+    Returns:
+      gamma (float, dimensionless) or NaN.
+    """
+    s, qm = np.asarray(stat, float), np.asarray(quiet, bool)
+    if s.shape != qm.shape:
+        raise ValueError(f"stat {s.shape} and quiet {qm.shape} must have the same shape")
+    v = s[qm & np.isfinite(s)]
+    if v.size < max(int(min_samples), 1):
+        return float("nan")
+    return float(margin * np.quantile(v, quantile))
