@@ -215,6 +215,15 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
                                  sd[:, idx.nabla] / MG, run.prep.outages, out / f"biases.{fmt}",
                                  title=f"{name}: estimated sensor biases ({n}-state model)", gyro_sm=gyro_s,
                                  accel_sm=np.asarray(sb.accel) / MG))
+    ser = run.prep.standstill_info.get("_series")
+    if ser is not None:
+        from jaxnav.plot import plot_standstill
+
+        info = run.prep.standstill_info
+        paths.append(plot_standstill(run.prep.t, ser["stat"], info["threshold"], run.prep.standstill,
+                                     ser["raw"] & ser["moving"], ser["t_gnss"], ser["speed"], ser["speed_sigma"],
+                                     run.prep.outages, out / f"standstill.{fmt}",
+                                     title=f"{name}: standstill detector ({info['platform']} preset) and GNSS check"))
     return [str(p) for p in paths]
 
 

@@ -29,7 +29,7 @@ import numpy as np
 from jaxnav.experiments.ins_config import InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (PLATFORMS, LCParams, PVMeasurements, SensorBiases, StandstillParams, coarse_alignment,
-                        detect_standstill, detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold,
+                        detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold,
                         shoe_statistic, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
                         noise_preset, sensor_to_body, smooth, zaru, zupt)
