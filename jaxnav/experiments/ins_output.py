@@ -223,7 +223,8 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
         paths.append(plot_standstill(run.prep.t, ser["stat"], info["threshold"], run.prep.standstill,
                                      ser["raw"] & ser["moving"], ser["t_gnss"], ser["speed"], ser["speed_sigma"],
                                      run.prep.outages, out / f"standstill.{fmt}",
-                                     title=f"{name}: standstill detector ({info['platform']} preset) and GNSS check"))
+                                     title=f"{name}: standstill detector ({info['platform']} preset) and GNSS check",
+                                     unconfirmed=ser["unconfirmed"]))
     return [str(p) for p in paths]
 
 
@@ -348,7 +349,8 @@ def format_ins(results: dict) -> str:
         if dd:
             lines.append(f"  detector ({dd['platform']}): threshold {dd['threshold']:.1f} from {dd['threshold_source']}; "
                          f"GNSS veto: {dd['vetoed_samples']} samples in {dd['vetoed_intervals']} intervals "
-                         f"({dd['vetoed_s']:.1f} s) where GNSS speed > {dd['gnss_k']:g} sigma; vs GNSS-static epochs: "
+                         f"({dd['vetoed_s']:.1f} s) where GNSS speed > {dd['gnss_k']:g} sigma, {dd['unconfirmed_intervals']} "
+                         f"unconfirmed by GNSS dropped; vs GNSS-static epochs: "
                          f"precision {dd['precision']:.3f}, recall {dd['recall']:.3f} "
                          f"(IMU alone {dd['imu_only_precision']:.3f} / {dd['imu_only_recall']:.3f})")
     if c.get("nhc"):

@@ -29,7 +29,7 @@ import numpy as np
 from jaxnav.experiments.ins_config import InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (PLATFORMS, LCParams, PVMeasurements, SensorBiases, StandstillParams, coarse_alignment,
-                        detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold,
+                        detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold, runs_touching,
                         shoe_statistic, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
                         noise_preset, sensor_to_body, smooth, zaru, zupt)
@@ -263,11 +263,13 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
     periods, and a GNSS veto (:func:`jaxnav.ins.gnss_speed_test`, :func:`jaxnav.ins.gnss_motion_labels`).
 
     Gravity for the test is the mean |f| over the first ``static_s`` seconds (absorbs a scale error).
-    Quiet samples: GNSS-static ones (speed below its sigma at both neighbouring usable epochs) and
-    the declared static start. With ``detector_threshold = "auto"`` the threshold is
+    Quiet samples: GNSS-static ones (speed within its 95 % uncertainty of zero at both neighbouring
+    usable epochs) and the declared static start. With ``detector_threshold = "auto"`` the threshold is
     :func:`jaxnav.ins.quiet_threshold` over them (the fixed fallback: 10 times the rest expectation
     6 of T_n with the configured sigmas, when too few quiet samples exist). Samples where a usable
-    GNSS epoch says the platform moves (q > ``zupt_gnss_k``) are vetoed. Only epochs in ``meas.mask``
+    GNSS epoch says the platform moves (q > ``zupt_gnss_k``) are vetoed, and on platforms whose preset
+    asks for it a standstill must contain a GNSS-static sample (one wholly inside a GNSS gap is
+    dropped, counted as unconfirmed). Only epochs in ``meas.mask``
     (the ones the filter sees) are used, so withheld fixes never decide a ZUPT.
 
     Args:
@@ -308,8 +310,14 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
     else:
         gamma, source = float(c.detector_threshold), "config"
     raw = np.asarray(keep_runs(stat < gamma, m))
+    if not pf["gnss_veto"]:
+        moving = np.zeros(t.size, bool)
     vetoed = raw & moving
     det = np.asarray(keep_runs(raw & ~moving, m))
+    unchecked = np.zeros(t.size, bool)
+    if pf["need_gnss_static"] and meas is not None and static.any():
+        kept = runs_touching(det, static)
+        unchecked, det = det & ~kept, kept
     iv_v = standstill_intervals(t, vetoed)
     # scored where GNSS brackets the sample; GNSS-static is the truth (undecided speeds count as not static)
     sc = detection_scores(det[covered], static[covered])
@@ -320,11 +328,13 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
             "gnss_k": c.zupt_gnss_k, "vetoed_samples": int(np.count_nonzero(vetoed)),
             "vetoed_intervals": int(iv_v.shape[0]),
             "vetoed_s": float(np.count_nonzero(vetoed) / rate),
+            "unconfirmed_samples": int(np.count_nonzero(unchecked)),
+            "unconfirmed_intervals": int(standstill_intervals(t, unchecked).shape[0]),
             "gnss_static_samples": int(np.count_nonzero(static)), "gnss_moving_samples": int(np.count_nonzero(moving)),
             "scored_samples": int(np.count_nonzero(covered)),
             "precision": sc.precision, "recall": sc.recall, "tp": sc.tp, "fp": sc.fp, "fn": sc.fn, "tn": sc.tn,
             "imu_only_precision": sc_imu.precision, "imu_only_recall": sc_imu.recall}
-    info["_series"] = {"stat": stat, "raw": raw, "moving": moving, "static": static, "t_gnss": None if meas is None
+    info["_series"] = {"stat": stat, "raw": raw, "moving": moving, "unconfirmed": unchecked, "static": static, "t_gnss": None if meas is None
                        else np.asarray(meas.t, float), "speed": spd, "speed_sigma": sig}
     return det, info
 

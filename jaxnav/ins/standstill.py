@@ -155,6 +155,17 @@ def standstill_intervals(t, detected):
     return np.stack([t[a], t[b]], 1) if a.size else np.zeros((0, 2))
 
 
+def runs_touching(d, anchor):
+    """(N,) bool: the runs of True in ``d`` that contain at least one ``anchor`` sample (host side)."""
+    d, anchor = np.asarray(d, bool), np.asarray(anchor, bool)
+    if d.shape != anchor.shape:
+        raise ValueError(f"d {d.shape} and anchor {anchor.shape} must have the same shape")
+    run = np.cumsum(np.concatenate([[d[0]], d[1:] & ~d[:-1]])) if d.size else np.zeros(0, int)
+    hit = np.zeros(int(run.max(initial=0)) + 1, bool)
+    hit[run[d & anchor]] = True
+    return d & hit[run]
+
+
 class DetectionScores(NamedTuple):
     """Per-sample scores of a detector: precision = TP / (TP + FP), recall = TP / (TP + FN)
     (NaN when undefined), and the counts."""
@@ -179,13 +190,16 @@ def detection_scores(detected, truth) -> DetectionScores:
                            recall=tp / (tp + fn) if tp + fn else float("nan"), tp=tp, fp=fp, fn=fn, tn=tn)
 
 
-#: platform presets of the standstill detector: SHOE window (s), shortest standstill kept (s), and the
-#: margin on the quiet-period quantile of T_n that sets the threshold (see :func:`quiet_threshold`)
+#: platform presets of the standstill detector: SHOE window (s), shortest standstill kept (s), the
+#: margin on the quiet-period quantile of T_n that sets the threshold (see :func:`quiet_threshold`),
+#: whether GNSS motion vetoes a standstill (not on a foot: the foot rests in every step while the
+#: antenna moves on), and whether a standstill must touch a GNSS-static sample (a smooth cruise
+#: looks at rest to the IMU, so where GNSS cannot check, e.g. in an outage, a vehicle gets no ZUPT)
 PLATFORMS = {
-    "foot": {"window_s": 0.03, "min_s": 0.05, "margin": 3.0},
-    "handheld": {"window_s": 0.3, "min_s": 1.0, "margin": 2.0},
-    "car": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5},
-    "rover": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5},
+    "foot": {"window_s": 0.03, "min_s": 0.05, "margin": 3.0, "gnss_veto": False, "need_gnss_static": False},
+    "handheld": {"window_s": 0.3, "min_s": 1.0, "margin": 2.0, "gnss_veto": True, "need_gnss_static": True},
+    "car": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5, "gnss_veto": True, "need_gnss_static": True},
+    "rover": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5, "gnss_veto": True, "need_gnss_static": True},
 }
 
 
