@@ -40,7 +40,7 @@ class StandstillParams(NamedTuple):
       sigma_w: gyro white-noise std per sample, rad/s (ARW / sqrt(dt)).
       threshold: the test threshold gamma on T_n (dimensionless); rest where T_n < gamma.
       g: gravity magnitude, m/s^2 (an accelerometer scale error shows as motion: use the
-        measured |f| at rest, or the local normal gravity).
+        measured |f| at rest, or the local normal gravity); NaN: its estimate over each window.
     """
 
     sigma_a: Any = 0.05
@@ -75,21 +75,46 @@ def _check(f_b, w_b, window):
         raise ValueError(f"window must be >= 1 sample, got {window}")
 
 
-@partial(jax.jit, static_argnames=("window",))
-def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20):
+def _full_sum(x, window: int):
+    """Sum over a window of ``window`` samples starting ``window // 2`` before the sample, shifted
+    inside the record at the ends (every sum has ``window`` samples when N >= window)."""
+    N = x.shape[0]
+    c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)  # (N + 1,)
+    if N <= window:
+        return jnp.repeat(c[-1:], N, axis=0), jnp.full((N,), float(N), x.dtype)
+    b, a = window // 2, window - 1 - window // 2
+    hi = jnp.concatenate([jnp.repeat(c[window:window + 1], b, axis=0), c[window:], jnp.repeat(c[-1:], a, axis=0)], 0)
+    lo = jnp.concatenate([jnp.repeat(c[:1], b, axis=0), c[:N - window + 1], jnp.repeat(c[N - window:N - window + 1], a,
+                                                                                       axis=0)], 0)
+    return hi - lo, jnp.full((N,), float(window), x.dtype)
+
+
+@partial(jax.jit, static_argnames=("window", "edges"))
+def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20,
+                   edges: str = "clamp"):
     """SHOE GLRT statistic T_n per sample (module docstring; Skog et al. 2010).
+
+    With ``params.g`` NaN the gravity magnitude is replaced by its maximum-likelihood estimate
+    |mean f| over the window, which turns the accelerometer term into sum |f_k - mean f|^2 (an
+    accelerometer bias along gravity then does not count as motion).
 
     Args:
       f_b: (N, 3) specific force, m/s^2.  w_b: (N, 3) angular rate, rad/s (any body axes).
       params: :class:`StandstillParams`.  window: W, samples (static).
+      edges: "clamp" (window centred on the sample, (W-1)//2 before, shortened at the record's
+        ends) or "shift" (W//2 before, kept at W samples by shifting it inside the record).
     Returns:
       (N,) T_n, dimensionless (rest where below ``params.threshold``).
     """
     _check(f_b, w_b, window)
-    sf, n = _centred_sum(f_b, window)
-    sff, _ = _centred_sum(jnp.sum(f_b * f_b, 1), window)
-    sww, _ = _centred_sum(jnp.sum(w_b * w_b, 1), window)
+    if edges not in ("clamp", "shift"):
+        raise ValueError(f"edges must be 'clamp' or 'shift', got {edges!r}")
+    wsum = _centred_sum if edges == "clamp" else _full_sum
+    sf, n = wsum(f_b, window)
+    sff, _ = wsum(jnp.sum(f_b * f_b, 1), window)
+    sww, _ = wsum(jnp.sum(w_b * w_b, 1), window)
     g = jnp.asarray(params.g, f_b.dtype)
+    g = jnp.where(jnp.isfinite(g), g, jnp.linalg.norm(sf, axis=1) / n)
     # sum |f_k - g u|^2 = sum |f_k|^2 - 2 g |sum f_k| + n g^2  (u = sum f / |sum f|)
     acc = jnp.maximum(sff - 2.0 * g * jnp.linalg.norm(sf, axis=1) + n * g * g, 0.0)
     return (acc / params.sigma_a**2 + sww / params.sigma_w**2) / n
