@@ -21,16 +21,20 @@ def car(tmp_path_factory):
     return rec, p
 
 
-@pytest.mark.parametrize("platform", [None, "car", "rover"])
-def test_no_zupt_while_cruising_and_zupt_at_stops(car, platform):
+@pytest.mark.parametrize("platform, velocity", [(None, True), ("car", True), ("rover", False)])
+def test_no_zupt_while_cruising_and_zupt_at_stops(car, platform, velocity):
+    """Default and car presets with the GNSS velocity; rover without it (speed from position differences)."""
     from jaxnav.experiments.ins_config import load_ins_config
     from jaxnav.experiments.ins_run import prepare
 
     rec, p = car
+    text = p.read_text()
     if platform is not None:
-        p2 = p.with_name(f"car_{platform}.toml")
-        p2.write_text(p.read_text().replace('[run]\n', f'[run]\nplatform = "{platform}"\n'))
-        p = p2
+        text = text.replace('[run]\n', f'[run]\nplatform = "{platform}"\n')
+    if not velocity:
+        text = text.replace('[gnss]\n', '[gnss]\nuse_velocity = false\n')
+    p = p.with_name(f"car_{platform}_{velocity}.toml")
+    p.write_text(text)
     prep = prepare(load_ins_config(p), progress=lambda *a: None)
     t = prep.t - prep.t[0]
     speed = np.interp(t, np.asarray(rec.truth.t), np.linalg.norm(np.asarray(rec.truth.v_n), axis=1))
@@ -43,3 +47,19 @@ def test_no_zupt_while_cruising_and_zupt_at_stops(car, platform):
     first, second = (t > 2.0) & (t < 18.0), (t > 82.0) & (t < 86.0)
     assert np.mean(st[first]) > 0.9 and np.mean(st[second]) > 0.9
     assert info["precision"] > 0.9 and info["recall"] > 0.8
+
+
+def test_config_keys(car, tmp_path):
+    from jaxnav.experiments.ins_config import ConfigError, load_ins_config
+
+    _, p = car
+    cfg = load_ins_config(p)
+    assert cfg.constraints.platform == "handheld" and cfg.constraints.detector_threshold == "auto"
+    base = p.read_text()
+    for old, new, key in (("[run]\n", '[run]\nplatform = "boat"\n', "platform"),
+                          ('zupt = "auto"\n', 'zupt = "auto"\ndetector_threshold = "low"\n', "detector_threshold"),
+                          ('zupt = "auto"\n', 'zupt = "auto"\nzupt_gnss_k = -1.0\n', "zupt_gnss_k")):
+        q = tmp_path / "bad.toml"
+        q.write_text(base.replace(old, new))
+        with pytest.raises(ConfigError, match=key):
+            load_ins_config(q)
