@@ -269,8 +269,8 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
     6 of T_n with the configured sigmas, when too few quiet samples exist). Samples where a usable
     GNSS epoch says the platform moves (q > ``zupt_gnss_k``) are vetoed, and on platforms whose preset
     asks for it a standstill must contain a GNSS-static sample (one wholly inside a GNSS gap is
-    dropped, counted as unconfirmed). Only epochs in ``meas.mask``
-    (the ones the filter sees) are used, so withheld fixes never decide a ZUPT.
+    dropped, counted as unconfirmed). Only epochs in ``meas.mask`` (the ones the filter sees) are
+    used, so withheld fixes never decide a ZUPT.
 
     Args:
       t: (N,) s.  dth, dv: (N, 3) increments.  dt: (N,) s.  meas: PVMeasurements or None (no GNSS check).
@@ -334,8 +334,8 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
             "scored_samples": int(np.count_nonzero(covered)),
             "precision": sc.precision, "recall": sc.recall, "tp": sc.tp, "fp": sc.fp, "fn": sc.fn, "tn": sc.tn,
             "imu_only_precision": sc_imu.precision, "imu_only_recall": sc_imu.recall}
-    info["_series"] = {"stat": stat, "raw": raw, "moving": moving, "unconfirmed": unchecked, "static": static, "t_gnss": None if meas is None
-                       else np.asarray(meas.t, float), "speed": spd, "speed_sigma": sig}
+    info["_series"] = {"stat": stat, "raw": raw, "moving": moving, "unconfirmed": unchecked, "static": static,
+                       "t_gnss": None if meas is None else np.asarray(meas.t, float), "speed": spd, "speed_sigma": sig}
     return det, info
 
 
