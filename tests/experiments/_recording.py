@@ -45,10 +45,11 @@ def car_spec():
 
 def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=(0.6, 0.3, -1.4),
               tag_error_s=-0.15, imu_rate=100.0, gnss_rate=2.0, pos_sigma=0.02, vel_sigma=0.03,
-              vibration=1.0) -> Recording:
+              vibration=1.0, spec=None) -> Recording:
     """Simulate the car (industrial-grade IMU errors, RTK-level GNSS) and write ``imu.txt`` / ``gnss.txt``;
-    ``vibration`` scales the engine and road vibration while moving (0: a perfectly smooth road)."""
-    truth = sim.generate_trajectory(car_spec(), imu_rate_hz=imu_rate)
+    ``vibration`` scales the engine and road vibration while moving (0: a perfectly smooth road);
+    ``spec``: another :class:`jaxnav.sim.TrajectorySpec` (default :func:`car_spec`)."""
+    truth = sim.generate_trajectory(car_spec() if spec is None else spec, imu_rate_hz=imu_rate)
     dt = float(truth.dt)
     model_g = sim.SensorErrorModel(bias_sigma=math.radians(5.0) / 3600, white=math.radians(0.15) / 60)
     model_a = sim.SensorErrorModel(bias_sigma=2e-3 * 9.81, white=0.04 / 60)

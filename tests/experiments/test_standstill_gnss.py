@@ -63,3 +63,31 @@ def test_config_keys(car, tmp_path):
         q.write_text(base.replace(old, new))
         with pytest.raises(ConfigError, match=key):
             load_ins_config(q)
+
+
+def test_slow_rover_default_preset(tmp_path):
+    """A rover crawling at 0.3 m/s (no vibration) between stops: with the default preset no ZUPT while
+    it moves, and its stops found."""
+    import math
+
+    from jaxnav import sim
+    from jaxnav.experiments.ins_config import load_ins_config
+    from jaxnav.experiments.ins_run import prepare
+
+    S = sim.Segment
+    spec = sim.TrajectorySpec(lat=math.radians(40.1), lon=math.radians(-105.2), h=1600.0, heading=0.5, speed=0.0,
+                              segments=(S("rest", duration=20.0), S("accelerate", duration=3.0, dspeed=0.3),
+                                        S("cruise", hold=20.0), S("accelerate", duration=3.0, dspeed=-0.3),
+                                        S("rest", duration=10.0), S("accelerate", duration=3.0, dspeed=0.3),
+                                        S("turn", duration=10.0, dheading=1.0), S("cruise", hold=10.0)))
+    rec = write_car(tmp_path, vibration=0.0, spec=spec)
+    p = car_config(rec, tmp_path, time_offset=0.15)
+    text = p.read_text()
+    text = text[:text.index("[evaluate]")].replace("min_speed_m_s = 3.0", "min_speed_m_s = 0.2")
+    p.write_text(text + '[constraints]\nzupt = "auto"\n')
+    prep = prepare(load_ins_config(p), progress=lambda *a: None)
+    t = prep.t - prep.t[0]
+    speed = np.interp(t, np.asarray(rec.truth.t), np.linalg.norm(np.asarray(rec.truth.v_n), axis=1))
+    st = np.asarray(prep.standstill)
+    assert not np.any(st & (speed > 0.15)), f"ZUPT at speeds up to {speed[st].max():.2f} m/s"
+    assert np.mean(st[(t > 2.0) & (t < 18.0)]) > 0.9 and np.mean(st[(t > 48.0) & (t < 54.0)]) > 0.9
