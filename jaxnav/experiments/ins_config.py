@@ -79,6 +79,7 @@ RANGES = {
     "constraints.detector_sigma_a_m_s2": (1e-6, 100.0),
     "constraints.detector_sigma_w_deg_s": (1e-6, 1000.0),
     "constraints.detector_min_s": (0.0, 3600.0),
+    "constraints.zupt_gnss_k": (0.5, 100.0),
     "evaluate.outage_s": (0.1, 3600.0),
     "evaluate.first_s": (0.0, 1e6),
     "evaluate.gap_s": (0.1, 1e5),
@@ -178,11 +179,13 @@ class ConstraintSection(NamedTuple):
     nhc_sigma: float
     nhc_rate_hz: float
     nhc_lever_frd: Any
-    detector_window: int
-    detector_threshold: float
+    detector_window: Any  # samples, or None: the platform's window (seconds) at the IMU rate
+    detector_threshold: Any  # "auto" (from the recording's quiet periods) or a number
     detector_sigma_a: float
     detector_sigma_w: float
-    detector_min_s: float
+    detector_min_s: Any  # s, or None: the platform's
+    platform: str = "handheld"  # [run] platform: a key of jaxnav.ins.standstill.PLATFORMS
+    zupt_gnss_k: float = 3.0  # no ZUPT/ZARU where the GNSS speed exceeds this many of its sigmas
 
 
 class EvaluateSection(NamedTuple):
@@ -466,8 +469,12 @@ def _alignment(path, d) -> AlignmentSection:
     return a
 
 
-def _constraints(path, d) -> ConstraintSection:
+def _constraints(path, d, platform="handheld") -> ConstraintSection:
     r = _Reader(path, d, "constraints")
+    th = d.get("detector_threshold", "auto")
+    if th != "auto":
+        th = r.get("detector_threshold", float, lo=0.0, lo_open=True)
+    r.used.add("detector_threshold")
     z = d.get("zupt", False)
     r.used.add("zupt")
     if z not in ("auto", False):
@@ -481,11 +488,12 @@ def _constraints(path, d) -> ConstraintSection:
                           nhc_sigma=r.get("nhc_sigma_m_s", float, 0.1, **pos),
                           nhc_rate_hz=r.get("nhc_rate_hz", float, 10.0, **pos),
                           nhc_lever_frd=_lever(r, "nhc_lever_frd_m"),
-                          detector_window=r.get("detector_window", int, 31, lo=3, hi=100_000),
-                          detector_threshold=r.get("detector_threshold", float, 100.0, **pos),
+                          detector_window=r.get("detector_window", int, None, lo=3, hi=100_000),
+                          detector_threshold=th,
                           detector_sigma_a=r.get("detector_sigma_a_m_s2", float, 0.05, **pos),
                           detector_sigma_w=r.get("detector_sigma_w_deg_s", float, 0.57, **pos) * DEG,
-                          detector_min_s=r.get("detector_min_s", float, 0.5, lo=0.0))
+                          detector_min_s=r.get("detector_min_s", float, None, lo=0.0),
+                          platform=platform, zupt_gnss_k=r.get("zupt_gnss_k", float, 3.0, **pos))
     r.done()
     return c
 
@@ -548,11 +556,12 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
             raise ConfigError(f"{path}: missing section [{sec}]")
     run = _Reader(path, d.get("run", {}), "run")
     name = run.get("name", str, path.stem)
+    platform = run.get("platform", str, "handheld", choices=("car", "handheld", "foot", "rover"))
     run.done()
     return InsConfig(path=path, name=name, imu=_imu(path, d["imu"], variables), gnss=_gnss(path, d["gnss"], variables),
                      noise=_noise(path, d.get("noise", {"grade": "consumer"})),
                      alignment=_alignment(path, d.get("alignment", {})),
-                     constraints=_constraints(path, d.get("constraints", {})),
+                     constraints=_constraints(path, d.get("constraints", {}), platform),
                      evaluate=_evaluate(path, d["evaluate"]) if "evaluate" in d else None,
                      tune=_tune(path, d.get("tune", {})), raw=d)
 

@@ -221,6 +221,16 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
                                  sd[:, idx.nabla] / MG, run.prep.outages, out / f"biases.{fmt}",
                                  title=f"{name}: estimated sensor biases ({n}-state model)", gyro_sm=gyro_s,
                                  accel_sm=np.asarray(sb.accel) / MG))
+    ser = run.prep.standstill_info.get("_series")
+    if ser is not None:
+        from jaxnav.plot import plot_standstill
+
+        info = run.prep.standstill_info
+        paths.append(plot_standstill(run.prep.t, ser["stat"], info["threshold"], run.prep.standstill,
+                                     ser["raw"] & ser["moving"], ser["t_gnss"], ser["speed"], ser["speed_sigma"],
+                                     run.prep.outages, out / f"standstill.{fmt}",
+                                     title=f"{name}: standstill detector ({info['platform']} preset) and GNSS check",
+                                     unconfirmed=ser["unconfirmed"]))
     return [str(p) for p in paths]
 
 
@@ -246,9 +256,7 @@ def _constraints(prep, run) -> dict:
         d.update(standstill_samples=int(np.count_nonzero(prep.standstill)), standstill_intervals=int(iv.shape[0]),
                  standstill_s=float(np.sum(iv[:, 1] - iv[:, 0])) if iv.size else 0.0,
                  standstill_intervals_gpst_s=iv.tolist(),
-                 detector={"kind": "SHOE GLRT", "window": c.detector_window, "threshold": c.detector_threshold,
-                           "sigma_a_m_s2": c.detector_sigma_a, "sigma_w_rad_s": c.detector_sigma_w,
-                           "min_s": c.detector_min_s})
+                 detector={k: v for k, v in prep.standstill_info.items() if not k.startswith("_")})
     return d
 
 
@@ -345,6 +353,14 @@ def format_ins(results: dict) -> str:
     if "standstill_intervals" in c:
         lines.append(f"  standstill: {c['standstill_intervals']} intervals, {c['standstill_s']:.1f} s (SHOE GLRT) -> "
                      f"ZUPT{' + ZARU' if c['zaru'] else ''} updates")
+        dd = c.get("detector", {})
+        if dd:
+            lines.append(f"  detector ({dd['platform']}): threshold {dd['threshold']:.1f} from {dd['threshold_source']}; "
+                         f"GNSS veto: {dd['vetoed_samples']} samples in {dd['vetoed_intervals']} intervals "
+                         f"({dd['vetoed_s']:.1f} s) where GNSS speed > {dd['gnss_k']:g} sigma, {dd['unconfirmed_intervals']} "
+                         f"unconfirmed by GNSS dropped; vs GNSS-static epochs: "
+                         f"precision {dd['precision']:.3f}, recall {dd['recall']:.3f} "
+                         f"(IMU alone {dd['imu_only_precision']:.3f} / {dd['imu_only_recall']:.3f})")
     if c.get("nhc"):
         lines.append("  non-holonomic constraint on (lateral and vertical velocity zero while moving)")
 

@@ -28,7 +28,9 @@ import numpy as np
 
 from jaxnav.experiments.ins_config import ConfigError, InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, StandstillParams, coarse_alignment, detect_standstill,
+from jaxnav.ins import (PLATFORMS, LCParams, PVMeasurements, SensorBiases, StandstillParams, coarse_alignment,
+                        detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold, runs_touching,
+                        shoe_statistic, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
                         noise_preset, sensor_to_body, smooth, zaru, zupt)
 from jaxnav.ins.attitude import quat_to_dcm
@@ -254,21 +256,88 @@ class Prepared(NamedTuple):
     densities: Densities
     standstill: Any = None  # (N,) bool per IMU sample, or None (no detection)
     aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC)
+    standstill_info: dict = {}  # detector report (detect_stops), with its series under "_series"
 
 
-def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float):
-    """(N,) bool standstill per IMU sample by the SHOE GLRT with the ``[constraints]`` settings.
+def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
+    """Standstill per IMU sample: SHOE GLRT with the platform's window, a threshold from the quiet
+    periods, and a GNSS veto (:func:`jaxnav.ins.gnss_speed_test`, :func:`jaxnav.ins.gnss_motion_labels`).
 
     Gravity for the test is the mean |f| over the first ``static_s`` seconds (absorbs a scale error).
+    Quiet samples: GNSS-static ones (speed within its 95 % uncertainty of zero at both neighbouring
+    usable epochs) and the declared static start. With ``detector_threshold = "auto"`` the threshold is
+    :func:`jaxnav.ins.quiet_threshold` over them (the fixed fallback: 10 times the rest expectation
+    6 of T_n with the configured sigmas, when too few quiet samples exist). Samples where a usable
+    GNSS epoch says the platform moves (q > ``zupt_gnss_k``) are vetoed, and on platforms whose preset
+    asks for it a standstill must contain a GNSS-static sample (one wholly inside a GNSS gap is
+    dropped, counted as unconfirmed). Only epochs in ``meas.mask`` (the ones the filter sees) are
+    used, so withheld fixes never decide a ZUPT.
+
+    Args:
+      t: (N,) s.  dth, dv: (N, 3) increments.  dt: (N,) s.  meas: PVMeasurements or None (no GNSS check).
+    Returns:
+      (standstill (N,) bool, info dict for results.json).
     """
     c = cfg.constraints
     f = dv / dt[:, None]
+    w = dth / dt[:, None]
     st = t <= t[0] + static_s
     g = float(np.mean(np.linalg.norm(f[st], axis=1)))
-    params = StandstillParams(sigma_a=c.detector_sigma_a, sigma_w=c.detector_sigma_w, threshold=c.detector_threshold,
-                              g=g)
-    m = max(1, int(round(c.detector_min_s / float(np.median(dt)))))
-    return np.asarray(detect_standstill(f, dth / dt[:, None], params, window=c.detector_window, min_samples=m))
+    pf = PLATFORMS[c.platform]
+    rate = 1.0 / float(np.median(dt))
+    window = int(c.detector_window) if c.detector_window is not None else max(1, int(round(pf["window_s"] * rate)))
+    min_s = float(pf["min_s"] if c.detector_min_s is None else c.detector_min_s)
+    m = max(1, int(round(min_s * rate)))
+    params = StandstillParams(sigma_a=c.detector_sigma_a, sigma_w=c.detector_sigma_w, threshold=1.0, g=g)
+    stat = np.asarray(shoe_statistic(f, w, params, window=window))
+    moving = np.zeros(t.size, bool)
+    static = np.zeros(t.size, bool)
+    covered = np.zeros(t.size, bool)
+    q = spd = sig = None
+    if meas is not None:
+        mk = np.asarray(meas.mask, bool)
+        pos = np.asarray(meas.pos, float)
+        enu = np.asarray(curvilinear_to_enu(pos[0], pos - pos[0]))
+        q, spd, sig = gnss_speed_test(meas.t, enu, meas.vel, meas.R, mk[:, :3].all(1), mk[:, 3:].all(1))
+        tg = np.asarray(meas.t, float)
+        gap = 1.5 * float(np.median(np.diff(tg))) if tg.size > 1 else 1.0
+        moving, static, covered = gnss_motion_labels(t, tg, q, k_moving=c.zupt_gnss_k, max_gap_s=max(gap, 0.3))
+    quiet = (static | st) & ~moving
+    fallback = 10.0 * 6.0
+    if c.detector_threshold == "auto":
+        gamma = quiet_threshold(stat, quiet, margin=pf["margin"], min_samples=m)
+        source = "quiet periods" if np.isfinite(gamma) else "fallback (too few quiet samples)"
+        gamma = gamma if np.isfinite(gamma) else fallback
+    else:
+        gamma, source = float(c.detector_threshold), "config"
+    raw = np.asarray(keep_runs(stat < gamma, m))
+    if not pf["gnss_veto"]:
+        moving = np.zeros(t.size, bool)
+    vetoed = raw & moving
+    det = np.asarray(keep_runs(raw & ~moving, m))
+    unchecked = np.zeros(t.size, bool)
+    if pf["need_gnss_static"] and meas is not None and static.any():
+        kept = runs_touching(det, static)
+        unchecked, det = det & ~kept, kept
+    iv_v = standstill_intervals(t, vetoed)
+    # scored where GNSS brackets the sample; GNSS-static is the truth (undecided speeds count as not static)
+    sc = detection_scores(det[covered], static[covered])
+    sc_imu = detection_scores(raw[covered], static[covered])
+    info = {"kind": "SHOE GLRT", "platform": c.platform, "window_samples": window, "min_s": min_s,
+            "threshold": float(gamma), "threshold_source": source, "quiet_samples": int(np.count_nonzero(quiet)),
+            "sigma_a_m_s2": c.detector_sigma_a, "sigma_w_rad_s": c.detector_sigma_w, "gnss_check": meas is not None,
+            "gnss_k": c.zupt_gnss_k, "vetoed_samples": int(np.count_nonzero(vetoed)),
+            "vetoed_intervals": int(iv_v.shape[0]),
+            "vetoed_s": float(np.count_nonzero(vetoed) / rate),
+            "unconfirmed_samples": int(np.count_nonzero(unchecked)),
+            "unconfirmed_intervals": int(standstill_intervals(t, unchecked).shape[0]),
+            "gnss_static_samples": int(np.count_nonzero(static)), "gnss_moving_samples": int(np.count_nonzero(moving)),
+            "scored_samples": int(np.count_nonzero(covered)),
+            "precision": sc.precision, "recall": sc.recall, "tp": sc.tp, "fp": sc.fp, "fn": sc.fn, "tn": sc.tn,
+            "imu_only_precision": sc_imu.precision, "imu_only_recall": sc_imu.recall}
+    info["_series"] = {"stat": stat, "raw": raw, "moving": moving, "unconfirmed": unchecked, "static": static,
+                       "t_gnss": None if meas is None else np.asarray(meas.t, float), "speed": spd, "speed_sigma": sig}
+    return det, info
 
 
 def build_aids(cfg: InsConfig, standstill):
@@ -322,11 +391,12 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         pos, t, outages, lever_rfu=lever_rfu, pos_sigma_floor=cfg.gnss.pos_sigma_floor,
         vel_sigma_floor=cfg.gnss.vel_sigma_floor, use_velocity=cfg.gnss.use_velocity,
         qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))
-    standstill = detect_stops(cfg, t, dth, dv, dt, a.static_s) if cfg.constraints.zupt == "auto" else None
+    standstill, stop_info = (detect_stops(cfg, t, dth, dv, dt, a.static_s, meas) if cfg.constraints.zupt == "auto"
+                             else (None, {}))
     return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
                     time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
                     meas=meas, keep=keep, withheld=withheld, densities=dens, standstill=standstill,
-                    aids=build_aids(cfg, standstill))
+                    aids=build_aids(cfg, standstill), standstill_info=stop_info)
 
 
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")

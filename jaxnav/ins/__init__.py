@@ -19,10 +19,16 @@ from jaxnav.ins.mounting import (  # issue 18: IMU mounting (sensor -> FRD vehic
 )
 from jaxnav.ins.noise import NOISE_GRADES, ImuNoise, imu_noise_from_datasheet, imu_noise_to_datasheet, noise_preset
 from jaxnav.ins.standstill import (
+    PLATFORMS,
     DetectionScores,
     StandstillParams,
     detect_standstill,
     detection_scores,
+    gnss_motion_labels,
+    gnss_speed_test,
+    keep_runs,
+    quiet_threshold,
+    runs_touching,
     shoe_statistic,
     standstill_intervals,
     threshold_standstill,
@@ -109,7 +115,8 @@ __all__ = [
     "mounting_from_rpy", "mounting_from_rpy_deg", "mounting_to_rpy", "sensor_to_body",
     "NOISE_GRADES", "ImuNoise", "imu_noise_from_datasheet", "imu_noise_to_datasheet", "noise_preset",
     "DetectionScores", "StandstillParams", "detect_standstill", "detection_scores", "shoe_statistic",
-    "standstill_intervals", "threshold_standstill", "TimeOffset", "estimate_time_offset",
+    "standstill_intervals", "threshold_standstill", "PLATFORMS", "gnss_motion_labels", "gnss_speed_test", "keep_runs",
+    "quiet_threshold", "runs_touching", "TimeOffset", "estimate_time_offset",
     "ERROR_MODEL_15GM", "ERROR_MODEL_21", "IDX21", "STATE_NAMES21", "error_model_Qc21", "error_model_F21",
     "error_model_G21", "error_model_P0", "chi2_quantile", "measurements", "Aid", "MeasContext", "MeasRows",
     "MeasurementModel", "heading", "nhc", "odometer", "zaru", "zupt",

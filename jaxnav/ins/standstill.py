@@ -40,7 +40,7 @@ class StandstillParams(NamedTuple):
       sigma_w: gyro white-noise std per sample, rad/s (ARW / sqrt(dt)).
       threshold: the test threshold gamma on T_n (dimensionless); rest where T_n < gamma.
       g: gravity magnitude, m/s^2 (an accelerometer scale error shows as motion: use the
-        measured |f| at rest, or the local normal gravity).
+        measured |f| at rest, or the local normal gravity); NaN: its estimate over each window.
     """
 
     sigma_a: Any = 0.05
@@ -75,24 +75,54 @@ def _check(f_b, w_b, window):
         raise ValueError(f"window must be >= 1 sample, got {window}")
 
 
-@partial(jax.jit, static_argnames=("window",))
-def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20):
+def _full_sum(x, window: int):
+    """Sum over a window of ``window`` samples starting ``window // 2`` before the sample, shifted
+    inside the record at the ends (every sum has ``window`` samples when N >= window)."""
+    N = x.shape[0]
+    c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)  # (N + 1,)
+    if N <= window:
+        return jnp.repeat(c[-1:], N, axis=0), jnp.full((N,), float(N), x.dtype)
+    b, a = window // 2, window - 1 - window // 2
+    hi = jnp.concatenate([jnp.repeat(c[window:window + 1], b, axis=0), c[window:], jnp.repeat(c[-1:], a, axis=0)], 0)
+    lo = jnp.concatenate([jnp.repeat(c[:1], b, axis=0), c[:N - window + 1], jnp.repeat(c[N - window:N - window + 1], a,
+                                                                                       axis=0)], 0)
+    return hi - lo, jnp.full((N,), float(window), x.dtype)
+
+
+@partial(jax.jit, static_argnames=("window", "edges"))
+def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20,
+                   edges: str = "clamp"):
     """SHOE GLRT statistic T_n per sample (module docstring; Skog et al. 2010).
+
+    With ``params.g`` NaN the gravity magnitude is replaced by its maximum-likelihood estimate
+    |mean f| over the window, which turns the accelerometer term into sum |f_k - mean f|^2 (an
+    accelerometer bias along gravity then does not count as motion).
 
     Args:
       f_b: (N, 3) specific force, m/s^2.  w_b: (N, 3) angular rate, rad/s (any body axes).
       params: :class:`StandstillParams`.  window: W, samples (static).
+      edges: "clamp" (window centred on the sample, (W-1)//2 before, shortened at the record's
+        ends) or "shift" (W//2 before, kept at W samples by shifting it inside the record).
     Returns:
       (N,) T_n, dimensionless (rest where below ``params.threshold``).
     """
     _check(f_b, w_b, window)
-    sf, n = _centred_sum(f_b, window)
-    sff, _ = _centred_sum(jnp.sum(f_b * f_b, 1), window)
-    sww, _ = _centred_sum(jnp.sum(w_b * w_b, 1), window)
+    if edges not in ("clamp", "shift"):
+        raise ValueError(f"edges must be 'clamp' or 'shift', got {edges!r}")
+    wsum = _centred_sum if edges == "clamp" else _full_sum
+    sf, n = wsum(f_b, window)
+    sff, _ = wsum(jnp.sum(f_b * f_b, 1), window)
+    sww, _ = wsum(jnp.sum(w_b * w_b, 1), window)
     g = jnp.asarray(params.g, f_b.dtype)
+    g = jnp.where(jnp.isfinite(g), g, jnp.linalg.norm(sf, axis=1) / n)
     # sum |f_k - g u|^2 = sum |f_k|^2 - 2 g |sum f_k| + n g^2  (u = sum f / |sum f|)
     acc = jnp.maximum(sff - 2.0 * g * jnp.linalg.norm(sf, axis=1) + n * g * g, 0.0)
     return (acc / params.sigma_a**2 + sww / params.sigma_w**2) / n
+
+
+def keep_runs(d, min_samples: int):
+    """(N,) bool ``d`` with its runs of True shorter than ``min_samples`` dropped (binary opening)."""
+    return _min_run(jnp.asarray(d), int(min_samples))
 
 
 def _min_run(d, m: int):
@@ -150,6 +180,17 @@ def standstill_intervals(t, detected):
     return np.stack([t[a], t[b]], 1) if a.size else np.zeros((0, 2))
 
 
+def runs_touching(d, anchor):
+    """(N,) bool: the runs of True in ``d`` that contain at least one ``anchor`` sample (host side)."""
+    d, anchor = np.asarray(d, bool), np.asarray(anchor, bool)
+    if d.shape != anchor.shape:
+        raise ValueError(f"d {d.shape} and anchor {anchor.shape} must have the same shape")
+    run = np.cumsum(np.concatenate([[d[0]], d[1:] & ~d[:-1]])) if d.size else np.zeros(0, int)
+    hit = np.zeros(int(run.max(initial=0)) + 1, bool)
+    hit[run[d & anchor]] = True
+    return d & hit[run]
+
+
 class DetectionScores(NamedTuple):
     """Per-sample scores of a detector: precision = TP / (TP + FP), recall = TP / (TP + FN)
     (NaN when undefined), and the counts."""
@@ -172,3 +213,114 @@ def detection_scores(detected, truth) -> DetectionScores:
     fn, tn = int(np.sum(~d & s)), int(np.sum(~d & ~s))
     return DetectionScores(precision=tp / (tp + fp) if tp + fp else float("nan"),
                            recall=tp / (tp + fn) if tp + fn else float("nan"), tp=tp, fp=fp, fn=fn, tn=tn)
+
+
+#: platform presets of the standstill detector: SHOE window (s), shortest standstill kept (s), the
+#: margin on the quiet-period quantile of T_n that sets the threshold (see :func:`quiet_threshold`),
+#: whether GNSS motion vetoes a standstill (not on a foot: the foot rests in every step while the
+#: antenna moves on), and whether a standstill must touch a GNSS-static sample (a smooth cruise
+#: looks at rest to the IMU, so where GNSS cannot check, e.g. in an outage, a vehicle gets no ZUPT)
+PLATFORMS = {
+    "foot": {"window_s": 0.03, "min_s": 0.05, "margin": 3.0, "gnss_veto": False, "need_gnss_static": False},
+    "handheld": {"window_s": 0.3, "min_s": 1.0, "margin": 2.0, "gnss_veto": True, "need_gnss_static": True},
+    "car": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5, "gnss_veto": True, "need_gnss_static": True},
+    "rover": {"window_s": 1.0, "min_s": 2.0, "margin": 1.5, "gnss_veto": True, "need_gnss_static": True},
+}
+
+
+def gnss_speed_test(t, pos_enu, vel_enu, R, pos_ok, vel_ok):
+    """Normalised GNSS speed q = sqrt(v^T C_v^-1 v) per epoch (host side).
+
+    Where the solution carries a velocity (``vel_ok``) it is used with its covariance; elsewhere the
+    velocity is the position difference to the neighbouring usable epoch, (p_{i+1} - p_{i-1}) /
+    (t_{i+1} - t_{i-1}) over the nearest usable epochs on each side (one side at the ends), with
+    C_v = (C_p,a + C_p,b) / dt^2. At rest q^2 ~ chi^2(3); q is NaN where no usable epoch exists.
+
+    Args:
+      t: (M,) s.  pos_enu: (M, 3) positions in a local ENU frame, m.  vel_enu: (M, 3) m/s.
+      R: (M, 6, 6) covariance of [pos ENU (m), vel ENU (m/s)].  pos_ok, vel_ok: (M,) bool.
+    Returns:
+      (q (M,), speed (M,) m/s, speed sigma (M,) m/s: sqrt(trace C_v / 3)).
+    """
+    t = np.asarray(t, float)
+    M = t.size
+    p, v, R = np.asarray(pos_enu, float), np.asarray(vel_enu, float), np.asarray(R, float)
+    if p.shape != (M, 3) or v.shape != (M, 3) or R.shape != (M, 6, 6):
+        raise ValueError(f"t {t.shape}, pos_enu {p.shape}, vel_enu {v.shape}, R {R.shape}: need (M,), (M, 3), (M, 3), "
+                         "(M, 6, 6)")
+    pos_ok = np.asarray(pos_ok, bool) & np.all(np.isfinite(p), 1)
+    vel_ok = np.asarray(vel_ok, bool) & np.all(np.isfinite(v), 1)
+    vv, C = np.full((M, 3), np.nan), np.full((M, 3, 3), np.nan)
+    vv[vel_ok], C[vel_ok] = v[vel_ok], R[vel_ok, 3:, 3:]
+    ip = np.flatnonzero(pos_ok)
+    if ip.size >= 2:
+        need = ~vel_ok & pos_ok
+        k = np.searchsorted(ip, np.flatnonzero(need))  # position of each epoch in the usable list
+        a, b = ip[np.maximum(k - 1, 0)], ip[np.minimum(k + 1, ip.size - 1)]
+        dt = t[b] - t[a]
+        good = dt > 0
+        i = np.flatnonzero(need)[good]
+        a, b, dt = a[good], b[good], dt[good]
+        vv[i] = (p[b] - p[a]) / dt[:, None]
+        C[i] = (R[a, :3, :3] + R[b, :3, :3]) / dt[:, None, None] ** 2
+    q = np.full(M, np.nan)
+    ok = np.all(np.isfinite(vv), 1) & np.all(np.isfinite(C.reshape(M, 9)), 1)
+    if ok.any():
+        q[ok] = np.sqrt(np.einsum("mi,mi->m", vv[ok], np.linalg.solve(C[ok], vv[ok][..., None])[..., 0]))
+    sig = np.sqrt(np.trace(C, axis1=1, axis2=2) / 3.0)
+    return q, np.linalg.norm(vv, axis=1), sig
+
+
+def gnss_motion_labels(t_imu, t_gnss, q, *, k_moving: float = 3.0, q_static: float = 2.8, max_gap_s: float = 1.5):
+    """Per-IMU-sample GNSS labels from the normalised speeds ``q`` of :func:`gnss_speed_test` (host side).
+
+    The neighbours of a sample are the usable GNSS epochs just before and just after it, if within
+    ``max_gap_s``. A sample is *moving* when it has a neighbour and every neighbour has q >
+    ``k_moving`` (two epochs must agree where there are two: at rest a single epoch beyond 3 sigma
+    has a probability of 3 %, two in a row 0.1 %), and *static* when both neighbours exist and
+    have q < ``q_static`` (default sqrt(chi^2_3(0.95)) = 2.8: a speed within its own 95 %
+    uncertainty of zero); samples far from any epoch get neither label.
+
+    Args:
+      t_imu: (N,) s.  t_gnss: (M,) s, increasing.  q: (M,) normalised speed (NaN: not usable).
+    Returns:
+      (moving (N,) bool, static (N,) bool, covered (N,) bool: usable epochs within ``max_gap_s`` on both sides).
+    """
+    t_imu, t_gnss, q = np.asarray(t_imu, float), np.asarray(t_gnss, float), np.asarray(q, float)
+    if t_gnss.shape != q.shape:
+        raise ValueError(f"t_gnss {t_gnss.shape} and q {q.shape} must have the same shape")
+    use = np.isfinite(q)
+    tg, qg = t_gnss[use], q[use]
+    N = t_imu.size
+    if tg.size == 0:
+        return np.zeros(N, bool), np.zeros(N, bool), np.zeros(N, bool)
+    j = np.searchsorted(tg, t_imu)
+    jb, ja = np.clip(j - 1, 0, tg.size - 1), np.clip(j, 0, tg.size - 1)
+    near_b = (t_imu - tg[jb] <= max_gap_s) & (tg[jb] <= t_imu + 1e-9)
+    near_a = (tg[ja] - t_imu <= max_gap_s) & (tg[ja] >= t_imu - 1e-9)
+    mb, ma = qg[jb] > k_moving, qg[ja] > k_moving
+    moving = (near_b | near_a) & (mb | ~near_b) & (ma | ~near_a)
+    static = near_b & near_a & (qg[jb] < q_static) & (qg[ja] < q_static)
+    return moving, static, near_b & near_a
+
+
+def quiet_threshold(stat, quiet, *, margin: float = 2.0, quantile: float = 0.95, min_samples: int = 20):
+    """SHOE threshold from the recording's own quiet samples: gamma = margin * Q_quantile(T_n | quiet).
+
+    The statistic's spread at rest depends on the true noise (and a running engine), not only on the
+    configured sigmas, so the threshold is placed above its observed distribution over samples known
+    to be at rest (GNSS-static, the declared static start). Returns NaN when fewer than
+    ``min_samples`` quiet samples exist (the caller then uses its fixed threshold).
+
+    Args:
+      stat: (N,) T_n.  quiet: (N,) bool.
+    Returns:
+      gamma (float, dimensionless) or NaN.
+    """
+    s, qm = np.asarray(stat, float), np.asarray(quiet, bool)
+    if s.shape != qm.shape:
+        raise ValueError(f"stat {s.shape} and quiet {qm.shape} must have the same shape")
+    v = s[qm & np.isfinite(s)]
+    if v.size < max(int(min_samples), 1):
+        return float("nan")
+    return float(margin * np.quantile(v, quantile))

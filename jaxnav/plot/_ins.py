@@ -119,3 +119,52 @@ def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_standstill(t, stat, threshold, detected, vetoed, t_gnss, speed, speed_sigma, windows, path, *,
+                    title: str, unconfirmed=None) -> pathlib.Path:
+    """SHOE statistic with its threshold and the accepted standstills (top), GNSS speed with its sigma
+    and the samples the GNSS check vetoed (bottom).
+
+    Args:
+      t: (N,) IMU times, s.  stat: (N,) T_n.  threshold: gamma.  detected, vetoed: (N,) bool.
+      t_gnss, speed, speed_sigma: (M,) s, m/s, m/s (or None).  windows: (K, 2) outage windows, s.
+      unconfirmed: optional (N,) bool, standstills dropped for want of a GNSS-static sample.
+    """
+    path = pathlib.Path(path)
+    t0 = float(t[0])
+    x = np.asarray(t) - t0
+    fig, ax = plt.subplots(2, 1, figsize=(13, 6.5), sharex=True)
+
+    def spans(a, flag, color, label):
+        d = np.diff(np.concatenate([[0], np.asarray(flag, np.int8), [0]]))
+        for k, (i, j) in enumerate(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)):
+            a.axvspan(x[i], x[j], color=color, alpha=0.3, lw=0, label=label if k == 0 else None)
+
+    for a in ax:
+        _shade_outages(a, windows, t0)
+    spans(ax[0], detected, "C2", "accepted standstill (ZUPT)")
+    spans(ax[0], vetoed, "C3", "vetoed: GNSS says moving")
+    if unconfirmed is not None:
+        spans(ax[0], unconfirmed, "C1", "dropped: no GNSS-static epoch")
+    ax[0].semilogy(x, np.maximum(np.asarray(stat, float), 1e-6), color="C0", lw=0.8, label="SHOE statistic T_n")
+    ax[0].axhline(threshold, color="k", ls="--", lw=1, label=f"threshold {threshold:.3g}")
+    ax[0].set_ylabel("T_n (dimensionless)")
+    ax[0].grid(alpha=0.3)
+    ax[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    if t_gnss is not None and speed is not None:
+        tg = np.asarray(t_gnss) - t0
+        ax[1].plot(tg, speed, ".", ms=2, color="C1", label="GNSS speed")
+        ax[1].plot(tg, 3 * np.asarray(speed_sigma), color="0.4", lw=0.8, label="3 x its sigma")
+        ax[1].set_yscale("symlog", linthresh=0.1)
+    spans(ax[1], vetoed, "C3", "vetoed: GNSS says moving")
+    spans(ax[1], detected, "C2", "accepted standstill (ZUPT)")
+    ax[1].set_ylabel("speed, m/s")
+    ax[1].set_xlabel("time since start, s")
+    ax[1].grid(alpha=0.3)
+    ax[1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=110)
+    plt.close(fig)
+    return path

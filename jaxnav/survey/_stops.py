@@ -12,12 +12,12 @@ between stops; class 3 = a target stop whose previous stop is a known-coordinate
 
 from __future__ import annotations
 
-from functools import partial
 from typing import Any, NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
+
+from jaxnav.ins.standstill import StandstillParams, shoe_statistic
 
 KNOWN_COORDINATE, KNOWN_POSITION, LEVELLING, ZUPT, TARGET = range(5)
 #: stop kind names, index = code
@@ -161,25 +161,14 @@ class DetectorParams(NamedTuple):
     gravity: Any = float("nan")
 
 
-def _window_sum(x, W):
-    """Centered moving sum over W samples (clamped edges), via cumulative sums; x (N, ...)."""
-    N = x.shape[0]
-    c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)
-    lo = np.clip(np.arange(N) - W // 2, 0, N)
-    hi = np.clip(lo + W, 0, N)
-    lo = np.clip(hi - W, 0, N)
-    return c[hi] - c[lo], (hi - lo).astype(float)
-
-
-@partial(jax.jit, static_argnames=("window",))
 def stance_statistic(f_b, w_b, params: DetectorParams = DetectorParams(), *, window: int = 50):
     """Generalized-likelihood-ratio static test statistic (stance hypothesis, "SHOE" detector).
 
     T_k = 1/W sum_{i in window} ( |f_i - g u_k|^2 / sigma_a^2 + |w_i|^2 / sigma_g^2 ),
-    u_k = mean(f) / |mean(f)| over the window: the negative log-likelihood ratio of "static"
-    (specific force along a fixed direction with magnitude g, zero rate) against "moving",
-    computed for every sample with cumulative sums. With g unknown its ML estimate |mean f|
-    turns the accelerometer term into the moving variance sum |f_i - mean f|^2.
+    u_k = mean(f) / |mean(f)| over the window: :func:`jaxnav.ins.shoe_statistic` with windows of W
+    samples starting W // 2 before each sample (shifted inside the record at its ends). With g
+    unknown its ML estimate |mean f| turns the accelerometer term into the moving variance sum
+    |f_i - mean f|^2.
 
     Args:
       f_b: (N, 3) specific force, m/s^2.  w_b: (N, 3) angular rate, rad/s.
@@ -187,17 +176,9 @@ def stance_statistic(f_b, w_b, params: DetectorParams = DetectorParams(), *, win
     Returns:
       (N,) statistic T_k (static where below the threshold).
     """
-    if jnp.shape(f_b) != jnp.shape(w_b) or jnp.ndim(f_b) != 2 or jnp.shape(f_b)[1] != 3:
-        raise ValueError(f"f_b {jnp.shape(f_b)} and w_b {jnp.shape(w_b)} must both be (N, 3)")
-    sf, n = _window_sum(f_b, window)
-    sff, _ = _window_sum(jnp.sum(f_b**2, 1), window)
-    sww, _ = _window_sum(jnp.sum(w_b**2, 1), window)
-    n = jnp.asarray(n, f_b.dtype)
-    u = sf / jnp.maximum(jnp.linalg.norm(sf, axis=1, keepdims=True), 1e-12)
-    g = jnp.asarray(params.gravity, f_b.dtype)
-    g = jnp.where(jnp.isfinite(g), g, jnp.linalg.norm(sf, axis=1) / n)
-    acc = jnp.maximum(sff - 2.0 * g * jnp.sum(u * sf, 1) + n * g * g, 0.0)
-    return (acc / params.sigma_a**2 + sww / params.sigma_g**2) / n
+    p = StandstillParams(sigma_a=params.sigma_a, sigma_w=params.sigma_g, threshold=params.threshold,
+                         g=params.gravity)
+    return shoe_statistic(jnp.asarray(f_b), jnp.asarray(w_b), p, window=window, edges="shift")
 
 
 def static_spans(static, t, *, min_duration: float = 2.0, min_gap: float = 0.5):

@@ -44,9 +44,12 @@ def car_spec():
 
 
 def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=(0.6, 0.3, -1.4),
-              tag_error_s=-0.15, imu_rate=100.0, gnss_rate=2.0, pos_sigma=0.02, vel_sigma=0.03) -> Recording:
-    """Simulate the car (industrial-grade IMU errors, RTK-level GNSS) and write ``imu.txt`` / ``gnss.txt``."""
-    truth = sim.generate_trajectory(car_spec(), imu_rate_hz=imu_rate)
+              tag_error_s=-0.15, imu_rate=100.0, gnss_rate=2.0, pos_sigma=0.02, vel_sigma=0.03,
+              vibration=1.0, spec=None) -> Recording:
+    """Simulate the car (industrial-grade IMU errors, RTK-level GNSS) and write ``imu.txt`` / ``gnss.txt``;
+    ``vibration`` scales the engine and road vibration while moving (0: a perfectly smooth road);
+    ``spec``: another :class:`jaxnav.sim.TrajectorySpec` (default :func:`car_spec`)."""
+    truth = sim.generate_trajectory(car_spec() if spec is None else spec, imu_rate_hz=imu_rate)
     dt = float(truth.dt)
     model_g = sim.SensorErrorModel(bias_sigma=math.radians(5.0) / 3600, white=math.radians(0.15) / 60)
     model_a = sim.SensorErrorModel(bias_sigma=2e-3 * 9.81, white=0.04 / 60)
@@ -58,7 +61,7 @@ def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=
     t_end = np.asarray(truth.t)
     moving = np.linalg.norm(np.asarray(truth.v_n)[1:], axis=1) > 0.05
     def vib(amp, hz):  # increment of amp sin(2 pi hz t) over (t_k, t_k+1]
-        return amp / (2 * np.pi * hz) * (np.cos(2 * np.pi * hz * t_end[:-1]) - np.cos(2 * np.pi * hz * t_end[1:]))
+        return vibration * amp / (2 * np.pi * hz) * (np.cos(2 * np.pi * hz * t_end[:-1]) - np.cos(2 * np.pi * hz * t_end[1:]))
     dv[:, 2] += np.where(moving, vib(0.3, 23.0), 0.0)
     dv[:, 0] += np.where(moving, vib(0.15, 31.0), 0.0)
     dth[:, 1] += np.where(moving, vib(0.01, 17.0), 0.0)

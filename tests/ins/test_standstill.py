@@ -105,3 +105,47 @@ def test_walk_set_stops():
     print(f"\nwalk_0827 SHOE: precision {s.precision:.4f} recall {s.recall:.4f}; RTK spans "
           f"{(ref - t[0]).round(2).tolist()}, detected {(ins.standstill_intervals(t, det) - t[0]).round(2).tolist()}")
     assert s.precision > 0.98 and s.recall > 0.8
+
+
+def test_gnss_speed_test_velocity_and_position_differences():
+    """q = sqrt(v' C^-1 v): from the reported velocity, and from position differences where it is absent."""
+    M = 9
+    t = np.arange(M) * 0.5
+    p = np.zeros((M, 3))
+    p[:, 0] = 2.0 * t  # 2 m/s east
+    R = np.zeros((M, 6, 6))
+    R[:, :3, :3] = np.eye(3) * 0.02**2
+    R[:, 3:, 3:] = np.eye(3) * 0.05**2
+    v = np.tile([2.0, 0.0, 0.0], (M, 1))
+    q, spd, sig = ins.gnss_speed_test(t, p, v, R, np.ones(M, bool), np.ones(M, bool))
+    np.testing.assert_allclose(q, 2.0 / 0.05)
+    np.testing.assert_allclose(sig, 0.05)
+    q2, spd2, sig2 = ins.gnss_speed_test(t, p, np.full((M, 3), np.nan), R, np.ones(M, bool), np.zeros(M, bool))
+    # central difference over 1 s inside, one-sided 0.5 s at the ends; sigma sqrt(2) 0.02 / dt
+    np.testing.assert_allclose(spd2, 2.0)
+    np.testing.assert_allclose(sig2[1:-1], math.sqrt(2) * 0.02 / 1.0)
+    np.testing.assert_allclose(sig2[[0, -1]], math.sqrt(2) * 0.02 / 0.5)
+    np.testing.assert_allclose(q2, spd2 / sig2)
+    with pytest.raises(ValueError, match="R"):
+        ins.gnss_speed_test(t, p, v, R[:, :3, :3], np.ones(M, bool), np.ones(M, bool))
+
+
+def test_gnss_motion_labels_need_two_epochs_to_veto():
+    tg = np.arange(6) * 1.0
+    q = np.array([0.5, 0.5, 5.0, 0.5, 5.0, 5.0])
+    t = np.array([0.5, 1.5, 2.5, 4.5, 5.2, 9.0])
+    moving, static, covered = ins.gnss_motion_labels(t, tg, q, k_moving=3.0, max_gap_s=1.5)
+    # 0.5: both still; 1.5 / 2.5: one epoch beyond 3 sigma, not both; 4.5: both moving;
+    # 5.2: only the epoch before is near (moving); 9.0: no epoch near
+    assert moving.tolist() == [False, False, False, True, True, False]
+    assert static.tolist() == [True, False, False, False, False, False]
+    assert covered.tolist() == [True, True, True, True, False, False]
+
+
+def test_quiet_threshold():
+    rng = np.random.default_rng(0)
+    stat = np.concatenate([rng.chisquare(6, 500) / 6, 1e3 + rng.random(500)])
+    quiet = np.arange(1000) < 500
+    g = ins.quiet_threshold(stat, quiet, margin=2.0)
+    assert g == pytest.approx(2.0 * np.quantile(stat[:500], 0.95))
+    assert math.isnan(ins.quiet_threshold(stat, np.zeros(1000, bool)))
