@@ -245,6 +245,21 @@ def test_grad_of_loglik_wrt_closed_over_parameters_equals_finite_differences():
         np.testing.assert_allclose(g, np.array(fd), rtol=1e-6)
 
 
+def test_inputs_and_time_varying_noise():
+    """f and h take the t-th slice of an ``inputs`` pytree; Q, R given per epoch equal the static ones."""
+    zs = ZS[:60]
+    dts = np.ones(60)
+    model = jf.NonlinearGaussian(lambda x, u: turn(x, 0, u["dt"]), lambda x, u: range_bearing(x, 0),
+                                 np.broadcast_to(Q, (60, N, N)), np.broadcast_to(R, (60, M, M)))
+    for run, smooth in ((jf.extended_kalman_filter, jf.extended_rts_smoother),
+                        (jf.unscented_kalman_filter, jf.unscented_rts_smoother)):
+        res = run(model, X0, P0, zs, inputs={"dt": dts})
+        ref = run(MODEL, X0, P0, zs)
+        np.testing.assert_allclose(res.means, ref.means, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(smooth(model, res, inputs={"dt": dts}).means, smooth(MODEL, ref).means,
+                                   rtol=0, atol=1e-9)
+
+
 def test_shape_errors_name_the_shapes():
     with pytest.raises(ValueError, match=r"model.h\(x, t\) has shape \(3,\); expected \(2,\)"):
         bad = jf.NonlinearGaussian(turn, lambda x, t: x[:3], Q, R)
