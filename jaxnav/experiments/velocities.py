@@ -221,7 +221,7 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
         t_st = time.perf_counter()
         fit = fit_station(s, steps=steps.get(s.station, ()), detect=detect, kappa=kappa, random_walk=random_walk,
                           reml=reml, screen=screen, sigma_factor=sigma_factor, residual_k=residual_k,
-                          periods_days=periods_days)
+                          periods_days=periods_days, warn_steps=True)
         fig = out / f"{s.station}_fit.png"
         plot_station_fit(fit, fig)
         rec = station_record(fit, file=f, figure=fig)

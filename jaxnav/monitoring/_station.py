@@ -422,7 +422,7 @@ def residual_trend(grid: DailyGrid, A, beta):
 
 def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: bool = True, reml: bool = True,
                 screen: bool = True, sigma_factor: float = 5.0, residual_k: float = 5.0,
-                per_decade: float = 1.5, iterations: int = 40, periods_days=()) -> StationFit:
+                per_decade: float = 1.5, iterations: int = 40, periods_days=(), warn_steps=None) -> StationFit:
     """Velocity, its uncertainty under coloured noise, seasonal terms, steps and outliers of one station.
 
     Args:
@@ -435,6 +435,8 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
       sigma_factor, residual_k: screening thresholds.  per_decade: Gauss-Markov terms per decade.
       iterations: BFGS iterations of the noise fit.
       periods_days: further periodic terms, days (:func:`jaxnav.monitoring.design_matrix`).
+      warn_steps: after the last fit, scan once more and warn when one more step would beat the
+        BIC penalty (a misfit); default: when ``detect`` > 0.
     Returns:
       :class:`StationFit` (amplitudes of the further periods: :func:`period_amplitudes`).
     Raises:
@@ -475,6 +477,8 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
                                iterations=iterations)
         fit = jax.tree_util.tree_map(np.asarray, fit)
         limit = detect <= sum(s == "detected" for s in sources)
+        if limit and not (detect > 0 if warn_steps is None else warn_steps):
+            break
         found = detect_steps(grid, A, fit, spec, random_walk=random_walk)
         if found is None:
             break
