@@ -127,7 +127,8 @@ def run(args) -> int:
         print(f"\nwrote {out / 'monitor.json'}, {out / 's1_statistics.png'}, {out / 's1_period.png'} "
               f"({res['wall_time_s']:.1f} s)")
         return 0
-    res = run_monitor_velocities(files, out, steps=steps, detect=0 if args.no_detect_steps else args.detect_steps, kappa=kappa,
+    detect = 0 if args.no_detect_steps else args.detect_steps
+    res = run_monitor_velocities(files, out, steps=steps, detect=detect, kappa=kappa,
                                  random_walk=not args.no_random_walk, reml=not args.ml, screen=not args.no_screen,
                                  sigma_factor=args.sigma_factor, residual_k=args.residual_k, s1=args.s1,
                                  period=args.period, robust=args.robust, command=shlex.join(["jaxnav", *args._argv]),

@@ -157,7 +157,8 @@ def write_velocity_table(path, records: dict, *, command: str = "") -> pathlib.P
              "# reference frame: as in each input file (not transformed); east/north/up local to the station",
              "# ve..su: trajectory model (offset, rate, annual, semi-annual, steps) with the coloured noise named in "
              "noise_model; corr_en: east-north rate correlation (0: the components are fitted independently)",
-             "# midas_*: MIDAS (Blewitt et al. 2016, with the same steps); steps: steps in the model (given + detected)",
+             "# midas_*: MIDAS (Blewitt et al. 2016, with the same steps); "
+             "steps: steps in the model (given + detected)",
              ",".join(cols)]
     for name, r in records.items():
         v, sd = r["velocity_mm_per_yr"], r["velocity_sigma_mm_per_yr"]

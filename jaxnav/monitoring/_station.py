@@ -101,8 +101,8 @@ def _day_index(series):
     return cal if dups(cal) < dups(jul) and np.all(np.diff(cal) >= 0) else jul
 
 
-def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 5.0, sigma_max_m=None, residual_k: float = 5.0,
-                    window_days: int = 15, max_passes: int = 10) -> Screening:
+def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 5.0, sigma_max_m=None,
+                    residual_k: float = 5.0, window_days: int = 15, max_passes: int = 10) -> Screening:
     """Reject days with implausible formal sigmas and values far from the trajectory (per component).
 
     1. Sigma test: a component whose formal sigma exceeds ``sigma_factor`` x the median formal
@@ -351,16 +351,16 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
         return None
     T = len(grid.t)
     est = spec.kappa is None
-    whitened = []
+    per_comp = []
     for c in range(3):
         args = (jnp.asarray(fit.theta[c]), jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0)),
                 jnp.asarray(grid.valid[:, c]))
-        whitened.append(args)
+        per_comp.append(args)
 
     def scan(cand):
         S = (np.arange(T)[:, None] >= cand[None, :]).astype(float)  # (T, M)
         stat = np.zeros(cand.size)
-        for th, yy, v in whitened:
+        for th, yy, v in per_comp:
             allA = jnp.asarray(np.concatenate([A, S], axis=1))
             yt, At, _ = _whitened(th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W),
                                   jnp.asarray(spec.d_grid), est, random_walk)
@@ -449,7 +449,8 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
     if len(t) < 2 or (t[-1] - t[0]) / DAY < 60:
         raise ValueError(f"{series.station}: the series spans {(t[-1] - t[0]) / DAY if len(t) > 1 else 0:.0f} days; "
                          "a trajectory with seasonal terms needs at least 60")
-    scr = screen_outliers(series, steps=steps, periods_days=periods_days, sigma_factor=sigma_factor, residual_k=residual_k) if screen else \
+    scr = screen_outliers(series, steps=steps, periods_days=periods_days, sigma_factor=sigma_factor,
+                          residual_k=residual_k) if screen else \
         Screening(keep=np.isfinite(series.enu), records=[], counts={"sigma": 0, "residual": 0,
                                                                       "missing": int((~np.isfinite(series.enu)).sum())},
                   sigma_limit_m=np.full(3, np.nan), residual_limit_m=np.full(3, np.nan))

@@ -23,8 +23,8 @@ def test_velocity_table_has_units_header_and_one_row_per_station(tmp_path):
     without coordinates has empty latitude/longitude cells."""
     from jaxnav.experiments.velocities import write_velocity_table
 
-    p = write_velocity_table(tmp_path / "velocities.csv", {"AAAA": _record((45.4, 16.3, 0.2), 29.65),
-                                                           "BBBB": _record((-1.0, 1.2, -17.1), None)}, command="jaxnav m")
+    recs = {"AAAA": _record((45.4, 16.3, 0.2), 29.65), "BBBB": _record((-1.0, 1.2, -17.1), None)}
+    p = write_velocity_table(tmp_path / "velocities.csv", recs, command="jaxnav m")
     text = p.read_text().splitlines()
     head = [ln for ln in text if ln.startswith("#")]
     assert any("mm/yr" in ln for ln in head) and any("reference frame" in ln for ln in head)
