@@ -410,3 +410,53 @@ def _smoothed_means_blocks(C, A, xs, L):
         Mb = maps(C[:nb * L].reshape(nb, L, n, n), A[:nb * L].reshape(nb, L, n, n))
         carry, _ = jax.lax.scan(lambda c, k: (apply(c, k * L, L, Mb[k]), None), carry, jnp.arange(nb), reverse=True)
     return carry[1].reshape(B, T, n)
+
+
+def _broadcast_like(tree, like):
+    """Every leaf of ``tree`` broadcast to the shape and cast to the dtype of the matching leaf of ``like``."""
+    return jax.tree_util.tree_map(lambda a, s: jnp.broadcast_to(jnp.asarray(a, s.dtype), s.shape), tree, like)
+
+
+def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, check_finite, joseph):
+    """The ``vmap`` rule of :func:`~jaxnav.filters.kalman_filter`: one covariance recursion when the batch allows.
+
+    When the model, P0, mask and plug-ins are shared, the plug-ins are data-independent and NaN
+    masking is on, the covariances differ between the sequences only through their non-finite
+    elements. ``lax.cond`` on the data then picks: no unmasked non-finite element in the whole
+    batch -> :func:`kalman_filter_batch`'s shared recursion (its shared outputs broadcast to B
+    copies, as a loop returns them); else the plain per-sequence filters. Either way the result
+    equals a loop of single runs. Other batches (P0 or the model per sequence, data-dependent
+    rules, ``check_finite=False``, where ``vmap`` already shares what can be shared) run the
+    plain filters.
+
+    Args:
+      plain: the per-sequence filter ``(model, x0, P0, zs, inflation, estimator, mask) -> KalmanResult``.
+      in_batched: pytree of bools like ``args``.  args: the batched arguments (batch axis first).
+      save, unroll, allow_float32, check_finite, joseph: the filter's static options.
+    Returns:
+      (KalmanResult with a leading batch axis on every field, its pytree of True).
+    """
+    model, x0, P0, zs, inflation, estimator, mask = args
+    axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
+
+    def per_sequence():
+        return jax.vmap(plain, in_axes=axes)(*args)
+
+    like = jax.eval_shape(per_sequence)
+    shared_args = [in_batched[i] for i in (0, 2, 4, 5, 6)]
+    if (check_finite and in_batched[3] and data_independent(inflation, estimator)
+            and not any(jax.tree_util.tree_leaves(shared_args)) and jnp.ndim(zs) == 3):
+        def shared():
+            out = _kalman_filter_batch(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
+                                       save=save, unroll=unroll, allow_float32=allow_float32, block="auto",
+                                       joseph=joseph)
+            return _broadcast_like(out, like)
+
+        used = True if mask is None else jnp.asarray(mask, bool)
+        if jnp.ndim(used) == 1:
+            used = used[:, None]
+        clean = jnp.all(jnp.isfinite(zs) | ~jnp.asarray(used, bool))
+        out = jax.lax.cond(clean, shared, per_sequence)
+    else:
+        out = per_sequence()
+    return out, jax.tree_util.tree_map(lambda _: True, out)

@@ -7,7 +7,7 @@ covariance recursion have their own entry points in :mod:`._batch`.
 
 from __future__ import annotations
 
-from functools import partial
+from functools import lru_cache, partial
 import jax
 
 from jaxnav.filters._model import LinearGaussian
@@ -85,9 +85,39 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
       ValueError: at trace time, for inconsistent shapes (naming them), unknown output names, or
         a float32 computation without ``allow_float32``.
     """
-    return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
-                          save=tuple(save), unroll=unroll, allow_float32=allow_float32, check_finite=check_finite,
-                          joseph=joseph)
+    run = _batch_aware(tuple(save), unroll, allow_float32, check_finite, joseph)
+    return run(model, x0, P0, zs, inflation, estimator, mask)
+
+
+@lru_cache(maxsize=None)
+def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
+    """:func:`_kalman_filter` for one static configuration, with a ``vmap`` rule and exact derivatives.
+
+    Under ``vmap`` the rule (:func:`jaxnav.filters._batch.vmap_filter_rule`) shares one covariance
+    recursion when the batch allows it and runs the plain per-sequence filters otherwise.
+    ``custom_vmap`` has no reverse mode, so derivatives (``jvp``, ``grad``, any nesting with
+    ``vmap``) are those of the plain filter: exact, per sequence under ``vmap``.
+    """
+    def plain(model, x0, P0, zs, inflation, estimator, mask):
+        return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask, save=save,
+                              unroll=unroll, allow_float32=allow_float32, check_finite=check_finite, joseph=joseph)
+
+    @jax.custom_batching.custom_vmap
+    def batched(*args):
+        return plain(*args)
+
+    @batched.def_vmap
+    def rule(axis_size, in_batched, *args):
+        from jaxnav.filters._batch import vmap_filter_rule
+        return vmap_filter_rule(plain, in_batched, args, save=save, unroll=unroll, allow_float32=allow_float32,
+                                check_finite=check_finite, joseph=joseph)
+
+    @jax.custom_jvp
+    def run(*args):
+        return batched(*args)
+
+    run.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
+    return run
 
 
 @partial(jax.jit, static_argnames=("save", "unroll", "allow_float32", "check_finite", "joseph"))

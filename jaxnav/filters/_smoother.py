@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import partial
+from functools import lru_cache, partial
 from typing import Any, NamedTuple
 
 import jax
@@ -55,7 +55,71 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
     Raises:
       ValueError: if the needed outputs were not saved, or F has a wrong shape.
     """
-    return _rts_smoother(model, filtered, unroll=unroll, save=tuple(save))
+    save = tuple(save)
+    moments = tuple(getattr(filtered, name, None) for name in ("means", "covs", "pred_means", "pred_covs"))
+    if any(a is None for a in moments):
+        smoother_inputs(model, filtered, save, "rts_smoother")  # raises, naming the missing output
+    return _batch_aware_rts(unroll, save)(model, *moments)
+
+
+@lru_cache(maxsize=None)
+def _batch_aware_rts(unroll, save):
+    """:func:`_rts_smoother` on the four saved moments, with a ``vmap`` rule and exact derivatives.
+
+    Under ``vmap`` with a shared model and batched covariances, ``lax.cond`` checks whether every
+    sequence's covariances equal the first's (what :func:`~jaxnav.filters.kalman_filter` returns
+    under ``vmap`` for a clean batch with a shared model): then the gains and smoothed covariances
+    are computed once and only the means per sequence; else the plain per-sequence smoothers.
+    Derivatives are those of the plain smoother (``custom_vmap`` has no reverse mode).
+    """
+    def plain(model, means, covs, pred_means, pred_covs):
+        filtered = _Moments(means=means, covs=covs, pred_means=pred_means, pred_covs=pred_covs)
+        return _rts_smoother(model, filtered, unroll=unroll, save=save)
+
+    @jax.custom_batching.custom_vmap
+    def batched(*args):
+        return plain(*args)
+
+    @batched.def_vmap
+    def rule(axis_size, in_batched, model, means, covs, pred_means, pred_covs):
+        args = (model, means, covs, pred_means, pred_covs)
+        axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
+
+        def per_sequence():
+            return jax.vmap(plain, in_axes=axes)(*args)
+
+        like = jax.eval_shape(per_sequence)
+        if any(jax.tree_util.tree_leaves(in_batched[0])) or not (in_batched[2] and in_batched[4]):
+            out = per_sequence()  # F per sequence, or covariances already shared by vmap
+        else:
+            def shared():
+                one = _Moments(means=means[0], covs=covs[0], pred_means=pred_means[0], pred_covs=pred_covs[0])
+                C, status = smoother_gains(model, one, save)
+                sm = jax.vmap(lambda x, xp: smoothed_means(C, x, xp, unroll), in_axes=(axes[1], axes[3]))(
+                    means, pred_means) if "means" in save else None
+                P_s = smoothed_covs(C, covs[0], pred_covs[0], unroll) if "covs" in save else None
+                out = SmootherResult(means=sm, covs=P_s, gains=C if "gains" in save else None, status=status)
+                return jax.tree_util.tree_map(lambda a, s: jnp.broadcast_to(a, s.shape), out, like)
+
+            same = jnp.all(covs == covs[:1]) & jnp.all(pred_covs == pred_covs[:1])
+            out = jax.lax.cond(same, shared, per_sequence)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    @jax.custom_jvp
+    def run(*args):
+        return batched(*args)
+
+    run.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
+    return run
+
+
+class _Moments(NamedTuple):
+    """The four filter outputs the smoother reads."""
+
+    means: Any
+    covs: Any
+    pred_means: Any
+    pred_covs: Any
 
 
 @partial(jax.jit, static_argnames=("unroll", "save"))
