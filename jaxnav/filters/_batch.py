@@ -23,16 +23,13 @@ The shared covariance outputs (``covs``, ``pred_covs``, ``innov_covs``, ``factor
 ones (``means``, ``pred_means``, ``innovations``, ``nis``, ``logliks``, ``loglik``,
 ``n_nonfinite``, ``status``, ``x_final``) with a leading axis B.
 
-Why named entry points and not a ``vmap`` rule: with NaN masking (the default of
-:func:`~jaxnav.filters.kalman_filter`) each sequence's covariance depends on its own NaN/inf
-elements, so whether a batch can share one recursion is known only from the data, while the
-batch axes of a ``vmap``'s outputs must be fixed when it is traced. A rule that checked the data
-would have to return B copies of the covariances (what made a following smoother slow) or give
-up exactness. Here the batch is explicit and so is the policy: a NaN/inf element of one sequence
-masks that element in every sequence (exact for clean batches and gaps common to all sequences,
-the Monte Carlo case); sequences that lose finite data that way are flagged
-(``BATCH_MASK_WIDENED``). Batches with their own gaps per sequence (real stations) keep
-``jax.vmap(kalman_filter)``.
+``jax.vmap(kalman_filter)`` uses this recursion too (:func:`vmap_filter_rule`), but only when
+the whole batch is free of unmasked NaN/inf, since a loop's covariances then agree; it returns
+saved covariances as B copies. Here the batch is explicit and so is the policy: a NaN/inf
+element of one sequence masks that element in every sequence (exact for clean batches and gaps
+common to all sequences, the Monte Carlo case); sequences that lose finite data that way are
+flagged (``BATCH_MASK_WIDENED``). Batches with their own gaps per sequence (real stations) keep
+``jax.vmap(kalman_filter)``, which then runs one filter per sequence.
 """
 
 from __future__ import annotations

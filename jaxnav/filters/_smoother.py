@@ -38,9 +38,10 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
     moments, so for an inflated (attenuated or fading) filter it smooths with the inflated priors
     the filter actually used; for the classic filter it equals the textbook RTS.
 
-    The gains depend only on the filter's covariances: under ``jax.vmap`` over filter results
-    whose covariances are not batched (``kalman_filter(check_finite=False)`` with a shared
-    model), they are computed once for the batch. :func:`~jaxnav.filters.rts_smoother_batch`
+    The gains depend only on the filter's covariances: under ``jax.vmap`` with a shared model they
+    are computed once for the batch when the covariances are not batched, or when every
+    sequence's equal the first's (checked at run time; what ``vmap(kalman_filter)`` returns for
+    a clean batch), else per sequence. Derivatives are the plain smoother's. :func:`~jaxnav.filters.rts_smoother_batch`
     smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
 
     Args:

@@ -57,16 +57,18 @@ def test_vmap_filter_and_smoother_equal_loop(data, case):
     def both(z):
         return jf.rts_smoother(m, filt(z))
 
-    loop_f, loop_s = stack([filt(z) for z in zs]), stack([both(z) for z in zs])
-    assert_tree_close(jax.jit(jax.vmap(filt))(zs), loop_f)
+    def all3(z):
+        f = filt(z)
+        return f, jf.rts_smoother(m, f), jf.log_likelihood(m, X0, P0, z)
+
+    loop = stack([all3(z) for z in zs])
+    loop_f = loop[0]
+    assert_tree_close(jax.jit(jax.vmap(all3))(zs), loop)
     assert_tree_close(jax.vmap(jax.jit(filt))(zs), loop_f)
-    assert_tree_close(jax.jit(jax.vmap(both))(zs), loop_s)
-    # nested: vmap over two batch axes (2 x B)
-    z2 = jnp.stack([zs, zs[::-1]])
-    nested = jax.jit(jax.vmap(jax.vmap(both)))(z2)
-    assert_tree_close(nested, stack([loop_s, stack([both(z) for z in zs[::-1]])]))
-    ll = jax.jit(jax.vmap(lambda z: jf.log_likelihood(m, X0, P0, z)))(zs)
-    np.testing.assert_allclose(ll, loop_f.loglik, rtol=1e-12)
+    if case == "clean":  # nested: vmap over two batch axes (2 x B), jit inside
+        z2 = jnp.stack([zs, zs[::-1]])
+        nested = jax.vmap(jax.vmap(jax.jit(both)))(z2)
+        assert_tree_close(nested, stack([loop[1], stack([both(z) for z in zs[::-1]])]))
     assert int(jnp.sum(loop_f.n_nonfinite)) == (case == "one NaN")
 
 
