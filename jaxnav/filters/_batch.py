@@ -45,7 +45,8 @@ from jaxnav._numerics import safe_cholesky, whiten
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import data_independent
-from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains
+from jaxnav.filters._smoother import (SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains,
+                                      vmap_sharing)
 from jaxnav.filters._step import ALL_OUTPUTS, scan_setup, step_with_gain
 
 #: per-epoch outputs that differ between the sequences of a shared-recursion batch
@@ -414,6 +415,10 @@ def _broadcast_like(tree, like):
     return jax.tree_util.tree_map(lambda a, s: jnp.broadcast_to(jnp.asarray(a, s.dtype), s.shape), tree, like)
 
 
+#: the outputs a shared-recursion batch returns once (no batch axis)
+_SHARED_FIELDS = ("covs", "pred_covs", "innov_covs", "factors", "noise", "valid", "n_skipped", "P_final")
+
+
 def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, check_finite, joseph):
     """The ``vmap`` rule of :func:`~jaxnav.filters.kalman_filter`: one covariance recursion when the batch allows.
 
@@ -423,15 +428,15 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
     batch -> :func:`kalman_filter_batch`'s shared recursion (its shared outputs broadcast to B
     copies, as a loop returns them); else the plain per-sequence filters. Either way the result
     equals a loop of single runs. Other batches (P0 or the model per sequence, data-dependent
-    rules, ``check_finite=False``, where ``vmap`` already shares what can be shared) run the
-    plain filters.
+    rules, ``check_finite=False``) run the plain filters under ``vmap``, which leaves the
+    covariance outputs unbatched where they do not depend on the batch.
 
     Args:
       plain: the per-sequence filter ``(model, x0, P0, zs, inflation, estimator, mask) -> KalmanResult``.
       in_batched: pytree of bools like ``args``.  args: the batched arguments (batch axis first).
       save, unroll, allow_float32, check_finite, joseph: the filter's static options.
     Returns:
-      (KalmanResult with a leading batch axis on every field, its pytree of True).
+      (KalmanResult, its pytree of bools: which leaves have the leading batch axis).
     """
     model, x0, P0, zs, inflation, estimator, mask = args
     axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
@@ -454,6 +459,5 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
             used = used[:, None]
         clean = jnp.all(jnp.isfinite(zs) | ~jnp.asarray(used, bool))
         out = jax.lax.cond(clean, shared, per_sequence)
-    else:
-        out = per_sequence()
-    return out, jax.tree_util.tree_map(lambda _: True, out)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+    return vmap_sharing(plain, axes, args, _SHARED_FIELDS)

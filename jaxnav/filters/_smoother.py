@@ -91,7 +91,8 @@ def _batch_aware_rts(unroll, save):
 
         like = jax.eval_shape(per_sequence)
         if any(jax.tree_util.tree_leaves(in_batched[0])) or not (in_batched[2] and in_batched[4]):
-            out = per_sequence()  # F per sequence, or covariances already shared by vmap
+            # F per sequence, or covariances not batched: what plain vmap shares stays shared
+            return vmap_sharing(plain, axes, args, ("covs", "gains", "status"))
         else:
             def shared():
                 one = _Moments(means=means[0], covs=covs[0], pred_means=pred_means[0], pred_covs=pred_covs[0])
@@ -112,6 +113,26 @@ def _batch_aware_rts(unroll, save):
 
     run.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
     return run
+
+
+def vmap_sharing(fn, in_axes, args, fields):
+    """``jax.vmap(fn)`` inside a ``custom_vmap`` rule: (outputs, out_batched), with ``fields`` unbatched where vmap allows.
+
+    ``fn`` returns a NamedTuple. The named fields are first asked for with ``out_axes=None``
+    (what plain ``vmap`` does for values that do not depend on the batched inputs); if any of
+    them depends on the batch (``vmap`` refuses at trace time), every field is batched.
+    """
+    out_type = jax.eval_shape(lambda: jax.vmap(fn, in_axes=in_axes)(*args))
+    names = type(out_type)._fields
+    axes = type(out_type)(*[None if name in fields else 0 for name in names])
+    try:
+        out = jax.vmap(fn, in_axes=in_axes, out_axes=axes)(*args)
+    except ValueError:
+        axes = type(out_type)(*[0] * len(names))
+        out = jax.vmap(fn, in_axes=in_axes, out_axes=axes)(*args)
+    batched = type(out_type)(*[jax.tree_util.tree_map(lambda _, a=a: a == 0, getattr(out, name))
+                               for name, a in zip(names, axes)])
+    return out, batched
 
 
 class _Moments(NamedTuple):
