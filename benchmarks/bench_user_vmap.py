@@ -36,6 +36,7 @@ def main(argv=None):
     p.add_argument("--T", type=int, default=3600)
     p.add_argument("--batch", type=int, default=256)
     p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--cases", default="cgf", help="subset of the cases c, g, f to run (default all)")
     p.add_argument("--results", default=None, help="markdown file whose generated section is replaced")
     args = p.parse_args(argv)
     T, B, reps = args.T, args.batch, args.repeats
@@ -82,7 +83,7 @@ def main(argv=None):
     rows = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", category=DeprecationWarning)
-        for case, impls in cases.items():
+        for case, impls in ((c, i) for c, i in cases.items() if c in args.cases):
             for name, fn, nan_too in impls:
                 for label, data in (("clean", zB), ("one NaN", zN)) if nan_too else (("clean", zB),):
                     a = (theta0, data) if case == "f" else (data,)
