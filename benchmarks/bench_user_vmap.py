@@ -102,7 +102,8 @@ def main(argv=None):
         t = min(r)
         ps = best.get((c, "plain lax.scan", "clean"))
         dx = best.get((c, "dynamax", "clean"))
-        fmt = lambda ref: "—" if ref is None or n in ("plain lax.scan", "dynamax") else f"{ref / t:.2f}x"  # noqa: E731
+        ref_row = n in ("plain lax.scan", "dynamax")
+        fmt = lambda ref: "—" if ref is None or ref_row else f"{ref / t:.2f}x"  # noqa: E731
         out.append(f"| ({c}) | {n} | {lab} | {bf._fmt_t(t)} | {fmt(ps)} | {fmt(dx)} |")
     report = "\n".join(out)
     print(report)

@@ -41,8 +41,8 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
     The gains depend only on the filter's covariances: under ``jax.vmap`` with a shared model they
     are computed once for the batch when the covariances are not batched, or when every
     sequence's equal the first's (checked at run time; what ``vmap(kalman_filter)`` returns for
-    a clean batch), else per sequence. Derivatives are the plain smoother's. :func:`~jaxnav.filters.rts_smoother_batch`
-    smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
+    a clean batch), else per sequence. Derivatives are the plain smoother's.
+    :func:`~jaxnav.filters.rts_smoother_batch` smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
 
     Args:
       model: the model given to the filter (only F is used; (n, n) or (T, n, n)).
@@ -116,7 +116,7 @@ def _batch_aware_rts(unroll, save):
 
 
 def vmap_sharing(fn, in_axes, args, fields):
-    """``jax.vmap(fn)`` inside a ``custom_vmap`` rule: (outputs, out_batched), with ``fields`` unbatched where vmap allows.
+    """``jax.vmap(fn)`` in a ``custom_vmap`` rule: (outputs, out_batched), ``fields`` unbatched where vmap allows.
 
     ``fn`` returns a NamedTuple. The named fields are first asked for with ``out_axes=None``
     (what plain ``vmap`` does for values that do not depend on the batched inputs); if any of
