@@ -9,7 +9,7 @@
 * :func:`rts_smoother`: fixed-interval smoothing over the saved filter moments.
 * :func:`kalman_filter_batch`, :func:`rts_smoother_batch`: B sequences sharing one covariance
   recursion (Monte Carlo studies), the means in blocks of epochs as dense products.
-  ``jax.vmap(kalman_filter)`` is the per-sequence computation.
+  ``jax.vmap(kalman_filter)`` shares the recursion for clean batches (checked at run time).
 * :func:`log_likelihood`: the classic filter's innovation log-likelihood with exact gradients
   from one backward smoothing pass (no tape through the filter).
 * :func:`parallel_filter`, :func:`parallel_smoother`: associative-scan forms.

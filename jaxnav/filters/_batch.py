@@ -23,16 +23,13 @@ The shared covariance outputs (``covs``, ``pred_covs``, ``innov_covs``, ``factor
 ones (``means``, ``pred_means``, ``innovations``, ``nis``, ``logliks``, ``loglik``,
 ``n_nonfinite``, ``status``, ``x_final``) with a leading axis B.
 
-Why named entry points and not a ``vmap`` rule: with NaN masking (the default of
-:func:`~jaxnav.filters.kalman_filter`) each sequence's covariance depends on its own NaN/inf
-elements, so whether a batch can share one recursion is known only from the data, while the
-batch axes of a ``vmap``'s outputs must be fixed when it is traced. A rule that checked the data
-would have to return B copies of the covariances (what made a following smoother slow) or give
-up exactness. Here the batch is explicit and so is the policy: a NaN/inf element of one sequence
-masks that element in every sequence (exact for clean batches and gaps common to all sequences,
-the Monte Carlo case); sequences that lose finite data that way are flagged
-(``BATCH_MASK_WIDENED``). Batches with their own gaps per sequence (real stations) keep
-``jax.vmap(kalman_filter)``.
+``jax.vmap(kalman_filter)`` uses this recursion too (:func:`vmap_filter_rule`), but only when
+the whole batch is free of unmasked NaN/inf, since a loop's covariances then agree; it returns
+saved covariances as B copies. Here the batch is explicit and so is the policy: a NaN/inf
+element of one sequence masks that element in every sequence (exact for clean batches and gaps
+common to all sequences, the Monte Carlo case); sequences that lose finite data that way are
+flagged (``BATCH_MASK_WIDENED``). Batches with their own gaps per sequence (real stations) keep
+``jax.vmap(kalman_filter)``, which then runs one filter per sequence.
 """
 
 from __future__ import annotations
@@ -48,7 +45,8 @@ from jaxnav._numerics import safe_cholesky, whiten
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import data_independent
-from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains
+from jaxnav.filters._smoother import (SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains,
+                                      vmap_sharing)
 from jaxnav.filters._step import ALL_OUTPUTS, scan_setup, step_with_gain
 
 #: per-epoch outputs that differ between the sequences of a shared-recursion batch
@@ -410,3 +408,56 @@ def _smoothed_means_blocks(C, A, xs, L):
         Mb = maps(C[:nb * L].reshape(nb, L, n, n), A[:nb * L].reshape(nb, L, n, n))
         carry, _ = jax.lax.scan(lambda c, k: (apply(c, k * L, L, Mb[k]), None), carry, jnp.arange(nb), reverse=True)
     return carry[1].reshape(B, T, n)
+
+
+def _broadcast_like(tree, like):
+    """Every leaf of ``tree`` broadcast to the shape and cast to the dtype of the matching leaf of ``like``."""
+    return jax.tree_util.tree_map(lambda a, s: jnp.broadcast_to(jnp.asarray(a, s.dtype), s.shape), tree, like)
+
+
+#: the outputs a shared-recursion batch returns once (no batch axis)
+_SHARED_FIELDS = ("covs", "pred_covs", "innov_covs", "factors", "noise", "valid", "n_skipped", "P_final")
+
+
+def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, check_finite, joseph):
+    """The ``vmap`` rule of :func:`~jaxnav.filters.kalman_filter`: one covariance recursion when the batch allows.
+
+    When the model, P0, mask and plug-ins are shared, the plug-ins are data-independent and NaN
+    masking is on, the covariances differ between the sequences only through their non-finite
+    elements. ``lax.cond`` on the data then picks: no unmasked non-finite element in the whole
+    batch -> :func:`kalman_filter_batch`'s shared recursion (its shared outputs broadcast to B
+    copies, as a loop returns them); else the plain per-sequence filters. Either way the result
+    equals a loop of single runs. Other batches (P0 or the model per sequence, data-dependent
+    rules, ``check_finite=False``) run the plain filters under ``vmap``, which leaves the
+    covariance outputs unbatched where they do not depend on the batch.
+
+    Args:
+      plain: the per-sequence filter ``(model, x0, P0, zs, inflation, estimator, mask) -> KalmanResult``.
+      in_batched: pytree of bools like ``args``.  args: the batched arguments (batch axis first).
+      save, unroll, allow_float32, check_finite, joseph: the filter's static options.
+    Returns:
+      (KalmanResult, its pytree of bools: which leaves have the leading batch axis).
+    """
+    model, x0, P0, zs, inflation, estimator, mask = args
+    axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
+
+    def per_sequence():
+        return jax.vmap(plain, in_axes=axes)(*args)
+
+    like = jax.eval_shape(per_sequence)
+    shared_args = [in_batched[i] for i in (0, 2, 4, 5, 6)]
+    if (check_finite and in_batched[3] and data_independent(inflation, estimator)
+            and not any(jax.tree_util.tree_leaves(shared_args)) and jnp.ndim(zs) == 3):
+        def shared():
+            out = _kalman_filter_batch(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
+                                       save=save, unroll=unroll, allow_float32=allow_float32, block="auto",
+                                       joseph=joseph)
+            return _broadcast_like(out, like)
+
+        used = True if mask is None else jnp.asarray(mask, bool)
+        if jnp.ndim(used) == 1:
+            used = used[:, None]
+        clean = jnp.all(jnp.isfinite(zs) | ~jnp.asarray(used, bool))
+        out = jax.lax.cond(clean, shared, per_sequence)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+    return vmap_sharing(plain, axes, args, _SHARED_FIELDS)

@@ -1,13 +1,13 @@
 """The Kalman filter driver: :func:`filter_step` scanned over a measurement series (S0 eqs. (4)-(17)).
 
-A plain per-sequence computation: ``jax.vmap`` of :func:`kalman_filter` runs exactly the loop of
-single runs, whatever the nesting of ``jit``, ``vmap`` and ``grad``. Batches that share one
-covariance recursion have their own entry points in :mod:`._batch`.
+``jax.vmap`` of :func:`kalman_filter` equals the loop of single runs, whatever the nesting of
+``jit``, ``vmap`` and ``grad``; its ``vmap`` rule (:func:`._batch.vmap_filter_rule`) runs one
+covariance recursion for a clean batch with shared model, P0, mask and a data-independent rule.
 """
 
 from __future__ import annotations
 
-from functools import partial
+from functools import lru_cache, partial
 import jax
 
 from jaxnav.filters._model import LinearGaussian
@@ -44,14 +44,15 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
     prediction, so the first prediction has k = 1 (S_1 = 1). A masked or NaN epoch returns the
     prediction as its estimate.
 
-    Batches: ``jax.vmap`` over any argument runs one filter per sequence, equal to a loop. With
-    the default ``check_finite=True`` every sequence's covariance depends on its own NaN/inf
-    elements, so ``vmap`` carries one covariance per sequence. When the data are trusted
-    (``check_finite=False``) and the model, P0, mask and a data-independent rule are shared,
-    nothing in the covariance recursion depends on the batched data and ``vmap`` runs it once
-    for the whole batch. For Monte Carlo batches (clean, or with gaps common to all sequences)
-    :func:`~jaxnav.filters.kalman_filter_batch` shares the recursion while still masking
-    NaN/inf, and runs the means in blocks of epochs as dense products.
+    Batches: ``jax.vmap`` over any argument equals a loop of single runs. When the model, P0,
+    mask and a data-independent rule are shared and ``zs`` is batched, a run-time check
+    (``lax.cond``) picks: no unmasked NaN/inf in the whole batch -> one covariance recursion for
+    all sequences (:func:`~jaxnav.filters.kalman_filter_batch`'s; saved covariances returned as
+    B copies); else one filter per sequence (with masking on, each sequence's covariance depends
+    on its own NaN/inf elements). Derivatives (``grad``, ``jvp``) are the plain filter's: exact,
+    one per sequence under ``vmap``. With ``check_finite=False`` and shared inputs, ``vmap``
+    shares the covariance recursion by itself. For batches with gaps common to all sequences,
+    :func:`~jaxnav.filters.kalman_filter_batch` shares the recursion while masking NaN/inf.
 
     Args:
       model: :class:`LinearGaussian` with static or (T, ...) time-varying leaves.
@@ -85,9 +86,39 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
       ValueError: at trace time, for inconsistent shapes (naming them), unknown output names, or
         a float32 computation without ``allow_float32``.
     """
-    return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
-                          save=tuple(save), unroll=unroll, allow_float32=allow_float32, check_finite=check_finite,
-                          joseph=joseph)
+    run = _batch_aware(tuple(save), unroll, allow_float32, check_finite, joseph)
+    return run(model, x0, P0, zs, inflation, estimator, mask)
+
+
+@lru_cache(maxsize=None)
+def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
+    """:func:`_kalman_filter` for one static configuration, with a ``vmap`` rule and exact derivatives.
+
+    Under ``vmap`` the rule (:func:`jaxnav.filters._batch.vmap_filter_rule`) shares one covariance
+    recursion when the batch allows it and runs the plain per-sequence filters otherwise.
+    ``custom_vmap`` has no reverse mode, so derivatives (``jvp``, ``grad``, any nesting with
+    ``vmap``) are those of the plain filter: exact, per sequence under ``vmap``.
+    """
+    def plain(model, x0, P0, zs, inflation, estimator, mask):
+        return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask, save=save,
+                              unroll=unroll, allow_float32=allow_float32, check_finite=check_finite, joseph=joseph)
+
+    @jax.custom_batching.custom_vmap
+    def batched(*args):
+        return plain(*args)
+
+    @batched.def_vmap
+    def rule(axis_size, in_batched, *args):
+        from jaxnav.filters._batch import vmap_filter_rule
+        return vmap_filter_rule(plain, in_batched, args, save=save, unroll=unroll, allow_float32=allow_float32,
+                                check_finite=check_finite, joseph=joseph)
+
+    @jax.custom_jvp
+    def run(*args):
+        return batched(*args)
+
+    run.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
+    return run
 
 
 @partial(jax.jit, static_argnames=("save", "unroll", "allow_float32", "check_finite", "joseph"))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import partial
+from functools import lru_cache, partial
 from typing import Any, NamedTuple
 
 import jax
@@ -38,10 +38,11 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
     moments, so for an inflated (attenuated or fading) filter it smooths with the inflated priors
     the filter actually used; for the classic filter it equals the textbook RTS.
 
-    The gains depend only on the filter's covariances: under ``jax.vmap`` over filter results
-    whose covariances are not batched (``kalman_filter(check_finite=False)`` with a shared
-    model), they are computed once for the batch. :func:`~jaxnav.filters.rts_smoother_batch`
-    smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
+    The gains depend only on the filter's covariances: under ``jax.vmap`` with a shared model they
+    are computed once for the batch when the covariances are not batched, or when every
+    sequence's equal the first's (checked at run time; what ``vmap(kalman_filter)`` returns for
+    a clean batch), else per sequence. Derivatives are the plain smoother's.
+    :func:`~jaxnav.filters.rts_smoother_batch` smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
 
     Args:
       model: the model given to the filter (only F is used; (n, n) or (T, n, n)).
@@ -55,7 +56,92 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
     Raises:
       ValueError: if the needed outputs were not saved, or F has a wrong shape.
     """
-    return _rts_smoother(model, filtered, unroll=unroll, save=tuple(save))
+    save = tuple(save)
+    moments = tuple(getattr(filtered, name, None) for name in ("means", "covs", "pred_means", "pred_covs"))
+    if any(a is None for a in moments):
+        smoother_inputs(model, filtered, save, "rts_smoother")  # raises, naming the missing output
+    return _batch_aware_rts(unroll, save)(model, *moments)
+
+
+@lru_cache(maxsize=None)
+def _batch_aware_rts(unroll, save):
+    """:func:`_rts_smoother` on the four saved moments, with a ``vmap`` rule and exact derivatives.
+
+    Under ``vmap`` with a shared model and batched covariances, ``lax.cond`` checks whether every
+    sequence's covariances equal the first's (what :func:`~jaxnav.filters.kalman_filter` returns
+    under ``vmap`` for a clean batch with a shared model): then the gains and smoothed covariances
+    are computed once and only the means per sequence; else the plain per-sequence smoothers.
+    Derivatives are those of the plain smoother (``custom_vmap`` has no reverse mode).
+    """
+    def plain(model, means, covs, pred_means, pred_covs):
+        filtered = _Moments(means=means, covs=covs, pred_means=pred_means, pred_covs=pred_covs)
+        return _rts_smoother(model, filtered, unroll=unroll, save=save)
+
+    @jax.custom_batching.custom_vmap
+    def batched(*args):
+        return plain(*args)
+
+    @batched.def_vmap
+    def rule(axis_size, in_batched, model, means, covs, pred_means, pred_covs):
+        args = (model, means, covs, pred_means, pred_covs)
+        axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
+
+        def per_sequence():
+            return jax.vmap(plain, in_axes=axes)(*args)
+
+        like = jax.eval_shape(per_sequence)
+        if any(jax.tree_util.tree_leaves(in_batched[0])) or not (in_batched[2] and in_batched[4]):
+            # F per sequence, or covariances not batched: what plain vmap shares stays shared
+            return vmap_sharing(plain, axes, args, ("covs", "gains", "status"))
+        else:
+            def shared():
+                one = _Moments(means=means[0], covs=covs[0], pred_means=pred_means[0], pred_covs=pred_covs[0])
+                C, status = smoother_gains(model, one, save)
+                sm = jax.vmap(lambda x, xp: smoothed_means(C, x, xp, unroll), in_axes=(axes[1], axes[3]))(
+                    means, pred_means) if "means" in save else None
+                P_s = smoothed_covs(C, covs[0], pred_covs[0], unroll) if "covs" in save else None
+                out = SmootherResult(means=sm, covs=P_s, gains=C if "gains" in save else None, status=status)
+                return jax.tree_util.tree_map(lambda a, s: jnp.broadcast_to(a, s.shape), out, like)
+
+            same = jnp.all(covs == covs[:1]) & jnp.all(pred_covs == pred_covs[:1])
+            out = jax.lax.cond(same, shared, per_sequence)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    @jax.custom_jvp
+    def run(*args):
+        return batched(*args)
+
+    run.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
+    return run
+
+
+def vmap_sharing(fn, in_axes, args, fields):
+    """``jax.vmap(fn)`` in a ``custom_vmap`` rule: (outputs, out_batched), ``fields`` unbatched where vmap allows.
+
+    ``fn`` returns a NamedTuple. The named fields are first asked for with ``out_axes=None``
+    (what plain ``vmap`` does for values that do not depend on the batched inputs); if any of
+    them depends on the batch (``vmap`` refuses at trace time), every field is batched.
+    """
+    out_type = jax.eval_shape(lambda: jax.vmap(fn, in_axes=in_axes)(*args))
+    names = type(out_type)._fields
+    axes = type(out_type)(*[None if name in fields else 0 for name in names])
+    try:
+        out = jax.vmap(fn, in_axes=in_axes, out_axes=axes)(*args)
+    except ValueError:
+        axes = type(out_type)(*[0] * len(names))
+        out = jax.vmap(fn, in_axes=in_axes, out_axes=axes)(*args)
+    batched = type(out_type)(*[jax.tree_util.tree_map(lambda _, a=a: a == 0, getattr(out, name))
+                               for name, a in zip(names, axes)])
+    return out, batched
+
+
+class _Moments(NamedTuple):
+    """The four filter outputs the smoother reads."""
+
+    means: Any
+    covs: Any
+    pred_means: Any
+    pred_covs: Any
 
 
 @partial(jax.jit, static_argnames=("unroll", "save"))
