@@ -305,9 +305,11 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                            "before_si": rep.before, "after_si": rep.after,
                            "loglik_before": rep.loglik_before, "loglik_after": rep.loglik_after,
                            "n_evals": rep.n_evals, "wall_time_s": rep.wall_time_s,
+                           "fitted_on": rep.fitted_on, "n_epochs": rep.n_epochs,
                            "noise_after": _densities_dict(rep.densities),
                            "evaluation_before": results["evaluation"], "evaluation_after": _evaluation(run_t.scores)}
         run = run_t
+    results["tuning"] = _tuning(prep, results)
     files = []
     for nm, fn in (("trajectory.csv", lambda p: write_trajectory_csv(p, run)),
                    ("trajectory_forward.csv", lambda p: write_trajectory_csv(p, run, "forward")),
@@ -318,6 +320,23 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
     results["files"] = sorted(pathlib.Path(f).relative_to(out).as_posix() for f in files) + ["results.json"]
     write_json(out / "results.json", results)
     return results
+
+
+def _tuning(prep, results: dict) -> dict:
+    """What was fitted on which GNSS epochs, and what was scored (the withheld fixes, never fitted on)."""
+    fitted = {}
+    off = prep.time_offset_info
+    if off.get("source") == "estimate":
+        fitted["time_offset"] = {"fitted_on": off["fitted_on"], "n_epochs": off["n_epochs_used"]}
+    if "tune" in results:
+        t = results["tune"]
+        fitted[", ".join(t["params"])] = {"fitted_on": t["fitted_on"], "n_epochs": t["n_epochs"]}
+    out = {"fitted": fitted}
+    if prep.withheld.any():
+        out["scored_on"] = ("the fixed-quality GNSS epochs inside the [evaluate] outages, withheld from the filter and "
+                            "from every fit, scored after fitting")
+        out["n_withheld"] = int(np.count_nonzero(prep.withheld))
+    return out
 
 
 def format_ins(results: dict) -> str:

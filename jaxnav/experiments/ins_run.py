@@ -630,7 +630,11 @@ _TUNE_MAP = {"arw": ("arw", "log"), "vrw": ("vrw", "log"), "gyro_bias_instabilit
 
 
 class TuneReport(NamedTuple):
-    """``--tune`` result: parameters before/after (SI), innovation log-likelihood before/after, evaluations, time."""
+    """``--tune`` result: parameters before/after (SI), innovation log-likelihood before/after, evaluations, time.
+
+    ``fitted_on``: which GNSS epochs the loss used; ``n_epochs``: how many (with ``[evaluate]`` never
+    the withheld ones).
+    """
 
     before: dict
     after: dict
@@ -640,6 +644,8 @@ class TuneReport(NamedTuple):
     wall_time_s: float
     densities: Densities
     lever_rfu: Any
+    fitted_on: str = ""
+    n_epochs: int = 0
 
 
 def training_windows(prep: Prepared) -> np.ndarray:
@@ -674,8 +680,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     ``loss_kind``:
 
     * "innovations": the negative GNSS innovation log-likelihood of the forward filter over the
-      whole run (all GNSS epochs, no simulated outages) — the classic ML criterion; at a GNSS rate
-      of several Hz it weighs predictions over fractions of a second.
+      whole run (every GNSS epoch the filter sees; the ``[evaluate]`` outages stay withheld) — the
+      classic ML criterion; at a GNSS rate of several Hz it weighs predictions over fractions of a second.
     * "outages": the negative predictive log-likelihood of the GNSS fixes withheld on
       :func:`training_windows` (disjoint from the evaluation windows): horizontal antenna position
       predicted by the forward filter against each withheld fixed-quality fix, with the filter's
@@ -685,7 +691,7 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     gradients through the complete filter; densities are tuned on a log scale.
 
     Args:
-      prep: :class:`Prepared` (its evaluation outages are not withheld here).  names: parameters
+      prep: :class:`Prepared` (its evaluation outages stay withheld).  names: parameters
         from ``_TUNE_MAP``.  max_evals: loss evaluations at most.  mode: "reverse" or "forward".
     """
     from jaxnav.tune import Space, minimize_lbfgs
@@ -697,7 +703,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
         raise ValueError("gyro_bias_instability is a parameter of the 18- and 21-state models (noise.states)")
     if loss_kind not in ("innovations", "outages"):
         raise ValueError(f"loss must be 'innovations' or 'outages', got {loss_kind!r}")
-    base_mask = _mask_without_outages(prep)
+    # only the epochs the filter may see: the [evaluate] outages stay withheld, scored once after tuning
+    base_mask = np.asarray(prep.meas.mask).copy()
     scored = None
     if loss_kind == "outages":
         tw = training_windows(prep)
@@ -712,6 +719,9 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
                              f"windows {tw.tolist()}; use loss = 'innovations'")
         base_mask = base_mask & ~inside[:, None]
     all_gnss = prep.meas._replace(mask=base_mask)
+    n_fit = int(scored.sum()) if scored is not None else int(base_mask[:, :3].any(-1).sum())
+    fitted_on = ("GNSS epochs the filter sees" + (", outside the [evaluate] outages" if prep.withheld.any() else "")
+                 + (": fixes withheld on the training windows" if scored is not None else ": their innovations"))
     d0 = prep.densities
     lever0 = jnp.asarray(prep.lever_rfu, float)
     p0 = {}
@@ -756,7 +766,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     si = {n: np.asarray(v).tolist() for n, v in p0.items()}
     so = {n: np.asarray(v).tolist() for n, v in res.params.items()}
     return TuneReport(before=si, after=so, loglik_before=ll0, loglik_after=ll1, n_evals=int(res.n_evals),
-                      wall_time_s=time.perf_counter() - t0, densities=d1, lever_rfu=np.asarray(lev1))
+                      wall_time_s=time.perf_counter() - t0, densities=d1, lever_rfu=np.asarray(lev1),
+                      fitted_on=fitted_on, n_epochs=n_fit)
 
 
 def _mask_without_outages(prep: Prepared):
