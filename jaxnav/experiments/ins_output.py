@@ -181,7 +181,8 @@ def _evaluation(sc) -> dict:
 
 
 def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
-    """The four figures of a run into ``out``: track + outage errors, differences to GNSS, attitude, biases."""
+    """The figures of a run into ``out``: track + outage errors, differences to GNSS, attitude, biases, and
+    the time offset likelihood where it was estimated."""
     from jaxnav.plot import plot_ins_attitude, plot_ins_biases, plot_ins_differences, plot_walk
 
     out = pathlib.Path(out)
@@ -231,6 +232,14 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
                                      run.prep.outages, out / f"standstill.{fmt}",
                                      title=f"{name}: standstill detector ({info['platform']} preset) and GNSS check",
                                      unconfirmed=ser["unconfirmed"]))
+    off = run.prep.time_offset_info
+    if "grid_s" in off:
+        from jaxnav.plot import plot_time_offset_likelihood
+
+        paths.append(plot_time_offset_likelihood(off["grid_s"], off["loglik"], off["offset_s"], off["sigma_s"],
+                                                 out / f"time_offset.{fmt}",
+                                                 title=f"{name}: IMU-GNSS time offset by the innovation likelihood "
+                                                       f"({off['n_epochs_used']} GNSS epochs)"))
     return [str(p) for p in paths]
 
 
@@ -319,9 +328,11 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                            "before_si": rep.before, "after_si": rep.after,
                            "loglik_before": rep.loglik_before, "loglik_after": rep.loglik_after,
                            "n_evals": rep.n_evals, "wall_time_s": rep.wall_time_s,
+                           "fitted_on": rep.fitted_on, "n_epochs": rep.n_epochs,
                            "noise_after": _densities_dict(rep.densities),
                            "evaluation_before": results["evaluation"], "evaluation_after": _evaluation(run_t.scores)}
         run = run_t
+    results["tuning"] = _tuning(prep, results)
     files = []
     for nm, fn in (("trajectory.csv", lambda p: write_trajectory_csv(p, run)),
                    ("trajectory_forward.csv", lambda p: write_trajectory_csv(p, run, "forward")),
@@ -334,6 +345,31 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
     return results
 
 
+def _tuning(prep, results: dict) -> dict:
+    """What was fitted on which GNSS epochs, and what was scored (the withheld fixes, never fitted on)."""
+    fitted = {}
+    off = prep.time_offset_info
+    if off.get("source") == "estimate":
+        fitted["time_offset"] = {"fitted_on": off["fitted_on"], "n_epochs": off["n_epochs_used"]}
+    if "tune" in results:
+        t = results["tune"]
+        fitted[", ".join(t["params"])] = {"fitted_on": t["fitted_on"], "n_epochs": t["n_epochs"]}
+    out = {"fitted": fitted}
+    if prep.withheld.any():
+        out["scored_on"] = ("the fixed-quality GNSS epochs inside the [evaluate] outages, withheld from the filter and "
+                            "from every fit, scored after fitting")
+        out["n_withheld"] = int(np.count_nonzero(prep.withheld))
+    return out
+
+
+def _offset_note(o: dict) -> str:
+    """'config', or 'estimate +- sigma ms from N GNSS epochs, K dropped at the search span's edges'."""
+    if o.get("source") != "estimate" or "sigma_s" not in o:
+        return o.get("source", "config")
+    return (f"estimate +- {1e3 * o['sigma_s']:.1f} ms from {o['n_epochs_used']} GNSS epochs, "
+            f"{o['n_epochs_dropped_at_span_edges']} dropped at the search span's edges")
+
+
 def format_ins(results: dict) -> str:
     """Summary of :func:`process` with units."""
     from jaxnav._status import status_words
@@ -343,7 +379,7 @@ def format_ins(results: dict) -> str:
              f"  IMU {r['imu']['n_samples']} samples, GNSS {r['gnss']['n_epochs_used']} of "
              f"{r['gnss']['n_epochs_in_imu_span']} epochs used ({r['gnss']['n_withheld']} withheld on simulated outages)",
              f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "
-             f"({r['time_offset']['source']}); initial heading {r['alignment']['heading_deg']:.1f} deg",
+             f"({_offset_note(r['time_offset'])}); initial heading {r['alignment']['heading_deg']:.1f} deg",
              f"  {r['n_states']}-state filter + RTS: status {status_words(r['status'])}, log-likelihood {r['loglik']:.1f}, "
              f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
              f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s"]
@@ -380,6 +416,8 @@ def format_ins(results: dict) -> str:
                      f"{t['loglik_after']:.1f} "
                      f"({t['n_evals']} evaluations, {t['wall_time_s']:.1f} s); "
                      + ", ".join(f"{k} {_fmt(t['before_si'][k])} -> {_fmt(t['after_si'][k])}" for k in t["params"]))
+        if "fitted_on" in t:
+            lines.append(f"  --tune fitted on {t['n_epochs']} {t['fitted_on']}")
         ev(t["evaluation_after"], " after tuning")
     return "\n".join(lines)
 

@@ -122,8 +122,8 @@ def gnss_measurements(pos_sol, t_imu, outages=(), *, lever_rfu=(0.0, 0.0, 0.0), 
     """
     t_imu = np.asarray(t_imu, float)
     gt = np.asarray(pos_sol.t, float)
-    dt0 = t_imu[1] - t_imu[0]
-    keep = np.nonzero((gt > t_imu[0] - dt0 + 1e-6) & (gt <= t_imu[-1]))[0]
+    # an epoch needs an IMU sample ending at or before it (one inside the first sample's interval has none)
+    keep = np.nonzero((gt >= t_imu[0] - 1e-9) & (gt <= t_imu[-1]))[0]
     if keep.size < 2:
         raise ValueError(f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
                          f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s")
@@ -573,17 +573,23 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     cross-correlation estimate of the yaw rate against the GNSS course rate
     (:func:`jaxnav.ins.estimate_time_offset`, reported as the first guess; it assumes the body points
     along the velocity, which a handheld device does not), then on a 10 ms grid within +-50 ms of the
-    best, and a parabola through the three best log-likelihoods refines the maximum.
+    best, and a parabola through the three best log-likelihoods refines the maximum and gives its
+    1-sigma from the curvature (:func:`_parabola_peak`). Every trial scores the same GNSS epochs: those
+    inside the IMU span at every trial offset and outside the ``[evaluate]`` outages
+    (:func:`_search_epochs`; the others are dropped and counted).
 
     Returns:
-      (offset s, info dict with the grid, its log-likelihoods and the method).
+      (offset s, info dict with the grid, its log-likelihoods, the estimate's sigma, the epoch counts
+      and the method).
     """
     from jaxnav.ins import estimate_time_offset as xcorr  # yaw rate vs GNSS course rate
 
     t, dth, dv, dt = imu_increments(imu, C_bs)
+    span = cfg.imu.time_offset_search_s
+    pos, common = _search_epochs(cfg, pos, t, span)
     llh = np.stack([np.asarray(pos.lat), np.asarray(pos.lon), np.asarray(pos.h)], -1)
     v = np.asarray(pos.v_enu, float)
-    info = {"source": "estimate"}
+    info = {"source": "estimate", **common}
     try:
         est = xcorr(t, dth / dt[:, None], np.asarray(pos.t, float), v if np.all(np.isfinite(v)) else None, llh=llh,
                     f_b=dv / dt[:, None], max_offset_s=max(1.0, cfg.imu.time_offset_search_s + 0.5))
@@ -596,8 +602,7 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     except ValueError as exc:  # too few turns or epochs: search around zero
         guess = 0.0
         info.update(first_guess=f"0 (cross-correlation not usable: {exc})")
-    span = cfg.imu.time_offset_search_s
-    # likelihoods comparable between offsets: every GNSS epoch, no gate, no pseudo-measurements
+    # likelihoods comparable between offsets: the same GNSS epochs, no gate, no pseudo-measurements
     no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0),
                            gnss=cfg.gnss._replace(gate_probability=None),
                            constraints=cfg.constraints._replace(zupt=False, nhc=False))
@@ -621,22 +626,79 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     fine = np.round(c_best + np.arange(-0.05, 0.05 + 1e-9, 0.01), 6)
     fine = fine[np.abs(fine) <= span + 1e-9]
     ll = np.array([loglik(o) for o in fine])
-    j = int(np.nanargmax(ll))
-    best = float(fine[j])
-    if 0 < j < len(fine) - 1:
-        y0, y1, y2 = ll[j - 1:j + 2]
-        den = y0 - 2 * y1 + y2
-        if den < 0:
-            best += 0.5 * (y0 - y2) / den * (fine[1] - fine[0])
+    best, sigma = _parabola_peak(fine, ll)
     grid = np.array(sorted(cache))
     at_edge = abs(best) >= span - 0.01
     info.update(method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
                        "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[g] for g in grid]),
-                offset_s=best, at_search_edge=bool(at_edge))
+                offset_s=best, sigma_s=sigma,
+                sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
+                             "(treats the innovations as independent: optimistic when GNSS errors are correlated "
+                             "in time)", at_search_edge=bool(at_edge))
     if at_edge and progress:
         progress(f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
                  "imu.time_offset_search_s")
     return best, info
+
+
+def _parabola_peak(x, ll):
+    """(maximiser, 1-sigma) of a log-likelihood on an even grid ``x`` (K,): parabola through the best three points.
+
+    ll(x) ~ c - (x - x*)^2 / (2 sigma^2): x* = x_j + h (l_- - l_+) / (2 (l_- - 2 l_j + l_+)),
+    sigma = h / sqrt(-(l_- - 2 l_j + l_+)); sigma is NaN at a grid edge or without curvature.
+    """
+    x, ll = np.asarray(x, float), np.asarray(ll, float)
+    j = int(np.nanargmax(ll))
+    best, sigma = float(x[j]), float("nan")
+    if 0 < j < len(x) - 1:
+        y0, y1, y2 = ll[j - 1:j + 2]
+        den = y0 - 2 * y1 + y2
+        h = x[1] - x[0]
+        if den < 0:
+            best += 0.5 * (y0 - y2) / den * h
+            sigma = float(h / math.sqrt(-den))
+    return best, sigma
+
+
+#: fewest GNSS epochs the time offset search needs inside the IMU span at every trial offset
+MIN_SEARCH_EPOCHS = 10
+
+
+def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
+    """The GNSS solution restricted to the epochs every trial offset in [-span, span] s can use, and counts.
+
+    An epoch is used when it lies inside the IMU span (``t_imu`` (N,), s, before any offset) for every
+    trial offset, so all trials score the same epochs; with ``[evaluate]`` the epochs its outages
+    withhold at any trial offset (windows widened by ``span``) are left out as well, so the offset is
+    fitted only on fixes the filter may see.
+
+    Raises:
+      ValueError: fewer than :data:`MIN_SEARCH_EPOCHS` epochs remain (names ``imu.time_offset_search_s``).
+    """
+    gt = np.asarray(pos.t, float)
+    t0, t1 = float(t_imu[0]), float(t_imu[-1])
+    reach = (gt >= t0 - span - 1e-9) & (gt <= t1 + span)
+    inside = (gt >= t0 + span + 1e-6) & (gt <= t1 - span - 1e-6)
+    withheld = np.zeros(gt.size, bool)
+    ev = cfg.evaluate
+    if ev is not None:
+        for a, b in outage_windows(t0, t1, first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
+                                   end_margin_s=ev.end_margin_s):
+            withheld |= (gt >= a - span) & (gt < b + span)
+    use = inside & ~withheld
+    n = int(use.sum())
+    if n < MIN_SEARCH_EPOCHS:
+        raise ValueError(f"time offset search: only {n} GNSS epoch(s) lie inside the IMU span "
+                         f"[{t0:.3f}, {t1:.3f}] s at every trial offset within +-{span} s (GNSS "
+                         f"[{gt[0]:.3f}, {gt[-1]:.3f}] s; at least {MIN_SEARCH_EPOCHS} needed): check the time "
+                         "systems, or reduce imu.time_offset_search_s")
+    M = gt.size
+    sub = pos._replace(**{f: np.asarray(v)[use] for f, v in zip(pos._fields, pos)
+                          if isinstance(v, (np.ndarray, jnp.ndarray)) and np.ndim(v) >= 1 and np.shape(v)[0] == M})
+    return sub, {"n_epochs_used": n, "n_epochs_dropped_at_span_edges": int((reach & ~inside).sum()),
+                 "n_epochs_withheld_by_evaluate": int((inside & withheld).sum()),
+                 "fitted_on": ("GNSS epochs inside the IMU span at every trial offset"
+                               + (", outside the [evaluate] outages (widened by the search span)" if ev else ""))}
 
 
 #: ``[tune] params`` name -> (Densities field or "lever_arm", bijector)
@@ -645,7 +707,11 @@ _TUNE_MAP = {"arw": ("arw", "log"), "vrw": ("vrw", "log"), "gyro_bias_instabilit
 
 
 class TuneReport(NamedTuple):
-    """``--tune`` result: parameters before/after (SI), innovation log-likelihood before/after, evaluations, time."""
+    """``--tune`` result: parameters before/after (SI), innovation log-likelihood before/after, evaluations, time.
+
+    ``fitted_on``: which GNSS epochs the loss used; ``n_epochs``: how many (with ``[evaluate]`` never
+    the withheld ones).
+    """
 
     before: dict
     after: dict
@@ -655,6 +721,8 @@ class TuneReport(NamedTuple):
     wall_time_s: float
     densities: Densities
     lever_rfu: Any
+    fitted_on: str = ""
+    n_epochs: int = 0
 
 
 def training_windows(prep: Prepared) -> np.ndarray:
@@ -689,8 +757,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     ``loss_kind``:
 
     * "innovations": the negative GNSS innovation log-likelihood of the forward filter over the
-      whole run (all GNSS epochs, no simulated outages) — the classic ML criterion; at a GNSS rate
-      of several Hz it weighs predictions over fractions of a second.
+      whole run (every GNSS epoch the filter sees; the ``[evaluate]`` outages stay withheld) — the
+      classic ML criterion; at a GNSS rate of several Hz it weighs predictions over fractions of a second.
     * "outages": the negative predictive log-likelihood of the GNSS fixes withheld on
       :func:`training_windows` (disjoint from the evaluation windows): horizontal antenna position
       predicted by the forward filter against each withheld fixed-quality fix, with the filter's
@@ -700,7 +768,7 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     gradients through the complete filter; densities are tuned on a log scale.
 
     Args:
-      prep: :class:`Prepared` (its evaluation outages are not withheld here).  names: parameters
+      prep: :class:`Prepared` (its evaluation outages stay withheld).  names: parameters
         from ``_TUNE_MAP``.  max_evals: loss evaluations at most.  mode: "reverse" or "forward".
     """
     from jaxnav.tune import Space, minimize_lbfgs
@@ -712,7 +780,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
         raise ValueError("gyro_bias_instability is a parameter of the 18- and 21-state models (noise.states)")
     if loss_kind not in ("innovations", "outages"):
         raise ValueError(f"loss must be 'innovations' or 'outages', got {loss_kind!r}")
-    base_mask = _mask_without_outages(prep)
+    # only the epochs the filter may see: the [evaluate] outages stay withheld, scored once after tuning
+    base_mask = np.asarray(prep.meas.mask).copy()
     scored = None
     if loss_kind == "outages":
         tw = training_windows(prep)
@@ -727,6 +796,9 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
                              f"windows {tw.tolist()}; use loss = 'innovations'")
         base_mask = base_mask & ~inside[:, None]
     all_gnss = prep.meas._replace(mask=base_mask)
+    n_fit = int(scored.sum()) if scored is not None else int(base_mask[:, :3].any(-1).sum())
+    fitted_on = ("GNSS epochs the filter sees" + (", outside the [evaluate] outages" if prep.withheld.any() else "")
+                 + (": fixes withheld on the training windows" if scored is not None else ": their innovations"))
     d0 = prep.densities
     lever0 = jnp.asarray(prep.lever_rfu, float)
     p0 = {}
@@ -771,7 +843,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     si = {n: np.asarray(v).tolist() for n, v in p0.items()}
     so = {n: np.asarray(v).tolist() for n, v in res.params.items()}
     return TuneReport(before=si, after=so, loglik_before=ll0, loglik_after=ll1, n_evals=int(res.n_evals),
-                      wall_time_s=time.perf_counter() - t0, densities=d1, lever_rfu=np.asarray(lev1))
+                      wall_time_s=time.perf_counter() - t0, densities=d1, lever_rfu=np.asarray(lev1),
+                      fitted_on=fitted_on, n_epochs=n_fit)
 
 
 def _mask_without_outages(prep: Prepared):

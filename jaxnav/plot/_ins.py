@@ -168,3 +168,31 @@ def plot_standstill(t, stat, threshold, detected, vetoed, t_gnss, speed, speed_s
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_time_offset_likelihood(offsets, loglik, best, sigma, path, *, title: str) -> pathlib.Path:
+    """Innovation log-likelihood against the trial IMU-GNSS time offset, with the estimate and its 1-sigma.
+
+    Args:
+      offsets: (K,) trial offsets added to the IMU times, s.  loglik: (K,) their log-likelihoods.
+      best: the estimate, s.  sigma: its 1-sigma, s (NaN: not drawn).  path: file written.
+    """
+    path = pathlib.Path(path)
+    x, y = np.asarray(offsets, float), np.asarray(loglik, float)
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    for a, near in zip(ax, (None, 0.06)):
+        s = np.ones(x.size, bool) if near is None else np.abs(x - best) <= near
+        a.plot(1e3 * x[s], y[s], "o-", ms=3, lw=1, color="C0", label="trial offsets")
+        if np.isfinite(sigma):
+            a.axvspan(1e3 * (best - sigma), 1e3 * (best + sigma), color="C1", alpha=0.25, lw=0,
+                      label=f"estimate +-1 sigma ({1e3 * best:+.1f} +- {1e3 * sigma:.1f} ms)")
+        a.axvline(1e3 * best, color="C1", lw=1, label=None if np.isfinite(sigma) else f"estimate {1e3 * best:+.1f} ms")
+        a.set_xlabel("time offset added to the IMU times, ms")
+        a.set_ylabel("GNSS innovation log-likelihood")
+        a.set_title("whole search" if near is None else "around the estimate")
+        a.grid(alpha=0.3)
+    fig.suptitle(title)
+    legend_below(fig, ax[0], ncol=2, height=0.08)
+    save_figure(fig, path, dpi=110)
+    plt.close(fig)
+    return path

@@ -93,7 +93,8 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
     t0 = time.perf_counter()
     u0 = space.unconstrain(params0)
     flat0, unravel = jax.flatten_util.ravel_pytree(u0)
-    mask = jax.flatten_util.ravel_pytree(space.mask())[0].astype(flat0.dtype)
+    m = space.mask()  # one factor per parameter, broadcast over a vector parameter's elements
+    mask = jax.flatten_util.ravel_pytree({k: jnp.full(jnp.shape(v), m[k]) for k, v in u0.items()})[0].astype(flat0.dtype)
     vg_tree = value_and_grad(lambda u: loss(space.constrain(u)), mode=mode)
 
     def vg(x):

@@ -45,10 +45,11 @@ def car_spec():
 
 def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=(0.6, 0.3, -1.4),
               tag_error_s=-0.15, imu_rate=100.0, gnss_rate=2.0, pos_sigma=0.02, vel_sigma=0.03,
-              vibration=1.0, spec=None) -> Recording:
+              vibration=1.0, spec=None, imu_start_s=0.0) -> Recording:
     """Simulate the car (industrial-grade IMU errors, RTK-level GNSS) and write ``imu.txt`` / ``gnss.txt``;
     ``vibration`` scales the engine and road vibration while moving (0: a perfectly smooth road);
-    ``spec``: another :class:`jaxnav.sim.TrajectorySpec` (default :func:`car_spec`)."""
+    ``spec``: another :class:`jaxnav.sim.TrajectorySpec` (default :func:`car_spec`);
+    ``imu_start_s``: the IMU log starts at this true time, s (GNSS starts at 1 s)."""
     truth = sim.generate_trajectory(car_spec() if spec is None else spec, imu_rate_hz=imu_rate)
     dt = float(truth.dt)
     model_g = sim.SensorErrorModel(bias_sigma=math.radians(5.0) / 3600, white=math.radians(0.15) / 60)
@@ -72,7 +73,7 @@ def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=
     t = np.asarray(truth.t)[1:]
     folder.mkdir(parents=True, exist_ok=True)
     imu_file = folder / "imu.txt"
-    rows = np.column_stack([SOW0 + t + tag_error_s, dth_s, dv_s])
+    rows = np.column_stack([SOW0 + t + tag_error_s, dth_s, dv_s])[t >= imu_start_s - 1e-9]
     np.savetxt(imu_file, rows, fmt=["%.4f"] + ["%.12e"] * 6)
     # GNSS antenna: truth position + C_bn lever (RFU body), noise; at the GNSS rate from 1 s on
     step = int(round(1.0 / (gnss_rate * dt)))

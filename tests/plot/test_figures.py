@@ -263,7 +263,10 @@ def test_ins_figures_keep_legends_off_the_panels(tmp_path, captured):
     plot.plot_ins_attitude(t, a3(10), a3(10), np.abs(a3(.1)) + 0.05, win, d / "attitude.png", title="synthetic")
     plot.plot_ins_biases(t, a3(100), np.abs(a3(10)), a3(5), np.abs(a3()), win, d / "biases.png",
                          title="synthetic", gyro_sm=a3(100), accel_sm=a3(5))
-    want = {"differences_to_gnss.png": {"simulated GNSS outage", "filter +-3 sigma", "filter - GNSS"},
+    grid = np.linspace(-0.2, 0.2, 21)
+    plot.plot_time_offset_likelihood(grid, -1e4 * (grid - 0.05) ** 2, 0.05, 0.004, d / "time_offset.png",
+                                     title="synthetic")
+    want = {"time_offset.png": {"trial offsets", "estimate +-1 sigma (+50.0 +- 4.0 ms)"},"differences_to_gnss.png": {"simulated GNSS outage", "filter +-3 sigma", "filter - GNSS"},
             "attitude.png": {"simulated GNSS outage", "forward", "RTS smoothed", "smoothed 1-sigma"},
             "biases.png": {"simulated GNSS outage", "x (right), forward +-1 sigma", "z (up), RTS smoothed"}}
     for name, labels in want.items():
