@@ -42,12 +42,11 @@ import jax.numpy as jnp
 
 from jaxnav import _status
 from jaxnav._numerics import safe_cholesky, whiten
-from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import data_independent
 from jaxnav.filters._smoother import (SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains,
                                       vmap_sharing)
-from jaxnav.filters._step import ALL_OUTPUTS, scan_setup, step_with_gain
+from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, scan_setup, step_with_gain
 
 #: per-epoch outputs that differ between the sequences of a shared-recursion batch
 PER_SEQUENCE = ("means", "pred_means", "innovations", "nis", "logliks")

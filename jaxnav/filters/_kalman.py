@@ -11,28 +11,9 @@ from functools import lru_cache, partial
 import jax
 
 from jaxnav.filters._model import LinearGaussian
-from jaxnav.filters._step import ALL_OUTPUTS, _record, filter_step, scan_setup
+from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, filter_step, scan_setup
 
 
-KalmanResult = _record("KalmanResult", ALL_OUTPUTS + (
-    "loglik", "n_nonfinite", "n_skipped", "status", "x_final", "P_final"), """Result of :func:`kalman_filter`; per-epoch arrays have a leading axis T (None if not saved).
-
-    Attributes:
-      means: (T, n) filtered means X_k.  covs: (T, n, n) P_k.
-      pred_means: (T, n) X_{k,k-1}.  pred_covs: (T, n, n) P_{k,k-1} (after inflation).
-      innovations: (T, m) v_k (0 where invalid).  innov_covs: (T, m, m) H P_{k,k-1} H^T + R.
-      nis: (T,) v^T S^{-1} v.  logliks: (T,) per-epoch log-likelihood.
-      factors: (T,) inflation factor (1, S, S_k or lambda_k).
-      noise: per-epoch estimator output (e.g. VCInfo, SageHusaInfo) or ().
-      valid: (T,) number of valid measurement components.
-      loglik: scalar total innovation log-likelihood.
-      n_nonfinite: int, NaN/inf measurement elements masked.  n_skipped: int, epochs without update.
-      status: int32 flags (see :func:`jaxnav.raise_for_status`).
-      x_final, P_final: the last estimate (always returned).
-
-    The batch entry points (:func:`~jaxnav.filters.kalman_filter_batch`) return the same record
-    with a leading batch axis B on the per-sequence fields and none on the shared ones.
-    """)
 
 
 def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimator=None, mask=None,
