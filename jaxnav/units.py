@@ -54,7 +54,7 @@ def mps_to_mm_per_year(x):
     return x / MM_PER_YEAR
 
 
-# ----------------------------------------------------------------------------- IMU datasheet units (issue 18)
+# ----------------------------------------------------------------------------- IMU datasheet units
 SQRT_HOUR = math.sqrt(HOUR)  # sqrt(s) per sqrt(h)
 MPS_PER_SQRT_HOUR = 1.0 / SQRT_HOUR  # m/s/sqrt(s) per m/s/sqrt(h) (velocity random walk)
 DEG_PER_HOUR_PER_SQRT_HOUR = DEG_PER_HOUR / SQRT_HOUR  # rad/s/sqrt(s) per deg/h/sqrt(h) (gyro bias random walk)

@@ -1,4 +1,4 @@
-"""Station velocities with coloured noise on daily files (``jaxnav monitor FILES``), issue 19.
+"""Station velocities with coloured noise on daily files (``jaxnav monitor FILES``).
 
 :func:`run_monitor_velocities` reads each file, screens outliers, fits the trajectory model with
 white + power-law (+ random-walk) noise by maximum likelihood (:func:`jaxnav.monitoring.fit_station`),

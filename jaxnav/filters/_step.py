@@ -135,7 +135,7 @@ def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True):
     when R is small next to H P H^T; the Joseph form is a congruence plus a PSD term and keeps it.
 
     Notes:
-      Tried in issue 8 and not kept: expanding the Joseph product as W - K (H W),
+      Not used: expanding the Joseph product as W - K (H W),
       W = P - (P H^T) K^T, takes 3 n^2 m multiplications instead of 2 n^3 + n^2 m but rounds
       like P - K S K^T and loses the congruence that keeps P positive semi-definite.
 

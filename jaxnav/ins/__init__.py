@@ -6,7 +6,7 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 
 from jaxnav.ins import attitude, earth, error_model, integration, measurements
 from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
-from jaxnav.ins.mounting import (  # issue 18: IMU mounting (sensor -> FRD vehicle -> RFU body)
+from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU body)
     C_RFU_FRD,
     mounting_from_dcm,
     mounting_from_groves,
@@ -110,7 +110,7 @@ __all__ = [
     "EarthParams", "ImuSample", "MechParams", "MechResult", "MechState", "NavState", "attitude",
     "check_imu", "earth", "earth_params", "mech_step", "mechanize", "mechanize_backward",
     "normal_gravity", "position_rate", "Alignment", "coarse_alignment", "sensor_to_body_from_upstream",
-    # issue 18, inputs: mounting, alignment, time offset, standstill, noise grades
+    # inputs: mounting, alignment, time offset, standstill, noise grades
     "HEADING_METHODS", "C_RFU_FRD", "mounting_from_dcm", "mounting_from_groves", "mounting_from_groves_deg",
     "mounting_from_rpy", "mounting_from_rpy_deg", "mounting_to_rpy", "sensor_to_body",
     "NOISE_GRADES", "ImuNoise", "imu_noise_from_datasheet", "imu_noise_to_datasheet", "noise_preset",

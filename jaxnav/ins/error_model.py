@@ -22,7 +22,7 @@ Each model is an :class:`ErrorModel` record (:data:`ERROR_MODEL_18`, :data:`ERRO
 the 15-state one is derived from the 18-state one by :meth:`ErrorModel.drop` (rows and columns
 deleted), as larger models can be reduced.
 
-The 21-state model (issue 18; the layout of KF-GINS-style loosely coupled filters) takes the
+The 21-state model (the layout of KF-GINS-style loosely coupled filters) takes the
 sensor errors as a datasheet states them::
 
     X21 = [phi (3), dV (3), dpos (3), eps_b (3), nabla (3), s_g (3), s_a (3)]

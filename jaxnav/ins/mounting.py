@@ -150,7 +150,7 @@ def sensor_to_body_from_upstream(roll_deg: float, pitch_deg: float, yaw_deg: flo
     """Deprecated name of ``sensor_to_body(mounting_from_groves_deg(roll_deg, pitch_deg, yaw_deg))``.
 
     C_bs (sensor -> jaxnav right-forward-up body) from a Groves-style (upstream ``imu_misalign``)
-    IMU orientation in degrees. Before issue 18 this used Rz Ry Rx on the angles (the transpose of
+    IMU orientation in degrees. An earlier version used Rz Ry Rx on the angles (the transpose of
     what upstream applies: 13.6 deg off for (180, -6.79, 185.35) deg); the walk set's (180, 0, -90)
     is symmetric and gives diag(-1, -1, 1) either way.
     """

@@ -1,7 +1,7 @@
 """File readers (host side): RTKLIB solutions, raw IMU logs with RTKLIB time tags, daily station
 series (NGL tenv3, SIO .neu, .col tables, EarthScope/PBO .pos), TOML configuration files; the walk_0827
 set; S3 stop lists and S2 result tables (readers and writers); KF-GINS IMU/GNSS text files and generic
-CSV tables with a column map and units (issue 18).
+CSV tables with a column map and units.
 
 Errors are :class:`ReaderError` (a ValueError) naming the file and line; units are converted to SI
 here, at the edge. :func:`write_json` is the one strict JSON writer (non-finite numbers as null

@@ -21,7 +21,7 @@ from jaxnav.survey.rtk import (  # noqa: E402
     windows_from_pos,
 )
 
-# S3 cadastral survey (issue 7)
+# S3 cadastral survey
 from jaxnav.survey import cadastral  # noqa: E402
 from jaxnav.survey._ar import (  # noqa: E402
     ARFit,

@@ -16,7 +16,7 @@ The same transforms applied to the unfiltered epochs give the *conventional* res
 averaging) that the paper compares against; the terminal's own fitted heights h (the second height
 path) are averaged as well, and :func:`compare_levelling` forms the paper's Table 3.
 
-Issue 19 (host side, before and after the pipeline): :func:`motion_segments` splits a ``.pos``
+Host side, before and after the pipeline): :func:`motion_segments` splits a ``.pos``
 series into static segments and moving epochs (:class:`MotionParams`), :func:`windows_from_pos`
 cuts points inside static segments only, and :func:`point_sigmas` states the precision of each
 point's mean with time-correlated epochs (``sigma_method = "acf_ess_segment"``: the effective
