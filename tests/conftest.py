@@ -1,6 +1,7 @@
 """Test configuration: float64 everywhere, persistent compilation cache for local reruns."""
 
 import os
+import sys
 import pathlib
 
 
@@ -78,3 +79,13 @@ def _rank(item):
 def pytest_collection_modifyitems(config, items):
     """Heaviest scopes first (a stable sort: the order inside a module is kept)."""
     items.sort(key=_rank)
+
+
+@pytest.fixture(autouse=True)
+def _one_llvm_per_process():
+    """numba (llvmlite) brings a second LLVM into the process beside XLA's; with both loaded, a test
+    worker segfaulted inside a later XLA compile (numba/numba#7857) and xdist then hung. Anything
+    that needs numba (pyins) runs in a subprocess (tests/reference/pyins_run.py)."""
+    yield
+    if "llvmlite" in sys.modules:
+        pytest.fail("llvmlite (numba) was imported in the test process: run it in a subprocess instead")
