@@ -37,8 +37,10 @@ $(DVENV)/.docs: pyproject.toml
 demo: $(VENV)/.base
 	$(VENV)/bin/jaxnav demo --out $(OUT)
 
+# A worker that crashes ends the run (--max-worker-restart=0): after a restart xdist hung with both
+# workers idle until CI's 90 minutes ran out.
 test: $(VENV)/.test
-	$(PY) -m pytest -q -n 2 --dist loadscope --no-loadscope-reorder
+	$(PY) -m pytest -q -n 2 --dist loadscope --no-loadscope-reorder --max-worker-restart=0
 
 bench: $(BVENV)/.bench
 	$(BVENV)/bin/python benchmarks/bench_filters.py

@@ -24,21 +24,10 @@ def _pin_xdist_worker():
 
 _pin_xdist_worker()
 
-
-def _fast_compiles():
-    """Compile the tests' programs with XLA's LLVM backend at -O0, before jax starts.
-
-    The suite checks numbers, not speed, and is compile-bound: -O0 cut cold module times by
-    10-15 % (measured: test_filters_fast 67 -> 57 s, test_demo + test_sim 98 -> 88 s) with the
-    same results (no fast-math at either level). Benchmarks run with XLA's defaults. A flag set
-    by the caller wins; notebook kernels and subprocesses inherit the environment.
-    """
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_backend_optimization_level" not in flags:
-        os.environ["XLA_FLAGS"] = (flags + " --xla_backend_optimization_level=0").strip()
-
-
-_fast_compiles()
+# XLA compiles at its default optimisation level, the one users and the benchmarks run. The suite
+# once set --xla_backend_optimization_level=0 (10-15 % less compile time); under it the test workers
+# saw a miscompile (all-zero filter means) and segfaults inside XLA compiles that did not reproduce
+# alone.
 
 import jax  # noqa: E402
 
@@ -81,11 +70,18 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=_rank)
 
 
+#: top-level modules whose native code must not share a test process with XLA: numba's llvmlite
+#: carries a second LLVM (numba/numba#7857), Hector pulls in netCDF4 with its own bundled HDF5,
+#: curl and compression libraries. With them loaded, test workers segfaulted inside later XLA
+#: compiles, and pytest-xdist then hung until CI's time ran out. Such references run in a subprocess
+#: (tests/reference/pyins_run.py, tests/reference/hector_run.py).
+FOREIGN_NATIVE = ("llvmlite", "numba", "netCDF4", "hector")
+
+
 @pytest.fixture(autouse=True)
-def _one_llvm_per_process():
-    """numba (llvmlite) brings a second LLVM into the process beside XLA's; with both loaded, a test
-    worker segfaulted inside a later XLA compile (numba/numba#7857) and xdist then hung. Anything
-    that needs numba (pyins) runs in a subprocess (tests/reference/pyins_run.py)."""
+def _no_foreign_native_code_in_process():
+    """Fail any test that imports one of FOREIGN_NATIVE into the test process."""
     yield
-    if "llvmlite" in sys.modules:
-        pytest.fail("llvmlite (numba) was imported in the test process: run it in a subprocess instead")
+    loaded = [m for m in FOREIGN_NATIVE if m in sys.modules]
+    if loaded:
+        pytest.fail(f"{', '.join(loaded)} imported in the test process: run that reference in a subprocess instead")

@@ -26,6 +26,23 @@ def _exe():
     return str(cand) if cand.exists() else shutil.which("estimatetrend")
 
 
+def hector_covariance_row(n: int, d: float, one_minus_phi: float):
+    """Hector's first row of the GGM covariance (``hector.ggm._covariance_row``), computed in a subprocess.
+
+    Hector imports netCDF4 (with its bundled HDF5 and compression libraries); the test process keeps
+    only jaxnav's native code (see tests/conftest.py), so the row comes back as an array.
+    """
+    code = (
+        "import sys, numpy as np; from hector.ggm import _covariance_row; "
+        "np.save(sys.argv[1], np.asarray(_covariance_row(int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]))))"
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        out = pathlib.Path(tmp) / "row.npy"
+        subprocess.run([sys.executable, "-c", code, str(out), str(n), repr(d), repr(one_minus_phi)], check=True,
+                       timeout=300)
+        return np.load(out)
+
+
 def run_hector(t_s, y_m, *, steps_s=(), noise="FlickerGGM White", reml=True, timeout=600) -> dict:
     """Hector's estimatetrend on a daily series; returns its JSON (mm, mm/yr) plus "wall_s".
 
