@@ -256,7 +256,8 @@ def run_ct_drive(folder, out: Optional[str] = None, *, kinds=FILTERS, plugins=PL
         from jaxnav.plot import plot_ct_drive
         outdir = pathlib.Path(out)
         outdir.mkdir(parents=True, exist_ok=True)
-        result["figure"] = plot_ct_drive(result, outdir / "ct_drive.png")
+        result["figure"] = outdir / "ct_drive.png"
+        plot_ct_drive(result, result["figure"])
     return result
 
 
