@@ -22,7 +22,6 @@ from __future__ import annotations
 import pathlib
 from typing import Any, NamedTuple, Optional
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -32,7 +31,7 @@ from jaxnav.io import read_pos
 
 ROVER = "rover_1Hz_rtk.pos"
 REFERENCE = "reference_1Hz.pos"
-#: the variants compared: (name, filter, plug-in keywords)
+#: the filters and plug-ins compared (:func:`plugin` gives the plug-ins' keywords)
 FILTERS = ("EKF", "UKF")
 PLUGINS = ("classic", "fading", "igg3")
 UKF_ALPHA = 0.5  # well conditioned sigma points (see jaxnav.filters.unscented_kalman_filter)
@@ -238,7 +237,8 @@ def run_ct_drive(folder, out: Optional[str] = None, *, kinds=FILTERS, plugins=PL
     truth = drive.truth
 
     def errs(res):
-        return {(k, p, st): horizontal_errors(v[st], truth) for (k, p), v in res.items() for st in ("filtered", "smoothed")}
+        return {(k, p, st): horizontal_errors(v[st], truth)
+                for (k, p), v in res.items() for st in ("filtered", "smoothed")}
 
     res = run_variants(model, drive.zs, kinds, plugins)
     stiff_res = run_variants(ct_model(R, **stiff), drive.zs, ("EKF",), ("classic", "fading"))

@@ -9,6 +9,7 @@ from jaxnav.plot._save import save_figure
 
 STYLE = {"classic": "-", "fading": "--", "igg3": ":"}
 COLOR = {"EKF": "tab:blue", "UKF": "tab:orange"}
+NAME = {"classic": "classic", "fading": "fading", "igg3": "IGG-III"}
 
 
 def _shade(ax, t, where, color, label):
@@ -43,7 +44,8 @@ def plot_ct_drive(result: dict, path):
         ax[0].semilogy(t, e, "-" if st == "filtered" else "--", color=COLOR.get(k), lw=0.8 if st == "filtered" else 1.2,
                        alpha=0.85, label=f"{k} classic, {st}")
     ax[0].set_ylabel("horizontal error, m")
-    ax[0].set_title("Coordinated-turn model on the real 1 Hz RTK drive (mostly float): horizontal error against the reference")
+    ax[0].set_title("Coordinated-turn model on the real 1 Hz RTK drive (mostly float): "
+                    "horizontal error against the reference")
     _shade(ax[1], t, result["turns"], "red", "turning (reference > 5 deg/s)")
     for (k, p, st), e in result["manoeuvre_errors"].items():
         if st == "filtered":
@@ -56,7 +58,7 @@ def plot_ct_drive(result: dict, path):
     for (k, p, st), e in result["outlier_errors"].items():
         if st == "filtered":
             ax[2].semilogy(t, e, STYLE.get(p, "-"), color="tab:gray" if p == "classic" else "tab:purple", lw=0.9,
-                           label=f"{k} {p} (filtered)")
+                           label=f"{k} {NAME.get(p, p)} (filtered)")
     for i, k in enumerate(result["outlier_epochs"]):
         ax[2].axvline(t[k], color="red", lw=0.6, alpha=0.6, label="injected 20-50 m outlier" if i == 0 else None)
     ax[2].set_ylabel("horizontal error, m")
