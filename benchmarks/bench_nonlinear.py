@@ -122,16 +122,21 @@ def simulate(key, T):
     return jax.lax.scan(step, X0, jax.random.split(key, T))[1]
 
 
-def timed(fn, *args, repeats):
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn(*args))
-    compile_s = time.perf_counter() - t0
-    runs = []
-    for _ in range(repeats):
+def timed_pair(fa, fb, x, *, repeats):
+    """Compile both, then time them alternately (a, b, a, b, ...) so that a burst of load on a shared
+    machine falls on both; returns (out_a, compile_a, min_a, out_b, compile_b, min_b), seconds."""
+    outs, comp = [], []
+    for fn in (fa, fb):
         t0 = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        runs.append(time.perf_counter() - t0)
-    return out, compile_s, min(runs)
+        outs.append(jax.block_until_ready(fn(x)))
+        comp.append(time.perf_counter() - t0)
+    runs = ([], [])
+    for _ in range(repeats):
+        for fn, r in zip((fa, fb), runs):
+            t0 = time.perf_counter()
+            jax.block_until_ready(fn(x))
+            r.append(time.perf_counter() - t0)
+    return outs[0], comp[0], min(runs[0]), outs[1], comp[1], min(runs[1])
 
 
 def main():
@@ -173,10 +178,9 @@ def main():
     for kind in ("EKF", "UKF"):
         m0, S0 = full[kind].pred_means[0], full[kind].pred_covs[0]
         theirs = jax.jit(lambda z, kind=kind, m0=m0, S0=S0: dyn(kind, z, m0, S0))
-        o1, c1, t1 = timed(lambda z: ours[kind](z).means, zs, repeats=a.repeats)
-        d1, c2, t2 = timed(theirs, zs, repeats=a.repeats)
-        ob, c3, t3 = timed(jax.jit(jax.vmap(lambda z: ours[kind](z).means)), zb, repeats=a.repeats)
-        db, c4, t4 = timed(jax.jit(jax.vmap(theirs)), zb, repeats=a.repeats)
+        o1, c1, t1, d1, c2, t2 = timed_pair(lambda z: ours[kind](z).means, theirs, zs, repeats=a.repeats)
+        ob, c3, t3, db, c4, t4 = timed_pair(jax.jit(jax.vmap(lambda z: ours[kind](z).means)), jax.jit(jax.vmap(theirs)),
+                                            zb, repeats=a.repeats)
         diff = float(jnp.max(jnp.abs(o1 - d1)))
         diffb = float(jnp.max(jnp.abs(ob - db)))
         rows.append((kind, "single", t1, t2, c1, c2, diff))
