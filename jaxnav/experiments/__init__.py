@@ -20,6 +20,8 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
 * :mod:`~jaxnav.experiments.ins_config`, :mod:`~jaxnav.experiments.ins_run`,
   :mod:`~jaxnav.experiments.ins_output`: INS/GNSS post-processing of a recording from a config
   (``jaxnav ins``): :func:`load_ins_config`, :func:`prepare`, :func:`run_ins`, :func:`tune_noise`, :func:`process`.
+* :mod:`~jaxnav.experiments.ct_drive`: a coordinated-turn model on the real 1 Hz RTK car drive,
+  EKF/UKF x classic/fading/IGG-III against the reference: :func:`run_ct_drive`.
 * :mod:`~jaxnav.experiments.walk`: the walk set as the shipped ``walk_0827`` config (``jaxnav walk``):
   :func:`run_walk`, :func:`frame_check`.
 """
