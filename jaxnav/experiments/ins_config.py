@@ -2,7 +2,8 @@
 
 Every key is checked before any file is read (type, range, allowed values, unknown keys named);
 file paths are relative to the config file, and ``${JAXNAV_DATA}`` (or any ``${VAR}``) in a path
-is replaced from the environment (the shipped configs use it to find ``../shared/data``).
+is replaced from the environment (the shipped configs use it to find ``../shared/data``); a path
+that starts with a variable whose value is relative is taken against the working directory.
 Units are the datasheet units a user has at hand (deg, deg/sqrt(h), m/s/sqrt(h), deg/h, mg, s, m);
 :func:`load_ins_config` converts them to SI once, here, and the rest of the pipeline sees SI only.
 
@@ -302,7 +303,11 @@ class _Reader:
             return os.environ[name]
 
         p = pathlib.Path(os.path.expanduser(_VAR.sub(sub, v)))
-        return p if p.is_absolute() else (self.path.parent / p)
+        if p.is_absolute():
+            return p
+        # a path that starts with a variable is where the variable points (a relative JAXNAV_DATA is
+        # taken against the working directory, as the user typed it); any other against the config
+        return pathlib.Path(os.path.abspath(p)) if _VAR.match(v) else self.path.parent / p
 
     def table(self, key):
         self.used.add(key)

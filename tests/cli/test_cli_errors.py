@@ -121,6 +121,8 @@ def _files(tmp_path):
         assert old in cad, old
         (tmp_path / f"cad_{name}.toml").write_text(cad.replace(old, new, 1))
         d[f"cad_{name}"] = tmp_path / f"cad_{name}.toml"
+    (tmp_path / "rtklibexplorer-gnss-imu").mkdir()  # a data set's own folder given where its parent belongs
+    d["walkset"] = tmp_path / "rtklibexplorer-gnss-imu"
     d["stops_bad"] = tmp_path / "stops.csv"
     d["stops_bad"].write_text("K0, known_coordinate, 0, 10, 132.0, 118.0, 10.0\n")
     return d
@@ -186,6 +188,18 @@ CASES = [
     ("rtk same file twice", ["rtk", "{ep}", "{ep}", "--out", "{tmp}/o"], ["point 'P0' also appears in"]),
     ("ins data folder missing", ["ins", "walk_0827", "--data", "{tmp}/no_data"], ["no_data", "no such data folder"]),
     ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
+    # --data is the folder that holds the data sets in every command, relative to the working directory,
+    # and the message names the folder searched
+    ("walk data relative", ["walk", "--data", "no_data"], ["{tmp}/no_data: no such data folder (--data = no_data)"]),
+    ("ins data relative", ["ins", "walk_0827", "--data", "no_data"], ["{tmp}/no_data: no such data folder"]),
+    ("walk data is the set itself", ["walk", "--data", "{walkset}"],
+     ["rtklibexplorer-gnss-imu/rtklibexplorer-gnss-imu: no such data folder", "looks like the data set itself"]),
+    ("walk data without the files", ["walk", "--data", "."],
+     ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"]),
+    ("ins data without the files", ["ins", "walk_0827", "--data", "."],
+     ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"]),
+    ("cadastral data is the set itself", ["cadastral", "--out", "{tmp}/c", "--data", "{walkset}"],
+     ["looks like the data set itself"]),
     ("rtk nothing", ["rtk"], ["jaxnav rtk:", "give FILES or --simulate"]),
     ("rtk missing file", ["rtk", "{tmp}/none.pos"], ["none.pos", "no such file"]),
     ("rtk control K2,inf", ["rtk", "{ep}", "--control", "{cp_inf}", "--out", "{tmp}/o"],
@@ -445,3 +459,31 @@ def test_summaries_print_words_and_short_numbers():
     assert status_words(65536) == "65536 (GNSS_GATED)" and status_words(0) == "0 (ok)"
     assert status_words(np.array([GNSS_GATED, NONFINITE_MEASUREMENT])) == "65537 (NONFINITE_MEASUREMENT | GNSS_GATED)"
     assert csv_number(0.034999999999999996) == "0.035" and csv_number(3) == 3 and csv_number(1.2345678901234567e-9) == "1.23456789012e-09"
+
+
+@pytest.mark.parametrize("how", ["walk --data", "ins --data", "ins JAXNAV_DATA"])
+def test_data_means_the_folder_of_the_data_sets_relative_to_the_cwd(how, tmp_path, monkeypatch):
+    """`jaxnav walk --data D`, `jaxnav ins walk_0827 --data D` and `JAXNAV_DATA=D jaxnav ins walk_0827`
+    read the same files, D relative to the working directory (never to the config's folder or D's parent)."""
+    import jaxnav.cli.ins as ins_cli
+
+    from _paths import DATA_ROOT
+
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    rel = os.path.relpath(DATA_ROOT, work)
+    seen = []
+    monkeypatch.setattr(ins_cli, "run_config", lambda args, cfg, out, tune=False: seen.append(cfg) or 0)
+    monkeypatch.delenv("JAXNAV_DATA", raising=False)
+    if how == "walk --data":
+        argv = ["-q", "walk", "--data", rel]
+    elif how == "ins --data":
+        argv = ["-q", "ins", "walk_0827", "--data", rel]
+    else:
+        monkeypatch.setenv("JAXNAV_DATA", rel)
+        argv = ["-q", "ins", "walk_0827"]
+    assert main(argv) == 0
+    walk = DATA_ROOT / "rtklibexplorer-gnss-imu" / "walk_0827"
+    assert seen[0].imu.file.resolve() == (walk / "imu_1730.csv").resolve()
+    assert seen[0].gnss.file.resolve() == (walk / "gnss_1730_sf.pos").resolve()

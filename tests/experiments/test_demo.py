@@ -75,12 +75,21 @@ def test_experiment_file_errors_name_the_key(tmp_path):
 
 
 def test_data_dir_from_flag_or_environment(tmp_path, monkeypatch, capsys):
-    """--data wins, else $JAXNAV_DATA/<set>; neither set: one clear line naming both; no cwd default."""
+    """--data wins, else $JAXNAV_DATA; both name the folder that holds the sets (<root>/<set>), a relative
+    one taken against the working directory; neither set: one clear line naming both; no cwd default."""
     from jaxnav.cli._common import CommandError, data_dir
 
     (tmp_path / "walkset").mkdir()
     monkeypatch.delenv("JAXNAV_DATA", raising=False)
-    assert data_dir(str(tmp_path / "walkset"), "walkset") == tmp_path / "walkset"
+    assert data_dir(str(tmp_path), "walkset") == tmp_path / "walkset"
+    with pytest.raises(CommandError, match=r"walkset/walkset: no such data folder .*looks like the data set itself"):
+        data_dir(str(tmp_path / "walkset"), "walkset")  # the set's own folder: never its parent, silently
+    (tmp_path / "cwd").mkdir()
+    monkeypatch.chdir(tmp_path / "cwd")
+    assert data_dir("..", "walkset") == tmp_path / "walkset"
+    monkeypatch.setenv("JAXNAV_DATA", "..")
+    assert data_dir(None, "walkset") == tmp_path / "walkset"
+    monkeypatch.delenv("JAXNAV_DATA")
     with pytest.raises(CommandError, match="--data.*JAXNAV_DATA"):
         data_dir(None, "walkset")
     assert data_dir(None, "walkset", required=False) is None
