@@ -5,9 +5,9 @@ Rule (used by every command and by :func:`jaxnav.tune.run_chunked` / :func:`jaxn
 * stderr is a terminal (``sys.stderr.isatty()``): a ``tqdm`` bar on stderr;
 * otherwise (a log file, a pipe, a notebook, CI): plain lines on stderr, no carriage returns,
   ``"<desc>: <done>/<total> <unit>s (<pct> %, <elapsed> s, about <left> s left)"``, one after the
-  first update (the first chunk, which includes compiling: its estimate is an upper bound and says
-  so), one when a further 10 % is done or 10 s have passed since the last line, and one at the
-  end; the time left is estimated from the rate after the first update (compiling excluded);
+  first update (its estimate from the first chunk's rate, and says so: a first call that compiles
+  makes it too long), one when a further 10 % is done or 10 s have passed since the last line,
+  and one at the end; later estimates use the rate after the first update (compiling excluded);
 * nothing at all when ``enabled`` is False or the ``"jaxnav"`` logger has been set above INFO
   (``jaxnav -q`` does that; so can a library user with
   ``logging.getLogger("jaxnav").setLevel(logging.WARNING)``). An unset logger (level NOTSET, the
@@ -87,8 +87,8 @@ class Progress:
             self._line(now, share)
 
     def remaining_s(self, now=None):
-        """Estimated seconds left (None before the first update or when done), and whether it is an
-        upper bound (only the first update, compiling included, is known yet)."""
+        """Estimated seconds left (None before the first update or when done), and whether it comes
+        from the first update alone (whose time includes compiling when the first call compiles)."""
         if self._first is None or self.done >= self.total or self.done <= 0:
             return None, False
         now = time.monotonic() if now is None else now
@@ -102,7 +102,7 @@ class Progress:
             return
         self._last_t, self._last_share, self._written = now, share, self.done
         left, upper = self.remaining_s(now)
-        eta = "" if left is None else (f", at most ~{left:.0f} s left (this first part included compiling)" if upper
+        eta = "" if left is None else (f", about {left:.0f} s left at the first chunk's rate" if upper
                                        else f", about {left:.0f} s left")
         self.stream.write(f"{self.desc}: {self.done}/{self.total} {self.unit}s ({100.0 * share:.0f} %, "
                           f"{now - self._t0:.0f} s{eta})\n")

@@ -102,8 +102,8 @@ def test_progress_plain_lines_without_carriage_returns():
 
 
 def test_progress_estimates_the_time_left_after_the_first_chunk(monkeypatch):
-    """A long sweep says how long it will take: after the first chunk an upper bound (it included
-    compiling), then an estimate from the rate after it; the last line has none."""
+    """A long sweep says how long it will take: after the first chunk at that chunk's rate (which may
+    include compiling), then from the rate after it; the last line has none."""
     import jaxnav._progress as prog
 
     clock = iter([0.0, 30.0, 35.0, 40.0, 45.0, 50.0])
@@ -113,7 +113,7 @@ def test_progress_estimates_the_time_left_after_the_first_chunk(monkeypatch):
         for _ in range(5):
             p.update(20)
     lines = s.getvalue().splitlines()
-    assert lines[0] == "sweep: 20/100 runs (20 %, 30 s, at most ~120 s left (this first part included compiling))"
+    assert lines[0] == "sweep: 20/100 runs (20 %, 30 s, about 120 s left at the first chunk's rate)"
     assert lines[1] == "sweep: 40/100 runs (40 %, 35 s, about 15 s left)"  # 5 s per 20 runs once compiled
     assert lines[-1] == "sweep: 100/100 runs (100 %, 50 s)"
 
