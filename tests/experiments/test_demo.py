@@ -62,6 +62,22 @@ def test_s0_demo_writes_table_json_and_figures(tmp_path, capsys):
         assert pathlib.Path(f).stat().st_size > 10_000
     printed = capsys.readouterr().out
     assert "published" in printed and "b sweep" in printed
+    assert "Why the columns differ from the published ones" in printed
+
+
+def test_s0_table_says_why_it_differs_from_the_published_one():
+    """Beside Table 1 (one run) the Monte Carlo mean differs by metres: the summary says why (one
+    published run vs a mean over seeds; the paper's unstated model mismatch), without a run."""
+    from jaxnav.experiments.s0 import FILTERS, format_s0
+
+    per_seed = dict(pos_rms_m=[[1.0, 2.0, 3.0]] * 2, vel_rms_mps=[[0.1, 0.2, 0.3]] * 2, att_rms_rad=[[1e-3] * 3] * 2)
+    res = dict(settings=dict(seeds=2, experiment=dict(published={f: [1.0] * 9 for f in FILTERS},
+                                                      filter=dict(b=0.254))),
+               filters={f: dict(per_seed=per_seed) for f in FILTERS},
+               sweep=dict(b=[0.1, 0.254], mean_pos_rms_m=[2.0, 3.0], seeds=2))
+    text = format_s0(res)
+    assert "one simulated run per filter" in text and "mean +- std over the seeds" in text
+    assert "model mismatch it does not state" in text and "reproductions.md" in text
 
 
 def test_experiment_file_errors_name_the_key(tmp_path):
