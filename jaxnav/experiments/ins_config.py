@@ -443,8 +443,21 @@ def _noise(path, d) -> NoiseSection:
         init_gyro_scale=opt("init_gyro_scale_ppm", 1e-6), init_accel_scale=opt("init_accel_scale_ppm", 1e-6))
     if grade is None and (n.arw is None or n.vrw is None):
         r.fail("grade", "is required unless arw_deg_per_sqrt_h and vrw_m_per_s_per_sqrt_h are both given")
+    for key, used in NOISE_KEY_STATES.items():  # a density the chosen model has no state for is not silently dropped
+        if key in d and states not in used:
+            r.fail(key, f"is used only with states = {' or '.join(str(k) for k in used)} (the error states that "
+                        f"model it); with states = {states} it would be ignored: set states or remove the key")
     r.done()
     return n
+
+
+#: [noise] keys that only some state counts use (the others need no such entry: every model uses them)
+NOISE_KEY_STATES = {
+    "gyro_bias_instability_deg_per_h": (18, 21), "bias_correlation_time_s": (18, 21),
+    "accel_bias_instability_mg": (21,), "accel_bias_correlation_time_s": (21,),
+    "gyro_bias_rw_deg_per_h_per_sqrt_h": (21,), "accel_bias_rw_mg_per_sqrt_h": (21,),
+    "init_gyro_scale_ppm": (21,), "init_accel_scale_ppm": (21,),
+}
 
 
 def _pair(r: _Reader, key, default):

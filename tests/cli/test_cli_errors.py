@@ -114,6 +114,10 @@ def _files(tmp_path):
             else ins + f"[{sec}]\n{line}\n"
         (tmp_path / f"ins_{name}.toml").write_text(text)
         d[f"ins_{name}"] = tmp_path / f"ins_{name}.toml"
+    for name, line in (("rw15", "gyro_bias_rw_deg_per_h_per_sqrt_h = 0.1"), ("arw15", "accel_bias_rw_mg_per_sqrt_h = 0.01"),
+                       ("gbi15", "gyro_bias_instability_deg_per_h = 10.0")):
+        (tmp_path / f"ins_{name}.toml").write_text(ins.replace('grade = "consumer"\n', f'grade = "consumer"\n{line}\n'))
+        d[f"ins_{name}"] = tmp_path / f"ins_{name}.toml"
     from jaxnav.sim import _cadastral
 
     cad = (pathlib.Path(_cadastral.__file__).parent / "scenarios/cadastral.toml").read_text()
@@ -185,6 +189,13 @@ CASES = [
     ("ins unreadable files", ["ins", "{ins_pos}", "--out", "{tmp}/o"], ["a_file"]),
     ("ins gnss file is a folder", ["ins", "{ins_dir}", "--out", "{tmp}/o"],
      ["a folder, not a file", "gnss.file"]),
+    # a density the chosen error model has no state for is refused, naming the state counts that use it
+    ("ins bias rw with 15 states", ["ins", "{ins_rw15}", "--out", "{tmp}/o"],
+     ["ins_rw15.toml", "noise.gyro_bias_rw_deg_per_h_per_sqrt_h is used only with states = 21", "states = 15"]),
+    ("ins accel bias rw with 15 states", ["ins", "{ins_arw15}", "--out", "{tmp}/o"],
+     ["ins_arw15.toml", "noise.accel_bias_rw_mg_per_sqrt_h is used only with states = 21"]),
+    ("ins bias instability with 15 states", ["ins", "{ins_gbi15}", "--out", "{tmp}/o"],
+     ["ins_gbi15.toml", "noise.gyro_bias_instability_deg_per_h is used only with states = 18 or 21"]),
     ("rtk same file twice", ["rtk", "{ep}", "{ep}", "--out", "{tmp}/o"], ["point 'P0' also appears in"]),
     ("ins data folder missing", ["ins", "walk_0827", "--data", "{tmp}/no_data"], ["no_data", "no such data folder"]),
     ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
