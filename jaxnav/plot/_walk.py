@@ -33,7 +33,8 @@ def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathli
     starts = []
     for k, (ta, tb) in enumerate(scores.windows):
         w = (t >= ta) & (t < tb)
-        a.plot(ref[w, 0], ref[w, 1], "k.", ms=4, label="withheld (outage n, numbered at its start)" if k == 0 else None)
+        a.plot(ref[w, 0], ref[w, 1], "k.", ms=4,
+               label="withheld (outage n, numbered at its start)" if k == 0 else None)
         if w.any():
             starts.append((k + 1, ref[np.nonzero(w)[0][0], :2]))
     a.plot(ref[0, 0], ref[0, 1], "g^", label="start")
@@ -52,14 +53,15 @@ def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathli
     a.set_title(f"{title}: track, GNSS withheld on the outage windows")
     b = ax[1]
     scored = [k for k in range(len(scores.windows)) if scores.n_ref[k]]
+    fwd_max = np.nanmax(np.asarray(scores.fwd_max, float)[scored]) if scored else np.nan
+    sm_max = np.nanmax(np.asarray(scores.sm_max, float)[scored]) if scored else np.nan
     for j, k in enumerate(scored):  # one legend entry per solution, for all outages together
         ta, tb = scores.windows[k]
         w = (t >= ta) & (t < tb)
         b.plot(t[w] - ta, scores.err_fwd[w], "-", color="C0", lw=1, alpha=0.8,
-               label=f"forward filter ({len(scored)} outages; max {np.nanmax(np.asarray(scores.fwd_max, float)[scored]):.2f} m)"
-               if j == 0 else None)
+               label=f"forward filter ({len(scored)} outages; max {fwd_max:.2f} m)" if j == 0 else None)
         b.plot(t[w] - ta, scores.err_sm[w], "--", color="C1", lw=1, alpha=0.8,
-               label=f"RTS smoother (max {np.nanmax(np.asarray(scores.sm_max, float)[scored]):.2f} m)" if j == 0 else None)
+               label=f"RTS smoother (max {sm_max:.2f} m)" if j == 0 else None)
     skipped = len(scores.windows) - len(scored)
     if skipped:
         b.plot([], [], " ", label=f"{skipped} outage(s) without an RTK-fixed epoch inside (not scored)")

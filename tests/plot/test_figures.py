@@ -353,8 +353,8 @@ def _walk_inputs(K=16):
     n_ref = np.array([60] * (K - 1) + [0])
     fmax = np.array([err[(t >= a) & (t < b)].max() for a, b in windows])
     scores = types.SimpleNamespace(windows=windows, t=t, err_fwd=err, err_sm=err / 10, n_ref=n_ref,
-                                   fwd_max=np.where(n_ref > 0, fmax, np.nan), sm_max=np.where(n_ref > 0, fmax / 10, np.nan),
-                                   fwd_rms_all=1.0, sm_rms_all=0.1)
+                                   fwd_max=np.where(n_ref > 0, fmax, np.nan),
+                                   sm_max=np.where(n_ref > 0, fmax / 10, np.nan), fwd_rms_all=1.0, sm_rms_all=0.1)
     return scores, dict(enu_ref=ref, enu_fwd=ref + 0.5, enu_sm=ref + 0.05)
 
 
