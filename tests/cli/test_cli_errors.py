@@ -127,6 +127,9 @@ def _files(tmp_path):
         d[f"cad_{name}"] = tmp_path / f"cad_{name}.toml"
     (tmp_path / "rtklibexplorer-gnss-imu").mkdir()  # a data set's own folder given where its parent belongs
     d["walkset"] = tmp_path / "rtklibexplorer-gnss-imu"
+    (tmp_path / "cad_unsampled.toml").write_text(cad.replace("imu_rate_hz = 100.0", "imu_rate_hz = 10.0", 1)
+                                                 .replace("accel_s = 2.0 ", "accel_s = 0.05 ", 1))
+    d["cad_unsampled"] = tmp_path / "cad_unsampled.toml"
     d["stops_bad"] = tmp_path / "stops.csv"
     d["stops_bad"].write_text("K0, known_coordinate, 0, 10, 132.0, 118.0, 10.0\n")
     return d
@@ -266,6 +269,9 @@ CASES = [
     ("cadastral stops latitude", ["cadastral", "--out", "{tmp}/c", "--stops", "{stops_bad}"],
      ["stops.csv:1:", "lat_deg = 132"]),
     ("cadastral out is a file", ["cadastral", "--out", "{a_file}"], ["a_file", "existing file"]),
+    # a route the IMU rate cannot sample: refused when the config is read, naming the file (not mid-run)
+    ("cadastral route not sampled", ["cadastral", "--out", "{tmp}/c", "--config", "{cad_unsampled}"],
+     ["cad_unsampled.toml: survey and legs", "imu_rate_hz = 10"]),
 ] + [(f"ins range {n}", ["ins", f"{{ins_{n}}}", "--out", "{tmp}/o"],
       [f"ins_{n}.toml", f"{sec}.{line.split(' =')[0]}", "plausible"]) for n, sec, line in INS_RANGE_CASES] \
   + [(f"cadastral range {n}", ["cadastral", "--out", "{tmp}/c", "--config", f"{{cad_{n}}}"],
