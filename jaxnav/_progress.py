@@ -4,8 +4,10 @@ Rule (used by every command and by :func:`jaxnav.tune.run_chunked` / :func:`jaxn
 
 * stderr is a terminal (``sys.stderr.isatty()``): a ``tqdm`` bar on stderr;
 * otherwise (a log file, a pipe, a notebook, CI): plain lines on stderr, no carriage returns,
-  ``"<desc>: <done>/<total> <unit>s (<pct> %, <elapsed> s)"``, one when a further 10 % is done
-  or 10 s have passed since the last line, and one at the end;
+  ``"<desc>: <done>/<total> <unit>s (<pct> %, <elapsed> s, about <left> s left)"``, one after the
+  first update (its estimate from the first chunk's rate, and says so: a first call that compiles
+  makes it too long), one when a further 10 % is done or 10 s have passed since the last line,
+  and one at the end; later estimates use the rate after the first update (compiling excluded);
 * nothing at all when ``enabled`` is False or the ``"jaxnav"`` logger has been set above INFO
   (``jaxnav -q`` does that; so can a library user with
   ``logging.getLogger("jaxnav").setLevel(logging.WARNING)``). An unset logger (level NOTSET, the
@@ -58,6 +60,7 @@ class Progress:
         self._t0 = self._last_t = time.monotonic()
         self._last_share = 0.0
         self._written = 0
+        self._first = None  # (time, done) at the first update: the rate after it excludes compiling
 
     def __enter__(self):
         if self.enabled and self.tty:
@@ -76,16 +79,33 @@ class Progress:
             return
         now = time.monotonic()
         share = self.done / self.total if self.total else 1.0
-        if self.done >= self.total or share - self._last_share >= LINE_EVERY_SHARE - 1e-12 \
+        first = self._first is None
+        if first:
+            self._first = (now, self.done)
+        if first or self.done >= self.total or share - self._last_share >= LINE_EVERY_SHARE - 1e-12 \
                 or now - self._last_t >= LINE_EVERY_S:
             self._line(now, share)
+
+    def remaining_s(self, now=None):
+        """Estimated seconds left (None before the first update or when done), and whether it comes
+        from the first update alone (whose time includes compiling when the first call compiles)."""
+        if self._first is None or self.done >= self.total or self.done <= 0:
+            return None, False
+        now = time.monotonic() if now is None else now
+        t1, d1 = self._first
+        if self.done > d1 and now > t1:
+            return (now - t1) / (self.done - d1) * (self.total - self.done), False
+        return (now - self._t0) / self.done * (self.total - self.done), True
 
     def _line(self, now, share):
         if self.done == self._written:
             return
         self._last_t, self._last_share, self._written = now, share, self.done
+        left, upper = self.remaining_s(now)
+        eta = "" if left is None else (f", about {left:.0f} s left at the first chunk's rate" if upper
+                                       else f", about {left:.0f} s left")
         self.stream.write(f"{self.desc}: {self.done}/{self.total} {self.unit}s ({100.0 * share:.0f} %, "
-                          f"{now - self._t0:.0f} s)\n")
+                          f"{now - self._t0:.0f} s{eta})\n")
         self.stream.flush()
 
     def __exit__(self, *exc):

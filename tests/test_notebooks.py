@@ -94,6 +94,27 @@ def test_notebook_stored_stripped(path):
     assert nb.metadata.get("kernelspec", {}).get("name", KERNEL) == KERNEL
 
 
+def test_stripped_notebooks_say_where_the_rendered_ones_are():
+    """Read on a forge, a stripped notebook shows no number or figure: notebooks/README.md and the
+    README say first where the rendered ones are (the docs site that `make docs` builds)."""
+    head = (NB_DIR / "README.md").read_text(encoding="utf-8").split("| notebook |")[0]
+    assert "without outputs" in head and "make docs" in head and "site/notebooks/" in head
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert re.search(r"Notebooks \(`notebooks/`.*?stored without outputs.*?make docs", readme, re.S)
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=IDS)
+def test_notebook_text_has_no_development_history_and_agrees_with_the_readme(path):
+    """No "(issue N)" in a heading or text; a number also stated in the README is the README's."""
+    nb = nbformat.read(path, as_version=4)
+    text = "\n".join(c.source for c in nb.cells if c.cell_type == "markdown")
+    assert not re.search(r"\bissue\s*#?\d+", text, re.I), path.name
+    hector = re.findall(r"rates agree within ([\d.]+) mm/yr", text)
+    if hector:
+        stated = re.search(r"agrees with\s+Hector to ([\d.]+) mm/yr", (ROOT / "README.md").read_text(encoding="utf-8"))
+        assert stated and hector[0] == stated.group(1), (path.name, hector, stated)
+
+
 def _executes(path):
     @pytest.mark.slow
     def test_executes(self, kernel_env, tmp_path):

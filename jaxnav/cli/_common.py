@@ -120,31 +120,54 @@ def input_file(path, option: str) -> pathlib.Path:
 
 
 def data_dir(args_data, subfolder: str, *, required: bool = True) -> Optional[pathlib.Path]:
-    """The data folder of a command: ``--data`` if given, else ``$JAXNAV_DATA/<subfolder>``.
+    """The folder of one data set: ``<root>/<subfolder>``, the root being ``--data`` or ``$JAXNAV_DATA``.
+
+    Every command gives ``--data`` (and ``JAXNAV_DATA``) the same meaning: the folder that holds the
+    data sets (like ``../shared/data``); a relative one is taken against the working directory.
 
     Args:
-      args_data: the command's ``--data`` value (the data set's own folder) or None.
-      subfolder: the data set's folder name inside ``$JAXNAV_DATA`` (e.g. "rtklibexplorer-gnss-imu").
+      args_data: the command's ``--data`` value or None.
+      subfolder: the data set's folder name inside the root (e.g. "rtklibexplorer-gnss-imu").
       required: without ``--data`` and ``JAXNAV_DATA``, raise (True) or return None (False; a
-        missing ``$JAXNAV_DATA/<subfolder>`` then also gives None).
+        ``$JAXNAV_DATA`` without ``<subfolder>`` then also gives None, while a ``--data`` without it
+        is still an error: the user asked for it).
     Returns:
-      The folder, or None (``required=False`` only).
+      The data set's folder (absolute), or None (``required=False`` only).
     Raises:
-      CommandError: neither is set (``required``), or the folder does not exist.
+      CommandError: neither is set (``required``), or a folder does not exist; the message names the
+        folder searched and where it came from.
     """
     if args_data:
-        path, source = pathlib.Path(args_data), "--data"
+        root, source = data_root(args_data, "--data"), "--data"
     elif os.environ.get(DATA_ENV):
-        path, source = pathlib.Path(os.environ[DATA_ENV]) / subfolder, DATA_ENV
-        if not required and not path.is_dir():
-            return None
+        root, source = data_root(os.environ[DATA_ENV], DATA_ENV), DATA_ENV
     elif required:
-        raise CommandError(f"no data folder: give --data DIR (the {subfolder} folder) or set {DATA_ENV} "
-                           f"to the folder that holds {subfolder}/")
+        raise CommandError(f"no data folder: give --data DIR or set {DATA_ENV} (the folder that holds the "
+                           f"data sets, with {subfolder}/ in it)")
     else:
         return None
+    path = root / subfolder
+    if path.is_dir():
+        return path
+    if not required and source == DATA_ENV:
+        return None
+    hint = ""
+    if root.name == subfolder:
+        hint = f"; {root} looks like the data set itself: give the folder that holds it ({root.parent})"
+    raise CommandError(f"{path}: no such data folder ({source} = {root}, the folder that holds the data sets, "
+                       f"has no {subfolder}/{hint})")
+
+
+def data_root(value, source: str) -> pathlib.Path:
+    """``--data`` / ``$JAXNAV_DATA`` as an absolute folder (relative: against the working directory).
+
+    Raises:
+      CommandError: not an existing folder (naming the folder searched and ``source``).
+    """
+    path = pathlib.Path(os.path.abspath(os.path.expanduser(os.fspath(value))))
     if not path.is_dir():
-        raise CommandError(f"{path}: no such data folder (from {source})")
+        what = "a file, not a folder" if path.exists() else "no such data folder"
+        raise CommandError(f"{path}: {what} ({source} = {value})")
     return path
 
 

@@ -24,8 +24,9 @@ def register(subparsers):
                    help="stop-list CSV replacing the simulated one (checked against the data)")
     p.add_argument("--legs", type=int_range(1), default=None, help="use only the first n (>= 1) legs (short run)")
     p.add_argument("--chunk", type=int_range(1, MAX_SEEDS), default=8, help="seeds per compiled batch, >= 1; default 8")
-    p.add_argument("--data", default=None, help=f"{WALK_SET} folder for the real-walk stop detection "
-                                                f"(default ${DATA_ENV}/{WALK_SET}; skipped if neither is set)")
+    p.add_argument("--data", default=None, help=f"folder that holds the data sets (like ../shared/data; relative "
+                                                f"to the working directory), for the real-walk stop detection on "
+                                                f"its {WALK_SET}/; default ${DATA_ENV}; skipped if neither is set")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     add_process_args(p)
     return p

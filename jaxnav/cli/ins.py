@@ -1,8 +1,9 @@
 """``jaxnav ins CONFIG``: INS/GNSS post-processing of a real recording from a config file alone.
 
 CONFIG is a TOML file (keys: :mod:`jaxnav.experiments.ins_config`) or the name of a shipped one
-(``walk_0827``). Paths in the config are relative to it; ``${JAXNAV_DATA}`` is taken from the
-environment or from ``--data``.
+(``walk_0827``). Paths in the config are relative to it; ``${JAXNAV_DATA}`` is ``--data`` or the
+environment variable: the folder that holds the data sets, a relative one taken against the working
+directory (as in every command).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import logging
 import os
 import pathlib
 
-from jaxnav.cli._common import DATA_ENV, CommandError, begin_computation, prepare_out, record_config
+from jaxnav.cli._common import DATA_ENV, CommandError, begin_computation, data_root, prepare_out, record_config
 
 
 def register(subparsers):
@@ -25,7 +26,8 @@ def register(subparsers):
                    help="tune the [tune] params (noise densities, lever arm) by maximising the GNSS innovation "
                         "likelihood over the whole run, then rerun and report before/after")
     p.add_argument("--data", default=None,
-                   help=f"folder that holds the data sets; sets ${{{DATA_ENV}}} for the paths in CONFIG")
+                   help=f"folder that holds the data sets (like ../shared/data; relative to the working directory); "
+                        f"stands for ${{{DATA_ENV}}} in the paths of CONFIG")
     return p
 
 
@@ -33,16 +35,22 @@ def run(args) -> int:
     """Check the config and the output folder, run, write the outputs, print the summary."""
     from jaxnav.experiments.ins_config import load_ins_config
 
-    if args.data:
-        if not os.path.isdir(args.data):
-            raise CommandError(f"{args.data}: no such data folder (--data)")
-        os.environ[DATA_ENV] = os.path.abspath(args.data)
-    cfg = load_ins_config(args.config)
+    variables = None
+    if args.data:  # the folder that holds the data sets, as in every command (relative: to the working dir)
+        variables = {DATA_ENV: str(data_root(args.data, "--data"))}
+    elif os.environ.get(DATA_ENV):  # not checked here: a config of the user's may not use it
+        variables = {DATA_ENV: os.path.abspath(os.path.expanduser(os.environ[DATA_ENV]))}
+    cfg = load_ins_config(args.config, variables=variables)
+    check_input_files(cfg)
+    record_config(args, cfg.path, cfg.raw)
+    return run_config(args, cfg, args.out or f"out/ins/{cfg.name}", tune=args.tune)
+
+
+def check_input_files(cfg) -> None:
+    """Every file the config names exists and is a file, else :class:`CommandError` naming it and its key."""
     for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag")):
         if p is not None and not p.is_file():
             raise CommandError(f"{p}: {'a folder, not a file' if p.is_dir() else 'no such file'} ({cfg.path}: {key})")
-    record_config(args, cfg.path, cfg.raw)
-    return run_config(args, cfg, args.out or f"out/ins/{cfg.name}", tune=args.tune)
 
 
 def run_config(args, cfg, out, *, tune: bool = False) -> int:

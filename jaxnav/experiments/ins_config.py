@@ -2,7 +2,8 @@
 
 Every key is checked before any file is read (type, range, allowed values, unknown keys named);
 file paths are relative to the config file, and ``${JAXNAV_DATA}`` (or any ``${VAR}``) in a path
-is replaced from the environment (the shipped configs use it to find ``../shared/data``).
+is replaced from the environment (the shipped configs use it to find ``../shared/data``); a path
+that starts with a variable whose value is relative is taken against the working directory.
 Units are the datasheet units a user has at hand (deg, deg/sqrt(h), m/s/sqrt(h), deg/h, mg, s, m);
 :func:`load_ins_config` converts them to SI once, here, and the rest of the pipeline sees SI only.
 
@@ -302,7 +303,11 @@ class _Reader:
             return os.environ[name]
 
         p = pathlib.Path(os.path.expanduser(_VAR.sub(sub, v)))
-        return p if p.is_absolute() else (self.path.parent / p)
+        if p.is_absolute():
+            return p
+        # a path that starts with a variable is where the variable points (a relative JAXNAV_DATA is
+        # taken against the working directory, as the user typed it); any other against the config
+        return pathlib.Path(os.path.abspath(p)) if _VAR.match(v) else self.path.parent / p
 
     def table(self, key):
         self.used.add(key)
@@ -438,8 +443,21 @@ def _noise(path, d) -> NoiseSection:
         init_gyro_scale=opt("init_gyro_scale_ppm", 1e-6), init_accel_scale=opt("init_accel_scale_ppm", 1e-6))
     if grade is None and (n.arw is None or n.vrw is None):
         r.fail("grade", "is required unless arw_deg_per_sqrt_h and vrw_m_per_s_per_sqrt_h are both given")
+    for key, used in NOISE_KEY_STATES.items():  # a density the chosen model has no state for is not silently dropped
+        if key in d and states not in used:
+            r.fail(key, f"is used only with states = {' or '.join(str(k) for k in used)} (the error states that "
+                        f"model it); with states = {states} it would be ignored: set states or remove the key")
     r.done()
     return n
+
+
+#: [noise] keys that only some state counts use (the others need no such entry: every model uses them)
+NOISE_KEY_STATES = {
+    "gyro_bias_instability_deg_per_h": (18, 21), "bias_correlation_time_s": (18, 21),
+    "accel_bias_instability_mg": (21,), "accel_bias_correlation_time_s": (21,),
+    "gyro_bias_rw_deg_per_h_per_sqrt_h": (21,), "accel_bias_rw_mg_per_sqrt_h": (21,),
+    "init_gyro_scale_ppm": (21,), "init_accel_scale_ppm": (21,),
+}
 
 
 def _pair(r: _Reader, key, default):

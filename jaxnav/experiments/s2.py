@@ -296,10 +296,11 @@ def format_rtk(summary: dict) -> str:
     mt = summary.get("motion_test")
     if mt is not None and mt["files"]:
         n_all = sum(c["n_epochs"] for c in mt["files"])
-        lines.append(f"  static/moving test (.pos files): {summary['excluded_moving_epochs']} of {n_all} epochs moving "
-                     f"(speed > {mt['v_max']:g} m/s or > {mt['d_max']:g} m in {mt['window_s']:g} s) and "
-                     f"{summary['excluded_short_static_epochs']} in static runs < {mt['min_static_s']:g} s: "
-                     f"EXCLUDED; {sum(c['n_segments'] for c in mt['files'])} static segment(s)")
+        moving, short = summary["excluded_moving_epochs"], summary["excluded_short_static_epochs"]
+        lines.append(f"  static/moving test (.pos files): {n_all - moving - short} of {n_all} epochs kept as static "
+                     f"in {sum(c['n_segments'] for c in mt['files'])} segment(s); left out: {moving} moving "
+                     f"(speed > {mt['v_max']:g} m/s or > {mt['d_max']:g} m in {mt['window_s']:g} s), {short} in "
+                     f"static runs < {mt['min_static_s']:g} s")
     sm = summary.get("sigma_mean_mm", {})
     if sm.get("corrected") is not None:
         c, nv = sm["corrected"], sm["naive"]
@@ -320,8 +321,23 @@ def format_rtk(summary: dict) -> str:
                                for s, th in zip(c["share_within"], c["thresholds_cm"]))
             lines.append(f"  {key[10:]:>24}: max {c['max_abs_cm']:.2f} cm, mean {c['mean_cm']:.2f} cm, "
                          f"std {c['std_cm']:.2f} cm; {shares}")
+    pts = summary.get("points") or []
+    if pts:
+        h = "h (normal)" if str(summary.get("height_system", "")).startswith("normal") else "h (ellipsoidal)"
+        lines.append(f"  points ({summary.get('crs', 'grid').split(' (')[0]}; x north, y east, {h}; sigma with "
+                     f"correlated epochs):")
+        for q in pts[:POINTS_PRINTED]:
+            lines.append(f"    {q['name']}: x {q['x_m']:.4f} m, y {q['y_m']:.4f} m, h {q['h_m']:.4f} m; sigma x/y/h "
+                         f"{q['sigma_x_m'] / MM:.2f}/{q['sigma_y_m'] / MM:.2f}/{q['sigma_h_m'] / MM:.2f} mm "
+                         f"({q['n_epochs']} epochs)")
+        if len(pts) > POINTS_PRINTED:
+            lines.append(f"    ... and {len(pts) - POINTS_PRINTED} more points in rtk_results.csv")
     lines.append(f"wrote {', '.join(summary['outputs'])}")
     return "\n".join(lines)
+
+
+#: points whose coordinates the summary prints (the rest are in rtk_results.csv)
+POINTS_PRINTED = 20
 
 
 def write_simulated_survey(out, seed: int = 0):

@@ -53,7 +53,8 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
         noise from float32 innovations, whose rounding grows with the size of z: the relative
         variance error is about 6e-7 |z|/sigma for fading and 7e-8 |z|/sigma for Sage-Husa, so
         keep z within ~100 sigma of the origin (local offsets) or use float64 (a 200k-epoch track
-        drifting to 5 km put fading's variances 50 % off).
+        drifting to 5 km put fading's variances 50 % off). A float32 run of such a plug-in with a
+        measurement beyond that range sets FLOAT32_DATA_RANGE in ``status`` (an error flag).
       check_finite: static. True (default) masks NaN/inf measurement elements and counts them.
         False trusts the data: NaN/inf are still counted and raise the NONFINITE_UNMASKED error
         flag, but are not masked (they propagate into the estimate).

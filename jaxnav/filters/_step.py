@@ -265,6 +265,10 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
         # without S failing: say so (only here: the fixed rules keep P bounded)
         psd = _near_psd(up.P) & _near_psd(P_pred)
         flags = flags | jnp.where(finite_state & ~psd, _status.COVARIANCE_INDEFINITE, 0)
+        if dt == jnp.float32:  # the documented float32 range of these plug-ins: |z| within ~100 sigma
+            sigma = jnp.sqrt(jnp.abs(jnp.diagonal(R)))
+            far = jnp.any(valid & (jnp.abs(jnp.where(valid, inp.z, 0.0)) > _status.FLOAT32_Z_RANGE * sigma))
+            flags = flags | jnp.where(far, _status.FLOAT32_DATA_RANGE, 0)
     ll = jnp.where(observed & up.ok, up.loglik, 0.0)
 
     new = FilterState(

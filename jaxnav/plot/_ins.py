@@ -8,12 +8,21 @@ import pathlib
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from jaxnav.plot._save import save_figure
-from jaxnav.plot._style import legend_below, readable_ticks
+from jaxnav.plot._style import legend_below, readable_ticks, symlog_ticks
 
 
 def _shade_outages(ax, windows, t0):
     for k, (a, b) in enumerate(windows):
         ax.axvspan(a - t0, b - t0, color="0.85", zorder=0, label="simulated GNSS outage" if k == 0 else None)
+
+
+def _unwrap_deg(x):
+    """Angles in degrees made continuous (multiples of 360 added at the jumps), NaN kept where they are."""
+    out = np.array(x, float)
+    ok = np.isfinite(out)
+    if ok.any():
+        out[ok] = np.degrees(np.unwrap(np.radians(out[ok])))
+    return out
 
 
 def plot_ins_differences(t, d_pos, sig_pos, d_vel, sig_vel, windows, path, *, title: str) -> pathlib.Path:
@@ -37,12 +46,13 @@ def plot_ins_differences(t, d_pos, sig_pos, d_vel, sig_vel, windows, path, *, ti
             a.fill_between(t - t0, -3 * s[:, c], 3 * s[:, c], color="C1", alpha=0.25, lw=0, label="filter +-3 sigma")
             a.plot(t - t0, d[:, c], ".", ms=2, color="C0", label="filter - GNSS")
             a.set_title(f"{what} {comp}")
-            a.set_ylabel(f"difference, {unit}")
             a.grid(alpha=0.3)
             # symmetric log scale: cm-level agreement with GNSS and metre-level drift in outages both visible
             lin = float(np.nanmedian(3 * s[:, c])) if np.any(np.isfinite(s[:, c])) else 0.1
             lin = 10.0 ** np.ceil(np.log10(max(lin, 1e-3)))  # a power of ten: ticks 0, +-lin, +-10 lin
             a.set_yscale("symlog", linthresh=lin)
+            symlog_ticks(a, lin)  # plain numbers, not -10^0
+            a.set_ylabel(f"difference, {unit}\n(log beyond +-{lin:g})")
     for a in ax[1]:
         a.set_xlabel("time since start, s")
     fig.suptitle(title)
@@ -66,17 +76,19 @@ def plot_ins_attitude(t, fwd, sm, sig, windows, path, *, title: str) -> pathlib.
         a = ax[0, c]
         _shade_outages(a, windows, t0)
         f_c, s_c = fwd[:, c].astype(float), sm[:, c].astype(float)
-        if name == "heading":  # break the lines where the heading wraps through north
-            f_c = np.where(np.abs(np.diff(f_c, prepend=f_c[0])) > 180, np.nan, f_c)
-            s_c = np.where(np.abs(np.diff(s_c, prepend=s_c[0])) > 180, np.nan, s_c)
+        label = f"{name}, deg"
+        if name == "heading":  # unwrapped: no 0/360 jumps; the forward heading on the smoothed one's turn
+            s_c = _unwrap_deg(s_c)
+            f_c = s_c + (f_c - s_c + 180.0) % 360.0 - 180.0
+            label = "heading (unwrapped), deg"
         a.plot(t - t0, f_c, "-", lw=1, color="C0", label="forward")
         a.plot(t - t0, s_c, "-", lw=1, color="C1", label="RTS smoothed")
         a.set_title(name)
-        a.set_ylabel(f"{name}, deg")
+        a.set_ylabel(label)
         a.grid(alpha=0.3)
         b = ax[1, c]
         _shade_outages(b, windows, t0)
-        b.semilogy(t - t0, sig[:, c], color="C1", label="smoothed 1-sigma")
+        b.semilogy(t - t0, sig[:, c], "--", lw=1.2, color="C3", label="RTS smoothed 1-sigma")
         b.set_ylabel(f"1-sigma {('tilt about east', 'tilt about north', 'heading')[c]}, deg")
         b.set_xlabel("time since start, s")
         b.grid(alpha=0.3, which="both")

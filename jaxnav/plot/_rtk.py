@@ -20,7 +20,8 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
     Top panel (only with ``h_level``): differences in cm per point number for the conventional RTK
     heights (the terminal's fitted h, averaged) and the filtered pipeline (ellipsoidal H + fitted
     height anomaly), with +-``thresholds`` bands. Bottom panels: internal precision of each point's
-    mean, plane sqrt(m_x^2 + m_y^2) and height, in mm, conventional averaging vs filtered.
+    mean, plane sqrt(m_x^2 + m_y^2) and height, in mm, conventional averaging vs filtered. The
+    points are separate marks (no lines between them: neighbouring points are not a series).
 
     Args:
       result: :class:`jaxnav.survey.rtk.RtkResult` (P points).
@@ -46,8 +47,8 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
         d_f = (xyh[:, 2] - hl) / CM
         d_t = (np.asarray(result.terminal_xyh)[:, 2] - hl) / CM
         if np.any(np.isfinite(d_t)):
-            ax[0].plot(k, d_t, "s-", ms=4, lw=0.8, color="tab:gray", label="conventional RTK (terminal h)")
-        ax[0].plot(k, d_f, "o-", ms=4, lw=0.8, color="tab:blue", label="filtered (H - fitted anomaly)")
+            ax[0].plot(k, d_t, "s", ms=4, color="tab:gray", label="conventional RTK (terminal h)")
+        ax[0].plot(k, d_f, "o", ms=4, color="tab:blue", label="filtered (H - fitted anomaly)")
         for th, ls in zip(thresholds, (":", "--")):
             ax[0].axhspan(-th / CM, th / CM, color="tab:green", alpha=0.07, lw=0)
             ax[0].axhline(th / CM, color="tab:green", ls=ls, lw=0.8)
@@ -59,24 +60,24 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
         a = 1
     mp_raw = np.hypot(*np.asarray(result.raw_precision)[:, :2].T) / MM
     mp_f = np.hypot(*np.asarray(result.precision)[:, :2].T) / MM
-    ax[a].plot(k, mp_raw, "s-", ms=3, lw=0.8, color="tab:gray", label="conventional mean, eq. (19)")
-    ax[a].plot(k, mp_f, "o-", ms=3, lw=0.8, color="tab:blue", label="filtered mean, eq. (19)")
+    ax[a].plot(k, mp_raw, "s", ms=4, color="tab:gray", label="conventional mean, eq. (19)")
+    ax[a].plot(k, mp_f, "o", ms=4, color="tab:blue", label="filtered mean, eq. (19)")
     fp = np.asarray(result.formal_precision)
-    ax[a].plot(k, np.hypot(fp[:, 0], fp[:, 1]) / MM, ":", lw=1.0, color="tab:red", label="from reported sigmas")
+    ax[a].plot(k, np.hypot(fp[:, 0], fp[:, 1]) / MM, "_", ms=10, mew=1.5, color="tab:red", label="from reported sigmas")
     if sigma is not None:
         sg = np.asarray(sigma, float)
-        ax[a].plot(k, np.hypot(sg[:, 0], sg[:, 1]) / MM, "^-", ms=3, lw=1.0, color="tab:orange",
+        ax[a].plot(k, np.hypot(sg[:, 0], sg[:, 1]) / MM, "^", ms=4, color="tab:orange",
                    label="correlated epochs (acf_ess_segment)")
     ax[a].set_title("Precision of each point's mean (log scale)")
     ax[a].set_ylabel("plane precision, mm")
     legend_outside(ax[a])
-    ax[a + 1].plot(k, np.asarray(result.raw_precision)[:, 2] / MM, "s-", ms=3, lw=0.8, color="tab:gray",
+    ax[a + 1].plot(k, np.asarray(result.raw_precision)[:, 2] / MM, "s", ms=4, color="tab:gray",
                    label="conventional")
-    ax[a + 1].plot(k, np.asarray(result.precision)[:, 2] / MM, "o-", ms=3, lw=0.8, color="tab:blue",
+    ax[a + 1].plot(k, np.asarray(result.precision)[:, 2] / MM, "o", ms=4, color="tab:blue",
                    label="filtered")
-    ax[a + 1].plot(k, fp[:, 2] / MM, ":", lw=1.0, color="tab:red", label="from reported sigmas")
+    ax[a + 1].plot(k, fp[:, 2] / MM, "_", ms=10, mew=1.5, color="tab:red", label="from reported sigmas")
     if sigma is not None:  # after the others: the same legend order as the plane panel
-        ax[a + 1].plot(k, np.asarray(sigma, float)[:, 2] / MM, "^-", ms=3, lw=1.0, color="tab:orange",
+        ax[a + 1].plot(k, np.asarray(sigma, float)[:, 2] / MM, "^", ms=4, color="tab:orange",
                        label="correlated epochs (acf_ess_segment)")
     ax[a].set_yscale("log")
     ax[a + 1].set_yscale("log")

@@ -54,6 +54,27 @@ def readable_ticks(ax, which="both"):
         axis.set_major_formatter(FuncFormatter(_fmt))
 
 
+def symlog_ticks(ax, linthresh: float, which: str = "y", most: int = 7):
+    """Plain-number ticks on a symmetric-log axis: 0 and +-linthresh x 10^k ("-1", "0", "0.1", "10").
+
+    matplotlib labels symlog ticks as powers ("-10^0", "10^-1"), hard to read as numbers. Call after
+    the data and limits are set; at most ``most`` ticks (every other decade when there are more).
+    """
+    axis = getattr(ax, f"{which}axis")
+    lo, hi = sorted(getattr(ax, f"get_{which}lim")())
+    pos = [linthresh * 10.0 ** k for k in range(0, 12) if linthresh * 10.0 ** k <= max(hi, -lo) * (1 + 1e-9)]
+    step = 1
+    while 1 + 2 * len(pos[::step]) > most and step < len(pos):
+        step += 1
+    pos = pos[::step]
+    ticks = sorted([0.0] + [v for v in pos if v <= hi] + [-v for v in pos if -v >= lo])
+    if len(ticks) < 3:  # the data stay inside the linear part: linear ticks there
+        ticks = [float(f"{v:.6g}") for v in MaxNLocator(nbins=4).tick_values(lo, hi) if lo <= v <= hi]
+    axis.set_major_locator(FixedLocator(ticks))
+    axis.set_major_formatter(FuncFormatter(_fmt))
+    axis.set_minor_formatter(NullFormatter())
+
+
 def legend_outside(ax, handles=None, labels=None, *, fontsize=8, x=1.01, **kw):
     """Legend beside ``ax`` (upper left corner at axes x = ``x``, top aligned): it never covers data.
 

@@ -51,12 +51,13 @@ def plot_sweep(outdir, *, grid, axes, loss, loss_name, init):
         ax[0].set_ylabel(a)
         ax[0].legend(fontsize=8, framealpha=0.6)
     ax[0].set_title(f"loss landscape (mean over {loss.shape[1]} runs)")
-    ax[1].hist(loss[best], bins=min(20, max(5, loss.shape[1] // 2)), alpha=0.7, label="best point")
+    ax[1].hist(loss[best], bins=min(20, max(5, loss.shape[1] // 2)), alpha=0.7, ec="white", lw=0.8, label="best point")
     ax[1].set_xlabel(loss_name)
     ax[1].set_ylabel("runs")
     ax[1].set_title("Monte Carlo distribution at the best grid point")
     _readable_ticks(ax[0])
     _readable_ticks(ax[1], "x")
+    ax[1].yaxis.set_major_locator(MaxNLocator(nbins=5, integer=True))  # counts of runs: whole numbers
     for a in ax:
         plt.setp(a.get_xticklabels(), rotation=30, ha="right")
     fig.tight_layout()
@@ -116,14 +117,15 @@ def plot_tune(outdir, *, path, losses, final, final_loss, landscape, loss_name, 
     ax[1].grid(alpha=0.3, which="both")
     ax[1].legend(fontsize=8)
     bins = min(20, max(5, len(final_runs) // 2))
-    ax[2].hist(start_runs, bins=bins, alpha=0.6, label="initial values")
-    ax[2].hist(final_runs, bins=bins, alpha=0.6, label="tuned values")
+    ax[2].hist(start_runs, bins=bins, alpha=0.6, ec="white", lw=0.8, label="initial values")
+    ax[2].hist(final_runs, bins=bins, alpha=0.6, ec="white", lw=0.8, label="tuned values")
     ax[2].set_xlabel(loss_name)
     ax[2].set_ylabel("runs")
     ax[2].legend()
     ax[2].set_title("Monte Carlo distribution")
     _readable_ticks(ax[0])
     _readable_ticks(ax[2], "x")
+    ax[2].yaxis.set_major_locator(MaxNLocator(nbins=5, integer=True))  # counts of runs: whole numbers
     for a in ax:
         plt.setp(a.get_xticklabels(), rotation=30, ha="right")
     fig.tight_layout()

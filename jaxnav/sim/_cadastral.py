@@ -36,7 +36,7 @@ from jaxnav.sim._scenario import (
     make_trajectory,
     simulate,
 )
-from jaxnav.sim._trajectory import ScenarioError, Segment, TrajectorySpec
+from jaxnav.sim._trajectory import ScenarioError, Segment, TrajectorySpec, segment_table
 
 _KINDS = ("known_coordinate", "known_position", "levelling", "zupt", "target")
 
@@ -444,6 +444,14 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
         grade = ImuGrade(name=gname, gyro=SensorErrorModel(**g), accel=SensorErrorModel(**a),
                          initial_errors=InitialErrorConfig(**ie))
         out[gname] = CadastralScenario(grade=grade, **kw)
+    for scn in list(out.values())[:1]:  # the route is the grades' common one: expand it once, here, so that a
+        c = scn.scenario_config()       # route the IMU rate cannot sample is refused with the file, not mid-run
+        try:
+            segment_table(c.trajectory, 1.0 / c.imu_rate_hz, c.duration)
+        except ScenarioError as e:
+            raise ScenarioError(f"survey and legs: the route they describe is not valid at imu_rate_hz = "
+                                f"{c.imu_rate_hz:g}: {e} (lengthen accel_s, turn_s or pitch_s, or raise "
+                                f"imu_rate_hz)") from None
     return out, dict(d.get("pipeline", {}))
 
 

@@ -20,7 +20,7 @@ import numpy as np
 from jax.experimental import multihost_utils
 from jax.sharding import NamedSharding, PartitionSpec
 
-from jaxnav._progress import Progress
+from jaxnav._progress import Progress, stage
 from jaxnav.tune._distributed import batch_mesh, is_writer, spans_processes
 
 
@@ -120,6 +120,8 @@ def map_sharded(fn: Callable, take: Callable, n: int, *, chunk: Optional[int] = 
     if multi:
         _same_on_every_process(first, n, chunk)
     t0 = time.perf_counter()
+    if progress and is_writer():  # compiling can take longer than the runs: say what the wait is
+        stage("%s: compiling the batched computation (%d per call) before the first chunk", desc, chunk)
     compiled = _compiled(fn, place(first), devs, sh, out_sh)
     compile_time = time.perf_counter() - t0
     values = map_chunked(lambda idx: compiled(*place(tuple(take(idx)))), n, chunk=chunk, desc=desc,

@@ -114,6 +114,10 @@ def _files(tmp_path):
             else ins + f"[{sec}]\n{line}\n"
         (tmp_path / f"ins_{name}.toml").write_text(text)
         d[f"ins_{name}"] = tmp_path / f"ins_{name}.toml"
+    for name, line in (("rw15", "gyro_bias_rw_deg_per_h_per_sqrt_h = 0.1"), ("arw15", "accel_bias_rw_mg_per_sqrt_h = 0.01"),
+                       ("gbi15", "gyro_bias_instability_deg_per_h = 10.0")):
+        (tmp_path / f"ins_{name}.toml").write_text(ins.replace('grade = "consumer"\n', f'grade = "consumer"\n{line}\n'))
+        d[f"ins_{name}"] = tmp_path / f"ins_{name}.toml"
     from jaxnav.sim import _cadastral
 
     cad = (pathlib.Path(_cadastral.__file__).parent / "scenarios/cadastral.toml").read_text()
@@ -121,6 +125,11 @@ def _files(tmp_path):
         assert old in cad, old
         (tmp_path / f"cad_{name}.toml").write_text(cad.replace(old, new, 1))
         d[f"cad_{name}"] = tmp_path / f"cad_{name}.toml"
+    (tmp_path / "rtklibexplorer-gnss-imu").mkdir()  # a data set's own folder given where its parent belongs
+    d["walkset"] = tmp_path / "rtklibexplorer-gnss-imu"
+    (tmp_path / "cad_unsampled.toml").write_text(cad.replace("imu_rate_hz = 100.0", "imu_rate_hz = 10.0", 1)
+                                                 .replace("accel_s = 2.0 ", "accel_s = 0.05 ", 1))
+    d["cad_unsampled"] = tmp_path / "cad_unsampled.toml"
     d["stops_bad"] = tmp_path / "stops.csv"
     d["stops_bad"].write_text("K0, known_coordinate, 0, 10, 132.0, 118.0, 10.0\n")
     return d
@@ -183,9 +192,28 @@ CASES = [
     ("ins unreadable files", ["ins", "{ins_pos}", "--out", "{tmp}/o"], ["a_file"]),
     ("ins gnss file is a folder", ["ins", "{ins_dir}", "--out", "{tmp}/o"],
      ["a folder, not a file", "gnss.file"]),
+    # a density the chosen error model has no state for is refused, naming the state counts that use it
+    ("ins bias rw with 15 states", ["ins", "{ins_rw15}", "--out", "{tmp}/o"],
+     ["ins_rw15.toml", "noise.gyro_bias_rw_deg_per_h_per_sqrt_h is used only with states = 21", "states = 15"]),
+    ("ins accel bias rw with 15 states", ["ins", "{ins_arw15}", "--out", "{tmp}/o"],
+     ["ins_arw15.toml", "noise.accel_bias_rw_mg_per_sqrt_h is used only with states = 21"]),
+    ("ins bias instability with 15 states", ["ins", "{ins_gbi15}", "--out", "{tmp}/o"],
+     ["ins_gbi15.toml", "noise.gyro_bias_instability_deg_per_h is used only with states = 18 or 21"]),
     ("rtk same file twice", ["rtk", "{ep}", "{ep}", "--out", "{tmp}/o"], ["point 'P0' also appears in"]),
     ("ins data folder missing", ["ins", "walk_0827", "--data", "{tmp}/no_data"], ["no_data", "no such data folder"]),
     ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
+    # --data is the folder that holds the data sets in every command, relative to the working directory,
+    # and the message names the folder searched
+    ("walk data relative", ["walk", "--data", "no_data"], ["{tmp}/no_data: no such data folder (--data = no_data)"]),
+    ("ins data relative", ["ins", "walk_0827", "--data", "no_data"], ["{tmp}/no_data: no such data folder"]),
+    ("walk data is the set itself", ["walk", "--data", "{walkset}"],
+     ["rtklibexplorer-gnss-imu/rtklibexplorer-gnss-imu: no such data folder", "looks like the data set itself"]),
+    ("walk data without the files", ["walk", "--data", "."],
+     ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"]),
+    ("ins data without the files", ["ins", "walk_0827", "--data", "."],
+     ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"]),
+    ("cadastral data is the set itself", ["cadastral", "--out", "{tmp}/c", "--data", "{walkset}"],
+     ["looks like the data set itself"]),
     ("rtk nothing", ["rtk"], ["jaxnav rtk:", "give FILES or --simulate"]),
     ("rtk missing file", ["rtk", "{tmp}/none.pos"], ["none.pos", "no such file"]),
     ("rtk control K2,inf", ["rtk", "{ep}", "--control", "{cp_inf}", "--out", "{tmp}/o"],
@@ -241,6 +269,9 @@ CASES = [
     ("cadastral stops latitude", ["cadastral", "--out", "{tmp}/c", "--stops", "{stops_bad}"],
      ["stops.csv:1:", "lat_deg = 132"]),
     ("cadastral out is a file", ["cadastral", "--out", "{a_file}"], ["a_file", "existing file"]),
+    # a route the IMU rate cannot sample: refused when the config is read, naming the file (not mid-run)
+    ("cadastral route not sampled", ["cadastral", "--out", "{tmp}/c", "--config", "{cad_unsampled}"],
+     ["cad_unsampled.toml: survey and legs", "imu_rate_hz = 10"]),
 ] + [(f"ins range {n}", ["ins", f"{{ins_{n}}}", "--out", "{tmp}/o"],
       [f"ins_{n}.toml", f"{sec}.{line.split(' =')[0]}", "plausible"]) for n, sec, line in INS_RANGE_CASES] \
   + [(f"cadastral range {n}", ["cadastral", "--out", "{tmp}/c", "--config", f"{{cad_{n}}}"],
@@ -445,3 +476,31 @@ def test_summaries_print_words_and_short_numbers():
     assert status_words(65536) == "65536 (GNSS_GATED)" and status_words(0) == "0 (ok)"
     assert status_words(np.array([GNSS_GATED, NONFINITE_MEASUREMENT])) == "65537 (NONFINITE_MEASUREMENT | GNSS_GATED)"
     assert csv_number(0.034999999999999996) == "0.035" and csv_number(3) == 3 and csv_number(1.2345678901234567e-9) == "1.23456789012e-09"
+
+
+@pytest.mark.parametrize("how", ["walk --data", "ins --data", "ins JAXNAV_DATA"])
+def test_data_means_the_folder_of_the_data_sets_relative_to_the_cwd(how, tmp_path, monkeypatch):
+    """`jaxnav walk --data D`, `jaxnav ins walk_0827 --data D` and `JAXNAV_DATA=D jaxnav ins walk_0827`
+    read the same files, D relative to the working directory (never to the config's folder or D's parent)."""
+    import jaxnav.cli.ins as ins_cli
+
+    from _paths import DATA_ROOT
+
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    rel = os.path.relpath(DATA_ROOT, work)
+    seen = []
+    monkeypatch.setattr(ins_cli, "run_config", lambda args, cfg, out, tune=False: seen.append(cfg) or 0)
+    monkeypatch.delenv("JAXNAV_DATA", raising=False)
+    if how == "walk --data":
+        argv = ["-q", "walk", "--data", rel]
+    elif how == "ins --data":
+        argv = ["-q", "ins", "walk_0827", "--data", rel]
+    else:
+        monkeypatch.setenv("JAXNAV_DATA", rel)
+        argv = ["-q", "ins", "walk_0827"]
+    assert main(argv) == 0
+    walk = DATA_ROOT / "rtklibexplorer-gnss-imu" / "walk_0827"
+    assert seen[0].imu.file.resolve() == (walk / "imu_1730.csv").resolve()
+    assert seen[0].gnss.file.resolve() == (walk / "gnss_1730_sf.pos").resolve()

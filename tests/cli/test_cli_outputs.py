@@ -93,12 +93,29 @@ def test_progress_plain_lines_without_carriage_returns():
         for _ in range(50):
             p.update(2)
     lines = s.getvalue().splitlines()
-    assert "\r" not in s.getvalue() and 10 <= len(lines) <= 11
+    assert "\r" not in s.getvalue() and 10 <= len(lines) <= 12  # the first update, every 10 %, the end
     assert lines[-1].startswith("sweep: 100/100 runs (100 %")
     s2 = io.StringIO()
     with Progress(3, "x", stream=s2, tty=False, enabled=False) as p:
         p.update(3)
     assert s2.getvalue() == ""
+
+
+def test_progress_estimates_the_time_left_after_the_first_chunk(monkeypatch):
+    """A long sweep says how long it will take: after the first chunk at that chunk's rate (which may
+    include compiling), then from the rate after it; the last line has none."""
+    import jaxnav._progress as prog
+
+    clock = iter([0.0, 30.0, 35.0, 40.0, 45.0, 50.0])
+    monkeypatch.setattr(prog.time, "monotonic", lambda: next(clock))
+    s = io.StringIO()
+    with Progress(100, "sweep", unit="run", stream=s, tty=False) as p:
+        for _ in range(5):
+            p.update(20)
+    lines = s.getvalue().splitlines()
+    assert lines[0] == "sweep: 20/100 runs (20 %, 30 s, about 120 s left at the first chunk's rate)"
+    assert lines[1] == "sweep: 40/100 runs (40 %, 35 s, about 15 s left)"  # 5 s per 20 runs once compiled
+    assert lines[-1] == "sweep: 100/100 runs (100 %, 50 s)"
 
 
 def test_progress_silent_when_the_logger_is_quiet():

@@ -62,6 +62,22 @@ def test_s0_demo_writes_table_json_and_figures(tmp_path, capsys):
         assert pathlib.Path(f).stat().st_size > 10_000
     printed = capsys.readouterr().out
     assert "published" in printed and "b sweep" in printed
+    assert "Why the columns differ from the published ones" in printed
+
+
+def test_s0_table_says_why_it_differs_from_the_published_one():
+    """Beside Table 1 (one run) the Monte Carlo mean differs by metres: the summary says why (one
+    published run vs a mean over seeds; the paper's unstated model mismatch), without a run."""
+    from jaxnav.experiments.s0 import FILTERS, format_s0
+
+    per_seed = dict(pos_rms_m=[[1.0, 2.0, 3.0]] * 2, vel_rms_mps=[[0.1, 0.2, 0.3]] * 2, att_rms_rad=[[1e-3] * 3] * 2)
+    res = dict(settings=dict(seeds=2, experiment=dict(published={f: [1.0] * 9 for f in FILTERS},
+                                                      filter=dict(b=0.254))),
+               filters={f: dict(per_seed=per_seed) for f in FILTERS},
+               sweep=dict(b=[0.1, 0.254], mean_pos_rms_m=[2.0, 3.0], seeds=2))
+    text = format_s0(res)
+    assert "one simulated run per filter" in text and "mean +- std over the seeds" in text
+    assert "model mismatch it does not state" in text and "reproductions.md" in text
 
 
 def test_experiment_file_errors_name_the_key(tmp_path):
@@ -75,12 +91,21 @@ def test_experiment_file_errors_name_the_key(tmp_path):
 
 
 def test_data_dir_from_flag_or_environment(tmp_path, monkeypatch, capsys):
-    """--data wins, else $JAXNAV_DATA/<set>; neither set: one clear line naming both; no cwd default."""
+    """--data wins, else $JAXNAV_DATA; both name the folder that holds the sets (<root>/<set>), a relative
+    one taken against the working directory; neither set: one clear line naming both; no cwd default."""
     from jaxnav.cli._common import CommandError, data_dir
 
     (tmp_path / "walkset").mkdir()
     monkeypatch.delenv("JAXNAV_DATA", raising=False)
-    assert data_dir(str(tmp_path / "walkset"), "walkset") == tmp_path / "walkset"
+    assert data_dir(str(tmp_path), "walkset") == tmp_path / "walkset"
+    with pytest.raises(CommandError, match=r"walkset/walkset: no such data folder .*looks like the data set itself"):
+        data_dir(str(tmp_path / "walkset"), "walkset")  # the set's own folder: never its parent, silently
+    (tmp_path / "cwd").mkdir()
+    monkeypatch.chdir(tmp_path / "cwd")
+    assert data_dir("..", "walkset") == tmp_path / "walkset"
+    monkeypatch.setenv("JAXNAV_DATA", "..")
+    assert data_dir(None, "walkset") == tmp_path / "walkset"
+    monkeypatch.delenv("JAXNAV_DATA")
     with pytest.raises(CommandError, match="--data.*JAXNAV_DATA"):
         data_dir(None, "walkset")
     assert data_dir(None, "walkset", required=False) is None

@@ -232,13 +232,14 @@ def test_igg3_defaults_on_gross_errors_monte_carlo():
 # ------------------------------------------------------------------------------------------
 
 
-def _float32_rel_var_error(model, x0, P0, zs, **plug):
+def _float32_rel_var_error(model, x0, P0, zs, *, status32=0, **plug):
+    """Largest relative variance difference float32 vs float64; the float32 run's status must be ``status32``."""
     out = []
     for dt in (jnp.float64, jnp.float32):
         m = jf.LinearGaussian(*[None if a is None else jnp.asarray(a, dt) for a in model])
         r = jf.kalman_filter(m, jnp.asarray(x0, dt), jnp.asarray(P0, dt), jnp.asarray(zs, dt), allow_float32=True,
                              save=("covs",), **plug)
-        assert int(r.status) == 0
+        assert int(r.status) == (status32 if dt == jnp.float32 else 0), (dt, _status.status_words(r.status))
         out.append(np.asarray(jnp.diagonal(r.covs, axis1=1, axis2=2), float))
     return float(np.max(np.abs(out[1] / out[0] - 1.0)))
 
@@ -266,10 +267,16 @@ def test_float32_data_dependent_variances_need_local_offsets(long_track):
     model, P0, sc = long_track
     resid = np.asarray(sc.zs - sc.x_true[:, :3])  # local offsets: the noise itself
 
-    def err(offset, **plug):
+    def err(offset, status32=0, **plug):
         x0 = jnp.array([offset] * 3 + [0.0] * 3)
-        return _float32_rel_var_error(model, x0, P0, resid + offset, **plug)
+        return _float32_rel_var_error(model, x0, P0, resid + offset, status32=status32, **plug)
 
     assert err(0.0, inflation=jf.fading()) < 2e-5
     assert err(0.0, estimator=jf.sage_husa(0.95)) < 2e-5
-    assert err(100.0, inflation=jf.fading()) > 1e-3  # the scale dependence the README states
+    # the scale dependence the README states, and the run says so in its status (an error flag)
+    far = _status.FLOAT32_DATA_RANGE
+    assert err(100.0, status32=far, inflation=jf.fading()) > 1e-3
+    assert err(100.0, status32=far, estimator=jf.sage_husa(0.95)) > 0
+    with pytest.raises(_status.StatusError, match="float32 with a data-dependent plug-in"):
+        _status.raise_for_status(far)
+    assert err(100.0, inflation=jf.attenuated(0.254)) < 1e-5  # data-independent: no flag at any scale

@@ -1,6 +1,7 @@
-"""The figures of issue 21 on tiny synthetic inputs: each test asserts what its fix promises
+"""The publication figures on tiny synthetic inputs: each test asserts what its figure promises
 (labels match curves, legends outside the data, the real statistic, spread bars, no lines joining
-independent periods, readable ticks, the loss itself, titles naming the data and the seed)."""
+independent points or periods, readable ticks, the loss itself, titles naming the data and the seed,
+one legend entry per kind of curve, unwrapped heading, whole-number counts)."""
 
 import os
 import pathlib
@@ -18,6 +19,7 @@ from jaxnav import plot  # noqa: E402
 import jaxnav.plot._ins as _ins  # noqa: E402
 import jaxnav.plot._s0 as _s0  # noqa: E402
 import jaxnav.plot._tune as _tune  # noqa: E402
+import jaxnav.plot._walk as _walk  # noqa: E402
 
 # JAXNAV_KEEP_FIGURES=DIR keeps the PNGs for a look
 KEEP = os.environ.get("JAXNAV_KEEP_FIGURES")
@@ -41,7 +43,7 @@ def captured(monkeypatch):
             return save(fig, path, **kw) if KEEP else pathlib.Path(path)
         return wrapper
 
-    for mod in (_s0, _tune, _ins):
+    for mod in (_s0, _tune, _ins, _walk):
         monkeypatch.setattr(mod, "save_figure", keep(mod.save_figure))
     return figs
 
@@ -267,7 +269,7 @@ def test_ins_figures_keep_legends_off_the_panels(tmp_path, captured):
     plot.plot_time_offset_likelihood(grid, -1e4 * (grid - 0.05) ** 2, 0.05, 0.004, d / "time_offset.png",
                                      title="synthetic")
     want = {"time_offset.png": {"trial offsets", "estimate +-1 sigma (+50.0 +- 4.0 ms)"},"differences_to_gnss.png": {"simulated GNSS outage", "filter +-3 sigma", "filter - GNSS"},
-            "attitude.png": {"simulated GNSS outage", "forward", "RTS smoothed", "smoothed 1-sigma"},
+            "attitude.png": {"simulated GNSS outage", "forward", "RTS smoothed", "RTS smoothed 1-sigma"},
             "biases.png": {"simulated GNSS outage", "x (right), forward +-1 sigma", "z (up), RTS smoothed"}}
     for name, labels in want.items():
         fig = captured[name]
@@ -291,3 +293,104 @@ def test_log_ticks_few_inside_and_apart(lo, hi):
     assert np.all(gaps >= np.log10(hi / lo) / 7 * (1 - 1e-9))  # never crowded
     if np.log10(hi / lo) >= 1 and lo <= 1 <= hi:
         assert 1.0 in ticks  # round values first
+
+
+def _tick_numbers(axis):
+    """The tick labels of ``axis`` as numbers (fails on "10^0"-style or mathtext labels)."""
+    texts = [lb.get_text() for lb in axis.get_ticklabels() if lb.get_text()]
+    return [float(tx.replace("\u2212", "-")) for tx in texts]
+
+
+def test_ins_differences_ticks_are_plain_numbers(tmp_path, captured):
+    """The symmetric-log axes read as numbers ("-1", "0", "0.1", "10"), not -10^0 / 10^-1."""
+    M = 200
+    t = np.linspace(0.0, 120.0, M)
+    drift = np.where((t > 40) & (t < 55), 0.02 * (t - 40) ** 2, 0.0)
+    d = np.stack([drift, -drift, 0.01 * np.sin(t)], axis=1)
+    s = np.full((M, 3), 0.01)
+    plot.plot_ins_differences(t, d, s, d / 10, s, np.array([[40.0, 55.0]]), tmp_path / "differences_to_gnss.png",
+                              title="synthetic")
+    fig = captured["differences_to_gnss.png"]
+    _renderer(fig)
+    for ax in fig.axes:
+        assert ax.get_yscale() == "symlog"
+        nums = _tick_numbers(ax.yaxis)
+        assert 0.0 in nums and len(nums) >= 3, nums
+
+
+def test_ins_attitude_heading_unwrapped_and_sigma_in_its_own_style(tmp_path, captured):
+    """Heading through north is drawn continuous (no 0/360 jumps, no gaps); the smoothed 1-sigma has
+    another colour and line style than the smoothed attitude."""
+    M = 100
+    t = np.linspace(0.0, 100.0, M)
+    heading = (300.0 + 2.0 * t) % 360.0  # crosses north at t = 30
+    att = np.stack([np.zeros(M), np.zeros(M), heading], axis=1)
+    plot.plot_ins_attitude(t, att, att, np.full((M, 3), 0.1), np.array([[40.0, 55.0]]), tmp_path / "attitude.png",
+                           title="synthetic")
+    fig = captured["attitude.png"]
+    head, sig = fig.axes[2], fig.axes[5]
+    for ln in _data_lines(head):
+        y = np.asarray(ln.get_ydata(), float)
+        assert np.all(np.isfinite(y)) and np.max(np.abs(np.diff(y))) < 10.0
+    (sm,) = [ln for ln in head.get_lines() if ln.get_label() == "RTS smoothed"]
+    (sg,) = [ln for ln in sig.get_lines() if ln.get_label() == "RTS smoothed 1-sigma"]
+    assert sm.get_color() != sg.get_color() and sm.get_linestyle() != sg.get_linestyle()
+    assert "unwrapped" in head.get_ylabel()
+
+
+def _walk_inputs(K=16):
+    """A 9-minute drive on a small loop with K outages whose starts lie close together."""
+    M = 2160
+    t = np.linspace(0.0, 540.0, M)
+    ref = np.stack([20 * np.cos(t / 30), 20 * np.sin(t / 30), np.zeros(M)], axis=1)
+    windows = np.array([[30.0 + 30 * k, 45.0 + 30 * k] for k in range(K)])
+    inside = np.zeros(M, bool)
+    err = np.zeros(M)
+    for a, b in windows:
+        w = (t >= a) & (t < b)
+        inside |= w
+        err[w] = 0.02 * (t[w] - a) ** 2
+    n_ref = np.array([60] * (K - 1) + [0])
+    fmax = np.array([err[(t >= a) & (t < b)].max() for a, b in windows])
+    scores = types.SimpleNamespace(windows=windows, t=t, err_fwd=err, err_sm=err / 10, n_ref=n_ref,
+                                   fwd_max=np.where(n_ref > 0, fmax, np.nan),
+                                   sm_max=np.where(n_ref > 0, fmax / 10, np.nan), fwd_rms_all=1.0, sm_rms_all=0.1)
+    return scores, dict(enu_ref=ref, enu_fwd=ref + 0.5, enu_sm=ref + 0.05)
+
+
+def test_walk_outages_one_legend_entry_per_solution_and_labels_apart(tmp_path, captured):
+    scores, extras = _walk_inputs()
+    plot.plot_walk(scores, extras, tmp_path / "track_outages.png", title="synthetic")
+    fig = captured["track_outages.png"]
+    track, errors = fig.axes
+    texts = _legend_texts(errors)
+    assert len(texts) == 3, texts  # forward, RTS, the unscored outage: not one entry per outage
+    assert "15 outages" in texts[0] and "1 outage(s) without an RTK-fixed epoch" in texts[2]
+    labels = [tx for tx in track.texts if tx.get_text()]
+    assert labels and not _overlaps(labels, fig)
+    assert len([ln for ln in errors.get_lines() if len(ln.get_xdata())]) == 2 * 15  # every scored outage drawn
+
+
+def test_rtk_points_are_marks_not_a_line(tmp_path):
+    fig = plot.plot_rtk(_rtk_result(5), tmp_path / "rtk.png", names=[f"P{i}" for i in range(5)],
+                        h_level=np.zeros(5))
+    for ax in fig.axes:
+        data = [ln for ln in ax.get_lines() if len(np.atleast_1d(ln.get_xdata())) == 5]
+        assert data and all(ln.get_linestyle() == "None" for ln in data), [ln.get_label() for ln in data]
+
+
+def test_monte_carlo_histograms_count_whole_runs(tmp_path, captured):
+    x = np.linspace(0.0, 1.0, 10)
+    loss = 1.0 + x[:, None] + 0.3 * np.random.default_rng(9).random((10, 8))
+    plot.plot_sweep(tmp_path, grid={"b": x}, axes=["b"], loss=loss, loss_name="RMS, m", init={"b": 0.5})
+    fig = captured["sweep_landscape.png"]
+    _renderer(fig)
+    ticks = _tick_numbers(fig.axes[1].yaxis)
+    assert ticks and all(v == int(v) for v in ticks), ticks
+    plot.plot_tune(tmp_path, path={"b": np.array([0.1, 0.2])}, losses=np.array([2.0, 1.0]), final={"b": 0.2},
+                   final_loss=1.0, landscape=None, loss_name="RMS, m", start_runs=np.arange(8.0) / 8 + 2,
+                   final_runs=np.arange(8.0) / 8 + 1)
+    fig = captured["tune.png"]
+    _renderer(fig)
+    ticks = _tick_numbers(fig.axes[2].yaxis)
+    assert ticks and all(v == int(v) for v in ticks), ticks

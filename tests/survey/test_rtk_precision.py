@@ -136,7 +136,7 @@ def test_claimed_precision_on_spirent_static_point():
 
 def _static_then_drive(path):
     """A .pos file: the real static rooftop records, then the real car drive's records moved in time
-    to start 2 s after them (a static half and a driving half, as the issue's u-blox file)."""
+    to start 2 s after them (a static half and a driving half, as a user's u-blox file)."""
     import datetime as dt
 
     st = NAGOYA.read_text().splitlines()
@@ -165,9 +165,14 @@ def test_cli_excludes_the_driving_half(tmp_path, capsys):
     # -> 60, 60 (+29 < 30)
     assert s["n_points"] == 2 and [p["name"] for p in s["points"]] == [f"static_then_drive#{k}" for k in (1, 2)]
     assert 500 < s["excluded_moving_epochs"] < 531 and s["motion_test"]["files"][0]["n_epochs"] == 832
-    assert f"{s['excluded_moving_epochs']} of 832 epochs moving" in text and "EXCLUDED" in text
+    moving, short = s["excluded_moving_epochs"], s["excluded_short_static_epochs"]
+    # worded so that it cannot read as "everything excluded", and the points' coordinates printed
+    assert f"{832 - moving - short} of 832 epochs kept as static" in text and f"left out: {moving} moving" in text
+    assert "EXCLUDED" not in text
+    for p in s["points"]:
+        assert f"{p['name']}: x {p['x_m']:.4f} m, y {p['y_m']:.4f} m, h {p['h_m']:.4f} m" in text
     assert all(p["t_end"] <= "2024-06-24T08:25:00.000" for p in s["points"])
-    # without the test, 4 of 7 points are formed while driving (the issue's "17 of 38")
+    # without the test, 4 of 7 points are formed while driving (a user's "17 of 38")
     w = windows_from_pos(read_pos(f), motion=None, fixed_only=False)
     assert len(set(w["point"])) == 7 and w["n_moving"] == 0
 
