@@ -325,9 +325,9 @@ class PostseismicTerm(NamedTuple):
 
 #: time constant a post-seismic term to be estimated starts from (screening, first noise fit), s
 TAU_START = 30.0 * DAY
-#: the searched grid of ln tau: 1 day .. 2 x the span, 20 points per decade
+#: the searched grid of ln tau: 1 day .. 2 x the span, 10 points per decade
 TAU_MIN = 1.0 * DAY
-TAU_PER_DECADE = 20
+TAU_PER_DECADE = 10
 
 
 @partial(jax.jit, static_argnames=("estimate_kappa", "random_walk"))
@@ -346,7 +346,8 @@ def profile_tau(grid: DailyGrid, build, j: int, theta, spec, *, random_walk: boo
     of the three components are summed (tau is one physical time constant for all three; the
     plain likelihood, since REML values of different designs are not comparable). A parabola
     in ln tau through the best grid point and its neighbours refines it; the interval is where
-    2 (ln L_max - ln L) <= 1, interpolated on the grid.
+    2 (ln L_max - ln L) <= 1: on that parabola when it lies within one grid step of the best
+    tau, else interpolated on the grid (a flat or skewed profile).
 
     Args:
       grid: :class:`DailyGrid`.  build: tau (s) -> (T, k) design with that tau for term j.
@@ -371,13 +372,17 @@ def profile_tau(grid: DailyGrid, build, j: int, theta, spec, *, random_walk: boo
     i = int(np.nanargmax(ll))
     at_edge = i in (0, G - 1)
     best = ln_tau[i]
+    h = ln_tau[1] - ln_tau[0]
+    half = np.inf
     if not at_edge:  # vertex of the parabola through the best point and its neighbours (uniform grid)
         v0, v1, v2 = ll[i - 1:i + 2]
         curv = v2 - 2.0 * v1 + v0
         if curv < 0:
-            h = ln_tau[1] - ln_tau[0]
             best = float(np.clip(ln_tau[i] - 0.5 * h * (v2 - v0) / curv, ln_tau[i - 1], ln_tau[i + 1]))
-    llmax = max(float(ll[i]), float(np.max(ll)))
+            half = h / np.sqrt(-curv)  # 2 Delta ln L = 1 on the parabola: |ln tau - best| = h / sqrt(-curv)
+    if half <= h:  # a sharp profile: the parabola's interval (finer than the grid)
+        return (float(np.exp(best)), (float(np.exp(best - half)), float(np.exp(best + half))), at_edge, ln_tau, ll)
+    llmax = float(ll[i])
     drop = 2.0 * (llmax - ll)
 
     def cross(k, step):
