@@ -2,7 +2,8 @@
 
 * ``jaxnav monitor FILES... --out DIR``: each file (NGL ``.tenv3``, SIO ``.neu``, ``.col`` table,
   EarthScope/PBO ``.pos``) is a station: outlier screening, trajectory model (offset, rate,
-  annual, semi-annual, steps) with white + flicker (+ random-walk) noise fitted by maximum
+  annual, semi-annual, steps given by ``--step`` and ``--steps-file`` or detected, post-seismic
+  terms, ``--poly-degree``) with white + flicker (+ random-walk) noise fitted by maximum
   likelihood, velocities and their uncertainties, one figure per station
   (:func:`jaxnav.experiments.run_monitor_velocities`). ``--s1`` adds S1's adaptive-filter
   forecasts and statistics of the same files (:func:`jaxnav.experiments.run_monitor_files`).
