@@ -36,6 +36,9 @@ def _enu(a, scale=1.0):
 def station_midas(fit):
     """MIDAS rates of a fitted station's screened daily values, with the fit's steps (m/yr, (3,) each).
 
+    Where the fit has post-seismic terms, MIDAS (whose model is a rate and steps) runs on the
+    values less the fitted transients, so that the comparison tests the rest of the model.
+
     Returns:
       (:class:`jaxnav.monitoring.MidasVelocity`, warnings): a warning per component where MIDAS and
       the model rate differ by more than their combined sigma sqrt(s_midas^2 + s_fit^2), and where
@@ -46,7 +49,11 @@ def station_midas(fit):
 
     g = fit.grid
     t_yr = decimal_year(g.t[:g.n_days])
-    m = midas_velocity(t_yr, np.where(g.valid, g.y, np.nan)[:g.n_days], decimal_year(fit.steps))
+    y = np.where(g.valid, g.y, np.nan)[:g.n_days]
+    for i, nm in enumerate(fit.design_names):  # MIDAS has no transient: it sees the series less the fitted ones
+        if nm.startswith("postseismic_"):
+            y = y - np.outer(fit.A[:g.n_days, i], np.asarray(fit.noise.beta)[:, i])
+    m = midas_velocity(t_yr, y, decimal_year(fit.steps))
     v_fit, s_fit = fit.velocity * YEAR, fit.velocity_sigma * YEAR
     warnings = []
     for c, comp in enumerate(COMPONENTS):
@@ -191,8 +198,14 @@ def write_velocity_table(path, records: dict, *, command: str = "") -> pathlib.P
              "# ve..su: trajectory model (offset, rate, annual, semi-annual, steps) with the coloured noise named in "
              "noise_model; corr_en: east-north rate correlation (0: the components are fitted independently)",
              "# midas_*: MIDAS (Blewitt et al. 2016, with the same steps); "
-             "steps: steps in the model (given + detected)",
-             ",".join(cols)]
+             "steps: steps in the model (given + detected)"]
+    extra = sorted({f"polynomial of degree {r['polynomial']['degree']} (rate at the reference epoch, mid-span)"
+                    for r in records.values() if r.get("polynomial", {}).get("degree", 1) > 1}
+                   | {f"post-seismic terms at {n} (its midas_* from the series less them)" for n, r in records.items()
+                      if r.get("postseismic")})
+    if extra:
+        lines.append("# the model also has: " + "; ".join(extra))
+    lines.append(",".join(cols))
     for name, r in records.items():
         v, sd = r["velocity_mm_per_yr"], r["velocity_sigma_mm_per_yr"]
         mv, ms = r["midas_velocity_mm_per_yr"], r["midas_velocity_sigma_mm_per_yr"]
