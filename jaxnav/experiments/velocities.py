@@ -145,7 +145,8 @@ def station_record(fit, *, file, figure=None, step_labels=None) -> dict:
                       rate_is_the_velocity_at="reference_epoch",
                       terms=[dict(power=p, equation=f"c (t - t_ref)^{p}",
                                   coefficient_mm_per_yr_power=_enu(_per_yr_power(c, p)),
-                                  sigma_mm_per_yr_power=_enu(_per_yr_power(sd, p))) for p, (c, sd) in poly_terms.items()])
+                                  sigma_mm_per_yr_power=_enu(_per_yr_power(sd, p)))
+                             for p, (c, sd) in poly_terms.items()])
     if 2 in poly_terms:
         polynomial["acceleration_mm_per_yr2"] = _enu(2.0 * _per_yr_power(poly_terms[2][0], 2))
         polynomial["acceleration_sigma_mm_per_yr2"] = _enu(2.0 * _per_yr_power(poly_terms[2][1], 2))
