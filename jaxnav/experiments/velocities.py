@@ -229,25 +229,27 @@ def merge_known_steps(items) -> list:
 
     Steps on the same day (a steps file and ``--step``, or two files) become one: the earliest
     epoch, the most specific kind (earthquake > equipment > unknown), the post-seismic terms of
-    all (one per form, the first given), the origins joined by "; ".
+    all with one per form (a command-line option's before a file's), the origins joined by "; "
+    (options first).
 
     Args:
       items: :class:`jaxnav.io.KnownStep` of one station.
     Returns:
       list of :class:`jaxnav.io.KnownStep`.
     """
-    by_day = {}
-    for k in sorted(items, key=lambda k: k.epoch):
-        day = int(np.floor(k.epoch / DAY + 0.5))  # a date's epoch is the start of its day, J2000 - 0.5 d
-        if day not in by_day:
-            by_day[day] = k
-            continue
-        m = by_day[day]
-        forms = {f for f, _ in m.postseismic}
-        by_day[day] = io.KnownStep(m.station, m.epoch, max(m.kind, k.kind, key=_KIND_RANK.get),
-                                   m.postseismic + tuple(p for p in k.postseismic if p[0] not in forms),
-                                   f"{m.origin}; {k.origin}")
-    return [by_day[d] for d in sorted(by_day)]
+    groups = {}
+    for k in items:
+        groups.setdefault(int(np.floor(k.epoch / DAY + 0.5)), []).append(k)  # a date's epoch: its start, -0.5 d
+    out = []
+    for day in sorted(groups):
+        g = sorted(groups[day], key=lambda k: (not _explicit(k), k.epoch))
+        terms = {}
+        for k in g:
+            for form, tau in k.postseismic:
+                terms.setdefault(form, tau)
+        out.append(io.KnownStep(g[0].station, min(k.epoch for k in g), max((k.kind for k in g), key=_KIND_RANK.get),
+                                tuple(terms.items()), "; ".join(k.origin for k in g)))
+    return out
 
 
 def _explicit(k) -> bool:

@@ -175,3 +175,19 @@ def test_cli_steps_file_postseismic_and_poly_degree(tmp_path, capsys):
     assert pol["degree"] == 2 and pol["rate_is_the_velocity_at"] == "reference_epoch"
     assert set(pol["acceleration_mm_per_yr2"]) == {"east", "north", "up"}
     assert "post-seismic log after 2011-01-02, tau 40 d (given)" in text and "acceleration mm/yr^2" in text
+
+
+def test_known_steps_on_one_day_merge():
+    """A --step and a file's earthquake on the same day are one step: the more specific kind, the terms of
+    both (one per form, an option's before a file's), all origins; other days stay apart, in time order."""
+    from jaxnav.experiments.velocities import merge_known_steps
+
+    d = io.date_to_epoch("2011-03-11")
+    ks = [io.KnownStep("ABCD", d + 0.3 * DAY, "earthquake", (("log", 30 * DAY),), "f.txt:4"),
+          io.KnownStep("ABCD", d, "unknown", (), "--step"),
+          io.KnownStep("ABCD", d + 0.1 * DAY, "earthquake", (("log", None), ("exp", None)), "--postseismic x"),
+          io.KnownStep("ABCD", d - 40 * DAY, "equipment", (), "f.txt:2")]
+    m = merge_known_steps(ks)
+    assert [k.kind for k in m] == ["equipment", "earthquake"]
+    assert m[1].epoch == d and m[1].postseismic == (("log", None), ("exp", None))
+    assert m[1].origin == "--step; --postseismic x; f.txt:4"
