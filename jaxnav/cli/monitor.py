@@ -2,7 +2,8 @@
 
 * ``jaxnav monitor FILES... --out DIR``: each file (NGL ``.tenv3``, SIO ``.neu``, ``.col`` table,
   EarthScope/PBO ``.pos``) is a station: outlier screening, trajectory model (offset, rate,
-  annual, semi-annual, steps) with white + flicker (+ random-walk) noise fitted by maximum
+  annual, semi-annual, steps given by ``--step`` and ``--steps-file`` or detected, post-seismic
+  terms, ``--poly-degree``) with white + flicker (+ random-walk) noise fitted by maximum
   likelihood, velocities and their uncertainties, one figure per station
   (:func:`jaxnav.experiments.run_monitor_velocities`). ``--s1`` adds S1's adaptive-filter
   forecasts and statistics of the same files (:func:`jaxnav.experiments.run_monitor_files`).
@@ -35,6 +36,17 @@ def register(subparsers):
     p.add_argument("--step", action="append", default=[], metavar="STATION:DATE",
                    help="a known step (antenna change) at DATE (YYYY-MM-DD or decimal year) for STATION; "
                         "repeat for more")
+    p.add_argument("--steps-file", action="append", default=[], metavar="FILE",
+                   help="known steps, one a line: STATION DATE KIND [log:TAU|exp:TAU|log:estimate ...] with KIND "
+                        "equipment, earthquake or unknown, post-seismic terms (TAU days) after earthquakes only; "
+                        "NGL steps.txt lines are read too (docs/guide/stations.md); repeat for more files")
+    p.add_argument("--postseismic", action="append", default=[], metavar="STATION:DATE:FORM:TAU",
+                   help="an earthquake at DATE for STATION: a step and a post-seismic term, FORM log "
+                        "(a log(1 + dt/tau)) or exp (a (1 - exp(-dt/tau))), TAU its time constant in days or "
+                        "'estimate'; repeat for more terms or stations")
+    p.add_argument("--poly-degree", type=int_range(1, 4), default=1,
+                   help="degree of the polynomial in time, 1 .. 4; default 1 (offset and rate); 2 adds an "
+                        "acceleration; the rate is the velocity at the reference epoch (mid-span)")
     p.add_argument("--detect-steps", type=int_range(0, 10), default=DETECT_DEFAULT,
                    help="detect up to this many further steps per station (added one at a time while the "
                         f"likelihood gain beats the BIC penalty), 0 .. 10; default {DETECT_DEFAULT}")
@@ -69,7 +81,7 @@ def register(subparsers):
     return p
 
 
-def _epoch(text: str) -> float:
+def _epoch(text: str, option: str = "--step") -> float:
     """YYYY-MM-DD or a decimal year -> s since J2000 (UsageError otherwise)."""
     from jaxnav.units import YEAR
 
@@ -79,9 +91,9 @@ def _epoch(text: str) -> float:
             return (d - _dt.date(2000, 1, 1)).days * 86400.0 - 43200.0
         y = float(text)
     except ValueError:
-        raise UsageError(f"--step: cannot read the date {text!r} (YYYY-MM-DD or a decimal year)") from None
+        raise UsageError(f"{option}: cannot read the date {text!r} (YYYY-MM-DD or a decimal year)") from None
     if not 1950.0 <= y <= 2150.0:
-        raise UsageError(f"--step: decimal year {text!r} is outside 1950 .. 2150")
+        raise UsageError(f"{option}: decimal year {text!r} is outside 1950 .. 2150")
     return (y - 2000.0) * YEAR
 
 
@@ -92,6 +104,25 @@ def _steps(items) -> dict:
             raise UsageError(f"--step expects STATION:DATE, got {it!r}")
         st, date = it.split(":", 1)
         out.setdefault(st.strip().upper(), []).append(_epoch(date.strip()))
+    return out
+
+
+def _postseismic(items) -> list:
+    """--postseismic STATION:DATE:FORM:TAU values -> :class:`jaxnav.io.KnownStep` (earthquakes)."""
+    from jaxnav.io import KnownStep, parse_postseismic
+
+    out = []
+    for it in items:
+        parts = it.split(":")
+        if len(parts) != 4 or not parts[0].strip():
+            raise UsageError(f"--postseismic expects STATION:DATE:FORM:TAU (e.g. ABCD:2011-03-11:log:30 or "
+                             f"ABCD:2011-03-11:log:estimate), got {it!r}")
+        try:
+            term = parse_postseismic(f"{parts[2]}:{parts[3]}")
+        except ValueError as exc:
+            raise UsageError(f"--postseismic {it}: {exc}") from None
+        out.append(KnownStep(parts[0].strip().upper(), _epoch(parts[1].strip(), "--postseismic"), "earthquake",
+                             (term,), f"--postseismic {it}"))
     return out
 
 
@@ -117,6 +148,13 @@ def run(args) -> int:
         raise UsageError("give either daily series files or --simulate, not both")
     files = [input_file(f, "FILES") for f in args.files]
     steps, kappa = _steps(args.step), _kappa(args.kappa)
+    known = _postseismic(args.postseismic)
+    steps_files = [input_file(f, "--steps-file") for f in args.steps_file]
+    if steps_files or known:
+        from jaxnav.io import read_steps_file
+
+        for f in steps_files:
+            known += read_steps_file(f)
     out = prepare_out(args.out)
     args._json_outputs = ("monitor.json",)  # main adds the provenance block to it
     if args.simulate:
@@ -132,7 +170,8 @@ def run(args) -> int:
                                  random_walk=not args.no_random_walk, reml=not args.ml, screen=not args.no_screen,
                                  sigma_factor=args.sigma_factor, residual_k=args.residual_k, s1=args.s1,
                                  period=args.period, robust=args.robust, command=shlex.join(["jaxnav", *args._argv]),
-                                 periods_days=tuple(args.extra_period))
+                                 periods_days=tuple(args.extra_period), known_steps=known, steps_files=steps_files,
+                                 poly_degree=args.poly_degree)
     print(res["text"])
     print(f"wrote {out / 'monitor.json'} and {len(args.files)} figure(s) in {out} ({res['wall_time_s']:.1f} s)")
     return 0

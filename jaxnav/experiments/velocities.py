@@ -19,12 +19,13 @@ import numpy as np
 
 from jaxnav import io
 from jaxnav.monitoring import COMPONENTS, fit_station, midas_velocity
-from jaxnav.units import MM, MM_PER_YEAR, YEAR, powerlaw_amplitude_to_mm_yr, random_walk_to_mm_per_sqrt_yr
+from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR, powerlaw_amplitude_to_mm_yr, random_walk_to_mm_per_sqrt_yr
 
 UNITS = {"velocity": "mm/yr", "positions, sigmas, amplitudes, steps": "mm",
          "powerlaw_amplitude": "mm/yr^(-kappa/4) (Hector's unit; mm/yr^0.25 for flicker)",
          "random_walk": "mm/sqrt(yr)", "phase": "deg, of A cos(2 pi h (t - 2000.0 yr) - phase)",
-         "dates": "ISO 8601 calendar day of the daily solution"}
+         "dates": "ISO 8601 calendar day of the daily solution", "tau": "days",
+         "polynomial coefficients": "mm/yr^p for the power p of (t - t_ref) in years"}
 _log = logging.getLogger(__name__)
 
 
@@ -34,6 +35,9 @@ def _enu(a, scale=1.0):
 
 def station_midas(fit):
     """MIDAS rates of a fitted station's screened daily values, with the fit's steps (m/yr, (3,) each).
+
+    Where the fit has post-seismic terms, MIDAS (whose model is a rate and steps) runs on the
+    values less the fitted transients, so that the comparison tests the rest of the model.
 
     Returns:
       (:class:`jaxnav.monitoring.MidasVelocity`, warnings): a warning per component where MIDAS and
@@ -45,7 +49,11 @@ def station_midas(fit):
 
     g = fit.grid
     t_yr = decimal_year(g.t[:g.n_days])
-    m = midas_velocity(t_yr, np.where(g.valid, g.y, np.nan)[:g.n_days], decimal_year(fit.steps))
+    y = np.where(g.valid, g.y, np.nan)[:g.n_days]
+    for i, nm in enumerate(fit.design_names):  # MIDAS has no transient: it sees the series less the fitted ones
+        if nm.startswith("postseismic_"):
+            y = y - np.outer(fit.A[:g.n_days, i], np.asarray(fit.noise.beta)[:, i])
+    m = midas_velocity(t_yr, y, decimal_year(fit.steps))
     v_fit, s_fit = fit.velocity * YEAR, fit.velocity_sigma * YEAR
     warnings = []
     for c, comp in enumerate(COMPONENTS):
@@ -64,8 +72,22 @@ def station_midas(fit):
     return m, warnings
 
 
-def station_record(fit, *, file, figure=None) -> dict:
-    """The JSON-ready record of one :class:`jaxnav.monitoring.StationFit` (mm, mm/yr, labelled components)."""
+def _per_yr_power(a, p):
+    """m/s^p -> mm/yr^p (the output edge of polynomial coefficients)."""
+    return np.asarray(a, float) * YEAR ** p / MM
+
+
+def _days(t):
+    """s -> days (the output edge of time constants)."""
+    return float(t) / DAY
+
+
+def station_record(fit, *, file, figure=None, step_labels=None) -> dict:
+    """The JSON-ready record of one :class:`jaxnav.monitoring.StationFit` (mm, mm/yr, labelled components).
+
+    ``step_labels``: {step epoch s: (kind, origin)} of the given steps (their kind and where they
+    were given), copied into each step's record.
+    """
     nf = fit.noise
     noise = {}
     names = ("white_mm", "powerlaw_amplitude", "random_walk_mm_per_sqrt_yr", "spectral_index")
@@ -96,7 +118,7 @@ def station_record(fit, *, file, figure=None) -> dict:
         semiannual_amplitude_mm=float(fit.semiannual_amplitude[c] / MM),
         semiannual_amplitude_sigma_mm=float(fit.semiannual_amplitude_sigma[c] / MM),
         semiannual_phase_deg=float(np.degrees(fit.semiannual_phase[c]))) for c, comp in enumerate(COMPONENTS)}
-    from jaxnav.monitoring._station import decimal_year, iso_date, period_amplitudes
+    from jaxnav.monitoring._station import decimal_year, iso_date, period_amplitudes, polynomial_terms
 
     for per, (a, asd, ph) in period_amplitudes(fit).items():
         for c, comp in enumerate(COMPONENTS):
@@ -105,10 +127,29 @@ def station_record(fit, *, file, figure=None) -> dict:
             seasonal[comp][f"period_{per}_phase_deg"] = float(np.degrees(ph[c]))
 
     gains = np.asarray(fit.step_gains, float) if len(fit.step_gains) else np.full(len(fit.steps), np.nan)
+    labels = step_labels or {}
     steps = [dict(date=iso_date(ts), decimal_year=float(decimal_year(ts)), source=src,
+                  kind=labels.get(float(ts), ("unknown", None))[0] if src == "given" else None,
+                  given_by=labels.get(float(ts), (None, None))[1] if src == "given" else None,
                   size_mm=_enu(fit.step_sizes[:, j], MM), sigma_mm=_enu(fit.step_sigmas[:, j], MM),
                   gain_2lnL=None if not np.isfinite(gains[j]) else float(gains[j]))
              for j, (ts, src) in enumerate(zip(fit.steps, fit.step_sources))]
+    post = [dict(date=iso_date(p.epoch), decimal_year=float(decimal_year(p.epoch)), form=p.form,
+                 equation=("a log(1 + (t - t_eq) / tau)" if p.form == "log" else "a (1 - exp(-(t - t_eq) / tau))"),
+                 tau_days=_days(p.tau), tau_estimated=bool(p.estimated),
+                 tau_range_days=[_days(p.tau_range[0]), _days(p.tau_range[1])], tau_at_edge=bool(p.tau_at_edge),
+                 amplitude_mm=_enu(p.amplitude, MM), amplitude_sigma_mm=_enu(p.amplitude_sigma, MM))
+            for p in fit.postseismic]
+    poly_terms = polynomial_terms(fit)
+    polynomial = dict(degree=int(fit.poly_degree), reference_epoch=iso_date(fit.t_ref),
+                      rate_is_the_velocity_at="reference_epoch",
+                      terms=[dict(power=p, equation=f"c (t - t_ref)^{p}",
+                                  coefficient_mm_per_yr_power=_enu(_per_yr_power(c, p)),
+                                  sigma_mm_per_yr_power=_enu(_per_yr_power(sd, p)))
+                             for p, (c, sd) in poly_terms.items()])
+    if 2 in poly_terms:
+        polynomial["acceleration_mm_per_yr2"] = _enu(2.0 * _per_yr_power(poly_terms[2][0], 2))
+        polynomial["acceleration_sigma_mm_per_yr2"] = _enu(2.0 * _per_yr_power(poly_terms[2][1], 2))
     scr = fit.screening
     outl = [dict(date=d["date"], decimal_year=d["decimal_year"], component=d["component"], reason=d["reason"],
                  value_mm=d["value_m"] / MM, sigma_mm=d["sigma_m"] / MM,
@@ -128,7 +169,7 @@ def station_record(fit, *, file, figure=None) -> dict:
         residual_trend_mm_per_yr=_enu(np.asarray(fit.residual_trend, float) / MM_PER_YEAR),
         midas_velocity_mm_per_yr=_enu(mid.velocity, MM), midas_velocity_sigma_mm_per_yr=_enu(mid.sigma, MM),
         midas_pairs=dict(zip(COMPONENTS, mid.pairs_kept.tolist())),
-        noise=noise, seasonal=seasonal, steps=steps,
+        noise=noise, seasonal=seasonal, steps=steps, postseismic=post, polynomial=polynomial,
         outliers=dict(count=len(outl), by_reason={k: v for k, v in scr.counts.items() if k != "missing"},
                       sigma_limit_mm=_enu(scr.sigma_limit_m, MM), residual_limit_mm=_enu(scr.residual_limit_m, MM),
                       list=outl),
@@ -158,8 +199,14 @@ def write_velocity_table(path, records: dict, *, command: str = "") -> pathlib.P
              "# ve..su: trajectory model (offset, rate, annual, semi-annual, steps) with the coloured noise named in "
              "noise_model; corr_en: east-north rate correlation (0: the components are fitted independently)",
              "# midas_*: MIDAS (Blewitt et al. 2016, with the same steps); "
-             "steps: steps in the model (given + detected)",
-             ",".join(cols)]
+             "steps: steps in the model (given + detected)"]
+    extra = sorted({f"polynomial of degree {r['polynomial']['degree']} (rate at the reference epoch, mid-span)"
+                    for r in records.values() if r.get("polynomial", {}).get("degree", 1) > 1}
+                   | {f"post-seismic terms at {n} (its midas_* from the series less them)" for n, r in records.items()
+                      if r.get("postseismic")})
+    if extra:
+        lines.append("# the model also has: " + "; ".join(extra))
+    lines.append(",".join(cols))
     for name, r in records.items():
         v, sd = r["velocity_mm_per_yr"], r["velocity_sigma_mm_per_yr"]
         mv, ms = r["midas_velocity_mm_per_yr"], r["midas_velocity_sigma_mm_per_yr"]
@@ -174,16 +221,69 @@ def write_velocity_table(path, records: dict, *, command: str = "") -> pathlib.P
     return path
 
 
+_KIND_RANK = {"unknown": 0, "equipment": 1, "earthquake": 2}
+
+
+def merge_known_steps(items) -> list:
+    """Known steps of one station merged by calendar day, in time order.
+
+    Steps on the same day (a steps file and ``--step``, or two files) become one: the earliest
+    epoch, the most specific kind (earthquake > equipment > unknown), the post-seismic terms of
+    all with one per form (a command-line option's before a file's), the origins joined by "; "
+    (options first).
+
+    Args:
+      items: :class:`jaxnav.io.KnownStep` of one station.
+    Returns:
+      list of :class:`jaxnav.io.KnownStep`.
+    """
+    groups = {}
+    for k in items:
+        groups.setdefault(int(np.floor(k.epoch / DAY + 0.5)), []).append(k)  # a date's epoch: its start, -0.5 d
+    out = []
+    for day in sorted(groups):
+        g = sorted(groups[day], key=lambda k: (not _explicit(k), k.epoch))
+        terms = {}
+        for k in g:
+            for form, tau in k.postseismic:
+                terms.setdefault(form, tau)
+        out.append(io.KnownStep(g[0].station, min(k.epoch for k in g), max((k.kind for k in g), key=_KIND_RANK.get),
+                                tuple(terms.items()), "; ".join(k.origin for k in g)))
+    return out
+
+
+def _explicit(k) -> bool:
+    """A step given on the command line (an option, not a file): its mistakes are errors, not warnings."""
+    return k.origin.startswith("--")
+
+
+def _known_step_dict(k) -> dict:
+    from jaxnav.monitoring._station import decimal_year, iso_date
+
+    return dict(station=k.station, date=iso_date(k.epoch), decimal_year=float(decimal_year(k.epoch)), kind=k.kind,
+                postseismic=[dict(form=f, tau_days=None if tau is None else _days(tau)) for f, tau in k.postseismic],
+                given_by=k.origin)
+
+
 def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.0, random_walk: bool = True,
                            reml: bool = True, screen: bool = True, sigma_factor: float = 5.0,
                            residual_k: float = 5.0, s1: bool = False, period: int = 365,
-                           robust: bool = False, command: str = "", periods_days=()) -> dict:
+                           robust: bool = False, command: str = "", periods_days=(), known_steps=(),
+                           steps_files=(), poly_degree: int = 1) -> dict:
     """Velocities with coloured noise of daily station files; writes ``monitor.json`` and figures.
 
     Args:
       files: paths of daily series (.tenv3, .neu, .col, PBO .pos).
       out: output folder (``monitor.json``, ``STATION_fit.png``).
-      steps: {station: [epochs s since J2000]} of known steps.
+      steps: {station: [epochs s since J2000]} of known steps (given as ``--step``).
+      known_steps: further :class:`jaxnav.io.KnownStep` (from steps files, ``--postseismic``),
+        merged by day with ``steps`` (:func:`merge_known_steps`). Every known step is in the model;
+        detection adds on top. A step from a file for a station not among ``files``, or outside its
+        series, is listed in the output's warnings and ``known_steps`` (never dropped silently);
+        the same mistakes in a step given by an option (origin "--...") raise ValueError.
+        An earthquake's post-seismic terms enter the model with its step.
+      steps_files: the steps files read (recorded in the settings).
+      poly_degree: degree of the polynomial in time (:func:`jaxnav.monitoring.fit_station`).
       detect, kappa, random_walk, reml, screen, sigma_factor, residual_k: see
         :func:`jaxnav.monitoring.fit_station`.
       s1, period, robust: also run the S1 adaptive-filter analysis (into ``out/s1``).
@@ -202,30 +302,63 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
     t0 = time.perf_counter()
     _log.info("reading %d daily series file(s)", len(files))
     series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
-    unknown = sorted(set(steps) - {s.station for s in series})
+    names = {s.station for s in series}
+    unknown = sorted(set(steps) - names)
     if unknown:
         raise ValueError(f"--step {', '.join(unknown)}: no such station in the file(s) read (stations: "
-                         f"{', '.join(sorted({s.station for s in series}))})")
+                         f"{', '.join(sorted(names))})")
+    known = [io.KnownStep(st.upper(), float(e), "unknown", (), "--step") for st, es in steps.items() for e in es]
+    known += list(known_steps)
+    for k in known:
+        if _explicit(k) and k.station not in names:
+            raise ValueError(f"{k.origin} {k.station}: no such station in the file(s) read (stations: "
+                             f"{', '.join(sorted(names))})")
+    unmatched = [_known_step_dict(k) for k in known if k.station not in names]
+    by_station = {}
+    for k in known:
+        by_station.setdefault(k.station, []).append(k)
     result = dict(
         version=__version__, command=command, units=UNITS,
         settings=dict(kappa="estimated" if kappa is None else kappa, random_walk=random_walk,
                       likelihood="REML" if reml else "ML", screen=screen, sigma_factor=sigma_factor,
                       residual_k=residual_k, detect_steps=detect, ggm_1mphi=6.9e-6,
-                      extra_periods_days=[float(p) for p in periods_days]),
+                      extra_periods_days=[float(p) for p in periods_days], poly_degree=int(poly_degree),
+                      steps_files=[str(f) for f in steps_files]),
+        known_steps=dict(given=len(known), unmatched_stations=unmatched),
         stations={})
     lines = [f"{'station':<8}{'axis':<6}{'velocity mm/yr':>15}{'+-1 sigma':>10}{'(white only)':>13}"
              f"{'white mm':>9}{'PL mm/yr^-k/4':>14}{'kappa':>7}{'RW mm/yr^.5':>12}{'outliers':>9}"]
+    for u in unmatched:
+        lines.append(f"warning: known step of {u['station']} at {u['date']} ({u['kind']}, {u['given_by']}): no such "
+                     "station among the files; not used")
     for k, (f, s) in enumerate(zip(files, series)):
         _log.info("station %d/%d %s: %d days, fitting trajectory model and %s noise (%s)", k + 1, len(files),
                   s.station, int(np.size(s.t)), "white + power-law" + (" + random-walk" if random_walk else ""),
                   "REML" if reml else "ML")
         t_st = time.perf_counter()
-        fit = fit_station(s, steps=steps.get(s.station, ()), detect=detect, kappa=kappa, random_walk=random_walk,
+        from jaxnav.monitoring._station import _day_index
+
+        first, last = float(s.t[0]), float(s.t[0]) + float(_day_index(s)[-1]) * DAY  # the daily grid's ends
+        use, outside = [], []
+        for k in merge_known_steps(by_station.get(s.station, [])):
+            if first < k.epoch <= last and (not k.postseismic or k.epoch < last):
+                use.append(k)
+            elif _explicit(k):
+                raise ValueError(f"{k.origin}: the step of {s.station} at {iso_date(k.epoch)} is outside its series "
+                                 f"({iso_date(first)} .. {iso_date(last)})")
+            else:
+                outside.append(k)
+        fit = fit_station(s, steps=[k.epoch for k in use], detect=detect, kappa=kappa, random_walk=random_walk,
                           reml=reml, screen=screen, sigma_factor=sigma_factor, residual_k=residual_k,
-                          periods_days=periods_days, warn_steps=True)
+                          periods_days=periods_days, warn_steps=True, poly_degree=poly_degree,
+                          postseismic=[(k.epoch, form, tau) for k in use for form, tau in k.postseismic])
+        for k in outside:
+            fit.warnings.append(f"known step at {iso_date(k.epoch)} ({k.kind}, {k.origin}) is outside the series "
+                                f"({iso_date(first)} .. {iso_date(last)}): not in the model")
         fig = out / f"{s.station}_fit.png"
         plot_station_fit(fit, fig)
-        rec = station_record(fit, file=f, figure=fig)
+        rec = station_record(fit, file=f, figure=fig, step_labels={float(k.epoch): (k.kind, k.origin) for k in use})
+        rec["known_steps_outside_series"] = [_known_step_dict(k) for k in outside]
         llh = np.asarray(s.llh, float)
         ok = np.isfinite(llh[:, :2]).all(axis=1)
         rec["latitude_deg"] = float(np.degrees(np.median(llh[ok, 0]))) if ok.any() else None
@@ -246,8 +379,19 @@ def run_monitor_velocities(files, out, *, steps=None, detect: int = 0, kappa=-1.
             f"{k} {'n/a' if mv[k] is None else format(mv[k], '+.2f')} +- "
             f"{'n/a' if ms[k] is None else format(ms[k], '.2f')}" for k in COMPONENTS))
         for st in rec["steps"]:
-            lines.append(f"{'':<8}step {st['date']} ({st['source']}): " + ", ".join(
-                f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm" for k, v in st["size_mm"].items()))
+            lines.append(f"{'':<8}step {st['date']} ({st['source']}" + (f", {st['kind']}" if st["kind"] else "")
+                         + "): " + ", ".join(f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm"
+                                             for k, v in st["size_mm"].items()))
+        for ps in rec["postseismic"]:
+            lo, hi = ps["tau_range_days"]
+            lines.append(f"{'':<8}post-seismic {ps['form']} after {ps['date']}, tau {ps['tau_days']:.3g} d"
+                         + (f" (estimated, {lo:.3g} .. {hi:.3g})" if ps["tau_estimated"] else " (given)") + ": "
+                         + ", ".join(f"{k} {v:+.1f} +- {ps['amplitude_sigma_mm'][k]:.1f} mm"
+                                     for k, v in ps["amplitude_mm"].items()))
+        if "acceleration_mm_per_yr2" in rec["polynomial"]:
+            acc, asd = rec["polynomial"]["acceleration_mm_per_yr2"], rec["polynomial"]["acceleration_sigma_mm_per_yr2"]
+            lines.append(f"{'':<8}acceleration mm/yr^2 (rate at {rec['polynomial']['reference_epoch']}): "
+                         + ", ".join(f"{k} {acc[k]:+.3f} +- {asd[k]:.3f}" for k in COMPONENTS))
         for w in rec["warnings"]:
             lines.append(f"{'':<8}warning: {w}")
         if s.n_masked:

@@ -17,6 +17,7 @@ from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, r
 from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
 from jaxnav.io._rtklib import GPS_EPOCH, PosSolution, read_pos
 from jaxnav.io._stop_list import read_stop_list, write_stop_list
+from jaxnav.io._steps_file import STEP_KINDS, KnownStep, date_to_epoch, parse_postseismic, read_steps_file
 from jaxnav.io._survey_files import (
     ControlPoints,
     EpochLog,
@@ -39,4 +40,5 @@ __all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags",
            "imu_increments", "RTK_RESULT_COLUMNS", "write_rtk_results", "read_stop_list", "write_stop_list",
            "WalkData", "load_walk", "ReaderError", "json_ready", "write_json",
            "provenance", "git_commit", "utc_now", "files_snapshot", "files_written",
-           "read_kfgins_imu", "read_kfgins_gnss", "read_csv_imu", "read_csv_gnss"]
+           "read_kfgins_imu", "read_kfgins_gnss", "read_csv_imu", "read_csv_gnss",
+           "STEP_KINDS", "KnownStep", "date_to_epoch", "parse_postseismic", "read_steps_file"]

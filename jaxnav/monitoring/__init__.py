@@ -25,8 +25,11 @@ from jaxnav.monitoring._station import (
     daily_grid,
     detect_steps,
     fit_series_batch,
+    PostseismicTerm,
     fit_station,
     period_amplitudes,
+    polynomial_terms,
+    profile_tau,
     residual_trend,
     screen_outliers,
     step_penalty,
@@ -41,6 +44,8 @@ from jaxnav.monitoring._trajectory import (
     fit_component,
     noise_spec,
     noise_state_space,
+    POSTSEISMIC_FORMS,
+    postseismic_column,
     robust_scale,
 )
 from jaxnav.monitoring._statistics import (
@@ -61,5 +66,6 @@ __all__ = [
     "COMPONENTS", "DailyGrid", "Design", "GGM_ONE_MINUS_PHI", "GaussMarkovSum", "NoiseFit", "NoiseSpec", "Screening",
     "StationFit", "component_loglik", "daily_grid", "design_matrix", "detect_steps", "fit_component",
     "fit_series_batch", "fit_station", "gauss_markov_sum", "ggm_autocovariance", "noise_spec", "noise_state_space",
-    "period_amplitudes", "residual_trend", "robust_scale", "screen_outliers", "step_penalty", "simulate_powerlaw_series",
+    "period_amplitudes", "residual_trend", "PostseismicTerm", "polynomial_terms", "profile_tau",
+    "POSTSEISMIC_FORMS", "postseismic_column", "robust_scale", "screen_outliers", "step_penalty", "simulate_powerlaw_series",
 ]

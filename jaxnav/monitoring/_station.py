@@ -20,6 +20,8 @@ import numpy as np
 from jaxnav.monitoring._trajectory import (
     COMPONENTS,
     AT_BOUND_TOL,
+    POSTSEISMIC_FORMS,
+    component_loglik,
     design_matrix,
     fit_component,
     noise_spec,
@@ -102,7 +104,8 @@ def _day_index(series):
 
 
 def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 5.0, sigma_max_m=None,
-                    residual_k: float = 5.0, window_days: int = 15, max_passes: int = 10) -> Screening:
+                    residual_k: float = 5.0, window_days: int = 15, max_passes: int = 10, poly_degree: int = 1,
+                    postseismic=()) -> Screening:
     """Reject days with implausible formal sigmas and values far from the trajectory (per component).
 
     1. Sigma test: a component whose formal sigma exceeds ``sigma_factor`` x the median formal
@@ -118,7 +121,8 @@ def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 
 
     Args:
       series: :class:`jaxnav.io.DailySeries`.  steps: step epochs, s since J2000.
-      periods_days: further periodic terms of the trajectory (:func:`design_matrix`).
+      periods_days, poly_degree: further periodic terms and polynomial degree of the trajectory
+        (:func:`design_matrix`).  postseismic: (epoch s, form, tau s) transients of the trajectory.
       sigma_factor, sigma_max_m, residual_k, window_days, max_passes: as above.
     Returns:
       :class:`Screening`.
@@ -138,7 +142,8 @@ def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 
         records.append(dict(index=int(i), date=iso_date(t[i]), decimal_year=float(decimal_year(t[i])),
                             component=COMPONENTS[c], reason="sigma", value_m=float(y[i, c]),
                             sigma_m=float(sig[i, c]), residual_m=None, threshold_m=float(lim[c])))
-    A = design_matrix(t, steps=steps, periods_days=periods_days).A if len(t) > 1 else np.ones((len(t), 1))
+    A = design_matrix(t, steps=steps, periods_days=periods_days, poly_degree=poly_degree,
+                      postseismic=postseismic).A if len(t) > 1 else np.ones((len(t), 1))
     day = _day_index(series)
     res_lim = np.full(3, np.nan)
     for c in range(3):
@@ -256,6 +261,8 @@ class StationFit(NamedTuple):
       gm_max_rel_error: of the Gauss-Markov approximation of the power-law covariance.
       step_gains: (S,) 2 ln L gain of each detected step at its detection (NaN for given steps).
       residual_trend: (3,) m/s, least-squares rate of the fit's residuals (:func:`residual_trend`).
+      poly_degree: degree of the polynomial in time (:func:`polynomial_terms`).
+      postseismic: tuple of :class:`PostseismicTerm`.
     """
 
     station: str
@@ -290,6 +297,104 @@ class StationFit(NamedTuple):
     gm_max_rel_error: float
     step_gains: Any = ()
     residual_trend: Any = None
+    poly_degree: int = 1
+    postseismic: tuple = ()
+
+
+class PostseismicTerm(NamedTuple):
+    """A post-seismic transient of a :class:`StationFit` (Bevis & Brown 2014; :func:`postseismic_column`).
+
+    Attributes:
+      epoch: t_eq, s since J2000.  form: "log" | "exp".  tau: time constant, s.
+      estimated: whether tau was estimated (:func:`profile_tau`), else given.
+      tau_range: (2,) s, the profile-likelihood interval of tau (2 Delta ln L <= 1, the noise held
+        at its fitted values; (tau, tau) when given).  tau_at_edge: the best tau lies on an end of
+        the searched grid (the data do not bound it).
+      amplitude: (3,) m.  amplitude_sigma: (3,) m (GLS, conditional on tau).
+    """
+
+    epoch: float
+    form: str
+    tau: float
+    estimated: bool
+    tau_range: Any
+    tau_at_edge: bool
+    amplitude: Any
+    amplitude_sigma: Any
+
+
+#: time constant a post-seismic term to be estimated starts from (screening, first noise fit), s
+TAU_START = 30.0 * DAY
+#: the searched grid of ln tau: 1 day .. 2 x the span, 10 points per decade
+TAU_MIN = 1.0 * DAY
+TAU_PER_DECADE = 10
+
+
+@partial(jax.jit, static_argnames=("estimate_kappa", "random_walk"))
+def _loglik_over_designs(theta, y, valid, As, r, W, d_grid, *, estimate_kappa, random_walk):
+    """ML log-likelihood of one component at fixed noise for each design of a stack (G, T, k) -> (G,)."""
+    return jax.vmap(lambda A: component_loglik(theta, y, valid, A, r, W, d_grid, estimate_kappa=estimate_kappa,
+                                               random_walk=random_walk, reml=False))(As)
+
+
+def profile_tau(grid: DailyGrid, build, j: int, theta, spec, *, random_walk: bool, tau_max=None):
+    """Time constant of post-seismic term ``j`` by its profile likelihood on a log grid, refined.
+
+    For tau on a grid of ln tau (:data:`TAU_PER_DECADE` points per decade from :data:`TAU_MIN`
+    to ``tau_max``, default twice the span) the design with that tau is fitted by generalised
+    least squares under each component's noise ``theta`` (held fixed), and the ML log-likelihoods
+    of the three components are summed (tau is one physical time constant for all three; the
+    plain likelihood, since REML values of different designs are not comparable). A parabola
+    in ln tau through the best grid point and its neighbours refines it; the interval is where
+    2 (ln L_max - ln L) <= 1: on that parabola when it lies within one grid step of the best
+    tau, else interpolated on the grid (a flat or skewed profile).
+
+    Args:
+      grid: :class:`DailyGrid`.  build: tau (s) -> (T, k) design with that tau for term j.
+      j: the term.  theta: (3, 4) noise parameters.  spec: :class:`NoiseSpec`.
+      random_walk: as in the fit.  tau_max: end of the grid, s.
+    Returns:
+      (tau s, (lo s, hi s), at_edge bool, ln tau grid (G,), summed ln L (G,)).
+    """
+    n = grid.n_days
+    span = (grid.t[n - 1] - grid.t[0])
+    tau_max = 2.0 * span if tau_max is None else float(tau_max)
+    G = max(int(np.ceil(np.log10(tau_max / TAU_MIN) * TAU_PER_DECADE)) + 1, 3)
+    ln_tau = np.linspace(np.log(TAU_MIN), np.log(tau_max), G)
+    As = jnp.asarray(np.stack([build(float(np.exp(lt))) for lt in ln_tau]))
+    est = spec.kappa is None
+    ll = np.zeros(G)
+    for c in range(3):
+        y = jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0))
+        ll += np.asarray(_loglik_over_designs(jnp.asarray(theta[c]), y, jnp.asarray(grid.valid[:, c]), As,
+                                              jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid),
+                                              estimate_kappa=est, random_walk=random_walk))
+    i = int(np.nanargmax(ll))
+    at_edge = i in (0, G - 1)
+    best = ln_tau[i]
+    h = ln_tau[1] - ln_tau[0]
+    half = np.inf
+    if not at_edge:  # vertex of the parabola through the best point and its neighbours (uniform grid)
+        v0, v1, v2 = ll[i - 1:i + 2]
+        curv = v2 - 2.0 * v1 + v0
+        if curv < 0:
+            best = float(np.clip(ln_tau[i] - 0.5 * h * (v2 - v0) / curv, ln_tau[i - 1], ln_tau[i + 1]))
+            half = h / np.sqrt(-curv)  # 2 Delta ln L = 1 on the parabola: |ln tau - best| = h / sqrt(-curv)
+    if half <= h:  # a sharp profile: the parabola's interval (finer than the grid)
+        return (float(np.exp(best)), (float(np.exp(best - half)), float(np.exp(best + half))), at_edge, ln_tau, ll)
+    llmax = float(ll[i])
+    drop = 2.0 * (llmax - ll)
+
+    def cross(k, step):
+        while 0 <= k + step < G and drop[k + step] <= 1.0:
+            k += step
+        if not 0 <= k + step < G:
+            return ln_tau[k]
+        f = (1.0 - drop[k]) / max(drop[k + step] - drop[k], 1e-300)
+        return ln_tau[k] + f * (ln_tau[k + step] - ln_tau[k])
+
+    lo, hi = cross(i, -1), cross(i, 1)
+    return float(np.exp(best)), (float(np.exp(min(lo, best))), float(np.exp(max(hi, best)))), at_edge, ln_tau, ll
 
 
 def _amplitude(beta, cov, i):
@@ -396,6 +501,20 @@ def period_amplitudes(fit: StationFit) -> dict:
     return out
 
 
+def polynomial_terms(fit: StationFit) -> dict:
+    """{p: (coefficient (3,) m/s^p, its sigma (3,) m/s^p)} of the powers p >= 2 of (t - t_ref).
+
+    The trajectory holds c_p ((t - t_ref) / yr)^p (:func:`design_matrix`); the acceleration at
+    t_ref is 2 c_2 (p = 2 here: 2 x the coefficient is the acceleration, m/s^2).
+    """
+    out = {}
+    for i, nm in enumerate(fit.design_names):
+        if nm.startswith("poly_"):
+            p = int(nm[len("poly_"):])
+            out[p] = (fit.noise.beta[:, i] / YEAR ** p, np.sqrt(fit.noise.beta_cov[:, i, i]) / YEAR ** p)
+    return out
+
+
 def residual_trend(grid: DailyGrid, A, beta):
     """Ordinary least-squares rate of the residuals y - A beta per component (m/yr, (3,)).
 
@@ -422,7 +541,8 @@ def residual_trend(grid: DailyGrid, A, beta):
 
 def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: bool = True, reml: bool = True,
                 screen: bool = True, sigma_factor: float = 5.0, residual_k: float = 5.0,
-                per_decade: float = 1.5, iterations: int = 40, periods_days=(), warn_steps=None) -> StationFit:
+                per_decade: float = 1.5, iterations: int = 40, periods_days=(), warn_steps=None,
+                poly_degree: int = 1, postseismic=()) -> StationFit:
     """Velocity, its uncertainty under coloured noise, seasonal terms, steps and outliers of one station.
 
     Args:
@@ -437,12 +557,31 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
       periods_days: further periodic terms, days (:func:`jaxnav.monitoring.design_matrix`).
       warn_steps: after the last fit, scan once more and warn when one more step would beat the
         BIC penalty (a misfit); default: when ``detect`` > 0.
+      poly_degree: degree of the polynomial in time (1: offset and rate; 2 adds an acceleration);
+        the rate is always the velocity at the reference epoch t_ref (mid-span).
+      postseismic: post-seismic transients, each (epoch s since J2000, "log" | "exp", tau s or
+        None to estimate it by :func:`profile_tau`, started at :data:`TAU_START`, alternated with
+        the noise fit until tau moves by less than 2 %, at most 3 profiles). The coseismic step at
+        the same epoch is not implied: give it in ``steps``.
     Returns:
-      :class:`StationFit` (amplitudes of the further periods: :func:`period_amplitudes`).
+      :class:`StationFit` (amplitudes of the further periods: :func:`period_amplitudes`; the
+      polynomial: :func:`polynomial_terms`; the transients: ``postseismic``).
     Raises:
-      ValueError: a series shorter than 60 days or with fewer valid days than model terms + 10.
+      ValueError: a series shorter than 60 days or with fewer valid days than model terms + 10, a
+        step or post-seismic epoch outside the series.
     """
     steps = [float(s) for s in np.atleast_1d(np.asarray(steps, float))]
+    post = []
+    for item in postseismic:
+        te, form, tau = item
+        if form not in POSTSEISMIC_FORMS:
+            raise ValueError(f"{series.station}: post-seismic form {form!r} (expected one of {POSTSEISMIC_FORMS})")
+        if tau is not None and not (np.isfinite(tau) and tau > 0):
+            raise ValueError(f"{series.station}: post-seismic time constant {tau} s must be > 0")
+        post.append((float(te), form, tau))
+    estimate_tau = [j for j, (_, _, tau) in enumerate(post) if tau is None]
+    taus = [TAU_START if tau is None else float(tau) for _, _, tau in post]
+    tau_info = {j: ((taus[j], taus[j]), False) for j in range(len(post))}
     sources = ["given"] * len(steps)
     gains = [np.nan] * len(steps)
     t = np.asarray(series.t, float)
@@ -450,20 +589,32 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
         raise ValueError(f"{series.station}: the series spans {(t[-1] - t[0]) / DAY if len(t) > 1 else 0:.0f} days; "
                          "a trajectory with seasonal terms needs at least 60")
     scr = screen_outliers(series, steps=steps, periods_days=periods_days, sigma_factor=sigma_factor,
-                          residual_k=residual_k) if screen else \
+                          residual_k=residual_k, poly_degree=poly_degree,
+                          postseismic=[(te, f, tau) for (te, f, _), tau in zip(post, taus)]) if screen else \
         Screening(keep=np.isfinite(series.enu), records=[], counts={"sigma": 0, "residual": 0,
                                                                       "missing": int((~np.isfinite(series.enu)).sum())},
                   sigma_limit_m=np.full(3, np.nan), residual_limit_m=np.full(3, np.nan))
     grid = daily_grid(series, scr.keep)
     spec = noise_spec(grid.n_days, kappa=kappa, per_decade=per_decade)
     warnings = []
+    t_ref = 0.5 * (grid.t[0] + grid.t[grid.n_days - 1])
+    for te, _, _ in post:
+        if not grid.t[0] < te < grid.t[grid.n_days - 1]:
+            raise ValueError(f"{series.station}: post-seismic epoch {decimal_year(te):.4f} is outside the series "
+                             f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})")
+
+    def design(step_list, tau_list):
+        return design_matrix(grid.t, steps=sorted(step_list), t_ref=t_ref, periods_days=periods_days,
+                             poly_degree=poly_degree,
+                             postseismic=[(te, f, tau) for (te, f, _), tau in zip(post, tau_list)])
+
+    tau_passes = 0
     while True:
-        t_ref = 0.5 * (grid.t[0] + grid.t[grid.n_days - 1])
         for ts in steps:
             if not grid.t[0] < ts <= grid.t[grid.n_days - 1]:
                 raise ValueError(f"{series.station}: step epoch {decimal_year(ts):.4f} is outside the series "
                                  f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})")
-        D = design_matrix(grid.t, steps=sorted(steps), t_ref=t_ref, periods_days=periods_days)
+        D = design(steps, taus)
         A = D.A
         nvalid = grid.valid.sum(axis=0)
         if np.any(nvalid < A.shape[1] + 10):
@@ -477,6 +628,18 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
         fit = fit_series_batch(grid.y.T, grid.valid.T, A, spec, np.array(scale), random_walk=random_walk, reml=reml,
                                iterations=iterations)
         fit = jax.tree_util.tree_map(np.asarray, fit)
+        if estimate_tau and tau_passes < 3:  # profile each estimated tau under the noise just fitted
+            tau_passes += 1
+            moved = False
+            for j in estimate_tau:
+                def build(tau, j=j):
+                    return design(steps, [tau if k == j else taus[k] for k in range(len(taus))]).A
+                tau_new, rng, edge, _, _ = profile_tau(grid, build, j, fit.theta, spec, random_walk=random_walk)
+                tau_info[j] = (rng, edge)
+                if abs(np.log(tau_new / taus[j])) > 0.02:
+                    taus[j], moved = tau_new, True
+            if moved:
+                continue
         limit = detect <= sum(s == "detected" for s in sources)
         if limit and not (detect > 0 if warn_steps is None else warn_steps):
             break
@@ -489,6 +652,7 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
                             "the model misfits")
             break
         steps.append(found[0])
+        tau_passes = 0
         sources.append("detected")
         gains.append(found[1])
         warnings.append(f"step detected at {iso_date(found[0])} (2 ln L gain {found[1]:.0f} > BIC penalty "
@@ -529,6 +693,16 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
             else:
                 warnings.append(f"{comp}: {lab[j]} estimate at the {edge} bound of its box {bounds} "
                                 f"(within {AT_BOUND_TOL} in ln units): the estimate is limited by the box")
+    terms = []
+    for j, (te, form, tau) in enumerate(post):
+        i = names.index(f"postseismic_{j}_{form}")
+        rng, edge = tau_info[j]
+        if edge:
+            warnings.append(f"post-seismic {form} term after {iso_date(te)}: the best time constant lies at the end of "
+                            f"the searched range ({taus[j] / DAY:.3g} days): not resolved by these data")
+        terms.append(PostseismicTerm(epoch=te, form=form, tau=taus[j], estimated=tau is None,
+                                     tau_range=np.array(rng, float), tau_at_edge=bool(edge), amplitude=beta[:, i],
+                                     amplitude_sigma=np.sqrt(cov[:, i, i])))
     r_rate = residual_trend(grid, A, beta)
     kap = fit.theta[:, 3]
     model = ("white + power-law (GGM, 1-phi = 6.9e-6, kappa " + ("estimated" if kappa is None else f"{kappa:g}")
@@ -545,4 +719,5 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
         white_sigma=np.exp(fit.theta[:, 0]), kappa=kap, powerlaw_amplitude=powerlaw_amplitude(fit.theta),
         random_walk=random_walk_amplitude(fit.theta) if random_walk else np.zeros(3), noise=fit, model=model,
         warnings=warnings, screening=scr, grid=grid, design_names=names, A=A,
-        gm_max_rel_error=spec.max_rel_error, step_gains=gains, residual_trend=r_rate / YEAR)
+        gm_max_rel_error=spec.max_rel_error, step_gains=gains, residual_trend=r_rate / YEAR,
+        poly_degree=int(poly_degree), postseismic=tuple(terms))

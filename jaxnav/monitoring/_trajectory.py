@@ -57,9 +57,10 @@ class Design(NamedTuple):
     """Design matrix of the trajectory model on a daily grid.
 
     Attributes:
-      A: (T, k) columns: offset, rate (years from t_ref), cos/sin annual, cos/sin semi-annual, steps.
+      A: (T, k) columns: offset, rate (years from t_ref), cos/sin annual, cos/sin semi-annual, further
+        periods, steps, polynomial powers >= 2, post-seismic transients.
       names: (k,) column names ("offset", "rate", "annual_cos", "annual_sin", "semiannual_cos",
-        "semiannual_sin", "step_0", ...).
+        "semiannual_sin", "step_0", ..., "poly_2", ..., "postseismic_0_log", ...).
       t_ref: reference epoch of the offset and rate, s since J2000 (mid-span).
       steps: (S,) step epochs, s since J2000.
     """
@@ -70,8 +71,42 @@ class Design(NamedTuple):
     steps: Any
 
 
-def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_days=()) -> Design:
+#: forms of a post-seismic transient (:func:`postseismic_column`)
+POSTSEISMIC_FORMS = ("log", "exp")
+
+
+def postseismic_column(t, epoch, form: str, tau):
+    """Unit-amplitude post-seismic transient after ``epoch`` (0 before it), (T,).
+
+    Bevis & Brown (2014, J. Geod. 88, eqs. (11)-(12)), as in Hector's design options:
+
+      log: log(1 + (t - t_eq) / tau)        exp: 1 - exp(-(t - t_eq) / tau)     for t >= t_eq
+
+    Args:
+      t: (T,) s since J2000.  epoch: t_eq, s since J2000.  form: "log" or "exp".  tau: time
+        constant, s (> 0).
+    Returns:
+      (T,) dimensionless (its coefficient is the amplitude, m).
+    """
+    t = np.asarray(t, float)
+    if form not in POSTSEISMIC_FORMS:
+        raise ValueError(f"post-seismic form must be one of {POSTSEISMIC_FORMS}, got {form!r}")
+    if not (np.isfinite(tau) and tau > 0):
+        raise ValueError(f"post-seismic time constant must be > 0 s, got {tau}")
+    dt = np.maximum(t - float(epoch), 0.0) / float(tau)
+    return np.log1p(dt) if form == "log" else -np.expm1(-dt)
+
+
+def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_days=(), poly_degree: int = 1,
+                  postseismic=()) -> Design:
     """Trajectory-model design matrix at epochs ``t`` (s since J2000).
+
+    Columns in this order (Hector's design options): offset, rate, [annual, semi-annual], further
+    periods, steps, then the powers 2 .. ``poly_degree`` of (t - t_ref) / yr ("poly_2", ...; the
+    coefficient of power p is m/yr^p, so the acceleration is 2 x the "poly_2" coefficient), then
+    the post-seismic transients ("postseismic_<j>_<form>", :func:`postseismic_column`). Since
+    every added power vanishes with its slope at t_ref, the "rate" column's coefficient stays the
+    velocity at t_ref whatever the degree.
 
     Args:
       t: (T,) s since J2000.
@@ -81,6 +116,8 @@ def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_day
       t_ref: reference epoch of offset and rate (default mid-span), s.
       periods_days: further periodic terms (e.g. the GPS draconitic year 351.6 d): cos/sin columns
         "period_<P>d_cos", "period_<P>d_sin" of 2 pi t / P, t from J2000.
+      poly_degree: degree of the polynomial in time (1: offset and rate).
+      postseismic: sequence of (epoch s since J2000, form "log" | "exp", tau s).
     Returns:
       :class:`Design` (columns scaled to order one: rate in years, so its coefficient is m/yr).
     """
@@ -105,6 +142,17 @@ def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_day
                              f"({t[0] / YEAR + 2000.0:.4f} .. {t[-1] / YEAR + 2000.0:.4f})")
         cols.append((t >= ts).astype(float))
         names.append(f"step_{j}")
+    if int(poly_degree) != poly_degree or poly_degree < 1:
+        raise ValueError(f"poly_degree must be an integer >= 1, got {poly_degree}")
+    for k in range(2, int(poly_degree) + 1):
+        cols.append(((t - t_ref) / YEAR) ** k)
+        names.append(f"poly_{k}")
+    for j, (te, form, tau) in enumerate(postseismic):
+        if not (t[0] < te < t[-1]):
+            raise ValueError(f"post-seismic epoch {te / YEAR + 2000.0:.4f} (decimal year) is outside the series "
+                             f"({t[0] / YEAR + 2000.0:.4f} .. {t[-1] / YEAR + 2000.0:.4f})")
+        cols.append(postseismic_column(t, te, form, tau))
+        names.append(f"postseismic_{j}_{form}")
     return Design(A=np.stack(cols, axis=1), names=tuple(names), t_ref=t_ref, steps=steps)
 
 

@@ -8,7 +8,7 @@ import pathlib
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxnav.units import MM, MM_PER_YEAR, YEAR  # noqa: E402
+from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import legend_outside, readable_ticks
 
@@ -246,7 +246,12 @@ def plot_station_fit(fit, path):
         ax[2, c].set_xlabel("frequency, cycles/yr")
         ax[2, c].set_ylabel("PSD, mm^2/(cycle/yr)")
         ax[2, c].legend(fontsize=7)
-    fig.suptitle(f"{fit.station}: trajectory (offset, rate, annual, semi-annual, steps) with {fit.model}", fontsize=10)
+    terms = "offset, rate, annual, semi-annual, steps"
+    if getattr(fit, "poly_degree", 1) > 1:
+        terms += f", polynomial of degree {fit.poly_degree}"
+    if getattr(fit, "postseismic", ()):
+        terms += ", post-seismic " + ", ".join(f"{p.form} (tau {p.tau / DAY:.3g} d)" for p in fit.postseismic)
+    fig.suptitle(f"{fit.station}: trajectory ({terms}) with {fit.model}", fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
 

@@ -72,6 +72,8 @@ def _files(tmp_path):
     d["tenv3_lat"] = tmp_path / "lat.tenv3"
     (tmp_path / "LHAS.tenv3").write_text(TENV3)
     d["tenv3_ok"] = tmp_path / "LHAS.tenv3"
+    (tmp_path / "steps_bad.txt").write_text("# station date kind\nLHAS 2003-01-01 equipment\nLHAS 2004-01-01 antenna\n")
+    d["steps_bad"] = tmp_path / "steps_bad.txt"
     (tmp_path / "a_file").write_text("not a folder")
     d["a_file"] = tmp_path / "a_file"
     d["b15"] = _s0_config(tmp_path, "b15.toml", "b = 0.254", "b = 1.5")
@@ -247,6 +249,18 @@ CASES = [
     ("monitor step unknown station", ["monitor", "{tenv3_ok}", "--step", "XXXX:2010-01-01", "--out", "{tmp}/o"],
      ["--step XXXX", "no such station", "LHAS"]),
     ("monitor files and simulate", ["monitor", "--simulate", "{tenv3_inf}"], ["not both"]),
+    ("monitor steps file missing", ["monitor", "{tenv3_ok}", "--steps-file", "{tmp}/none.txt"],
+     ["none.txt", "no such file", "--steps-file"]),
+    ("monitor steps file bad kind", ["monitor", "{tenv3_ok}", "--steps-file", "{steps_bad}", "--out", "{tmp}/o"],
+     ["steps_bad.txt:3:", "unknown step kind 'antenna'"]),
+    ("monitor postseismic form", ["monitor", "{tenv3_ok}", "--postseismic", "LHAS:2003-01-01:power:30"],
+     ["--postseismic LHAS:2003-01-01:power:30", "log:TAU_DAYS"]),
+    ("monitor postseismic fields", ["monitor", "{tenv3_ok}", "--postseismic", "LHAS:2003-01-01"],
+     ["--postseismic expects STATION:DATE:FORM:TAU"]),
+    ("monitor postseismic unknown station",
+     ["monitor", "{tenv3_ok}", "--postseismic", "XXXX:2010-01-01:log:30", "--out", "{tmp}/o"],
+     ["--postseismic XXXX:2010-01-01:log:30", "no such station"]),
+    ("monitor poly degree 0", ["monitor", "{tenv3_ok}", "--poly-degree", "0"], ["--poly-degree"]),
     ("sweep missing config", ["sweep", "{tmp}/none.toml"], ["jaxnav sweep:", "none.toml", "no such config"]),
     ("sweep seeds 0", ["sweep", "{t_seeds0}"], ["t_seeds0.toml", "problem.seeds = 0"]),
     ("sweep init 1.5", ["sweep", "{t_init}"], ["t_init.toml", "params.b.init = 1.5"]),
