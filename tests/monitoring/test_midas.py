@@ -143,6 +143,7 @@ def test_misfit_warnings_name_a_step_the_model_left_out():
             b[2, 1] = rate_up * MM
         sig = np.array([1.0, 1.0, sig_up]) * MM_PER_YEAR
         fit = SimpleNamespace(grid=grid, steps=np.array([t[700]]), velocity=b[:, 1] / YEAR, velocity_sigma=sig,
+                              design_names=("offset", "rate"), A=A,
                               residual_trend=mon.residual_trend(grid, A, b) / YEAR)
         m, warn = station_midas(fit)
         assert np.all(np.abs(m.velocity / MM - 2.0) < 2 * m.sigma / MM), m
