@@ -116,7 +116,7 @@ def _gm_peak():
 
 
 #: a Gauss-Markov rate of sigma s and time T has its largest Allan deviation GM_PEAK_ADEV * s
-#: (0.6174) at tau = GM_PEAK_TAU * T (1.891)
+#: (0.6174) at tau = GM_PEAK_TAU * T (1.893)
 GM_PEAK_TAU, GM_PEAK_ADEV = _gm_peak()
 
 
@@ -201,7 +201,7 @@ class AllanFit(NamedTuple):
       rate_rw: (...) K, rate unit / sqrt(s) (rate random walk).
       white_sigma, bias_instability_sigma, rate_rw_sigma: (...) their approximate 1-sigma (for a term not resolved,
         i.e. fitted as zero, the sigma of the unconstrained fit).
-      resolved: (..., 3) bool, whether N, B, K came out positive.
+      resolved: (..., 3) bool, whether N, B, K came out positive and above twice their sigma.
       upper: (..., 3) for each term its 2-sigma upper bound (value + 2 sigma).
       tau_floor: (...) s, the minimum of the fitted model (sqrt(3) N / K; the longest fitted tau if K
         is not resolved).
@@ -292,7 +292,9 @@ def allan_noise_fit(y, dt, *, tau_range=None, per_octave: int = 2, kind: str = "
         with np.errstate(divide="ignore", invalid="ignore"):
             sd = np.where(act & (p > 0), sd_th / (2.0 * c * np.where(p > 0, p, 1.0)), np.sqrt(fsd / c))
         up = np.where(act & (p > 0), p + 2.0 * sd, np.sqrt(np.maximum(fth, 0.0) / c + 2.0 * fsd / c))
-        out["theta"][i], out["sd"][i], out["res"][i], out["up"][i], out["chi2"][i] = p, sd, act & (p > 0), up, chi2
+        res = act & (p > 2.0 * sd)  # resolved: positive and at least twice its sigma
+        up = np.where(res, up, np.maximum(up, p + 2.0 * sd))
+        out["theta"][i], out["sd"][i], out["res"][i], out["up"][i], out["chi2"][i] = p, sd, res, up, chi2
         out["floor"][i] = (math.sqrt(3.0) * p[0] / p[2] if p[2] > 0 and p[0] > 0
                            else taus[fitted][-1] if p[2] <= 0 else taus[fitted][0])
     r = lambda k: out[k].reshape(batch + out[k].shape[1:])  # noqa: E731
