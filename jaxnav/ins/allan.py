@@ -229,6 +229,41 @@ class AllanFit(NamedTuple):
     n: int
 
 
+#: the largest chi-square per degree of freedom accepted before the shortest taus are dropped
+CHI2_TRIM = 3.0
+
+
+def _fit_axis(taus, av, K):
+    """One axis: the WLS fit and what :class:`AllanFit` reports of it (values, sigmas, bounds, floor)."""
+    th, cov, act, fth, fsd, chi2 = _wls_one(taus, av, K)
+    p = np.sqrt(th)  # theta = (N^2, B^2, K^2): the design columns carry the model's constants
+    sd_th = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sd = np.where(act & (p > 0), sd_th / (2.0 * np.where(p > 0, p, 1.0)), np.sqrt(fsd))
+    up = np.where(act & (p > 0), p + 2.0 * sd, np.sqrt(np.maximum(fth, 0.0) + 2.0 * fsd))
+    res = act & (p > 2.0 * sd)  # resolved: positive and at least twice its sigma
+    up = np.where(res, up, np.maximum(up, p + 2.0 * sd))
+    floor = (math.sqrt(3.0) * p[0] / p[2] if p[2] > 0 and p[0] > 0 else taus[-1] if p[2] <= 0 else taus[0])
+    return {"theta": p, "sd": sd, "res": res, "up": up, "chi2": chi2, "floor": floor}
+
+
+def _trim_short(taus, flat, K, fitted):
+    """Drop the shortest taus while the three terms do not explain the curve (largest chi-square per
+    degree of freedom over the axes above :data:`CHI2_TRIM`; an anti-alias filter, quantization or
+    resampled time tags shape the short taus), keeping at least half of them and at least 6."""
+    idx = np.flatnonzero(fitted)
+    keep_min = max(6, (idx.size + 1) // 2)
+    start = 0
+    while idx.size - start > keep_min:
+        chi2 = max(_wls_one(taus[idx[start:]], a[idx[start:]], K[idx[start:]])[-1] for a in flat)
+        if chi2 <= CHI2_TRIM:
+            break
+        start += 1
+    out = np.zeros_like(fitted)
+    out[idx[start:]] = True
+    return out
+
+
 def allan_ms(n: int, per_octave: int = 2, min_clusters: int = 3):
     """Averaging factors spaced ``per_octave`` to an octave from 1 up to n / min_clusters (distinct ints)."""
     top = n / float(min_clusters)
@@ -256,7 +291,9 @@ def allan_noise_fit(y, dt, *, tau_range=None, per_octave: int = 2, kind: str = "
       y: (..., N) rate samples along the last axis (rad/s or m/s^2; a constant -- gravity, Earth
         rate, a bias -- does not matter), or increments with ``kind="increment"``.
       dt: sample interval, s (uniform; see :func:`uniform_rates` for uneven time tags).
-      tau_range: (lo, hi) s, fit only these taus (e.g. to skip an anti-alias filter's short taus).
+      tau_range: (lo, hi) s, fit only these taus (e.g. to skip an anti-alias filter's short taus);
+        None: all, except that the shortest are dropped while the fit's chi-square per degree of
+        freedom exceeds :data:`CHI2_TRIM` (at most half of them; ``fitted`` says which were used).
       per_octave: taus per octave.
     Returns:
       :class:`AllanFit`.
@@ -282,21 +319,13 @@ def allan_noise_fit(y, dt, *, tau_range=None, per_octave: int = 2, kind: str = "
                          "need >= 3: a longer recording or a wider tau range")
     batch = av.shape[:-1]
     flat = av.reshape(-1, taus.size)
+    fitted = _trim_short(taus, flat, K, fitted) if tau_range is None else fitted
     out = {k: np.zeros((flat.shape[0],) + s) for k, s in
            (("theta", (3,)), ("sd", (3,)), ("res", (3,)), ("up", (3,)), ("chi2", ()), ("floor", ()))}
     for i, a in enumerate(flat):
-        th, cov, act, fth, fsd, chi2 = _wls_one(taus[fitted], a[fitted], K[fitted])
-        c = np.ones(3)  # theta = (N^2, B^2, K^2): the columns carry the model's constants
-        p = np.sqrt(th)
-        sd_th = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sd = np.where(act & (p > 0), sd_th / (2.0 * c * np.where(p > 0, p, 1.0)), np.sqrt(fsd / c))
-        up = np.where(act & (p > 0), p + 2.0 * sd, np.sqrt(np.maximum(fth, 0.0) / c + 2.0 * fsd / c))
-        res = act & (p > 2.0 * sd)  # resolved: positive and at least twice its sigma
-        up = np.where(res, up, np.maximum(up, p + 2.0 * sd))
-        out["theta"][i], out["sd"][i], out["res"][i], out["up"][i], out["chi2"][i] = p, sd, res, up, chi2
-        out["floor"][i] = (math.sqrt(3.0) * p[0] / p[2] if p[2] > 0 and p[0] > 0
-                           else taus[fitted][-1] if p[2] <= 0 else taus[fitted][0])
+        out_i = _fit_axis(taus[fitted], a[fitted], K[fitted])
+        for k, v in out_i.items():
+            out[k][i] = v
     r = lambda k: out[k].reshape(batch + out[k].shape[1:])  # noqa: E731
     th, sd = r("theta"), r("sd")
     return AllanFit(taus=taus, ms=m, avar=av, avar_sigma=allan_variance_sigma(av, m, n), fitted=fitted,

@@ -61,7 +61,7 @@ def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw,
         a.set_xlabel("averaging time tau, s")
         a.set_title(f"axis {'xyz'[c]}")
         a.grid(alpha=0.3, which="both")
-        a.legend(fontsize=7, loc="upper right")
+        a.legend(fontsize=7, loc="best")
     ax[0].set_ylabel(f"Allan deviation, {adev_unit}")
     fig.suptitle(title)
     fig.tight_layout()
