@@ -38,7 +38,9 @@ def run(args) -> int:
             raise CommandError(f"{args.data}: no such data folder (--data)")
         os.environ[DATA_ENV] = os.path.abspath(args.data)
     cfg = load_ins_config(args.config)
-    for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag")):
+    truth = cfg.evaluate.truth if cfg.evaluate is not None else None
+    for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag"),
+                   (truth, "evaluate.truth")):
         if p is not None and not p.is_file():
             raise CommandError(f"{p}: {'a folder, not a file' if p.is_dir() else 'no such file'} ({cfg.path}: {key})")
     record_config(args, cfg.path, cfg.raw)

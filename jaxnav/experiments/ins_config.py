@@ -190,12 +190,21 @@ class ConstraintSection(NamedTuple):
 
 class EvaluateSection(NamedTuple):
     """[evaluate]: simulated outages of ``outage_s`` from ``first_s`` after the start, GNSS back on for
-    ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s)."""
+    ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s);
+    ``outages`` False: none (a truth-only evaluation). ``truth``: a reference trajectory file (or
+    None) in ``truth_format`` ("kf-gins": ``truth.nav``; "csv": with ``truth_columns``,
+    ``truth_units``, ``truth_delimiter`` as :func:`jaxnav.io.read_csv_truth` takes them)."""
 
     outage_s: float
     first_s: float
     gap_s: float
     end_margin_s: float
+    outages: bool = True
+    truth: Optional[pathlib.Path] = None
+    truth_format: str = "kf-gins"
+    truth_columns: Optional[dict] = None
+    truth_units: Optional[dict] = None
+    truth_delimiter: Optional[str] = ","
 
 
 class TuneSection(NamedTuple):
@@ -498,12 +507,48 @@ def _constraints(path, d, platform="handheld") -> ConstraintSection:
     return c
 
 
-def _evaluate(path, d) -> EvaluateSection:
-    r = _Reader(path, d, "evaluate")
+TRUTH_FORMATS = ("kf-gins", "csv")
+_TRUTH_COLUMNS = ("t", "week", "tow", "lat", "lon", "h", "ve", "vn", "vu", "vd", "roll", "pitch", "heading", "yaw")
+
+
+def _evaluate(path, d, variables=None) -> EvaluateSection:
+    r = _Reader(path, d, "evaluate", variables)
+    truth = r.file("truth", required=False)
+    fmt = r.get("truth_format", str, "kf-gins", choices=TRUTH_FORMATS)
+    cols, units = r.table("truth_columns"), r.table("truth_units")
+    delim = r.d.get("truth_delimiter", ",")
+    r.used.add("truth_delimiter")
+    if truth is None:
+        for k in ("truth_format", "truth_columns", "truth_units", "truth_delimiter"):
+            if k in d:
+                r.fail(k, "is only used with truth = FILE")
+    if fmt == "csv" and truth is not None:
+        if cols is None:
+            r.fail("truth_columns", "is required for truth_format = 'csv' (a table like {t = 0, lat = 1, lon = 2, "
+                                    "h = 3, ...})")
+        for k, v in cols.items():
+            if k not in _TRUTH_COLUMNS:
+                r.fail("truth_columns", f"has unknown key {k!r}; known: {list(_TRUTH_COLUMNS)}")
+            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
+                r.fail("truth_columns", f"{k} must be a 0-based column index >= 0 or a header name, got {v!r}")
+        for k, v in (units or {}).items():
+            allowed = {"t": ("s", "ms", "us", "ns"), "angle": ("deg", "rad")}
+            if k not in allowed or v not in allowed[k]:
+                r.fail("truth_units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or angle in "
+                                      f"{list(allowed['angle'])}")
+    elif cols is not None or units is not None:
+        r.fail("truth_columns" if cols is not None else "truth_units", f"is only used with truth_format = 'csv', "
+                                                                        f"not {fmt!r}")
+    if not isinstance(delim, str) or not (delim == "whitespace" or len(delim) == 1):
+        r.fail("truth_delimiter", f"must be one character or 'whitespace', got {delim!r}")
     e = EvaluateSection(outage_s=r.get("outage_s", float, 15.0, lo=0.0, lo_open=True),
                         first_s=r.get("first_s", float, 40.0, lo=0.0),
                         gap_s=r.get("gap_s", float, 45.0, lo=0.0, lo_open=True),
-                        end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0))
+                        end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0),
+                        outages=r.get("outages", bool, True), truth=truth, truth_format=fmt, truth_columns=cols,
+                        truth_units=units, truth_delimiter=None if delim == "whitespace" else delim)
+    if not e.outages and truth is None:
+        r.fail("outages", "= false leaves nothing to evaluate: give truth = FILE, or drop [evaluate]")
     r.done()
     return e
 
@@ -562,7 +607,7 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
                      noise=_noise(path, d.get("noise", {"grade": "consumer"})),
                      alignment=_alignment(path, d.get("alignment", {})),
                      constraints=_constraints(path, d.get("constraints", {}), platform),
-                     evaluate=_evaluate(path, d["evaluate"]) if "evaluate" in d else None,
+                     evaluate=_evaluate(path, d["evaluate"], variables) if "evaluate" in d else None,
                      tune=_tune(path, d.get("tune", {})), raw=d)
 
 

@@ -47,7 +47,8 @@ def read_inputs(cfg: InsConfig):
       FileNotFoundError: a missing file (named).
     """
     imu_c, g = cfg.imu, cfg.gnss
-    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag")):
+    truth = cfg.evaluate.truth if cfg.evaluate is not None else None
+    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag"), (truth, "evaluate.truth")):
         if p is not None and not p.is_file():
             what = "a folder, not a file" if p.is_dir() else "no such file"
             raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
@@ -367,7 +368,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         off, off_info = likelihood_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
-    ev = cfg.evaluate
+    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
     if ev is not None and len(outage_windows(t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
                                              end_margin_s=ev.end_margin_s)) == 0:
         raise ConfigError(f"{cfg.path}: evaluate.first_s = {ev.first_s:g} + outage_s = {ev.outage_s:g} + "
@@ -384,7 +385,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     p0 = np.asarray(align.nav0.pos, float)
     p_imu = p0 - np.asarray(enu_to_curvilinear(p0, C_bn @ lever_rfu))
     align = align._replace(nav0=align.nav0._replace(pos=p_imu))
-    ev = cfg.evaluate
+    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
     outages = np.zeros((0, 2)) if ev is None else outage_windows(
         t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
     meas, keep, withheld = gnss_measurements(
@@ -680,7 +681,7 @@ def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
     reach = (gt >= t0 - span - 1e-9) & (gt <= t1 + span)
     inside = (gt >= t0 + span + 1e-6) & (gt <= t1 - span - 1e-6)
     withheld = np.zeros(gt.size, bool)
-    ev = cfg.evaluate
+    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
     if ev is not None:
         for a, b in outage_windows(t0, t1, first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
                                    end_margin_s=ev.end_margin_s):
@@ -734,7 +735,7 @@ def training_windows(prep: Prepared) -> np.ndarray:
     """
     ev = prep.cfg.evaluate
     t0, t1 = float(prep.t[0]), float(prep.t[-1])
-    if ev is None:
+    if ev is None or not ev.outages:
         return outage_windows(t0, t1)
     w = np.asarray(prep.outages, float).reshape(-1, 2)
     out = []
@@ -859,3 +860,82 @@ def _mask_without_outages(prep: Prepared):
                                  qualities=(1,) if prep.cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))[0]
         ok = np.asarray(full.mask)
     return ok
+
+
+# ----------------------------------------------------------------------------- reference trajectory
+def read_truth(cfg: InsConfig):
+    """The ``[evaluate] truth`` file as :class:`jaxnav.io.TruthTrajectory`, or None without one.
+
+    Raises:
+      FileNotFoundError: a missing file (named with the key).  jaxnav.io.ReaderError: FILE:LINE.
+      ValueError: a column map the reader refuses (naming the config keys).
+    """
+    from jaxnav.io import ReaderError, read_csv_truth, read_kfgins_truth
+
+    ev = cfg.evaluate
+    if ev is None or ev.truth is None:
+        return None
+    if not ev.truth.is_file():
+        what = "a folder, not a file" if ev.truth.is_dir() else "no such file"
+        raise FileNotFoundError(f"{ev.truth}: {what} ({cfg.path}: evaluate.truth)")
+    if ev.truth_format == "kf-gins":
+        return read_kfgins_truth(ev.truth)
+    try:
+        return read_csv_truth(ev.truth, ev.truth_columns, ev.truth_units, delimiter=ev.truth_delimiter)
+    except ReaderError:
+        raise
+    except ValueError as exc:
+        raise ValueError(f"{cfg.path}: evaluate.truth_columns / evaluate.truth_units: {exc}") from None
+
+
+def _position_cov_enu(P, pos):
+    """(M, 3, 3) ENU position covariance, m^2, from error covariances whose states 6:9 are (dlat, dlon, dh)."""
+    pos = np.asarray(pos, float)
+    J = np.stack([np.asarray(curvilinear_to_enu(pos, np.broadcast_to(e, pos.shape))) for e in np.eye(3)], -1)
+    Pp = np.asarray(P)[:, 6:9, 6:9]
+    return np.einsum("mij,mjk,mlk->mil", J, Pp, J)
+
+
+def _attitude_sigmas(P, heading):
+    """(M, 3) 1-sigma of roll, pitch, heading, rad: the tilt covariance about east/north (states 0:2)
+    projected on the forward and right axes at ``heading`` (rad, clockwise from north); heading from
+    the tilt about up (state 2)."""
+    P = np.asarray(P)
+    f = np.stack([np.sin(heading), np.cos(heading)], -1)  # forward in (east, north)
+    r = np.stack([np.cos(heading), -np.sin(heading)], -1)  # right
+    T = P[:, 0:2, 0:2]
+    var = lambda u: np.einsum("mi,mij,mj->m", u, T, u)  # noqa: E731
+    return np.sqrt(np.clip(np.stack([var(f), var(r), P[:, 2, 2]], -1), 0.0, None))
+
+
+def truth_errors(run: InsRun, truth, which: str):
+    """:class:`jaxnav.ins.TrajectoryErrors` of the forward or smoothed IMU solution against the reference.
+
+    The solution's epochs are the filter's (GNSS and pseudo-measurement epochs); a reference in GPST
+    since 1980 is put on seconds of week when the solution is (an IMU file without ``gps_week``).
+    """
+    from jaxnav.ins import trajectory_errors
+    from jaxnav.ins.attitude import quat_to_euler
+
+    ep = run.result.epochs
+    nav, P = (run.smoothed_nav, run.smoothed_covs) if which == "smoothed" else (ep.nav, ep.covs)
+    t = np.asarray(ep.t_nav, float)
+    t, first = np.unique(t, return_index=True)
+    pos = np.asarray(nav.pos, float)[first]
+    v = np.asarray(nav.v_n, float)[first]
+    P = np.asarray(P, float)[first]
+    e = np.asarray(quat_to_euler(np.asarray(nav.q_bn)), float)[first]  # [pitch, roll, yaw], body RFU in ENU
+    heading = np.mod(-e[:, 2], 2 * math.pi)
+    rpy = np.stack([e[:, 1], e[:, 0], heading], -1)
+    tt = np.asarray(truth.t, float)
+    week = 604800.0
+    if t[0] < 2 * week <= tt[0]:
+        tt = tt - math.floor(tt[0] / week) * week
+    if tt[-1] < t[0] or tt[0] > t[-1]:
+        raise ConfigError(f"{run.prep.cfg.path}: evaluate.truth: {truth.path} spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, "
+                          f"the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no common epoch (another time scale? the "
+                          "reference must be in GPST like the GNSS solution)")
+    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None))
+    return trajectory_errors(t, pos, v, rpy, tt, truth.pos, truth.v_enu, truth.rpy,
+                             cov_pos_enu=_position_cov_enu(P, pos), sig_vel=sd[:, 3:6],
+                             sig_att=_attitude_sigmas(P, heading), windows=run.prep.outages)
