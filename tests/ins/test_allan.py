@@ -146,3 +146,22 @@ def test_allan_command_bad_files(tmp_path, capsys):
     bad.write_text("345600.01 0 0 0 0 0 -0.098\n345600.02 0 x 0 0 0 -0.098\n")
     assert main(["allan", str(bad), "--format", "kf-gins", "--out", str(tmp_path / "o")]) == 2
     assert "bad.txt:2" in capsys.readouterr().err
+
+
+def test_allan_command_reads_a_csv_with_a_column_map(tmp_path):
+    """``--format csv --columns --units``: rates in deg/s and g, header names; the same ARW comes back."""
+    rng = np.random.default_rng(2)
+    n, dt = 20_000, 0.01
+    arw = units.deg_per_sqrt_hour_to_rad_per_sqrt_s(ARW_DEG_SQRT_H)
+    w = np.degrees(arw / math.sqrt(dt) * rng.standard_normal((n, 3)))  # deg/s
+    a = 0.001 * rng.standard_normal((n, 3)) + np.array([0.0, 0.0, 1.0])  # g
+    f = tmp_path / "imu.csv"
+    np.savetxt(f, np.column_stack([dt * np.arange(n), w, a]), delimiter=",", header="time,wx,wy,wz,ax,ay,az",
+               comments="", fmt="%.9g")
+    out = tmp_path / "out"
+    assert main(["-q", "allan", str(f), "--format", "csv", "--columns", "t=time,gx=wx,gy=wy,gz=wz,ax=ax,ay=ay,az=az",
+                 "--units", "t=s,gyro=deg/s,accel=g", "--out", str(out)]) == 0
+    import json
+
+    res = json.loads((out / "results.json").read_text())
+    assert res["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx([ARW_DEG_SQRT_H] * 3, rel=0.05)
