@@ -169,14 +169,16 @@ def run_allan(imu, out, *, source: str, start_s=None, end_s=None, tau_range=None
                units.rad_per_s_to_deg_per_hour(fit_g.rate_rw), out / "allan_gyro.png",
                title=f"gyro Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)", adev_unit="deg/h",
                white_label=_labels(eg, 0, "deg/sqrt(h)"),
-               bi_label=_labels(eg, 1, "deg/h"), rrw_label=_labels(eg, 2, "deg/h/sqrt(h)"), resolved=fit_g.resolved)
+               bi_label=_labels(eg, 1, "deg/h"), rrw_label=_labels(eg, 2, "deg/h/sqrt(h)"), resolved=fit_g.resolved,
+               bounds=np.stack([units.rad_per_s_to_deg_per_hour(fit_g.upper[..., j]) for j in range(3)], -1))
     plot_allan(fit_a.taus, units.mps2_to_mg(np.sqrt(fit_a.avar)),
                units.mps2_to_mg(fit_a.avar_sigma / (2 * np.sqrt(fit_a.avar))), fit_a.fitted,
                units.mps2_to_mg(fit_a.white), units.mps2_to_mg(fit_a.bias_instability),
                units.mps2_to_mg(fit_a.rate_rw), out / "allan_accel.png",
                title=f"accelerometer Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)", adev_unit="mg",
                white_label=_labels(ea, 0, "m/s/sqrt(h)"), bi_label=_labels(ea, 1, "mg"),
-               rrw_label=_labels(ea, 2, "mg/sqrt(h)"), resolved=fit_a.resolved)
+               rrw_label=_labels(ea, 2, "mg/sqrt(h)"), resolved=fit_a.resolved,
+               bounds=np.stack([units.mps2_to_mg(fit_a.upper[..., j]) for j in range(3)], -1))
     summary = {
         "input": {"file": source, "n_samples": int(keep.sum()), "n_uniform": int(y.shape[1]), "dt_s": dt,
                   "duration_s": dur, "start_s": float(rel[keep][0]), "end_s": float(rel[keep][-1]),

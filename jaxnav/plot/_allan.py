@@ -12,7 +12,7 @@ from jaxnav.plot._save import save_figure
 
 
 def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw, path, *, title: str,
-               adev_unit: str, white_label, bi_label, rrw_label, resolved=None) -> pathlib.Path:
+               adev_unit: str, white_label, bi_label, rrw_label, resolved=None, bounds=None) -> pathlib.Path:
     """Overlapping Allan deviation of three axes with error bars and the fitted slope lines.
 
     One panel per axis: the measured deviation (+-1 sigma, taus outside the fit hollow), white noise
@@ -25,7 +25,8 @@ def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw,
       path: file written.  title: figure title.  adev_unit: e.g. "deg/h".
       white_label, bi_label, rrw_label: (3,) legend texts with the values in datasheet units.
       resolved: optional (3, 3) bool per axis for (white, bias instability, rate random walk); a term not
-        resolved is drawn dotted (its line is then an upper bound's or a weak estimate's).
+        resolved is drawn dotted, at its 2-sigma upper bound from ``bounds`` when given.
+      bounds: optional (3, 3) upper bounds of (N, B, K) per axis, in the plotted units.
     """
     path = pathlib.Path(path)
     taus = np.asarray(taus, float)
@@ -40,8 +41,9 @@ def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw,
                    color="k", lw=0.8, capsize=2, label="Allan deviation +-1 sigma (fitted)")
         if np.any(~fitted):
             a.plot(taus[~fitted], d[~fitted], "o", ms=3, mfc="none", color="0.4", label="not fitted")
-        n, b, k = float(white[c]), float(bias_instability[c]), float(rate_rw[c])
+        fit = [float(white[c]), float(bias_instability[c]), float(rate_rw[c])]
         ls = ["--" if resolved is None or resolved[c][j] else ":" for j in range(3)]
+        n, b, k = (fit[j] if ls[j] == "--" or bounds is None else float(bounds[c][j]) for j in range(3))
         if n > 0:
             a.plot(tt, n / np.sqrt(tt), ls[0], color="C0", label=f"white (slope -1/2): {white_label[c]}")
             if tt[0] <= 1.0 <= tt[-1]:
@@ -53,7 +55,7 @@ def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw,
             a.plot(tt, k * np.sqrt(tt / 3.0), ls[2], color="C3", label=f"rate random walk (slope +1/2): {rrw_label[c]}")
             if tt[0] <= 3.0 <= tt[-1]:
                 a.plot([3.0], [k], "s", color="C3", ms=6)
-        a.plot(tt, np.sqrt(n**2 / tt + 2 * math.log(2) / math.pi * b**2 + k**2 * tt / 3), "-", color="C1", lw=1.5,
+        a.plot(tt, np.sqrt(fit[0]**2 / tt + 2 * math.log(2) / math.pi * fit[1]**2 + fit[2]**2 * tt / 3), "-", color="C1", lw=1.5,
                label="sum of the fitted terms")
         a.set_xscale("log")
         a.set_yscale("log")
