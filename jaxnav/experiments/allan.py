@@ -74,11 +74,16 @@ def _edge(fit, sensor):
     return out
 
 
+#: a recording shorter than this (s) is warned about in the TOML: its bias terms are bounds at short taus
+SHORT_RECORDING_S = 3600.0
+
+
 def noise_toml(gyro, accel, *, source: str) -> str:
     """A ``[noise]`` section for a ``jaxnav ins`` config from the two fits (largest axis of each term).
 
     Keys and units are those of :mod:`jaxnav.experiments.ins_config`; a value outside the config's
-    plausible range (:data:`RANGES`) is written commented out, with the reason. ``grade`` is the
+    plausible range (:data:`RANGES`) is written commented out, with the reason, and so are the bias
+    terms of a recording shorter than :data:`SHORT_RECORDING_S`. ``grade`` is the
     preset nearest in ARW: it supplies the initial (turn-on) bias and scale-factor sigmas, which a
     static recording cannot measure; the values below override its densities.
     """
@@ -98,13 +103,22 @@ def noise_toml(gyro, accel, *, source: str) -> str:
     ]
     lines = [f"# [noise] from the Allan variance of {source} (jaxnav allan): the largest of the three axes;",
              "# a term the recording could not resolve is given its 2-sigma upper bound (see results.json)",
-             "[noise]",
+             ]
+    dur = gyro.n * gyro.dt
+    if dur < SHORT_RECORDING_S:
+        lines += [f"# only {dur:.0f} s of data (taus up to {float(gyro.taus[-1]):.3g} s): the bias instability, its "
+                  "correlation time and the rate random walk",
+                  "# are bounds or weak estimates here, written commented out (the grade's values stand); "
+                  "record an hour or longer to measure them"]
+    lines += ["[noise]",
              f'grade = "{_nearest_grade(float(n.gyro_arw))}"  # nearest preset in ARW: turn-on bias and scale-factor '
              "sigmas (not measurable from a static recording)"]
     for key, v, what in vals:
         lo, hi = RANGES[f"noise.{key}"]
         v = float(v)
-        if math.isfinite(v) and lo <= v <= hi and v > 0:
+        if dur < SHORT_RECORDING_S and not key.startswith(("arw", "vrw")):
+            lines.append(f"# {key} = {v:.4g}  # {what}")
+        elif math.isfinite(v) and lo <= v <= hi and v > 0:
             lines.append(f"{key} = {v:.4g}  # {what}")
         else:
             lines.append(f"# {key} = {v:.4g}  # {what}; outside the config's range [{lo:g}, {hi:g}], left to the grade")
