@@ -29,7 +29,9 @@ and heading aiding):
   H[dlat] = -C_bn^T dw_ie_n/dlat, R = density^2 / T_still.
 * :data:`NHC`: vehicle-frame lateral and vertical velocity of a point (the rear axle) are 0;
   v_P^v = C_vb (C_bn^T v_n + w_nb_b x l_b); z = v_P^v[x, z]; H[dV] = C_vb C_bn^T, H[phi] = -C_vb C_bn^T [v_n x].
-* :data:`ODOMETER`: forward vehicle-frame speed of that point; z = v_P^v[y] - speed.
+* :data:`ODOMETER`: forward vehicle-frame speed of that point read with a scale factor (1 + k):
+  z = (1 + k_hat) v_P^v[y] - speed, H[dV, phi] = (1 + k_hat) (forward rows of the NHC's),
+  H[s_odo] = -v_P^v[y] (s_odo = k - k_hat, in models with that state; k_hat from ``ctx.biases``).
 * :data:`HEADING`: heading (clockwise from north) of a body vector u_b; u_n = C_bn u_b,
   psi = atan2(u_E, u_N), z = wrap(psi - psi_meas), H[phi] = [u_N, -u_E, 0] [u_n x] / (u_E^2 + u_N^2).
 
@@ -66,6 +68,7 @@ class MeasContext(NamedTuple):
         flagged by the :data:`ZARU` aid's mask), rad/s (zeros when there are none).
       T_mean: () time covered by those samples, s (0: none).
       dtx: () epoch time minus t_nav, s (GNSS epochs between IMU samples are extrapolated by it).
+      biases: the sensor-error corrections applied so far (:class:`jaxnav.ins.SensorBiases`), or None.
     """
 
     nav: Any
@@ -73,6 +76,7 @@ class MeasContext(NamedTuple):
     w_mean_b: Any
     T_mean: Any
     dtx: Any
+    biases: Any = None
 
 
 class MeasRows(NamedTuple):
@@ -273,15 +277,21 @@ NHC = MeasurementModel("nhc", 2, _nhc)
 
 
 def _odometer(ctx, data, params: VehicleParams, idx, n, ellipsoid=WGS84) -> MeasRows:
+    """Wheel speed with a scale factor: reading = (1 + k) v_fwd (module docstring)."""
     dtype = ctx.nav.v_n.dtype
     v_v, H_dv, H_phi = _vehicle_velocity(ctx, params, ellipsoid)
-    H = jnp.zeros((1, n), dtype).at[:, idx.dv].set(H_dv[1:2]).at[:, idx.phi].set(H_phi[1:2])
+    b = ctx.biases
+    k = jnp.zeros((), dtype) if b is None or b.odo_scale is None else jnp.reshape(b.odo_scale, ())
+    g = 1.0 + k
+    H = jnp.zeros((1, n), dtype).at[:, idx.dv].set(g * H_dv[1:2]).at[:, idx.phi].set(g * H_phi[1:2])
+    if idx.s_odo is not None:
+        H = H.at[0, idx.s_odo].set(-v_v[1])
     s = jnp.reshape(jnp.asarray(params.sigma, dtype), ())
     speed = jnp.asarray(data, dtype)
-    return MeasRows(z=v_v[1:2] - speed, H=H, R=jnp.reshape(s * s, (1, 1)), mask=jnp.isfinite(speed)[None])
+    return MeasRows(z=g * v_v[1:2] - speed, H=H, R=jnp.reshape(s * s, (1, 1)), mask=jnp.isfinite(speed)[None])
 
 
-#: Odometer (1 row: forward vehicle-frame speed of the wheel point, m/s); data = speed (N,).
+#: Odometer (1 row: forward vehicle-frame speed of the wheel point, m/s, times (1 + k)); data = speed (N,).
 ODOMETER = MeasurementModel("odometer", 1, _odometer)
 
 
