@@ -80,6 +80,9 @@ RANGES = {
     "constraints.detector_sigma_w_deg_s": (1e-6, 1000.0),
     "constraints.detector_min_s": (0.0, 3600.0),
     "constraints.zupt_gnss_k": (0.5, 100.0),
+    "odometer.sigma_m_s": (1e-4, 10.0),
+    "odometer.rate_hz": (1e-3, 1000.0),
+    "odometer.init_scale_sigma_ppm": (1.0, 5e5),
     "evaluate.outage_s": (0.1, 3600.0),
     "evaluate.first_s": (0.0, 1e6),
     "evaluate.gap_s": (0.1, 1e5),
@@ -188,6 +191,26 @@ class ConstraintSection(NamedTuple):
     zupt_gnss_k: float = 3.0  # no ZUPT/ZARU where the GNSS speed exceeds this many of its sigmas
 
 
+class OdometerSection(NamedTuple):
+    """[odometer]: wheel speed from the KF-GINS IMU file's 8th column (``source`` "imu") or a CSV (``source``
+    "csv": ``file``, ``columns``, ``units``, ``delimiter``, ``gps_week`` as :func:`jaxnav.io.read_csv_series`
+    takes them), on the IMU's clock; ``sigma`` m/s, ``rate_hz`` updates per second, ``lever_arm_frd`` (3,) the
+    wheel contact point minus the IMU, FRD vehicle frame, m; ``estimate_scale``: carry the scale-factor
+    error state, initial 1-sigma ``init_scale_sigma`` (dimensionless)."""
+
+    source: str
+    file: Optional[pathlib.Path]
+    columns: Optional[dict]
+    units: Optional[dict]
+    delimiter: Optional[str]
+    gps_week: Optional[int]
+    sigma: float
+    rate_hz: float
+    lever_arm_frd: Any
+    estimate_scale: bool
+    init_scale_sigma: float
+
+
 class EvaluateSection(NamedTuple):
     """[evaluate]: simulated outages of ``outage_s`` from ``first_s`` after the start, GNSS back on for
     ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s);
@@ -225,6 +248,7 @@ class InsConfig(NamedTuple):
       path: the config file.  name: a title for outputs (``[run] name``, default: the file stem).
       imu, gnss, noise, alignment, constraints: the sections.  evaluate: None or the outage protocol.
       tune: the ``--tune`` settings.  raw: the TOML as read (echoed into results.json).
+      odometer: None or the wheel-speed input.
     """
 
     path: pathlib.Path
@@ -237,6 +261,7 @@ class InsConfig(NamedTuple):
     evaluate: Optional[EvaluateSection]
     tune: TuneSection
     raw: dict
+    odometer: Optional[OdometerSection] = None
 
 
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -336,7 +361,7 @@ def _delimiter(r: "_Reader"):
     return v
 
 
-_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "evaluate", "tune")
+_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "odometer", "evaluate", "tune")
 
 
 def _imu(path, d, variables=None) -> ImuSection:
@@ -507,6 +532,42 @@ def _constraints(path, d, platform="handheld") -> ConstraintSection:
     return c
 
 
+def _odometer(path, d, imu: ImuSection, variables=None) -> OdometerSection:
+    r = _Reader(path, d, "odometer", variables)
+    src = r.get("source", str, choices=("imu", "csv"))
+    f = r.file("file", required=False)
+    cols, units = r.table("columns"), r.table("units")
+    week = r.get("gps_week", int, None, lo=0, hi=5000)
+    delim = _delimiter(r)
+    if src == "imu":
+        if imu.format != "kf-gins":
+            r.fail("source", f"= 'imu' reads the odometer column of a KF-GINS IMU file, but imu.format = "
+                             f"{imu.format!r}: give source = 'csv' with file = ...")
+        for k in ("file", "columns", "units", "gps_week", "delimiter"):
+            if k in d:
+                r.fail(k, "is only used with source = 'csv'")
+    else:
+        if f is None:
+            r.fail("file", "is required for source = 'csv'")
+        cols = {"t": 0, "speed": 1} if cols is None else cols
+        for k, v in cols.items():
+            if k not in ("t", "week", "tow", "speed"):
+                r.fail("columns", f"has unknown key {k!r}; known: ['t', 'week', 'tow', 'speed']")
+            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
+                r.fail("columns", f"{k} must be a 0-based column index >= 0 or a header name, got {v!r}")
+        for k, v in (units or {}).items():
+            allowed = {"t": ("s", "ms", "us", "ns"), "speed": ("m/s", "km/h")}
+            if k not in allowed or v not in allowed[k]:
+                r.fail("units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or speed in {list(allowed['speed'])}")
+    pos = dict(lo=0.0, lo_open=True)
+    o = OdometerSection(source=src, file=f, columns=cols, units=units, delimiter=delim, gps_week=week,
+                        sigma=r.get("sigma_m_s", float, 0.1, **pos), rate_hz=r.get("rate_hz", float, 2.0, **pos),
+                        lever_arm_frd=_lever(r, "lever_arm_frd_m"), estimate_scale=r.get("estimate_scale", bool, True),
+                        init_scale_sigma=r.get("init_scale_sigma_ppm", float, 2e4, **pos) * 1e-6)
+    r.done()
+    return o
+
+
 TRUTH_FORMATS = ("kf-gins", "csv")
 _TRUTH_COLUMNS = ("t", "week", "tow", "lat", "lon", "h", "ve", "vn", "vu", "vd", "roll", "pitch", "heading", "yaw")
 
@@ -603,12 +664,14 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
     name = run.get("name", str, path.stem)
     platform = run.get("platform", str, "handheld", choices=("car", "handheld", "foot", "rover"))
     run.done()
-    return InsConfig(path=path, name=name, imu=_imu(path, d["imu"], variables), gnss=_gnss(path, d["gnss"], variables),
+    imu = _imu(path, d["imu"], variables)
+    return InsConfig(path=path, name=name, imu=imu, gnss=_gnss(path, d["gnss"], variables),
                      noise=_noise(path, d.get("noise", {"grade": "consumer"})),
                      alignment=_alignment(path, d.get("alignment", {})),
                      constraints=_constraints(path, d.get("constraints", {}), platform),
                      evaluate=_evaluate(path, d["evaluate"], variables) if "evaluate" in d else None,
-                     tune=_tune(path, d.get("tune", {})), raw=d)
+                     tune=_tune(path, d.get("tune", {})), raw=d,
+                     odometer=_odometer(path, d["odometer"], imu, variables) if "odometer" in d else None)
 
 
 def _lever(r: _Reader, key):

@@ -299,6 +299,32 @@ def _constraints(prep, run) -> dict:
     return d
 
 
+def _odometer(prep, run) -> "dict | None":
+    """The wheel-speed input and its estimated scale factor (1 + k: reading = (1 + k) speed) with 1-sigma:
+    forward filter at the last epoch, RTS smoother (a random constant: the same at every epoch)."""
+    o = prep.cfg.odometer
+    if o is None:
+        return None
+    from jaxnav.experiments.ins_run import run_error_model
+
+    sp = np.asarray(prep.odometer_speed, float)
+    d = {"source": o.source if o.source == "imu" else str(o.file), "sigma_m_s": o.sigma, "rate_hz": o.rate_hz,
+         "lever_arm_frd_m": np.asarray(o.lever_arm_frd, float).tolist(),
+         "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(sp))), "imu_samples": int(sp.size),
+         "scale_factor_estimated": bool(o.estimate_scale)}
+    idx = run_error_model(prep.cfg).idx.s_odo
+    if idx is not None:
+        k_f = float(np.asarray(run.result.final_biases.odo_scale).reshape(-1)[0])
+        P = np.asarray(run.result.epochs.covs)[-1]
+        k_s = float(np.asarray(run.smoothed_biases.odo_scale)[0].reshape(-1)[0])
+        Ps = np.asarray(run.smoothed_covs)[0]
+        d.update(scale_factor=1.0 + k_f, scale_factor_sigma=float(np.sqrt(max(P[idx, idx][0, 0], 0.0))),
+                 scale_factor_smoothed=1.0 + k_s, scale_factor_smoothed_sigma=float(np.sqrt(max(Ps[idx, idx][0, 0], 0.0))),
+                 scale_factor_initial_sigma=o.init_scale_sigma,
+                 scale_factor_model="reading = scale_factor x forward speed of the wheel point; a random constant")
+    return d
+
+
 def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) -> dict:
     """The whole ``jaxnav ins`` job: run (and with ``tune`` tune, then rerun), write every output into ``out``.
 
@@ -344,7 +370,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                "gnss": {"file": str(cfg.gnss.file), "n_epochs_in_imu_span": int(prep.meas.t.size),
                         "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
                         "n_withheld": int(np.count_nonzero(prep.withheld))},
-               "constraints": _constraints(prep, run),
+               "constraints": _constraints(prep, run), "odometer": _odometer(prep, run),
                "status": int(run.result.status), "status_flags": describe(run.result.status),
                "status_ok": int(run.result.status) & ~INFO_FLAGS == 0,
                "n_nonfinite": int(run.result.n_nonfinite),
@@ -365,6 +391,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                            "noise_after": _densities_dict(rep.densities),
                            "evaluation_before": results["evaluation"], "evaluation_after": _evaluation(run_t.scores)}
         run = run_t
+        results["odometer"] = _odometer(prep, run)
     results["tuning"] = _tuning(prep, results)
     errs = None
     if truth is not None:
@@ -440,6 +467,13 @@ def format_ins(results: dict) -> str:
                          f"unconfirmed by GNSS dropped; vs GNSS-static epochs: "
                          f"precision {dd['precision']:.3f}, recall {dd['recall']:.3f} "
                          f"(IMU alone {dd['imu_only_precision']:.3f} / {dd['imu_only_recall']:.3f})")
+    o = r.get("odometer")
+    if o:
+        sf = (f"; scale factor {o['scale_factor_smoothed']:.5f} +- {o['scale_factor_smoothed_sigma']:.5f} (smoothed), "
+              f"{o['scale_factor']:.5f} +- {o['scale_factor_sigma']:.5f} (forward, end)" if "scale_factor" in o
+              else "; scale factor taken as 1 (estimate_scale = false)")
+        lines.append(f"  odometer ({o['source']}): {o['imu_samples_with_reading']} of {o['imu_samples']} IMU samples "
+                     f"with a reading, {o['rate_hz']:g} Hz updates, sigma {o['sigma_m_s']:g} m/s{sf}")
     if c.get("nhc"):
         lines.append("  non-holonomic constraint on (lateral and vertical velocity zero while moving)")
 

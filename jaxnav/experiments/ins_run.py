@@ -32,10 +32,10 @@ from jaxnav.ins import (PLATFORMS, LCParams, PVMeasurements, SensorBiases, Stand
                         detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold, runs_touching,
                         shoe_statistic, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
-                        noise_preset, sensor_to_body, smooth, zaru, zupt)
+                        noise_preset, odometer, sensor_to_body, smooth, zaru, zupt)
 from jaxnav.ins.attitude import quat_to_dcm
-from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_kfgins_gnss, read_kfgins_imu, read_pos,
-                       read_rtklib_imu)
+from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
+                       read_kfgins_odometer, read_pos, read_rtklib_imu)
 from jaxnav.ins.error_model import ERROR_MODEL_15
 
 
@@ -48,14 +48,17 @@ def read_inputs(cfg: InsConfig):
     """
     imu_c, g = cfg.imu, cfg.gnss
     truth = cfg.evaluate.truth if cfg.evaluate is not None else None
-    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag"), (truth, "evaluate.truth")):
+    odo = cfg.odometer.file if cfg.odometer is not None else None
+    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag"), (truth, "evaluate.truth"),
+                   (odo, "odometer.file")):
         if p is not None and not p.is_file():
             what = "a folder, not a file" if p.is_dir() else "no such file"
             raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
     if imu_c.format == "rtklib-csv":
         imu = read_rtklib_imu(imu_c.file, imu_c.tag)
     elif imu_c.format == "kf-gins":
-        imu = read_kfgins_imu(imu_c.file, gps_week=imu_c.gps_week)
+        odo_col = cfg.odometer is not None and cfg.odometer.source == "imu"
+        imu = read_kfgins_imu(imu_c.file, gps_week=imu_c.gps_week, n_columns=8 if odo_col else None)
     else:
         imu = _csv(cfg, "imu", lambda: read_csv_imu(imu_c.file, imu_c.columns, imu_c.units, delimiter=imu_c.delimiter))
     if g.format == "rtklib-pos":
@@ -78,6 +81,34 @@ def _csv(cfg, section, read):
         raise
     except ValueError as exc:
         raise ValueError(f"{cfg.path}: {section}.columns / {section}.units: {exc}") from None
+
+
+def read_odometer(cfg: InsConfig):
+    """(t (R,) s on the IMU file's clock, speed (R,) m/s) of the ``[odometer]`` source (NaN: no reading)."""
+    o = cfg.odometer
+    if o.source == "imu":
+        return read_kfgins_odometer(cfg.imu.file, gps_week=cfg.imu.gps_week)
+    d = _csv(cfg, "odometer", lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter))
+    t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * 604800.0
+    return t, d["speed"]
+
+
+def speed_on_imu(t_odo, speed, t_imu, *, max_gap_factor: float = 3.0):
+    """Wheel speed (N,) m/s at the IMU sample times ``t_imu`` (N,): linear between the two readings around
+    each sample, NaN outside the readings' span, across a gap longer than ``max_gap_factor`` times the
+    median reading interval, or next to a missing (NaN) reading. Readings at the IMU tags are taken as they are."""
+    t_odo, speed, t_imu = (np.asarray(a, float) for a in (t_odo, speed, t_imu))
+    ok = np.isfinite(speed) & np.isfinite(t_odo)
+    out = np.full(t_imu.shape, np.nan)
+    if ok.sum() < 2:
+        return out
+    med = float(np.median(np.diff(t_odo))) if t_odo.size > 1 else 0.0
+    to, so = t_odo[ok], speed[ok]
+    j = np.clip(np.searchsorted(to, t_imu, side="right"), 1, to.size - 1)
+    gap = to[j] - to[j - 1]
+    valid = (t_imu >= to[0]) & (t_imu <= to[-1]) & (gap <= max_gap_factor * med + 1e-9)
+    out[valid] = np.interp(t_imu[valid], to, so)
+    return out
 
 
 def outage_windows(t_start: float, t_end: float, *, first_s: float = 40.0, outage_s: float = 15.0,
@@ -213,16 +244,28 @@ def _preset(grade):
             "init_accel_scale": float(p.accel_sf)}
 
 
-def filter_params(d: Densities, pos0, n_states: int) -> LCParams:
-    """:class:`jaxnav.ins.LCParams` for 15, 18 or 21 states from :class:`Densities` at ``pos0`` (3,) rad, rad, m."""
+def run_error_model(cfg: InsConfig):
+    """The run's :class:`jaxnav.ins.ErrorModel`: ``noise.states``, plus the odometer scale-factor state when
+    ``[odometer] estimate_scale`` (:meth:`jaxnav.ins.ErrorModel.with_odometer_scale`)."""
+    model = error_model_for(cfg.noise.states)
+    o = cfg.odometer
+    return model.with_odometer_scale() if o is not None and o.estimate_scale else model
+
+
+def filter_params(d: Densities, pos0, n_states: int, *, odo_scale_sigma=None) -> LCParams:
+    """:class:`jaxnav.ins.LCParams` for 15, 18 or 21 states from :class:`Densities` at ``pos0`` (3,) rad, rad, m;
+    ``odo_scale_sigma``: initial 1-sigma of the odometer scale-factor state (dimensionless), appended as the
+    last state (None: no such state)."""
     att = jnp.asarray(d.init_att)
     att3 = jnp.stack([att[0], att[0], att[1]])
     tiny = 1e-12
     model = error_model_for(n_states)
+    if odo_scale_sigma is not None:
+        model = model.with_odometer_scale()
     P0 = error_model_P0(model, jnp.asarray(pos0, float), att=att3, vel=d.init_vel, pos_enu=d.init_pos,
                         gyro_bias=d.init_gyro_bias, accel_bias=d.init_accel_bias,
                         gyro_markov=jnp.maximum(d.gyro_markov, tiny), gyro_scale=d.init_gyro_scale,
-                        accel_scale=d.init_accel_scale)
+                        accel_scale=d.init_accel_scale, odo_scale=0.0 if odo_scale_sigma is None else odo_scale_sigma)
     if n_states == 21:
         Qc = error_model_Qc21(d.arw, d.vrw, gyro_bias_sigma=d.gyro_markov, gyro_bias_tau=d.tau,
                               accel_bias_sigma=d.accel_markov, accel_bias_tau=d.tau_accel,
@@ -256,8 +299,9 @@ class Prepared(NamedTuple):
     withheld: Any
     densities: Densities
     standstill: Any = None  # (N,) bool per IMU sample, or None (no detection)
-    aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC)
+    aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC, odometer)
     standstill_info: dict = {}  # detector report (detect_stops), with its series under "_series"
+    odometer_speed: Any = None  # (N,) m/s wheel speed per IMU sample (NaN: none), or None (no [odometer])
 
 
 def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
@@ -341,8 +385,9 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
     return det, info
 
 
-def build_aids(cfg: InsConfig, standstill):
-    """The ``[constraints]`` pseudo-measurements (:func:`jaxnav.ins.zupt`, ``zaru``, ``nhc``) for a run."""
+def build_aids(cfg: InsConfig, standstill, odo_speed=None):
+    """The ``[constraints]`` pseudo-measurements (:func:`jaxnav.ins.zupt`, ``zaru``, ``nhc``) and the
+    ``[odometer]`` wheel speed (:func:`jaxnav.ins.odometer`, ``odo_speed`` (N,) m/s per IMU sample) for a run."""
     c = cfg.constraints
     aids = []
     if standstill is not None and standstill.any():
@@ -353,6 +398,10 @@ def build_aids(cfg: InsConfig, standstill):
         active = None if standstill is None else ~standstill
         aids.append(nhc(active, sigma=(c.nhc_sigma, c.nhc_sigma), lever_b=sensor_to_body(np.eye(3)) @ c.nhc_lever_frd,
                         rate_hz=c.nhc_rate_hz))
+    o = cfg.odometer
+    if o is not None and odo_speed is not None:
+        aids.append(odometer(odo_speed, sigma=o.sigma, lever_b=sensor_to_body(np.eye(3)) @ o.lever_arm_frd,
+                             rate_hz=o.rate_hz))
     return tuple(aids)
 
 
@@ -394,10 +443,18 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))
     standstill, stop_info = (detect_stops(cfg, t, dth, dv, dt, a.static_s, meas) if cfg.constraints.zupt == "auto"
                              else (None, {}))
+    odo = None
+    if cfg.odometer is not None:
+        t_odo, sp = read_odometer(cfg)
+        odo = speed_on_imu(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
+        if not np.isfinite(odo).any():
+            raise ConfigError(f"{cfg.path}: odometer: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s "
+                              f"(readings [{t_odo[0]:.3f}, {t_odo[-1]:.3f}] s before the time offset): check the "
+                              "odometer's time scale (odometer.gps_week)")
     return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
                     time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
                     meas=meas, keep=keep, withheld=withheld, densities=dens, standstill=standstill,
-                    aids=build_aids(cfg, standstill), standstill_info=stop_info)
+                    aids=build_aids(cfg, standstill, odo), standstill_info=stop_info, odometer_speed=odo)
 
 
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
@@ -407,13 +464,16 @@ def run_filter(prep: Prepared, d: Optional[Densities] = None, *, meas=None, save
     """The loosely coupled filter on a prepared recording; returns :class:`jaxnav.ins.LCResult`."""
     d = prep.densities if d is None else d
     n = prep.cfg.noise.states
-    params = filter_params(d, prep.alignment.nav0.pos, n)
+    o = prep.cfg.odometer
+    model = run_error_model(prep.cfg)
+    params = filter_params(d, prep.alignment.nav0.pos, n,
+                           odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else None)
     m = prep.meas if meas is None else meas
     m = m._replace(R=jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
     z3 = np.zeros(3)
     b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
     return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
-                           n_states=n, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability,
+                           error_model=model, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability,
                            gate_max_run=prep.cfg.gnss.gate_max_run)
 
 
@@ -539,7 +599,7 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
     d = prep.densities if d is None else d
     t0 = time.perf_counter()
     res = run_filter(prep, d)
-    sm_nav, sm_b, sm_P = smooth(res, n_states=prep.cfg.noise.states)
+    sm_nav, sm_b, sm_P = smooth(res, error_model=run_error_model(prep.cfg))
     jax.block_until_ready(sm_nav.pos)
     runtime = time.perf_counter() - t0
     meas = prep.meas
@@ -606,7 +666,7 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     # likelihoods comparable between offsets: the same GNSS epochs, no gate, no pseudo-measurements
     no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0),
                            gnss=cfg.gnss._replace(gate_probability=None),
-                           constraints=cfg.constraints._replace(zupt=False, nhc=False))
+                           constraints=cfg.constraints._replace(zupt=False, nhc=False), odometer=None)
     cache = {}
 
     def loglik(off):

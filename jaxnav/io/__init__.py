@@ -29,8 +29,8 @@ from jaxnav.io._survey_files import (
     write_levelling,
 )
 from jaxnav.io._walk import WalkData, load_walk
-from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu
-from jaxnav.io._csv import read_csv_gnss, read_csv_imu
+from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
+from jaxnav.io._csv import read_csv_gnss, read_csv_imu, read_csv_series
 from jaxnav.io._truth import TruthTrajectory, read_csv_truth, read_kfgins_truth
 
 __all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags", "read_pos", "read_rtklib_imu",
@@ -40,5 +40,6 @@ __all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags",
            "imu_increments", "RTK_RESULT_COLUMNS", "write_rtk_results", "read_stop_list", "write_stop_list",
            "WalkData", "load_walk", "ReaderError", "json_ready", "write_json",
            "provenance", "git_commit", "utc_now", "files_snapshot", "files_written",
-           "read_kfgins_imu", "read_kfgins_gnss", "read_csv_imu", "read_csv_gnss",
+           "read_kfgins_imu", "read_kfgins_gnss", "read_kfgins_odometer", "read_csv_imu", "read_csv_gnss",
+           "read_csv_series",
            "TruthTrajectory", "read_kfgins_truth", "read_csv_truth"]
