@@ -453,6 +453,12 @@ def format_ins(results: dict) -> str:
              f"  {r['n_states']}-state filter + RTS: status {status_words(r['status'])}, log-likelihood {r['loglik']:.1f}, "
              f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
              f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s"]
+    dr = r["time_offset"].get("drift", {})
+    if "drift_s_per_s" in dr:
+        w = dr["windows"]
+        lines.append(f"  time offset by halves: {w[0]['offset_s']:+.3f} / {w[1]['offset_s']:+.3f} s, clock drift "
+                     f"{dr['drift_s_per_s'] * 1e6:+.0f} +- {dr['drift_sigma_s_per_s'] * 1e6:.0f} ppm"
+                     + (f"\n  WARNING: {dr['warning']}" if dr.get("significant") else " (not significant)"))
     for msg in r.get("status_flags", []):
         lines.append(f"  {'note' if r.get('status_ok', True) else 'PROBLEM'}: {msg}")
     c = r.get("constraints", {})

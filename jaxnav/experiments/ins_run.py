@@ -637,7 +637,9 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     best, and a parabola through the three best log-likelihoods refines the maximum and gives its
     1-sigma from the curvature (:func:`_parabola_peak`). Every trial scores the same GNSS epochs: those
     inside the IMU span at every trial offset and outside the ``[evaluate]`` outages
-    (:func:`_search_epochs`; the others are dropped and counted).
+    (:func:`_search_epochs`; the others are dropped and counted). A clock drift (the offset changing
+    linearly over the run) is estimated at the best offset by :func:`_offset_drift` and reported under
+    ``drift``, with a warning when significant.
 
     Returns:
       (offset s, info dict with the grid, its log-likelihoods, the estimate's sigma, the epoch counts
@@ -668,11 +670,15 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
                            gnss=cfg.gnss._replace(gate_probability=None),
                            constraints=cfg.constraints._replace(zupt=False, nhc=False), odometer=None)
     cache = {}
+    tg = np.asarray(pos.t, float)
+    t_ref, T = 0.5 * (tg[0] + tg[-1]), float(tg[-1] - tg[0])
 
-    def loglik(off):
-        key = round(float(off), 6)
+    def loglik(off, change=0.0):
+        """Log-likelihood with IMU times t + off + change (t - t_ref) / T (a linear clock error)."""
+        key = (round(float(off), 6), round(float(change), 6))
         if key not in cache:
-            p = prepare(no_eval, imu=imu._replace(t=np.asarray(imu.t, float) + key), pos=pos, progress=None)
+            ti = np.asarray(imu.t, float)
+            p = prepare(no_eval, imu=imu._replace(t=ti + key[0] + key[1] * (ti - t_ref) / T), pos=pos, progress=None)
             cache[key] = float(run_filter(p, save=("nav",)).loglik)
         return cache[key]
 
@@ -688,18 +694,110 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     fine = fine[np.abs(fine) <= span + 1e-9]
     ll = np.array([loglik(o) for o in fine])
     best, sigma = _parabola_peak(fine, ll)
-    grid = np.array(sorted(cache))
+    drift = _offset_drift(loglik, best, tg, span)
+    grid = np.array(sorted(k[0] for k in cache if k[1] == 0.0))
     at_edge = abs(best) >= span - 0.01
     info.update(method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
-                       "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[g] for g in grid]),
+                       "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[(g, 0.0)] for g in grid]),
                 offset_s=best, sigma_s=sigma,
                 sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
                              "(treats the innovations as independent: optimistic when GNSS errors are correlated "
-                             "in time)", at_search_edge=bool(at_edge))
+                             "in time)", at_search_edge=bool(at_edge), drift=drift)
     if at_edge and progress:
         progress(f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
                  "imu.time_offset_search_s")
+    if drift.get("significant") and progress:
+        progress(f"warning: {drift['warning']}")
     return best, info
+
+
+#: a clock drift is flagged when the offset's change over the run exceeds this many of its sigmas...
+DRIFT_SIGMAS = 3.0
+#: ... and this, s (below it the 10 ms grid and its parabola do not resolve a change)
+DRIFT_MIN_CHANGE_S = 0.005
+
+
+def _offset_drift(loglik, offset: float, t_gnss, span: float, *, step_o: float = 0.01,
+                  step_c: float = 0.02) -> dict:
+    """IMU clock drift by the innovation likelihood of a linear clock error.
+
+    The IMU times become t + o + c (t - t_ref) / T (t_ref the middle, T the span of the GNSS epochs
+    ``t_gnss``): o is the offset at mid-run, c its change over the run, d = c / T the drift (s/s). Every
+    trial is a whole run with one consistent clock (offsets fitted to separate halves of one-offset runs
+    are pulled towards the run's offset: a mistimed half spoils the state the other starts from). From
+    (``offset``, 0) a grid of ``step_o`` x ``step_c`` is walked (|o| + |c| / 2 within ``span``, so every
+    trial scores the same epochs) by Newton steps: a quadratic ll = a + g^T x + x^T H x / 2 through six grid
+    points around x (x, x +- one step in o and in c, x + one step in both), x moved to the grid point nearest
+    its maximum -H^-1 g until that lies within one step; (o, c) = that maximum, their covariance -H^-1 (independent innovations assumed:
+    optimistic, as the offset's sigma). Flagged significant when |c| exceeds
+    :data:`DRIFT_SIGMAS` sigmas and :data:`DRIFT_MIN_CHANGE_S`. Cost: three runs beyond the offset search
+    when there is no drift, three to six per Newton step otherwise.
+
+    Args:
+      loglik: (o s, c s) -> log-likelihood of the run.  offset: the one-offset estimate, s.
+      t_gnss: (M,) the search's GNSS epoch times, s.  span: the search half-width, s.
+    Returns:
+      dict for results.json: ``offset_mid_s``, ``change_s``, ``change_sigma_s``, ``drift_s_per_s``,
+      ``drift_sigma_s_per_s``, ``windows`` (the model's offset at the mean epoch time of each half),
+      ``significant``, ``warning`` (when significant); ``note`` only when it cannot be estimated.
+    """
+    tg = np.asarray(t_gnss, float)
+    T = float(tg[-1] - tg[0])
+    if tg.size < 2 * MIN_SEARCH_EPOCHS or T <= 0:
+        return {"note": "not estimated: too few GNSS epochs"}
+    ok = lambda o, c: abs(o) + 0.5 * abs(c) <= span + 1e-9  # noqa: E731
+    key = lambda o, c: (round(o, 6), round(c, 6))  # noqa: E731
+    ll = lambda x: loglik(*x)  # noqa: E731
+    x = key(round(offset / step_o) * step_o, 0.0)
+    stencil = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (1, 1))  # the fewest points that fix a 2-D quadratic
+    nbrs = lambda x: [key(x[0] + i * step_o, x[1] + j * step_c) for i, j in stencil]  # noqa: E731
+    S = np.diag([step_o, step_c])
+    for _ in range(12):  # Newton steps on the grid: fit the stencil around x, move to the grid point nearest its maximum
+        pts = nbrs(x)
+        if not all(ok(*y) for y in pts):
+            return {"note": "not estimated: the clock model reaches the edge of the search span; widen "
+                            "imu.time_offset_search_s"}
+        u = np.array([((y[0] - x[0]) / step_o, (y[1] - x[1]) / step_c) for y in pts])
+        A = np.column_stack([np.ones(len(pts)), u[:, 0], u[:, 1], 0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1],
+                             0.5 * u[:, 1] ** 2])
+        coef = np.linalg.solve(A, np.array([ll(y) for y in pts]))
+        H = np.array([[coef[3], coef[4]], [coef[4], coef[5]]])
+        if not np.all(np.linalg.eigvalsh(H) < 0):  # not concave here: step to the best stencil point
+            up = max(pts, key=ll)
+            if up == x:
+                return {"note": "not estimated: the likelihood has no maximum in offset and drift (too little "
+                                "dynamics)"}
+            x = up
+            continue
+        du = np.linalg.solve(H, -coef[1:3])  # the maximum, in grid steps from x
+        if np.all(np.abs(du) <= 1.0):
+            break
+        x = key(x[0] + float(np.clip(np.round(du[0]), -5, 5)) * step_o, x[1] + float(np.clip(np.round(du[1]), -5, 5)) * step_c)
+    else:
+        return {"note": "not estimated: the Newton steps did not settle"}
+    est = np.array(x) + S @ du
+    cov = S @ np.linalg.inv(-H) @ S
+    o, c = float(est[0]), float(est[1])
+    sc = float(np.sqrt(cov[1, 1]))
+    t_ref = 0.5 * (tg[0] + tg[-1])
+    wins = []
+    for h in (tg < t_ref, tg >= t_ref):
+        f = (float(np.mean(tg[h])) - t_ref) / T
+        wins.append({"t_start_s": float(tg[h][0]), "t_end_s": float(tg[h][-1]), "t_mean_s": float(np.mean(tg[h])),
+                     "n_epochs": int(h.sum()), "offset_s": o + c * f,
+                     "sigma_s": float(np.sqrt(max(cov[0, 0] + 2 * f * cov[0, 1] + f * f * cov[1, 1], 0.0)))})
+    sig = bool(abs(c) > DRIFT_SIGMAS * sc and abs(c) > DRIFT_MIN_CHANGE_S)
+    out = {"method": "innovation log-likelihood of a linear clock error t + o + c (t - t_mid) / T: Newton steps "
+                     "on a 10 ms x 20 ms grid, quadratic through six points around the best (sigmas from its curvature, "
+                     "optimistic as the offset's); windows: the model's offset at each half's mean epoch",
+           "offset_mid_s": o, "change_s": c, "change_sigma_s": sc, "drift_s_per_s": c / T,
+           "drift_sigma_s_per_s": sc / T, "windows": wins, "significant": sig}
+    if sig:
+        out["warning"] = (f"the IMU-GNSS time offset changes over the run by {c * 1e3:+.0f} +- {sc * 1e3:.0f} ms "
+                          f"({c / T * 1e6:+.0f} +- {sc / T * 1e6:.0f} ppm clock drift: {wins[0]['offset_s']:+.3f} s in "
+                          f"the first half, {wins[1]['offset_s']:+.3f} s in the second); one offset fits neither end: "
+                          "re-tag the IMU (e.g. from GNSS time pulses) or process shorter pieces")
+    return out
 
 
 def _parabola_peak(x, ll):
