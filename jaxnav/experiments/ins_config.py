@@ -83,6 +83,8 @@ RANGES = {
     "odometer.sigma_m_s": (1e-4, 10.0),
     "odometer.rate_hz": (1e-3, 1000.0),
     "odometer.init_scale_sigma_ppm": (1.0, 5e5),
+    "heading.sigma_deg": (1e-3, 180.0),
+    "heading.rate_hz": (1e-3, 1000.0),
     "evaluate.outage_s": (0.1, 3600.0),
     "evaluate.first_s": (0.0, 1e6),
     "evaluate.gap_s": (0.1, 1e5),
@@ -211,6 +213,20 @@ class OdometerSection(NamedTuple):
     init_scale_sigma: float
 
 
+class HeadingSection(NamedTuple):
+    """[heading]: heading of the vehicle's forward axis (clockwise from north) from a CSV (``file``, ``columns``
+    t (or week + tow), heading, optional sigma; ``units`` t, heading deg|rad; ``delimiter``; ``gps_week``) on
+    the GNSS time scale; ``sigma`` rad for readings without their own, ``rate_hz`` updates per second."""
+
+    file: pathlib.Path
+    columns: dict
+    units: Optional[dict]
+    delimiter: Optional[str]
+    gps_week: Optional[int]
+    sigma: float
+    rate_hz: float
+
+
 class EvaluateSection(NamedTuple):
     """[evaluate]: simulated outages of ``outage_s`` from ``first_s`` after the start, GNSS back on for
     ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s);
@@ -262,6 +278,7 @@ class InsConfig(NamedTuple):
     tune: TuneSection
     raw: dict
     odometer: Optional[OdometerSection] = None
+    heading: Optional[HeadingSection] = None
 
 
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -361,7 +378,8 @@ def _delimiter(r: "_Reader"):
     return v
 
 
-_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "odometer", "evaluate", "tune")
+_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "odometer", "heading", "evaluate",
+             "tune")
 
 
 def _imu(path, d, variables=None) -> ImuSection:
@@ -568,6 +586,28 @@ def _odometer(path, d, imu: ImuSection, variables=None) -> OdometerSection:
     return o
 
 
+def _heading(path, d, variables=None) -> HeadingSection:
+    r = _Reader(path, d, "heading", variables)
+    f = r.file("file")
+    cols = r.table("columns") or {"t": 0, "heading": 1}
+    for k, v in cols.items():
+        if k not in ("t", "week", "tow", "heading", "sigma"):
+            r.fail("columns", f"has unknown key {k!r}; known: ['t', 'week', 'tow', 'heading', 'sigma']")
+        if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
+            r.fail("columns", f"{k} must be a 0-based column index >= 0 or a header name, got {v!r}")
+    units = r.table("units")
+    for k, v in (units or {}).items():
+        allowed = {"t": ("s", "ms", "us", "ns"), "heading": ("deg", "rad")}
+        if k not in allowed or v not in allowed[k]:
+            r.fail("units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or heading in {list(allowed['heading'])}")
+    pos = dict(lo=0.0, lo_open=True)
+    h = HeadingSection(file=f, columns=cols, units=units, delimiter=_delimiter(r),
+                       gps_week=r.get("gps_week", int, None, lo=0, hi=5000),
+                       sigma=r.get("sigma_deg", float, 1.0, **pos) * DEG, rate_hz=r.get("rate_hz", float, 1.0, **pos))
+    r.done()
+    return h
+
+
 TRUTH_FORMATS = ("kf-gins", "csv")
 _TRUTH_COLUMNS = ("t", "week", "tow", "lat", "lon", "h", "ve", "vn", "vu", "vd", "roll", "pitch", "heading", "yaw")
 
@@ -671,7 +711,8 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
                      constraints=_constraints(path, d.get("constraints", {}), platform),
                      evaluate=_evaluate(path, d["evaluate"], variables) if "evaluate" in d else None,
                      tune=_tune(path, d.get("tune", {})), raw=d,
-                     odometer=_odometer(path, d["odometer"], imu, variables) if "odometer" in d else None)
+                     odometer=_odometer(path, d["odometer"], imu, variables) if "odometer" in d else None,
+                     heading=_heading(path, d["heading"], variables) if "heading" in d else None)
 
 
 def _lever(r: _Reader, key):

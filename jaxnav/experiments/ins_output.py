@@ -371,6 +371,10 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                         "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
                         "n_withheld": int(np.count_nonzero(prep.withheld))},
                "constraints": _constraints(prep, run), "odometer": _odometer(prep, run),
+               "heading": None if prep.heading is None else {
+                   "file": str(cfg.heading.file), "rate_hz": cfg.heading.rate_hz,
+                   "default_sigma_deg": math.degrees(cfg.heading.sigma),
+                   "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(prep.heading[0])))},
                "status": int(run.result.status), "status_flags": describe(run.result.status),
                "status_ok": int(run.result.status) & ~INFO_FLAGS == 0,
                "n_nonfinite": int(run.result.n_nonfinite),

@@ -33,6 +33,7 @@ from jaxnav.ins import (PLATFORMS, LCParams, PVMeasurements, SensorBiases, Stand
                         shoe_statistic, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
                         noise_preset, odometer, sensor_to_body, smooth, zaru, zupt)
+from jaxnav.ins import heading as heading_aid
 from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
                        read_kfgins_odometer, read_pos, read_rtklib_imu)
@@ -49,8 +50,9 @@ def read_inputs(cfg: InsConfig):
     imu_c, g = cfg.imu, cfg.gnss
     truth = cfg.evaluate.truth if cfg.evaluate is not None else None
     odo = cfg.odometer.file if cfg.odometer is not None else None
+    hdg = cfg.heading.file if cfg.heading is not None else None
     for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag"), (truth, "evaluate.truth"),
-                   (odo, "odometer.file")):
+                   (odo, "odometer.file"), (hdg, "heading.file")):
         if p is not None and not p.is_file():
             what = "a folder, not a file" if p.is_dir() else "no such file"
             raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
@@ -91,6 +93,27 @@ def read_odometer(cfg: InsConfig):
     d = _csv(cfg, "odometer", lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter))
     t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * 604800.0
     return t, d["speed"]
+
+
+def heading_on_imu(cfg: InsConfig, t_imu):
+    """The ``[heading]`` CSV at the IMU samples: (heading (N,) rad, sigma (N,) rad), NaN where no reading.
+
+    Each reading goes to the IMU sample nearest its time (GNSS time scale); readings outside the IMU span or
+    farther than one sample interval from every sample are dropped.
+    """
+    h = cfg.heading
+    d = _csv(cfg, "heading", lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter))
+    t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * 604800.0
+    t_imu = np.asarray(t_imu, float)
+    hd, sg = np.full(t_imu.size, np.nan), np.full(t_imu.size, np.nan)
+    j = np.clip(np.searchsorted(t_imu, t), 1, t_imu.size - 1)
+    j = np.where(np.abs(t_imu[j - 1] - t) < np.abs(t_imu[j] - t), j - 1, j)
+    dt = float(np.median(np.diff(t_imu)))
+    ok = np.abs(t_imu[j] - t) <= dt
+    hd[j[ok]] = d["heading"][ok]
+    if d["sigma"] is not None:
+        sg[j[ok]] = d["sigma"][ok]
+    return hd, sg
 
 
 def speed_on_imu(t_odo, speed, t_imu, *, max_gap_factor: float = 3.0):
@@ -302,6 +325,7 @@ class Prepared(NamedTuple):
     aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC, odometer)
     standstill_info: dict = {}  # detector report (detect_stops), with its series under "_series"
     odometer_speed: Any = None  # (N,) m/s wheel speed per IMU sample (NaN: none), or None (no [odometer])
+    heading: Any = None  # (heading (N,) rad, sigma (N,) rad) per IMU sample (NaN: none), or None (no [heading])
 
 
 def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
@@ -385,9 +409,10 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
     return det, info
 
 
-def build_aids(cfg: InsConfig, standstill, odo_speed=None):
+def build_aids(cfg: InsConfig, standstill, odo_speed=None, hdg=None):
     """The ``[constraints]`` pseudo-measurements (:func:`jaxnav.ins.zupt`, ``zaru``, ``nhc``) and the
-    ``[odometer]`` wheel speed (:func:`jaxnav.ins.odometer`, ``odo_speed`` (N,) m/s per IMU sample) for a run."""
+    ``[odometer]`` wheel speed (:func:`jaxnav.ins.odometer`, ``odo_speed`` (N,) m/s per IMU sample) and the
+    ``[heading]`` input (:func:`jaxnav.ins.heading`, ``hdg`` = (heading, sigma) (N,) rad each) for a run."""
     c = cfg.constraints
     aids = []
     if standstill is not None and standstill.any():
@@ -402,6 +427,8 @@ def build_aids(cfg: InsConfig, standstill, odo_speed=None):
     if o is not None and odo_speed is not None:
         aids.append(odometer(odo_speed, sigma=o.sigma, lever_b=sensor_to_body(np.eye(3)) @ o.lever_arm_frd,
                              rate_hz=o.rate_hz))
+    if cfg.heading is not None and hdg is not None:
+        aids.append(heading_aid(hdg[0], sigma=hdg[1], default_sigma=cfg.heading.sigma, rate_hz=cfg.heading.rate_hz))
     return tuple(aids)
 
 
@@ -451,10 +478,17 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
             raise ConfigError(f"{cfg.path}: odometer: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s "
                               f"(readings [{t_odo[0]:.3f}, {t_odo[-1]:.3f}] s before the time offset): check the "
                               "odometer's time scale (odometer.gps_week)")
+    hdg = None
+    if cfg.heading is not None:
+        hdg = heading_on_imu(cfg, t)
+        if not np.isfinite(hdg[0]).any():
+            raise ConfigError(f"{cfg.path}: heading: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s: "
+                              "check its time scale (heading.gps_week)")
     return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
                     time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
                     meas=meas, keep=keep, withheld=withheld, densities=dens, standstill=standstill,
-                    aids=build_aids(cfg, standstill, odo), standstill_info=stop_info, odometer_speed=odo)
+                    aids=build_aids(cfg, standstill, odo, hdg), standstill_info=stop_info, odometer_speed=odo,
+                    heading=hdg)
 
 
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
@@ -668,7 +702,7 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     # likelihoods comparable between offsets: the same GNSS epochs, no gate, no pseudo-measurements
     no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0),
                            gnss=cfg.gnss._replace(gate_probability=None),
-                           constraints=cfg.constraints._replace(zupt=False, nhc=False), odometer=None)
+                           constraints=cfg.constraints._replace(zupt=False, nhc=False), odometer=None, heading=None)
     cache = {}
     tg = np.asarray(pos.t, float)
     t_ref, T = 0.5 * (tg[0] + tg[-1]), float(tg[-1] - tg[0])

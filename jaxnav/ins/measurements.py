@@ -309,17 +309,20 @@ def _heading(ctx, data, params: HeadingParams, idx, n, ellipsoid=WGS84) -> MeasR
     u = quat_to_dcm(nav.q_bn) @ jnp.asarray(params.axis_b, dtype)
     h2 = u[0] * u[0] + u[1] * u[1]
     psi = jnp.arctan2(u[0], u[1])
-    meas = jnp.asarray(data, dtype)
+    if isinstance(data, tuple):  # (heading, per-reading sigma; NaN: params.sigma)
+        meas, s_i = (jnp.asarray(a, dtype) for a in data)
+    else:
+        meas, s_i = jnp.asarray(data, dtype), jnp.asarray(jnp.nan, dtype)
     d = psi - meas
     z = jnp.arctan2(jnp.sin(d), jnp.cos(d))
     g = jnp.stack([u[1], -u[0], jnp.zeros((), dtype)]) / jnp.maximum(h2, 1e-12)
     H = jnp.zeros((1, n), dtype).at[0, idx.phi].set(g @ skew(u))
-    s = jnp.reshape(jnp.asarray(params.sigma, dtype), ())
+    s = jnp.where(jnp.isfinite(s_i), s_i, jnp.reshape(jnp.asarray(params.sigma, dtype), ()))
     ok = jnp.isfinite(meas) & (h2 > 1e-6)  # a vertical axis has no heading
     return MeasRows(z=z[None], H=H, R=jnp.reshape(s * s, (1, 1)), mask=ok[None])
 
 
-#: Heading of a body vector (1 row, rad, clockwise from north); data = heading (N,).
+#: Heading of a body vector (1 row, rad, clockwise from north); data = heading (N,), or (heading, sigma) (N,) each.
 HEADING = MeasurementModel("heading", 1, _heading)
 
 
@@ -407,20 +410,27 @@ def odometer(speed, *, sigma=0.1, C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=No
                VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))
 
 
-def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active=None) -> Aid:
+def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active=None, default_sigma=0.01) -> Aid:
     """Heading updates (dual-antenna GNSS, magnetometer, a given heading).
 
     Args:
       heading: (N,) rad clockwise from north of the body vector ``axis_b``; NaN where none.
-      sigma: rad.  axis_b: (3,) body vector (forward by default).  rate_hz: thinning.
+      sigma: rad, scalar, or (N,) per reading (NaN entries take ``default_sigma``).
+      axis_b: (3,) body vector (forward by default).  rate_hz: thinning.
       active: (N,) bool samples with a reading (default: where ``heading`` is finite), as :func:`odometer`.
+      default_sigma: rad, for readings whose per-reading sigma is NaN.
     """
     hd = jnp.asarray(heading, float)
     if hd.ndim != 1:
         raise ValueError(f"heading must be 1-D (one value per IMU sample), got {hd.shape}")
     act = np.isfinite(np.asarray(heading, float)) if active is None else _mask(active, "active")
-    return Aid(HEADING, act, hd,
-               HeadingParams(jnp.asarray(sigma, float), _v3(axis_b, "axis_b")), _rate(rate_hz))
+    if jnp.ndim(sigma) == 0:
+        return Aid(HEADING, act, hd, HeadingParams(jnp.asarray(sigma, float), _v3(axis_b, "axis_b")), _rate(rate_hz))
+    sg = jnp.asarray(sigma, float)
+    if sg.shape != hd.shape:
+        raise ValueError(f"sigma must be a scalar or have the shape of heading {hd.shape}, got {sg.shape}")
+    return Aid(HEADING, act, (hd, sg), HeadingParams(jnp.asarray(default_sigma, float), _v3(axis_b, "axis_b")),
+               _rate(rate_hz))
 
 
 __all__ = ["Aid", "GNSS_PV", "GnssData", "HEADING", "HeadingParams", "MeasContext", "MeasRows", "MeasurementModel",

@@ -522,3 +522,16 @@ def test_odometer_scale_factor_state_recovered_and_outage_drift_cut(car):
     m1 = _outage_max(*_horizontal_error(res, truth))
     m2 = _outage_max(*_horizontal_error(fixed, truth))
     assert np.all(m1 < 0.1 * m0) and np.all(m1 < m2), (m0, m1, m2, k, sig)
+
+
+def test_heading_per_reading_sigma():
+    """ins.heading with a sigma per reading: R of an epoch is its own sigma^2, a NaN sigma takes default_sigma."""
+    nav = _nav()
+    ctx = ms.MeasContext(nav=nav, w_ib_b=jnp.zeros(3), w_mean_b=jnp.zeros(3), T_mean=jnp.asarray(0.0),
+                         dtx=jnp.asarray(0.0))
+    a = ins.heading(np.array([1.0, np.nan, 1.2]), sigma=np.array([0.02, 0.5, np.nan]), default_sigma=0.1)
+    assert a.active.tolist() == [True, False, True]
+    R = [float(ms.HEADING.fn(ctx, (a.data[0][i], a.data[1][i]), a.params, ins.IDX15, 15).R[0, 0]) for i in (0, 2)]
+    np.testing.assert_allclose(R, [0.02**2, 0.1**2])
+    with pytest.raises(ValueError, match="shape of heading"):
+        ins.heading(np.zeros(3), sigma=np.zeros(2))
