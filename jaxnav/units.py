@@ -126,3 +126,13 @@ def powerlaw_amplitude_to_mm_yr(a, kappa):
 def random_walk_to_mm_per_sqrt_yr(q):
     """Random-walk amplitude m/sqrt(s) -> mm/sqrt(yr)."""
     return q * math.sqrt(YEAR) / MM
+
+
+def rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour(x):
+    """Gyro rate random walk in rad/s/sqrt(s) -> deg/h/sqrt(h)."""
+    return x / DEG_PER_HOUR_PER_SQRT_HOUR
+
+
+def mps2_per_sqrt_s_to_mg_per_sqrt_hour(x):
+    """Accelerometer rate random walk in m/s^2/sqrt(s) -> mg/sqrt(h)."""
+    return x * SQRT_HOUR / MG

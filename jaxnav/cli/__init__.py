@@ -49,7 +49,7 @@ from typing import Optional
 from jaxnav.cli._common import CommandError, UsageError, figure_format_list
 
 #: the command modules, in the order of ``jaxnav --help``
-COMMANDS = ("demo", "demo_filters", "ins", "walk", "rtk", "cadastral", "monitor", "sweep", "tune")
+COMMANDS = ("demo", "demo_filters", "ins", "allan", "walk", "rtk", "cadastral", "monitor", "sweep", "tune")
 #: exit status of an error the user must fix (bad option, value, file or config)
 EXIT_USAGE = 2
 #: exit status of an internal error (a bug: please report it with the ``--debug`` traceback)

@@ -48,7 +48,9 @@ def run(args) -> int:
 
 def check_input_files(cfg) -> None:
     """Every file the config names exists and is a file, else :class:`CommandError` naming it and its key."""
-    for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag")):
+    truth = cfg.evaluate.truth if cfg.evaluate is not None else None
+    for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag"),
+                   (truth, "evaluate.truth")):
         if p is not None and not p.is_file():
             raise CommandError(f"{p}: {'a folder, not a file' if p.is_dir() else 'no such file'} ({cfg.path}: {key})")
 

@@ -81,6 +81,11 @@ RANGES = {
     "constraints.detector_sigma_w_deg_s": (1e-6, 1000.0),
     "constraints.detector_min_s": (0.0, 3600.0),
     "constraints.zupt_gnss_k": (0.5, 100.0),
+    "odometer.sigma_m_s": (1e-4, 10.0),
+    "odometer.rate_hz": (1e-3, 1000.0),
+    "odometer.init_scale_sigma_ppm": (1.0, 5e5),
+    "heading.sigma_deg": (1e-3, 180.0),
+    "heading.rate_hz": (1e-3, 1000.0),
     "evaluate.outage_s": (0.1, 3600.0),
     "evaluate.first_s": (0.0, 1e6),
     "evaluate.gap_s": (0.1, 1e5),
@@ -189,14 +194,57 @@ class ConstraintSection(NamedTuple):
     zupt_gnss_k: float = 3.0  # no ZUPT/ZARU where the GNSS speed exceeds this many of its sigmas
 
 
+class OdometerSection(NamedTuple):
+    """[odometer]: wheel speed from the KF-GINS IMU file's 8th column (``source`` "imu") or a CSV (``source``
+    "csv": ``file``, ``columns``, ``units``, ``delimiter``, ``gps_week`` as :func:`jaxnav.io.read_csv_series`
+    takes them), on the IMU's clock; ``sigma`` m/s, ``rate_hz`` updates per second, ``lever_arm_frd`` (3,) the
+    wheel contact point minus the IMU, FRD vehicle frame, m; ``estimate_scale``: carry the scale-factor
+    error state, initial 1-sigma ``init_scale_sigma`` (dimensionless)."""
+
+    source: str
+    file: Optional[pathlib.Path]
+    columns: Optional[dict]
+    units: Optional[dict]
+    delimiter: Optional[str]
+    gps_week: Optional[int]
+    sigma: float
+    rate_hz: float
+    lever_arm_frd: Any
+    estimate_scale: bool
+    init_scale_sigma: float
+
+
+class HeadingSection(NamedTuple):
+    """[heading]: heading of the vehicle's forward axis (clockwise from north) from a CSV (``file``, ``columns``
+    t (or week + tow), heading, optional sigma; ``units`` t, heading deg|rad; ``delimiter``; ``gps_week``) on
+    the GNSS time scale; ``sigma`` rad for readings without their own, ``rate_hz`` updates per second."""
+
+    file: pathlib.Path
+    columns: dict
+    units: Optional[dict]
+    delimiter: Optional[str]
+    gps_week: Optional[int]
+    sigma: float
+    rate_hz: float
+
+
 class EvaluateSection(NamedTuple):
     """[evaluate]: simulated outages of ``outage_s`` from ``first_s`` after the start, GNSS back on for
-    ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s)."""
+    ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s);
+    ``outages`` False: none (a truth-only evaluation). ``truth``: a reference trajectory file (or
+    None) in ``truth_format`` ("kf-gins": ``truth.nav``; "csv": with ``truth_columns``,
+    ``truth_units``, ``truth_delimiter`` as :func:`jaxnav.io.read_csv_truth` takes them)."""
 
     outage_s: float
     first_s: float
     gap_s: float
     end_margin_s: float
+    outages: bool = True
+    truth: Optional[pathlib.Path] = None
+    truth_format: str = "kf-gins"
+    truth_columns: Optional[dict] = None
+    truth_units: Optional[dict] = None
+    truth_delimiter: Optional[str] = ","
 
 
 class TuneSection(NamedTuple):
@@ -217,6 +265,7 @@ class InsConfig(NamedTuple):
       path: the config file.  name: a title for outputs (``[run] name``, default: the file stem).
       imu, gnss, noise, alignment, constraints: the sections.  evaluate: None or the outage protocol.
       tune: the ``--tune`` settings.  raw: the TOML as read (echoed into results.json).
+      odometer: None or the wheel-speed input.
     """
 
     path: pathlib.Path
@@ -229,6 +278,8 @@ class InsConfig(NamedTuple):
     evaluate: Optional[EvaluateSection]
     tune: TuneSection
     raw: dict
+    odometer: Optional[OdometerSection] = None
+    heading: Optional[HeadingSection] = None
 
 
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -332,7 +383,8 @@ def _delimiter(r: "_Reader"):
     return v
 
 
-_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "evaluate", "tune")
+_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "odometer", "heading", "evaluate",
+             "tune")
 
 
 def _imu(path, d, variables=None) -> ImuSection:
@@ -516,12 +568,106 @@ def _constraints(path, d, platform="handheld") -> ConstraintSection:
     return c
 
 
-def _evaluate(path, d) -> EvaluateSection:
-    r = _Reader(path, d, "evaluate")
+def _odometer(path, d, imu: ImuSection, variables=None) -> OdometerSection:
+    r = _Reader(path, d, "odometer", variables)
+    src = r.get("source", str, choices=("imu", "csv"))
+    f = r.file("file", required=False)
+    cols, units = r.table("columns"), r.table("units")
+    week = r.get("gps_week", int, None, lo=0, hi=5000)
+    delim = _delimiter(r)
+    if src == "imu":
+        if imu.format != "kf-gins":
+            r.fail("source", f"= 'imu' reads the odometer column of a KF-GINS IMU file, but imu.format = "
+                             f"{imu.format!r}: give source = 'csv' with file = ...")
+        for k in ("file", "columns", "units", "gps_week", "delimiter"):
+            if k in d:
+                r.fail(k, "is only used with source = 'csv'")
+    else:
+        if f is None:
+            r.fail("file", "is required for source = 'csv'")
+        cols = {"t": 0, "speed": 1} if cols is None else cols
+        for k, v in cols.items():
+            if k not in ("t", "week", "tow", "speed"):
+                r.fail("columns", f"has unknown key {k!r}; known: ['t', 'week', 'tow', 'speed']")
+            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
+                r.fail("columns", f"{k} must be a 0-based column index >= 0 or a header name, got {v!r}")
+        for k, v in (units or {}).items():
+            allowed = {"t": ("s", "ms", "us", "ns"), "speed": ("m/s", "km/h")}
+            if k not in allowed or v not in allowed[k]:
+                r.fail("units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or speed in {list(allowed['speed'])}")
+    pos = dict(lo=0.0, lo_open=True)
+    o = OdometerSection(source=src, file=f, columns=cols, units=units, delimiter=delim, gps_week=week,
+                        sigma=r.get("sigma_m_s", float, 0.1, **pos), rate_hz=r.get("rate_hz", float, 2.0, **pos),
+                        lever_arm_frd=_lever(r, "lever_arm_frd_m"), estimate_scale=r.get("estimate_scale", bool, True),
+                        init_scale_sigma=r.get("init_scale_sigma_ppm", float, 2e4, **pos) * 1e-6)
+    r.done()
+    return o
+
+
+def _heading(path, d, variables=None) -> HeadingSection:
+    r = _Reader(path, d, "heading", variables)
+    f = r.file("file")
+    cols = r.table("columns") or {"t": 0, "heading": 1}
+    for k, v in cols.items():
+        if k not in ("t", "week", "tow", "heading", "sigma"):
+            r.fail("columns", f"has unknown key {k!r}; known: ['t', 'week', 'tow', 'heading', 'sigma']")
+        if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
+            r.fail("columns", f"{k} must be a 0-based column index >= 0 or a header name, got {v!r}")
+    units = r.table("units")
+    for k, v in (units or {}).items():
+        allowed = {"t": ("s", "ms", "us", "ns"), "heading": ("deg", "rad")}
+        if k not in allowed or v not in allowed[k]:
+            r.fail("units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or heading in {list(allowed['heading'])}")
+    pos = dict(lo=0.0, lo_open=True)
+    h = HeadingSection(file=f, columns=cols, units=units, delimiter=_delimiter(r),
+                       gps_week=r.get("gps_week", int, None, lo=0, hi=5000),
+                       sigma=r.get("sigma_deg", float, 1.0, **pos) * DEG, rate_hz=r.get("rate_hz", float, 1.0, **pos))
+    r.done()
+    return h
+
+
+TRUTH_FORMATS = ("kf-gins", "csv")
+_TRUTH_COLUMNS = ("t", "week", "tow", "lat", "lon", "h", "ve", "vn", "vu", "vd", "roll", "pitch", "heading", "yaw")
+
+
+def _evaluate(path, d, variables=None) -> EvaluateSection:
+    r = _Reader(path, d, "evaluate", variables)
+    truth = r.file("truth", required=False)
+    fmt = r.get("truth_format", str, "kf-gins", choices=TRUTH_FORMATS)
+    cols, units = r.table("truth_columns"), r.table("truth_units")
+    delim = r.d.get("truth_delimiter", ",")
+    r.used.add("truth_delimiter")
+    if truth is None:
+        for k in ("truth_format", "truth_columns", "truth_units", "truth_delimiter"):
+            if k in d:
+                r.fail(k, "is only used with truth = FILE")
+    if fmt == "csv" and truth is not None:
+        if cols is None:
+            r.fail("truth_columns", "is required for truth_format = 'csv' (a table like {t = 0, lat = 1, lon = 2, "
+                                    "h = 3, ...})")
+        for k, v in cols.items():
+            if k not in _TRUTH_COLUMNS:
+                r.fail("truth_columns", f"has unknown key {k!r}; known: {list(_TRUTH_COLUMNS)}")
+            if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
+                r.fail("truth_columns", f"{k} must be a 0-based column index >= 0 or a header name, got {v!r}")
+        for k, v in (units or {}).items():
+            allowed = {"t": ("s", "ms", "us", "ns"), "angle": ("deg", "rad")}
+            if k not in allowed or v not in allowed[k]:
+                r.fail("truth_units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or angle in "
+                                      f"{list(allowed['angle'])}")
+    elif cols is not None or units is not None:
+        r.fail("truth_columns" if cols is not None else "truth_units", f"is only used with truth_format = 'csv', "
+                                                                        f"not {fmt!r}")
+    if not isinstance(delim, str) or not (delim == "whitespace" or len(delim) == 1):
+        r.fail("truth_delimiter", f"must be one character or 'whitespace', got {delim!r}")
     e = EvaluateSection(outage_s=r.get("outage_s", float, 15.0, lo=0.0, lo_open=True),
                         first_s=r.get("first_s", float, 40.0, lo=0.0),
                         gap_s=r.get("gap_s", float, 45.0, lo=0.0, lo_open=True),
-                        end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0))
+                        end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0),
+                        outages=r.get("outages", bool, True), truth=truth, truth_format=fmt, truth_columns=cols,
+                        truth_units=units, truth_delimiter=None if delim == "whitespace" else delim)
+    if not e.outages and truth is None:
+        r.fail("outages", "= false leaves nothing to evaluate: give truth = FILE, or drop [evaluate]")
     r.done()
     return e
 
@@ -576,12 +722,15 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
     name = run.get("name", str, path.stem)
     platform = run.get("platform", str, "handheld", choices=("car", "handheld", "foot", "rover"))
     run.done()
-    return InsConfig(path=path, name=name, imu=_imu(path, d["imu"], variables), gnss=_gnss(path, d["gnss"], variables),
+    imu = _imu(path, d["imu"], variables)
+    return InsConfig(path=path, name=name, imu=imu, gnss=_gnss(path, d["gnss"], variables),
                      noise=_noise(path, d.get("noise", {"grade": "consumer"})),
                      alignment=_alignment(path, d.get("alignment", {})),
                      constraints=_constraints(path, d.get("constraints", {}), platform),
-                     evaluate=_evaluate(path, d["evaluate"]) if "evaluate" in d else None,
-                     tune=_tune(path, d.get("tune", {})), raw=d)
+                     evaluate=_evaluate(path, d["evaluate"], variables) if "evaluate" in d else None,
+                     tune=_tune(path, d.get("tune", {})), raw=d,
+                     odometer=_odometer(path, d["odometer"], imu, variables) if "odometer" in d else None,
+                     heading=_heading(path, d["heading"], variables) if "heading" in d else None)
 
 
 def _lever(r: _Reader, key):

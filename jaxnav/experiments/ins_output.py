@@ -243,6 +243,36 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     return [str(p) for p in paths]
 
 
+def _edge_units(d):
+    """A statistics dict with every ``*_rad`` key turned into ``*_deg`` (the report's unit for angles)."""
+    from jaxnav.units import rad_to_deg
+
+    if isinstance(d, dict):
+        return {(k[:-4] + "_deg" if k.endswith("_rad") else k): (rad_to_deg(v) if k.endswith("_rad") else _edge_units(v))
+                for k, v in d.items()}
+    return d
+
+
+def _truth_evaluation(run: InsRun, truth, evaluation, *, tuned: bool):
+    """Forward and smoothed solutions against the reference: (errors per solution, the ``evaluation``
+    dict with a ``truth`` block added; keys with unit suffixes, angles in deg)."""
+    from jaxnav.experiments.ins_run import truth_errors
+    from jaxnav.ins import error_statistics
+
+    ev = run.prep.cfg.evaluate
+    errs = {w: truth_errors(run, truth, w) for w in ("forward", "smoothed")}
+    block = {"file": str(ev.truth), "format": ev.truth_format, "n_records": int(np.asarray(truth.t).size),
+             "solution": "after --tune" if tuned else "as configured", "point": "IMU (not the antenna)",
+             "errors": "solution minus reference; position in local ENU at the reference, m; heading wrapped to "
+                       "+-180 deg; outages = the [evaluate] windows (GNSS withheld); NEES of the 3-D position "
+                       "(expected 3); shares within 3 sigma (expected 0.9973 per component)"}
+    for w, e in errs.items():
+        block[w] = _edge_units(error_statistics(e, n_windows=int(np.asarray(run.prep.outages).shape[0])))
+    out = dict(evaluation or {})
+    out["truth"] = block
+    return errs, out
+
+
 def _densities_dict(d) -> dict:
     from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
 
@@ -269,6 +299,32 @@ def _constraints(prep, run) -> dict:
     return d
 
 
+def _odometer(prep, run) -> "dict | None":
+    """The wheel-speed input and its estimated scale factor (1 + k: reading = (1 + k) speed) with 1-sigma:
+    forward filter at the last epoch, RTS smoother (a random constant: the same at every epoch)."""
+    o = prep.cfg.odometer
+    if o is None:
+        return None
+    from jaxnav.experiments.ins_run import run_error_model
+
+    sp = np.asarray(prep.odometer_speed, float)
+    d = {"source": o.source if o.source == "imu" else str(o.file), "sigma_m_s": o.sigma, "rate_hz": o.rate_hz,
+         "lever_arm_frd_m": np.asarray(o.lever_arm_frd, float).tolist(),
+         "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(sp))), "imu_samples": int(sp.size),
+         "scale_factor_estimated": bool(o.estimate_scale)}
+    idx = run_error_model(prep.cfg).idx.s_odo
+    if idx is not None:
+        k_f = float(np.asarray(run.result.final_biases.odo_scale).reshape(-1)[0])
+        P = np.asarray(run.result.epochs.covs)[-1]
+        k_s = float(np.asarray(run.smoothed_biases.odo_scale)[0].reshape(-1)[0])
+        Ps = np.asarray(run.smoothed_covs)[0]
+        d.update(scale_factor=1.0 + k_f, scale_factor_sigma=float(np.sqrt(max(P[idx, idx][0, 0], 0.0))),
+                 scale_factor_smoothed=1.0 + k_s, scale_factor_smoothed_sigma=float(np.sqrt(max(Ps[idx, idx][0, 0], 0.0))),
+                 scale_factor_initial_sigma=o.init_scale_sigma,
+                 scale_factor_model="reading = scale_factor x forward speed of the wheel point; a random constant")
+    return d
+
+
 def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) -> dict:
     """The whole ``jaxnav ins`` job: run (and with ``tune`` tune, then rerun), write every output into ``out``.
 
@@ -286,6 +342,9 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
     out = pathlib.Path(out)
     say = progress or (lambda *_: None)
     say(f"reading {cfg.imu.file.name} and {cfg.gnss.file.name}")
+    from jaxnav.experiments.ins_run import read_truth
+
+    truth = read_truth(cfg)  # before the filter: a bad reference file fails fast
     prep = prepare(cfg, progress=progress)
     say(f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
         f"running the filter and the smoother")
@@ -311,7 +370,11 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                "gnss": {"file": str(cfg.gnss.file), "n_epochs_in_imu_span": int(prep.meas.t.size),
                         "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
                         "n_withheld": int(np.count_nonzero(prep.withheld))},
-               "constraints": _constraints(prep, run),
+               "constraints": _constraints(prep, run), "odometer": _odometer(prep, run),
+               "heading": None if prep.heading is None else {
+                   "file": str(cfg.heading.file), "rate_hz": cfg.heading.rate_hz,
+                   "default_sigma_deg": math.degrees(cfg.heading.sigma),
+                   "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(prep.heading[0])))},
                "status": int(run.result.status), "status_flags": describe(run.result.status),
                "status_ok": int(run.result.status) & ~INFO_FLAGS == 0,
                "n_nonfinite": int(run.result.n_nonfinite),
@@ -332,7 +395,12 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                            "noise_after": _densities_dict(rep.densities),
                            "evaluation_before": results["evaluation"], "evaluation_after": _evaluation(run_t.scores)}
         run = run_t
+        results["odometer"] = _odometer(prep, run)
     results["tuning"] = _tuning(prep, results)
+    errs = None
+    if truth is not None:
+        say(f"scoring against the reference trajectory {cfg.evaluate.truth.name}")
+        errs, results["evaluation"] = _truth_evaluation(run, truth, results.get("evaluation"), tuned=tune)
     files = []
     for nm, fn in (("trajectory.csv", lambda p: write_trajectory_csv(p, run)),
                    ("trajectory_forward.csv", lambda p: write_trajectory_csv(p, run, "forward")),
@@ -340,6 +408,12 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
                    ("track.geojson", lambda p: write_geojson(p, run)), ("track.kml", lambda p: write_kml(p, run))):
         files.append(str(fn(out / nm)))
     files += write_figures(run, out)
+    if errs is not None:
+        from jaxnav.plot import plot_truth_errors
+
+        files.append(str(plot_truth_errors(errs["forward"], errs["smoothed"], run.prep.outages, out / "truth_errors.png",
+                                           title=f"{cfg.name}: IMU solution minus the reference trajectory "
+                                                 f"({cfg.evaluate.truth.name}), +-3 sigma; GNSS withheld in the grey windows")))
     results["files"] = sorted(pathlib.Path(f).relative_to(out).as_posix() for f in files) + ["results.json"]
     write_json(out / "results.json", results)
     return results
@@ -383,6 +457,12 @@ def format_ins(results: dict) -> str:
              f"  {r['n_states']}-state filter + RTS: status {status_words(r['status'])}, log-likelihood {r['loglik']:.1f}, "
              f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
              f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s"]
+    dr = r["time_offset"].get("drift", {})
+    if "drift_s_per_s" in dr:
+        w = dr["windows"]
+        lines.append(f"  time offset by halves: {w[0]['offset_s']:+.3f} / {w[1]['offset_s']:+.3f} s, clock drift "
+                     f"{dr['drift_s_per_s'] * 1e6:+.0f} +- {dr['drift_sigma_s_per_s'] * 1e6:.0f} ppm"
+                     + (f"\n  WARNING: {dr['warning']}" if dr.get("significant") else " (not significant)"))
     for msg in r.get("status_flags", []):
         lines.append(f"  {'note' if r.get('status_ok', True) else 'PROBLEM'}: {msg}")
     c = r.get("constraints", {})
@@ -397,11 +477,18 @@ def format_ins(results: dict) -> str:
                          f"unconfirmed by GNSS dropped; vs GNSS-static epochs: "
                          f"precision {dd['precision']:.3f}, recall {dd['recall']:.3f} "
                          f"(IMU alone {dd['imu_only_precision']:.3f} / {dd['imu_only_recall']:.3f})")
+    o = r.get("odometer")
+    if o:
+        sf = (f"; scale factor {o['scale_factor_smoothed']:.5f} +- {o['scale_factor_smoothed_sigma']:.5f} (smoothed), "
+              f"{o['scale_factor']:.5f} +- {o['scale_factor_sigma']:.5f} (forward, end)" if "scale_factor" in o
+              else "; scale factor taken as 1 (estimate_scale = false)")
+        lines.append(f"  odometer ({o['source']}): {o['imu_samples_with_reading']} of {o['imu_samples']} IMU samples "
+                     f"with a reading, {o['rate_hz']:g} Hz updates, sigma {o['sigma_m_s']:g} m/s{sf}")
     if c.get("nhc"):
         lines.append("  non-holonomic constraint on (lateral and vertical velocity zero while moving)")
 
     def ev(e, tag=""):
-        if e is None:
+        if e is None or "n_windows" not in e:
             return
         lines.append(f"  outages{tag}: {e['n_scored_windows']} of {e['n_windows']} windows scored; horizontal RMS "
                      f"forward {e['forward_rms_h_m']:.2f} m (max {e['forward_max_h_m']:.2f} m), smoothed "
@@ -410,6 +497,18 @@ def format_ins(results: dict) -> str:
                      f"{100 * e['smoothed_share_within_3_sigma_h']:.0f} %")
 
     ev(r.get("evaluation"))
+    tr = (r.get("evaluation") or {}).get("truth")
+    if tr:
+        for w in ("forward", "smoothed"):
+            a, o, p = tr[w]["all"], tr[w]["outages"], tr[w]["outage_protocol"]
+            line = (f"  vs reference ({w}): 3-D position RMS {a['pos_3d_rms_m']:.3f} m, horizontal "
+                    f"{a['pos_h_rms_m']:.3f} m, velocity {a['vel_3d_rms_m_s']:.3f} m/s, roll/pitch/heading RMS "
+                    f"{a['roll_rms_deg']:.3f}/{a['pitch_rms_deg']:.3f}/{a['heading_rms_deg']:.3f} deg, position NEES "
+                    f"{a['nees_pos_mean']:.2f} (expect 3), within 3 sigma {100 * a['share_pos_within_3_sigma']:.1f} %")
+            if p["n_scored_windows"]:
+                line += (f"; outages: 3-D RMS {o['pos_3d_rms_m']:.3f} m, max drift per outage RMS "
+                         f"{p['rms_of_max_3d_drift_m']:.3f} m over {p['n_scored_windows']}")
+            lines.append(line)
     if "tune" in r:
         t = r["tune"]
         lines.append(f"  --tune ({t.get('loss', 'innovations')}): log-likelihood {t['loglik_before']:.1f} -> "

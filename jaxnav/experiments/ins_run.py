@@ -32,10 +32,11 @@ from jaxnav.ins import (PLATFORMS, LCParams, PVMeasurements, SensorBiases, Stand
                         detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold, runs_touching,
                         shoe_statistic, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
-                        noise_preset, sensor_to_body, smooth, zaru, zupt)
+                        noise_preset, odometer, sensor_to_body, smooth, zaru, zupt)
+from jaxnav.ins import heading as heading_aid
 from jaxnav.ins.attitude import quat_to_dcm
-from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_kfgins_gnss, read_kfgins_imu, read_pos,
-                       read_rtklib_imu)
+from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
+                       read_kfgins_odometer, read_pos, read_rtklib_imu)
 from jaxnav.ins.error_model import ERROR_MODEL_15
 
 
@@ -47,14 +48,19 @@ def read_inputs(cfg: InsConfig):
       FileNotFoundError: a missing file (named).
     """
     imu_c, g = cfg.imu, cfg.gnss
-    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag")):
+    truth = cfg.evaluate.truth if cfg.evaluate is not None else None
+    odo = cfg.odometer.file if cfg.odometer is not None else None
+    hdg = cfg.heading.file if cfg.heading is not None else None
+    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag"), (truth, "evaluate.truth"),
+                   (odo, "odometer.file"), (hdg, "heading.file")):
         if p is not None and not p.is_file():
             what = "a folder, not a file" if p.is_dir() else "no such file"
             raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
     if imu_c.format == "rtklib-csv":
         imu = read_rtklib_imu(imu_c.file, imu_c.tag)
     elif imu_c.format == "kf-gins":
-        imu = read_kfgins_imu(imu_c.file, gps_week=imu_c.gps_week)
+        odo_col = cfg.odometer is not None and cfg.odometer.source == "imu"
+        imu = read_kfgins_imu(imu_c.file, gps_week=imu_c.gps_week, n_columns=8 if odo_col else None)
     else:
         imu = _csv(cfg, "imu", lambda: read_csv_imu(imu_c.file, imu_c.columns, imu_c.units, delimiter=imu_c.delimiter))
     if g.format == "rtklib-pos":
@@ -77,6 +83,55 @@ def _csv(cfg, section, read):
         raise
     except ValueError as exc:
         raise ValueError(f"{cfg.path}: {section}.columns / {section}.units: {exc}") from None
+
+
+def read_odometer(cfg: InsConfig):
+    """(t (R,) s on the IMU file's clock, speed (R,) m/s) of the ``[odometer]`` source (NaN: no reading)."""
+    o = cfg.odometer
+    if o.source == "imu":
+        return read_kfgins_odometer(cfg.imu.file, gps_week=cfg.imu.gps_week)
+    d = _csv(cfg, "odometer", lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter))
+    t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * 604800.0
+    return t, d["speed"]
+
+
+def heading_on_imu(cfg: InsConfig, t_imu):
+    """The ``[heading]`` CSV at the IMU samples: (heading (N,) rad, sigma (N,) rad), NaN where no reading.
+
+    Each reading goes to the IMU sample nearest its time (GNSS time scale); readings outside the IMU span or
+    farther than one sample interval from every sample are dropped.
+    """
+    h = cfg.heading
+    d = _csv(cfg, "heading", lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter))
+    t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * 604800.0
+    t_imu = np.asarray(t_imu, float)
+    hd, sg = np.full(t_imu.size, np.nan), np.full(t_imu.size, np.nan)
+    j = np.clip(np.searchsorted(t_imu, t), 1, t_imu.size - 1)
+    j = np.where(np.abs(t_imu[j - 1] - t) < np.abs(t_imu[j] - t), j - 1, j)
+    dt = float(np.median(np.diff(t_imu)))
+    ok = np.abs(t_imu[j] - t) <= dt
+    hd[j[ok]] = d["heading"][ok]
+    if d["sigma"] is not None:
+        sg[j[ok]] = d["sigma"][ok]
+    return hd, sg
+
+
+def speed_on_imu(t_odo, speed, t_imu, *, max_gap_factor: float = 3.0):
+    """Wheel speed (N,) m/s at the IMU sample times ``t_imu`` (N,): linear between the two readings around
+    each sample, NaN outside the readings' span, across a gap longer than ``max_gap_factor`` times the
+    median reading interval, or next to a missing (NaN) reading. Readings at the IMU tags are taken as they are."""
+    t_odo, speed, t_imu = (np.asarray(a, float) for a in (t_odo, speed, t_imu))
+    ok = np.isfinite(speed) & np.isfinite(t_odo)
+    out = np.full(t_imu.shape, np.nan)
+    if ok.sum() < 2:
+        return out
+    med = float(np.median(np.diff(t_odo))) if t_odo.size > 1 else 0.0
+    to, so = t_odo[ok], speed[ok]
+    j = np.clip(np.searchsorted(to, t_imu, side="right"), 1, to.size - 1)
+    gap = to[j] - to[j - 1]
+    valid = (t_imu >= to[0]) & (t_imu <= to[-1]) & (gap <= max_gap_factor * med + 1e-9)
+    out[valid] = np.interp(t_imu[valid], to, so)
+    return out
 
 
 def outage_windows(t_start: float, t_end: float, *, first_s: float = 40.0, outage_s: float = 15.0,
@@ -212,16 +267,28 @@ def _preset(grade):
             "init_accel_scale": float(p.accel_sf)}
 
 
-def filter_params(d: Densities, pos0, n_states: int) -> LCParams:
-    """:class:`jaxnav.ins.LCParams` for 15, 18 or 21 states from :class:`Densities` at ``pos0`` (3,) rad, rad, m."""
+def run_error_model(cfg: InsConfig):
+    """The run's :class:`jaxnav.ins.ErrorModel`: ``noise.states``, plus the odometer scale-factor state when
+    ``[odometer] estimate_scale`` (:meth:`jaxnav.ins.ErrorModel.with_odometer_scale`)."""
+    model = error_model_for(cfg.noise.states)
+    o = cfg.odometer
+    return model.with_odometer_scale() if o is not None and o.estimate_scale else model
+
+
+def filter_params(d: Densities, pos0, n_states: int, *, odo_scale_sigma=None) -> LCParams:
+    """:class:`jaxnav.ins.LCParams` for 15, 18 or 21 states from :class:`Densities` at ``pos0`` (3,) rad, rad, m;
+    ``odo_scale_sigma``: initial 1-sigma of the odometer scale-factor state (dimensionless), appended as the
+    last state (None: no such state)."""
     att = jnp.asarray(d.init_att)
     att3 = jnp.stack([att[0], att[0], att[1]])
     tiny = 1e-12
     model = error_model_for(n_states)
+    if odo_scale_sigma is not None:
+        model = model.with_odometer_scale()
     P0 = error_model_P0(model, jnp.asarray(pos0, float), att=att3, vel=d.init_vel, pos_enu=d.init_pos,
                         gyro_bias=d.init_gyro_bias, accel_bias=d.init_accel_bias,
                         gyro_markov=jnp.maximum(d.gyro_markov, tiny), gyro_scale=d.init_gyro_scale,
-                        accel_scale=d.init_accel_scale)
+                        accel_scale=d.init_accel_scale, odo_scale=0.0 if odo_scale_sigma is None else odo_scale_sigma)
     if n_states == 21:
         Qc = error_model_Qc21(d.arw, d.vrw, gyro_bias_sigma=d.gyro_markov, gyro_bias_tau=d.tau,
                               accel_bias_sigma=d.accel_markov, accel_bias_tau=d.tau_accel,
@@ -255,8 +322,10 @@ class Prepared(NamedTuple):
     withheld: Any
     densities: Densities
     standstill: Any = None  # (N,) bool per IMU sample, or None (no detection)
-    aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC)
+    aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC, odometer)
     standstill_info: dict = {}  # detector report (detect_stops), with its series under "_series"
+    odometer_speed: Any = None  # (N,) m/s wheel speed per IMU sample (NaN: none), or None (no [odometer])
+    heading: Any = None  # (heading (N,) rad, sigma (N,) rad) per IMU sample (NaN: none), or None (no [heading])
 
 
 def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
@@ -340,8 +409,10 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
     return det, info
 
 
-def build_aids(cfg: InsConfig, standstill):
-    """The ``[constraints]`` pseudo-measurements (:func:`jaxnav.ins.zupt`, ``zaru``, ``nhc``) for a run."""
+def build_aids(cfg: InsConfig, standstill, odo_speed=None, hdg=None):
+    """The ``[constraints]`` pseudo-measurements (:func:`jaxnav.ins.zupt`, ``zaru``, ``nhc``) and the
+    ``[odometer]`` wheel speed (:func:`jaxnav.ins.odometer`, ``odo_speed`` (N,) m/s per IMU sample) and the
+    ``[heading]`` input (:func:`jaxnav.ins.heading`, ``hdg`` = (heading, sigma) (N,) rad each) for a run."""
     c = cfg.constraints
     aids = []
     if standstill is not None and standstill.any():
@@ -352,6 +423,12 @@ def build_aids(cfg: InsConfig, standstill):
         active = None if standstill is None else ~standstill
         aids.append(nhc(active, sigma=(c.nhc_sigma, c.nhc_sigma), lever_b=sensor_to_body(np.eye(3)) @ c.nhc_lever_frd,
                         rate_hz=c.nhc_rate_hz))
+    o = cfg.odometer
+    if o is not None and odo_speed is not None:
+        aids.append(odometer(odo_speed, sigma=o.sigma, lever_b=sensor_to_body(np.eye(3)) @ o.lever_arm_frd,
+                             rate_hz=o.rate_hz))
+    if cfg.heading is not None and hdg is not None:
+        aids.append(heading_aid(hdg[0], sigma=hdg[1], default_sigma=cfg.heading.sigma, rate_hz=cfg.heading.rate_hz))
     return tuple(aids)
 
 
@@ -367,7 +444,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         off, off_info = likelihood_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
-    ev = cfg.evaluate
+    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
     if ev is not None and len(outage_windows(t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
                                              end_margin_s=ev.end_margin_s)) == 0:
         raise ConfigError(f"{cfg.path}: evaluate.first_s = {ev.first_s:g} + outage_s = {ev.outage_s:g} + "
@@ -384,7 +461,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     p0 = np.asarray(align.nav0.pos, float)
     p_imu = p0 - np.asarray(enu_to_curvilinear(p0, C_bn @ lever_rfu))
     align = align._replace(nav0=align.nav0._replace(pos=p_imu))
-    ev = cfg.evaluate
+    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
     outages = np.zeros((0, 2)) if ev is None else outage_windows(
         t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
     meas, keep, withheld = gnss_measurements(
@@ -393,10 +470,25 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))
     standstill, stop_info = (detect_stops(cfg, t, dth, dv, dt, a.static_s, meas) if cfg.constraints.zupt == "auto"
                              else (None, {}))
+    odo = None
+    if cfg.odometer is not None:
+        t_odo, sp = read_odometer(cfg)
+        odo = speed_on_imu(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
+        if not np.isfinite(odo).any():
+            raise ConfigError(f"{cfg.path}: odometer: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s "
+                              f"(readings [{t_odo[0]:.3f}, {t_odo[-1]:.3f}] s before the time offset): check the "
+                              "odometer's time scale (odometer.gps_week)")
+    hdg = None
+    if cfg.heading is not None:
+        hdg = heading_on_imu(cfg, t)
+        if not np.isfinite(hdg[0]).any():
+            raise ConfigError(f"{cfg.path}: heading: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s: "
+                              "check its time scale (heading.gps_week)")
     return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
                     time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
                     meas=meas, keep=keep, withheld=withheld, densities=dens, standstill=standstill,
-                    aids=build_aids(cfg, standstill), standstill_info=stop_info)
+                    aids=build_aids(cfg, standstill, odo, hdg), standstill_info=stop_info, odometer_speed=odo,
+                    heading=hdg)
 
 
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
@@ -406,13 +498,16 @@ def run_filter(prep: Prepared, d: Optional[Densities] = None, *, meas=None, save
     """The loosely coupled filter on a prepared recording; returns :class:`jaxnav.ins.LCResult`."""
     d = prep.densities if d is None else d
     n = prep.cfg.noise.states
-    params = filter_params(d, prep.alignment.nav0.pos, n)
+    o = prep.cfg.odometer
+    model = run_error_model(prep.cfg)
+    params = filter_params(d, prep.alignment.nav0.pos, n,
+                           odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else None)
     m = prep.meas if meas is None else meas
     m = m._replace(R=jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
     z3 = np.zeros(3)
     b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
     return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
-                           n_states=n, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability,
+                           error_model=model, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability,
                            gate_max_run=prep.cfg.gnss.gate_max_run)
 
 
@@ -538,7 +633,7 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
     d = prep.densities if d is None else d
     t0 = time.perf_counter()
     res = run_filter(prep, d)
-    sm_nav, sm_b, sm_P = smooth(res, n_states=prep.cfg.noise.states)
+    sm_nav, sm_b, sm_P = smooth(res, error_model=run_error_model(prep.cfg))
     jax.block_until_ready(sm_nav.pos)
     runtime = time.perf_counter() - t0
     meas = prep.meas
@@ -576,7 +671,9 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     best, and a parabola through the three best log-likelihoods refines the maximum and gives its
     1-sigma from the curvature (:func:`_parabola_peak`). Every trial scores the same GNSS epochs: those
     inside the IMU span at every trial offset and outside the ``[evaluate]`` outages
-    (:func:`_search_epochs`; the others are dropped and counted).
+    (:func:`_search_epochs`; the others are dropped and counted). A clock drift (the offset changing
+    linearly over the run) is estimated at the best offset by :func:`_offset_drift` and reported under
+    ``drift``, with a warning when significant.
 
     Returns:
       (offset s, info dict with the grid, its log-likelihoods, the estimate's sigma, the epoch counts
@@ -605,13 +702,17 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     # likelihoods comparable between offsets: the same GNSS epochs, no gate, no pseudo-measurements
     no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0),
                            gnss=cfg.gnss._replace(gate_probability=None),
-                           constraints=cfg.constraints._replace(zupt=False, nhc=False))
+                           constraints=cfg.constraints._replace(zupt=False, nhc=False), odometer=None, heading=None)
     cache = {}
+    tg = np.asarray(pos.t, float)
+    t_ref, T = 0.5 * (tg[0] + tg[-1]), float(tg[-1] - tg[0])
 
-    def loglik(off):
-        key = round(float(off), 6)
+    def loglik(off, change=0.0):
+        """Log-likelihood with IMU times t + off + change (t - t_ref) / T (a linear clock error)."""
+        key = (round(float(off), 6), round(float(change), 6))
         if key not in cache:
-            p = prepare(no_eval, imu=imu._replace(t=np.asarray(imu.t, float) + key), pos=pos, progress=None)
+            ti = np.asarray(imu.t, float)
+            p = prepare(no_eval, imu=imu._replace(t=ti + key[0] + key[1] * (ti - t_ref) / T), pos=pos, progress=None)
             cache[key] = float(run_filter(p, save=("nav",)).loglik)
         return cache[key]
 
@@ -627,18 +728,110 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     fine = fine[np.abs(fine) <= span + 1e-9]
     ll = np.array([loglik(o) for o in fine])
     best, sigma = _parabola_peak(fine, ll)
-    grid = np.array(sorted(cache))
+    drift = _offset_drift(loglik, best, tg, span)
+    grid = np.array(sorted(k[0] for k in cache if k[1] == 0.0))
     at_edge = abs(best) >= span - 0.01
     info.update(method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
-                       "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[g] for g in grid]),
+                       "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[(g, 0.0)] for g in grid]),
                 offset_s=best, sigma_s=sigma,
                 sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
                              "(treats the innovations as independent: optimistic when GNSS errors are correlated "
-                             "in time)", at_search_edge=bool(at_edge))
+                             "in time)", at_search_edge=bool(at_edge), drift=drift)
     if at_edge and progress:
         progress(f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
                  "imu.time_offset_search_s")
+    if drift.get("significant") and progress:
+        progress(f"warning: {drift['warning']}")
     return best, info
+
+
+#: a clock drift is flagged when the offset's change over the run exceeds this many of its sigmas...
+DRIFT_SIGMAS = 3.0
+#: ... and this, s (below it the 10 ms grid and its parabola do not resolve a change)
+DRIFT_MIN_CHANGE_S = 0.005
+
+
+def _offset_drift(loglik, offset: float, t_gnss, span: float, *, step_o: float = 0.01,
+                  step_c: float = 0.02) -> dict:
+    """IMU clock drift by the innovation likelihood of a linear clock error.
+
+    The IMU times become t + o + c (t - t_ref) / T (t_ref the middle, T the span of the GNSS epochs
+    ``t_gnss``): o is the offset at mid-run, c its change over the run, d = c / T the drift (s/s). Every
+    trial is a whole run with one consistent clock (offsets fitted to separate halves of one-offset runs
+    are pulled towards the run's offset: a mistimed half spoils the state the other starts from). From
+    (``offset``, 0) a grid of ``step_o`` x ``step_c`` is walked (|o| + |c| / 2 within ``span``, so every
+    trial scores the same epochs) by Newton steps: a quadratic ll = a + g^T x + x^T H x / 2 through six grid
+    points around x (x, x +- one step in o and in c, x + one step in both), x moved to the grid point nearest
+    its maximum -H^-1 g until that lies within one step; (o, c) = that maximum, their covariance -H^-1 (independent innovations assumed:
+    optimistic, as the offset's sigma). Flagged significant when |c| exceeds
+    :data:`DRIFT_SIGMAS` sigmas and :data:`DRIFT_MIN_CHANGE_S`. Cost: three runs beyond the offset search
+    when there is no drift, three to six per Newton step otherwise.
+
+    Args:
+      loglik: (o s, c s) -> log-likelihood of the run.  offset: the one-offset estimate, s.
+      t_gnss: (M,) the search's GNSS epoch times, s.  span: the search half-width, s.
+    Returns:
+      dict for results.json: ``offset_mid_s``, ``change_s``, ``change_sigma_s``, ``drift_s_per_s``,
+      ``drift_sigma_s_per_s``, ``windows`` (the model's offset at the mean epoch time of each half),
+      ``significant``, ``warning`` (when significant); ``note`` only when it cannot be estimated.
+    """
+    tg = np.asarray(t_gnss, float)
+    T = float(tg[-1] - tg[0])
+    if tg.size < 2 * MIN_SEARCH_EPOCHS or T <= 0:
+        return {"note": "not estimated: too few GNSS epochs"}
+    ok = lambda o, c: abs(o) + 0.5 * abs(c) <= span + 1e-9  # noqa: E731
+    key = lambda o, c: (round(o, 6), round(c, 6))  # noqa: E731
+    ll = lambda x: loglik(*x)  # noqa: E731
+    x = key(round(offset / step_o) * step_o, 0.0)
+    stencil = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (1, 1))  # the fewest points that fix a 2-D quadratic
+    nbrs = lambda x: [key(x[0] + i * step_o, x[1] + j * step_c) for i, j in stencil]  # noqa: E731
+    S = np.diag([step_o, step_c])
+    for _ in range(12):  # Newton steps on the grid: fit the stencil around x, move to the grid point nearest its maximum
+        pts = nbrs(x)
+        if not all(ok(*y) for y in pts):
+            return {"note": "not estimated: the clock model reaches the edge of the search span; widen "
+                            "imu.time_offset_search_s"}
+        u = np.array([((y[0] - x[0]) / step_o, (y[1] - x[1]) / step_c) for y in pts])
+        A = np.column_stack([np.ones(len(pts)), u[:, 0], u[:, 1], 0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1],
+                             0.5 * u[:, 1] ** 2])
+        coef = np.linalg.solve(A, np.array([ll(y) for y in pts]))
+        H = np.array([[coef[3], coef[4]], [coef[4], coef[5]]])
+        if not np.all(np.linalg.eigvalsh(H) < 0):  # not concave here: step to the best stencil point
+            up = max(pts, key=ll)
+            if up == x:
+                return {"note": "not estimated: the likelihood has no maximum in offset and drift (too little "
+                                "dynamics)"}
+            x = up
+            continue
+        du = np.linalg.solve(H, -coef[1:3])  # the maximum, in grid steps from x
+        if np.all(np.abs(du) <= 1.0):
+            break
+        x = key(x[0] + float(np.clip(np.round(du[0]), -5, 5)) * step_o, x[1] + float(np.clip(np.round(du[1]), -5, 5)) * step_c)
+    else:
+        return {"note": "not estimated: the Newton steps did not settle"}
+    est = np.array(x) + S @ du
+    cov = S @ np.linalg.inv(-H) @ S
+    o, c = float(est[0]), float(est[1])
+    sc = float(np.sqrt(cov[1, 1]))
+    t_ref = 0.5 * (tg[0] + tg[-1])
+    wins = []
+    for h in (tg < t_ref, tg >= t_ref):
+        f = (float(np.mean(tg[h])) - t_ref) / T
+        wins.append({"t_start_s": float(tg[h][0]), "t_end_s": float(tg[h][-1]), "t_mean_s": float(np.mean(tg[h])),
+                     "n_epochs": int(h.sum()), "offset_s": o + c * f,
+                     "sigma_s": float(np.sqrt(max(cov[0, 0] + 2 * f * cov[0, 1] + f * f * cov[1, 1], 0.0)))})
+    sig = bool(abs(c) > DRIFT_SIGMAS * sc and abs(c) > DRIFT_MIN_CHANGE_S)
+    out = {"method": "innovation log-likelihood of a linear clock error t + o + c (t - t_mid) / T: Newton steps "
+                     "on a 10 ms x 20 ms grid, quadratic through six points around the best (sigmas from its curvature, "
+                     "optimistic as the offset's); windows: the model's offset at each half's mean epoch",
+           "offset_mid_s": o, "change_s": c, "change_sigma_s": sc, "drift_s_per_s": c / T,
+           "drift_sigma_s_per_s": sc / T, "windows": wins, "significant": sig}
+    if sig:
+        out["warning"] = (f"the IMU-GNSS time offset changes over the run by {c * 1e3:+.0f} +- {sc * 1e3:.0f} ms "
+                          f"({c / T * 1e6:+.0f} +- {sc / T * 1e6:.0f} ppm clock drift: {wins[0]['offset_s']:+.3f} s in "
+                          f"the first half, {wins[1]['offset_s']:+.3f} s in the second); one offset fits neither end: "
+                          "re-tag the IMU (e.g. from GNSS time pulses) or process shorter pieces")
+    return out
 
 
 def _parabola_peak(x, ll):
@@ -680,7 +873,7 @@ def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
     reach = (gt >= t0 - span - 1e-9) & (gt <= t1 + span)
     inside = (gt >= t0 + span + 1e-6) & (gt <= t1 - span - 1e-6)
     withheld = np.zeros(gt.size, bool)
-    ev = cfg.evaluate
+    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
     if ev is not None:
         for a, b in outage_windows(t0, t1, first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
                                    end_margin_s=ev.end_margin_s):
@@ -734,7 +927,7 @@ def training_windows(prep: Prepared) -> np.ndarray:
     """
     ev = prep.cfg.evaluate
     t0, t1 = float(prep.t[0]), float(prep.t[-1])
-    if ev is None:
+    if ev is None or not ev.outages:
         return outage_windows(t0, t1)
     w = np.asarray(prep.outages, float).reshape(-1, 2)
     out = []
@@ -859,3 +1052,82 @@ def _mask_without_outages(prep: Prepared):
                                  qualities=(1,) if prep.cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))[0]
         ok = np.asarray(full.mask)
     return ok
+
+
+# ----------------------------------------------------------------------------- reference trajectory
+def read_truth(cfg: InsConfig):
+    """The ``[evaluate] truth`` file as :class:`jaxnav.io.TruthTrajectory`, or None without one.
+
+    Raises:
+      FileNotFoundError: a missing file (named with the key).  jaxnav.io.ReaderError: FILE:LINE.
+      ValueError: a column map the reader refuses (naming the config keys).
+    """
+    from jaxnav.io import ReaderError, read_csv_truth, read_kfgins_truth
+
+    ev = cfg.evaluate
+    if ev is None or ev.truth is None:
+        return None
+    if not ev.truth.is_file():
+        what = "a folder, not a file" if ev.truth.is_dir() else "no such file"
+        raise FileNotFoundError(f"{ev.truth}: {what} ({cfg.path}: evaluate.truth)")
+    if ev.truth_format == "kf-gins":
+        return read_kfgins_truth(ev.truth)
+    try:
+        return read_csv_truth(ev.truth, ev.truth_columns, ev.truth_units, delimiter=ev.truth_delimiter)
+    except ReaderError:
+        raise
+    except ValueError as exc:
+        raise ValueError(f"{cfg.path}: evaluate.truth_columns / evaluate.truth_units: {exc}") from None
+
+
+def _position_cov_enu(P, pos):
+    """(M, 3, 3) ENU position covariance, m^2, from error covariances whose states 6:9 are (dlat, dlon, dh)."""
+    pos = np.asarray(pos, float)
+    J = np.stack([np.asarray(curvilinear_to_enu(pos, np.broadcast_to(e, pos.shape))) for e in np.eye(3)], -1)
+    Pp = np.asarray(P)[:, 6:9, 6:9]
+    return np.einsum("mij,mjk,mlk->mil", J, Pp, J)
+
+
+def _attitude_sigmas(P, heading):
+    """(M, 3) 1-sigma of roll, pitch, heading, rad: the tilt covariance about east/north (states 0:2)
+    projected on the forward and right axes at ``heading`` (rad, clockwise from north); heading from
+    the tilt about up (state 2)."""
+    P = np.asarray(P)
+    f = np.stack([np.sin(heading), np.cos(heading)], -1)  # forward in (east, north)
+    r = np.stack([np.cos(heading), -np.sin(heading)], -1)  # right
+    T = P[:, 0:2, 0:2]
+    var = lambda u: np.einsum("mi,mij,mj->m", u, T, u)  # noqa: E731
+    return np.sqrt(np.clip(np.stack([var(f), var(r), P[:, 2, 2]], -1), 0.0, None))
+
+
+def truth_errors(run: InsRun, truth, which: str):
+    """:class:`jaxnav.ins.TrajectoryErrors` of the forward or smoothed IMU solution against the reference.
+
+    The solution's epochs are the filter's (GNSS and pseudo-measurement epochs); a reference in GPST
+    since 1980 is put on seconds of week when the solution is (an IMU file without ``gps_week``).
+    """
+    from jaxnav.ins import trajectory_errors
+    from jaxnav.ins.attitude import quat_to_euler
+
+    ep = run.result.epochs
+    nav, P = (run.smoothed_nav, run.smoothed_covs) if which == "smoothed" else (ep.nav, ep.covs)
+    t = np.asarray(ep.t_nav, float)
+    t, first = np.unique(t, return_index=True)
+    pos = np.asarray(nav.pos, float)[first]
+    v = np.asarray(nav.v_n, float)[first]
+    P = np.asarray(P, float)[first]
+    e = np.asarray(quat_to_euler(np.asarray(nav.q_bn)), float)[first]  # [pitch, roll, yaw], body RFU in ENU
+    heading = np.mod(-e[:, 2], 2 * math.pi)
+    rpy = np.stack([e[:, 1], e[:, 0], heading], -1)
+    tt = np.asarray(truth.t, float)
+    week = 604800.0
+    if t[0] < 2 * week <= tt[0]:
+        tt = tt - math.floor(tt[0] / week) * week
+    if tt[-1] < t[0] or tt[0] > t[-1]:
+        raise ConfigError(f"{run.prep.cfg.path}: evaluate.truth: {truth.path} spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, "
+                          f"the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no common epoch (another time scale? the "
+                          "reference must be in GPST like the GNSS solution)")
+    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None))
+    return trajectory_errors(t, pos, v, rpy, tt, truth.pos, truth.v_enu, truth.rpy,
+                             cov_pos_enu=_position_cov_enu(P, pos), sig_vel=sd[:, 3:6],
+                             sig_att=_attitude_sigmas(P, heading), windows=run.prep.outages)

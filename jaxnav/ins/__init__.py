@@ -5,6 +5,17 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 """
 
 from jaxnav.ins import attitude, earth, error_model, integration, measurements
+from jaxnav.ins.allan import (  # Allan variance and noise identification from a static recording
+    AllanFit,
+    allan_deviation,
+    allan_model,
+    allan_noise_fit,
+    allan_variance,
+    allan_variance_sigma,
+    imu_noise_from_allan,
+    uniform_rates,
+)
+from jaxnav.ins.evaluation import TrajectoryErrors, error_statistics, trajectory_errors, wrap_angle
 from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
 from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU body)
     C_RFU_FRD,
@@ -113,7 +124,9 @@ __all__ = [
     # inputs: mounting, alignment, time offset, standstill, noise grades
     "HEADING_METHODS", "C_RFU_FRD", "mounting_from_dcm", "mounting_from_groves", "mounting_from_groves_deg",
     "mounting_from_rpy", "mounting_from_rpy_deg", "mounting_to_rpy", "sensor_to_body",
-    "NOISE_GRADES", "ImuNoise", "imu_noise_from_datasheet", "imu_noise_to_datasheet", "noise_preset",
+    "NOISE_GRADES", "ImuNoise", "AllanFit", "allan_deviation", "allan_model", "allan_noise_fit", "allan_variance",
+    "allan_variance_sigma", "imu_noise_from_allan", "uniform_rates",
+    "TrajectoryErrors", "error_statistics", "trajectory_errors", "wrap_angle", "imu_noise_from_datasheet", "imu_noise_to_datasheet", "noise_preset",
     "DetectionScores", "StandstillParams", "detect_standstill", "detection_scores", "shoe_statistic",
     "standstill_intervals", "threshold_standstill", "PLATFORMS", "gnss_motion_labels", "gnss_speed_test", "keep_runs",
     "quiet_threshold", "runs_touching", "TimeOffset", "estimate_time_offset",

@@ -73,7 +73,8 @@ from jaxnav.ins.attitude import skew
 
 class ErrorStateIndex(NamedTuple):
     """Slices of the error-state components (None for blocks a model lacks: ``eps_r`` in the 15- and
-    21-state models, the scale factors ``s_g``, ``s_a`` outside the 21-state model)."""
+    21-state models, the scale factors ``s_g``, ``s_a`` outside the 21-state model, the odometer
+    scale-factor error ``s_odo`` outside models made by :meth:`ErrorModel.with_odometer_scale`)."""
 
     phi: slice
     dv: slice
@@ -83,6 +84,7 @@ class ErrorStateIndex(NamedTuple):
     nabla: slice
     s_g: slice | None = None
     s_a: slice | None = None
+    s_odo: slice | None = None
 
 
 #: Layout of the 18-state vector (S0 eq. 18).
@@ -438,7 +440,7 @@ def error_model_Qc21(gyro_arw, accel_vrw, *, gyro_bias_sigma=0.0, gyro_bias_tau=
 
 
 def error_model_P0(model: "ErrorModel", pos, *, att, vel, pos_enu, gyro_bias, accel_bias, gyro_markov=0.0,
-                   gyro_scale=0.0, accel_scale=0.0):
+                   gyro_scale=0.0, accel_scale=0.0, odo_scale=0.0):
     """Diagonal initial covariance (n, n) of ``model`` from 1-sigma values (SI; scalars or (3,)).
 
     Args:
@@ -447,6 +449,7 @@ def error_model_P0(model: "ErrorModel", pos, *, att, vel, pos_enu, gyro_bias, ac
       att: attitude (phi E, N, U), rad.  vel: ENU velocity, m/s.  pos_enu: ENU position, m.
       gyro_bias: rad/s.  accel_bias: m/s^2.  gyro_markov: Markov drift (18-state model only), rad/s.
       gyro_scale, accel_scale: scale-factor errors (21-state model only), dimensionless.
+      odo_scale: odometer scale-factor error (models with ``idx.s_odo`` only), dimensionless.
     Returns:
       (n, n) diagonal P0 in the order of ``model.names``.
     """
@@ -458,7 +461,7 @@ def error_model_P0(model: "ErrorModel", pos, *, att, vel, pos_enu, gyro_bias, ac
     dpos = jnp.stack([pe[1] / (meridian_radius(lat) + h), pe[0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)),
                       pe[2]])
     blocks = dict(phi=v(att), dv=v(vel), dpos=dpos, eps_b=v(gyro_bias), eps_r=v(gyro_markov), nabla=v(accel_bias),
-                  s_g=v(gyro_scale), s_a=v(accel_scale))
+                  s_g=v(gyro_scale), s_a=v(accel_scale), s_odo=jnp.reshape(jnp.asarray(odo_scale, dtype), (1,)))
     sd = jnp.zeros(model.n, dtype)
     for name, sl in model.idx._asdict().items():
         if sl is not None:
@@ -659,6 +662,32 @@ class ErrorModel:
         return ErrorModel(names=tuple(self.names[i] for i in keep),
                           noise_names=tuple(self.noise_names[i] for i in nkeep), idx=idx, build_F=build_F,
                           build_G=build_G, noise_keep=rn, bias_gm=self.bias_gm)
+
+    def with_odometer_scale(self) -> "ErrorModel":
+        """The model with one more state appended: the odometer scale-factor error s_odo (dimensionless).
+
+        An odometer reads s_meas = (1 + k) v_fwd; s_odo = k - k_applied is a random constant
+        (s_odo_dot = 0, no driving noise): F gains a zero row and column, G a zero row, the noise
+        inputs (and Qc) are unchanged. The state enters only through the odometer measurement
+        (:data:`jaxnav.ins.measurements.ODOMETER`), whose estimate is fed back to
+        ``SensorBiases.odo_scale``.
+
+        Raises:
+          ValueError: the model already has the state.
+        """
+        if self.idx.s_odo is not None:
+            raise ValueError("the model already has the odometer scale-factor state")
+        parent, n = self, self.n
+
+        def build_F(*args, **kwargs):
+            return jnp.pad(parent.build_F(*args, **kwargs), ((0, 1), (0, 1)))
+
+        def build_G(C_bn):
+            return jnp.pad(parent.build_G(C_bn), ((0, 1), (0, 0)))
+
+        return ErrorModel(names=self.names + ("s_odo",), noise_names=self.noise_names,
+                          idx=self.idx._replace(s_odo=slice(n, n + 1)), build_F=build_F, build_G=build_G,
+                          noise_keep=self.noise_keep, bias_gm=self.bias_gm)
 
 
 #: Names of the 9 noise inputs of the 18-state model (S0 eq. 19).

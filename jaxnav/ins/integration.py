@@ -129,6 +129,8 @@ class SensorBiases(NamedTuple):
       accel: (3,) accelerometer bias, m/s^2.
       gyro_scale, accel_scale: (3,) scale-factor errors (dimensionless), or None for models without
         them. The raw increments are corrected as (raw - bias dt) / (1 + scale).
+      odo_scale: (1,) odometer scale-factor error k (reading = (1 + k) speed, dimensionless), or None
+        for models without the state (:meth:`jaxnav.ins.ErrorModel.with_odometer_scale`).
     """
 
     gyro: Any
@@ -136,6 +138,7 @@ class SensorBiases(NamedTuple):
     accel: Any
     gyro_scale: Any = None
     accel_scale: Any = None
+    odo_scale: Any = None
 
 
 class LCEpochs(NamedTuple):
@@ -247,6 +250,8 @@ def _apply_correction(nav: NavState, biases: SensorBiases, x, idx):
     biases = biases._replace(gyro=biases.gyro + x[idx.eps_b], markov=markov, accel=biases.accel + x[idx.nabla])
     if idx.s_g is not None:
         biases = biases._replace(gyro_scale=biases.gyro_scale + x[idx.s_g], accel_scale=biases.accel_scale + x[idx.s_a])
+    if idx.s_odo is not None:
+        biases = biases._replace(odo_scale=biases.odo_scale + x[idx.s_odo])
     return nav, biases
 
 
@@ -528,7 +533,8 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
             w_mean, T_mean = _mean_rate(rows, ae.still, carry.biases)
         else:
             w_mean, T_mean = jnp.zeros(3, dtype), z0
-        ctx = MeasContext(nav=p.mech.nav, w_ib_b=p.w_last, w_mean_b=w_mean, T_mean=T_mean, dtx=t_meas - t_nav)
+        ctx = MeasContext(nav=p.mech.nav, w_ib_b=p.w_last, w_mean_b=w_mean, T_mean=T_mean, dtx=t_meas - t_nav,
+                          biases=p.biases)
         gnss = _measure(ctx, m, R_scale, model.n, ellipsoid)
         gated, gnss_nis = jnp.zeros((), bool), z0
         if gate:
@@ -804,6 +810,11 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
                                    accel_scale=z3 if biases0.accel_scale is None else biases0.accel_scale)
     else:
         biases0 = biases0._replace(gyro_scale=None, accel_scale=None)
+    if model.idx.s_odo is not None:
+        biases0 = biases0._replace(odo_scale=jnp.zeros(1, z3.dtype) if biases0.odo_scale is None
+                                   else jnp.reshape(jnp.asarray(biases0.odo_scale, z3.dtype), (1,)))
+    else:
+        biases0 = biases0._replace(odo_scale=None)
     if not isinstance(nav_every, (int, np.integer)) or nav_every < 1:
         raise ValueError(f"nav_every={nav_every!r} must be an integer >= 1")
     if nav_every > 1 and save_imu_every:

@@ -29,7 +29,9 @@ and heading aiding):
   H[dlat] = -C_bn^T dw_ie_n/dlat, R = density^2 / T_still.
 * :data:`NHC`: vehicle-frame lateral and vertical velocity of a point (the rear axle) are 0;
   v_P^v = C_vb (C_bn^T v_n + w_nb_b x l_b); z = v_P^v[x, z]; H[dV] = C_vb C_bn^T, H[phi] = -C_vb C_bn^T [v_n x].
-* :data:`ODOMETER`: forward vehicle-frame speed of that point; z = v_P^v[y] - speed.
+* :data:`ODOMETER`: forward vehicle-frame speed of that point read with a scale factor (1 + k):
+  z = (1 + k_hat) v_P^v[y] - speed, H[dV, phi] = (1 + k_hat) (forward rows of the NHC's),
+  H[s_odo] = -v_P^v[y] (s_odo = k - k_hat, in models with that state; k_hat from ``ctx.biases``).
 * :data:`HEADING`: heading (clockwise from north) of a body vector u_b; u_n = C_bn u_b,
   psi = atan2(u_E, u_N), z = wrap(psi - psi_meas), H[phi] = [u_N, -u_E, 0] [u_n x] / (u_E^2 + u_N^2).
 
@@ -66,6 +68,7 @@ class MeasContext(NamedTuple):
         flagged by the :data:`ZARU` aid's mask), rad/s (zeros when there are none).
       T_mean: () time covered by those samples, s (0: none).
       dtx: () epoch time minus t_nav, s (GNSS epochs between IMU samples are extrapolated by it).
+      biases: the sensor-error corrections applied so far (:class:`jaxnav.ins.SensorBiases`), or None.
     """
 
     nav: Any
@@ -73,6 +76,7 @@ class MeasContext(NamedTuple):
     w_mean_b: Any
     T_mean: Any
     dtx: Any
+    biases: Any = None
 
 
 class MeasRows(NamedTuple):
@@ -273,15 +277,21 @@ NHC = MeasurementModel("nhc", 2, _nhc)
 
 
 def _odometer(ctx, data, params: VehicleParams, idx, n, ellipsoid=WGS84) -> MeasRows:
+    """Wheel speed with a scale factor: reading = (1 + k) v_fwd (module docstring)."""
     dtype = ctx.nav.v_n.dtype
     v_v, H_dv, H_phi = _vehicle_velocity(ctx, params, ellipsoid)
-    H = jnp.zeros((1, n), dtype).at[:, idx.dv].set(H_dv[1:2]).at[:, idx.phi].set(H_phi[1:2])
+    b = ctx.biases
+    k = jnp.zeros((), dtype) if b is None or b.odo_scale is None else jnp.reshape(b.odo_scale, ())
+    g = 1.0 + k
+    H = jnp.zeros((1, n), dtype).at[:, idx.dv].set(g * H_dv[1:2]).at[:, idx.phi].set(g * H_phi[1:2])
+    if idx.s_odo is not None:
+        H = H.at[0, idx.s_odo].set(-v_v[1])
     s = jnp.reshape(jnp.asarray(params.sigma, dtype), ())
     speed = jnp.asarray(data, dtype)
-    return MeasRows(z=v_v[1:2] - speed, H=H, R=jnp.reshape(s * s, (1, 1)), mask=jnp.isfinite(speed)[None])
+    return MeasRows(z=g * v_v[1:2] - speed, H=H, R=jnp.reshape(s * s, (1, 1)), mask=jnp.isfinite(speed)[None])
 
 
-#: Odometer (1 row: forward vehicle-frame speed of the wheel point, m/s); data = speed (N,).
+#: Odometer (1 row: forward vehicle-frame speed of the wheel point, m/s, times (1 + k)); data = speed (N,).
 ODOMETER = MeasurementModel("odometer", 1, _odometer)
 
 
@@ -299,17 +309,20 @@ def _heading(ctx, data, params: HeadingParams, idx, n, ellipsoid=WGS84) -> MeasR
     u = quat_to_dcm(nav.q_bn) @ jnp.asarray(params.axis_b, dtype)
     h2 = u[0] * u[0] + u[1] * u[1]
     psi = jnp.arctan2(u[0], u[1])
-    meas = jnp.asarray(data, dtype)
+    if isinstance(data, tuple):  # (heading, per-reading sigma; NaN: params.sigma)
+        meas, s_i = (jnp.asarray(a, dtype) for a in data)
+    else:
+        meas, s_i = jnp.asarray(data, dtype), jnp.asarray(jnp.nan, dtype)
     d = psi - meas
     z = jnp.arctan2(jnp.sin(d), jnp.cos(d))
     g = jnp.stack([u[1], -u[0], jnp.zeros((), dtype)]) / jnp.maximum(h2, 1e-12)
     H = jnp.zeros((1, n), dtype).at[0, idx.phi].set(g @ skew(u))
-    s = jnp.reshape(jnp.asarray(params.sigma, dtype), ())
+    s = jnp.where(jnp.isfinite(s_i), s_i, jnp.reshape(jnp.asarray(params.sigma, dtype), ()))
     ok = jnp.isfinite(meas) & (h2 > 1e-6)  # a vertical axis has no heading
     return MeasRows(z=z[None], H=H, R=jnp.reshape(s * s, (1, 1)), mask=ok[None])
 
 
-#: Heading of a body vector (1 row, rad, clockwise from north); data = heading (N,).
+#: Heading of a body vector (1 row, rad, clockwise from north); data = heading (N,), or (heading, sigma) (N,) each.
 HEADING = MeasurementModel("heading", 1, _heading)
 
 
@@ -397,20 +410,27 @@ def odometer(speed, *, sigma=0.1, C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=No
                VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))
 
 
-def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active=None) -> Aid:
+def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active=None, default_sigma=0.01) -> Aid:
     """Heading updates (dual-antenna GNSS, magnetometer, a given heading).
 
     Args:
       heading: (N,) rad clockwise from north of the body vector ``axis_b``; NaN where none.
-      sigma: rad.  axis_b: (3,) body vector (forward by default).  rate_hz: thinning.
+      sigma: rad, scalar, or (N,) per reading (NaN entries take ``default_sigma``).
+      axis_b: (3,) body vector (forward by default).  rate_hz: thinning.
       active: (N,) bool samples with a reading (default: where ``heading`` is finite), as :func:`odometer`.
+      default_sigma: rad, for readings whose per-reading sigma is NaN.
     """
     hd = jnp.asarray(heading, float)
     if hd.ndim != 1:
         raise ValueError(f"heading must be 1-D (one value per IMU sample), got {hd.shape}")
     act = np.isfinite(np.asarray(heading, float)) if active is None else _mask(active, "active")
-    return Aid(HEADING, act, hd,
-               HeadingParams(jnp.asarray(sigma, float), _v3(axis_b, "axis_b")), _rate(rate_hz))
+    if jnp.ndim(sigma) == 0:
+        return Aid(HEADING, act, hd, HeadingParams(jnp.asarray(sigma, float), _v3(axis_b, "axis_b")), _rate(rate_hz))
+    sg = jnp.asarray(sigma, float)
+    if sg.shape != hd.shape:
+        raise ValueError(f"sigma must be a scalar or have the shape of heading {hd.shape}, got {sg.shape}")
+    return Aid(HEADING, act, (hd, sg), HeadingParams(jnp.asarray(default_sigma, float), _v3(axis_b, "axis_b")),
+               _rate(rate_hz))
 
 
 __all__ = ["Aid", "GNSS_PV", "GnssData", "HEADING", "HeadingParams", "MeasContext", "MeasRows", "MeasurementModel",

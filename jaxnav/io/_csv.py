@@ -19,6 +19,9 @@ GNSS quantities: ``t`` (or ``week`` + ``tow``), ``lat``, ``lon``, ``h`` (ellipso
 ``vd`` for down), its sigmas ``sd_ve sd_vn sd_vu``, quality ``q`` and ``ns``. Units: ``t`` as
 above, ``angle``: deg or rad.
 
+Aiding series (:func:`read_csv_series`): ``t`` (or ``week`` + ``tow``) and ``speed`` (m/s or km/h),
+or ``heading`` (deg or rad, clockwise from north) with an optional ``sigma`` in the same unit.
+
 See :mod:`jaxnav.io._tables` for the error and missing-value rules.
 """
 
@@ -208,3 +211,59 @@ def read_csv_gnss(path, columns: dict, units: dict | None = None, *, delimiter="
     q = c["q"] if "q" in c else np.full(R, int(quality))
     ns = c.get("ns")
     return make_pos_solution(path, t, c["lat"] * ascale, c["lon"] * ascale, c["h"], sd, v, sv, q, ns, lines)
+
+
+_SPEED = {"m/s": 1.0, "km/h": 1.0 / 3.6}
+_HEADING = {"rad": 1.0, "deg": _u.DEG}
+_SERIES = {"speed": ("speed",), "heading": ("heading", "sigma")}
+
+
+def read_csv_series(path, columns: dict, units: dict | None = None, *, kind: str = "speed", delimiter=",",
+                    comment="#", header=None) -> dict:
+    """Read a time series that aids the filter (wheel speed, heading) from a CSV table with a column map.
+
+    Args:
+      path: the file.  columns: {quantity: index or header name}: ``t`` (or ``week`` + ``tow``) and, for
+        ``kind = "speed"``, ``speed``; for ``kind = "heading"``, ``heading`` and optionally ``sigma``.
+      units: {"t": s|ms|us|ns, "speed": m/s|km/h, "heading": deg|rad} (defaults s, m/s, deg; the sigma of
+        a heading takes the heading's unit).
+      kind: "speed" or "heading".  delimiter, comment, header: as :func:`read_csv_imu`.
+    Returns:
+      {"t": (R,) s, "speed": (R,) m/s} or {"t", "heading": (R,) rad, "sigma": (R,) rad or None}; a ``nan``
+      value is kept (no reading at that time).
+    Raises:
+      ValueError: for a bad column map, unit or kind.
+      ReaderError: FILE:LINE for a malformed line, a missing time, times that do not increase, a
+        negative heading sigma.
+    """
+    what = "read_csv_series"
+    if kind not in _SERIES:
+        raise ValueError(f"{what}: kind must be one of {list(_SERIES)}, got {kind!r}")
+    _check_map(columns, ("t", "week", "tow") + _SERIES[kind], what)
+    tcols = _time_columns(columns, what)
+    if _SERIES[kind][0] not in columns:
+        raise ValueError(f"{what}: the column map needs {_SERIES[kind][0]!r}")
+    tscale = _unit(units, "t", _TIME, "s", what)
+    vscale = _unit(units, kind, _SPEED if kind == "speed" else _HEADING, "m/s" if kind == "speed" else "deg", what)
+    extra = set(units or {}) - {"t", kind}
+    if extra:
+        raise ValueError(f"{what}: unknown unit keys {sorted(extra)} (known: t, {kind})")
+    keys = list(tcols) + [k for k in _SERIES[kind] if k in columns]
+    vals, lines = read_rows(path, {k: columns[k] for k in keys}, delimiter=delimiter, comment=comment, header=header)
+    if not lines.size:
+        raise ReaderError(str(path), None, "no data records")
+    c = {k: vals[:, i] for i, k in enumerate(keys)}
+    t = _times(c, tcols, tscale, str(path), lines)
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise ReaderError(str(path), int(lines[bad[0]]), "missing time")
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        raise ReaderError(str(path), int(lines[back[0] + 1]), "the time does not increase")
+    out = {"t": t, kind: c[kind] * vscale}
+    if kind == "heading":
+        sg = c["sigma"] * vscale if "sigma" in c else None
+        if sg is not None and np.any(sg < 0):
+            raise ReaderError(str(path), int(lines[np.flatnonzero(sg < 0)[0]]), "negative heading sigma")
+        out["sigma"] = sg
+    return out

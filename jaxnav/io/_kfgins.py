@@ -6,7 +6,8 @@ Formats as documented by KF-GINS (README "Data format"); fields separated by bla
   x, y, z [m/s] over the interval that ends at the time tag. IMU axes forward-right-down (KF-GINS'
   IMU frame), returned *as in the file*: the mounting C_vs is the identity for such a file
   (``sensor_to_body(mounting_from_rpy(0, 0, 0))`` turns it into jaxnav's right-forward-up body).
-  An 8th column (odometer speed) is allowed with ``n_columns=8`` and ignored.
+  An 8th column (odometer speed, m/s) is allowed with ``n_columns=8``; :func:`read_kfgins_imu` ignores
+  it, :func:`read_kfgins_odometer` reads it.
 * GNSS, 7 columns: GPS seconds of week [s]; latitude, longitude [deg]; ellipsoidal height [m];
   position standard deviations north, east, down [m]. 13 columns add the velocity north, east,
   down [m/s] after the height and its standard deviations [m/s] at the end (the layout KF-GINS'
@@ -34,6 +35,15 @@ from jaxnav.io._tables import (
 )
 
 
+def _first_record_fields(path) -> int:
+    """Number of fields of the first non-comment line (0: none)."""
+    for _, line in text_lines(str(path)):
+        t = line.strip()
+        if t and not t.startswith("#"):
+            return len(split_fields(t, None))
+    return 0
+
+
 def read_kfgins_imu(path, *, gps_week=None, n_columns: int = 7) -> ImuLog:
     """Read a KF-GINS IMU text file (time, angle and velocity increments).
 
@@ -48,7 +58,8 @@ def read_kfgins_imu(path, *, gps_week=None, n_columns: int = 7) -> ImuLog:
         :func:`read_kfgins_gnss` with the same week or RTKLIB solutions); None keeps seconds of week.
         A week rollover inside the file (the time drops from the end of a week to the start of the
         next, with at most 1 h between the two records) adds a week to the records after it.
-      n_columns: fields per line, 7 (default) or 8 (with the odometer column, ignored).
+      n_columns: fields per line, 7 (default) or 8 (with the odometer column, ignored); None: as many as
+        the first record has (7 or 8), every line the same.
     Returns:
       :class:`jaxnav.io.ImuLog` (``counter`` = sample index, ``timing`` = "increments", axes as in the file).
     Raises:
@@ -56,6 +67,11 @@ def read_kfgins_imu(path, *, gps_week=None, n_columns: int = 7) -> ImuLog:
         are skipped and listed in ``skipped``.
       ValueError: for an ``n_columns`` other than 7 or 8.
     """
+    if n_columns is None:
+        n_columns = _first_record_fields(path)
+        if n_columns not in (7, 8):
+            raise ReaderError(str(path), None, f"the first record has {n_columns} fields; a KF-GINS IMU file has 7 "
+                                               "(or 8 with the odometer)")
     if n_columns not in (7, 8):
         raise ValueError(f"n_columns must be 7 or 8, got {n_columns!r}")
     cols = {k: i for i, k in enumerate(("t", "dthx", "dthy", "dthz", "dvx", "dvy", "dvz"))}
@@ -66,6 +82,31 @@ def read_kfgins_imu(path, *, gps_week=None, n_columns: int = 7) -> ImuLog:
     t = gps_time(unwrap_week(vals[:, 0]), gps_week, str(path), lines)
     w_b, f_b = increments_to_rates(t, vals[:, 1:4], vals[:, 4:7], str(path), lines)
     return make_imu_log(path, t, w_b, f_b, lines, skipped, "increments")
+
+
+def read_kfgins_odometer(path, *, gps_week=None):
+    """The odometer column (8th field, m/s) of a KF-GINS IMU file with its time tags.
+
+    Args:
+      path: the file (8 fields per line).  gps_week: as :func:`read_kfgins_imu` (the same value gives the
+        same time scale as the IMU log).
+    Returns:
+      (t (R,) s, speed (R,) m/s); a ``nan`` speed is kept (no reading at that tag).
+    Raises:
+      ReaderError: FILE:LINE for a line without 8 fields, a missing time, or times that do not increase.
+    """
+    vals, lines = read_rows(path, {"t": 0, "speed": 7}, delimiter=None, comment="#", header=False, n_fields=8)
+    if not lines.size:
+        raise ReaderError(str(path), None, "no data records")
+    tt = unwrap_week(vals[:, 0])
+    bad = np.flatnonzero(~np.isfinite(tt))
+    if bad.size:
+        raise ReaderError(str(path), int(lines[bad[0]]), "missing time tag")
+    t = gps_time(tt, gps_week, str(path), lines)
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        raise ReaderError(str(path), int(lines[back[0] + 1]), "the time does not increase")
+    return t, vals[:, 1]
 
 
 def read_kfgins_gnss(path, *, gps_week=None, quality: int = 1) -> PosSolution:

@@ -208,3 +208,45 @@ def plot_time_offset_likelihood(offsets, loglik, best, sigma, path, *, title: st
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_truth_errors(err_fwd, err_sm, windows, path, *, title: str) -> pathlib.Path:
+    """Solution minus reference over time: position E/N/U (m), velocity E/N/U (m/s), roll/pitch/heading
+    (deg), forward and smoothed, each with its own +-3 sigma band; outages shaded.
+
+    Args:
+      err_fwd, err_sm: :class:`jaxnav.ins.TrajectoryErrors` (SI) of the forward and smoothed solutions.
+      windows: (K, 2) outage windows, s.  path: file written.  title: figure title.
+    """
+    path = pathlib.Path(path)
+    t0 = float(min(err_fwd.t[0], err_sm.t[0]))
+    fig, ax = plt.subplots(3, 3, figsize=(15, 9), sharex=True)
+    rows = (("pos_enu", "sig_pos_enu", 1.0, "m", ("east", "north", "up"), "position"),
+            ("vel_enu", "sig_vel", 1.0, "m/s", ("east", "north", "up"), "velocity"),
+            ("att", "sig_att", 180.0 / np.pi, "deg", ("roll", "pitch", "heading"), ""))
+    for r, (field, sfield, scale, unit, comps, what) in enumerate(rows):
+        for c in range(3):
+            a = ax[r, c]
+            _shade_outages(a, windows, t0)
+            for e, col, name in ((err_fwd, "C0", "forward"), (err_sm, "C1", "RTS smoothed")):
+                x = np.asarray(e.t) - t0
+                y = np.asarray(getattr(e, field))[:, c] * scale
+                s = np.asarray(getattr(e, sfield))[:, c] * scale
+                if np.any(np.isfinite(s)):
+                    a.fill_between(x, -3 * s, 3 * s, color=col, alpha=0.15, lw=0, label=f"{name} +-3 sigma")
+                a.plot(x, y, "-", lw=0.9, color=col, label=f"{name} - reference")
+            a.set_title(f"{what} {comps[c]}".strip())
+            a.set_ylabel(f"error, {unit}")
+            a.grid(alpha=0.3)
+            y_all = np.concatenate([np.asarray(getattr(e, field))[:, c] * scale for e in (err_fwd, err_sm)])
+            y_all = y_all[np.isfinite(y_all)]
+            if y_all.size:  # the band can be much wider than the error (a converging heading): zoom on the errors
+                m = float(np.max(np.abs(y_all)))
+                a.set_ylim(-1.3 * m if m > 0 else -1, 1.3 * m if m > 0 else 1)
+    for a in ax[2]:
+        a.set_xlabel("time since start, s")
+    fig.suptitle(title)
+    legend_below(fig, ax[0, 0], ncol=5, height=0.05)
+    save_figure(fig, path, dpi=110)
+    plt.close(fig)
+    return path

@@ -98,8 +98,9 @@ def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=
     return Recording(imu_file=imu_file, gnss_file=gnss_file, truth=truth, t_gnss=tg, tag_error_s=tag_error_s)
 
 
-def car_config(rec: Recording, folder, *, time_offset="estimate", states=15, extra="") -> str:
-    """A ``jaxnav ins`` TOML for the recording (paths relative to ``folder``)."""
+def car_config(rec: Recording, folder, *, time_offset="estimate", states=15, extra="", evaluate_extra="") -> str:
+    """A ``jaxnav ins`` TOML for the recording (paths relative to ``folder``); ``evaluate_extra``: more
+    ``[evaluate]`` keys (e.g. a reference trajectory), ``extra``: further sections."""
     text = f"""
 [run]
 name = "simulated car"
@@ -139,8 +140,24 @@ first_s = 60.0
 outage_s = 20.0
 gap_s = 40.0
 end_margin_s = 10.0
+{evaluate_extra}
 {extra}
 """
     p = folder / "car.toml"
     p.write_text(text, encoding="utf-8")
     return p
+
+
+def write_truth_nav(rec: Recording, path, *, step: int = 1):
+    """The recording's true IMU trajectory as a KF-GINS ``truth.nav`` (week, seconds of week, lat, lon deg,
+    h m, vN vE vD m/s, roll pitch yaw deg of the vehicle frame), every ``step``-th sample."""
+    tr = rec.truth
+    pos = np.asarray(tr.pos)[::step]
+    v = np.asarray(tr.v_n)[::step]
+    e = np.asarray(tr.euler)[::step]  # [pitch, roll, yaw] of the RFU body in ENU
+    t = np.asarray(tr.t)[::step]
+    yaw = np.mod(-np.degrees(e[:, 2]), 360.0)
+    rows = np.column_stack([np.full(t.size, WEEK), SOW0 + t, np.degrees(pos[:, 0]), np.degrees(pos[:, 1]), pos[:, 2],
+                            v[:, 1], v[:, 0], -v[:, 2], np.degrees(e[:, 1]), np.degrees(e[:, 0]), yaw])
+    np.savetxt(path, rows, fmt=["%d", "%.4f", "%.10f", "%.10f", "%.4f"] + ["%.5f"] * 3 + ["%.6f"] * 3)
+    return path

@@ -117,17 +117,17 @@ def test_data_dir_from_flag_or_environment(tmp_path, monkeypatch, capsys):
 
 
 def test_cli_registry_has_every_command(capsys):
-    """The nine commands of the README, each from its own module with register/run."""
+    """The ten commands of the README, each from its own module with register/run."""
     import importlib
 
     from jaxnav.cli import COMMANDS
 
-    assert COMMANDS == ("demo", "demo_filters", "ins", "walk", "rtk", "cadastral", "monitor", "sweep", "tune")
+    assert COMMANDS == ("demo", "demo_filters", "ins", "allan", "walk", "rtk", "cadastral", "monitor", "sweep", "tune")
     for name in COMMANDS:
         mod = importlib.import_module(f"jaxnav.cli.{name}")
         assert callable(mod.register) and callable(mod.run), name
     with pytest.raises(SystemExit):
         main(["--help"])
     printed = capsys.readouterr().out
-    for name in ("demo", "demo-filters", "ins", "walk", "rtk", "cadastral", "monitor", "sweep", "tune"):
+    for name in ("demo", "demo-filters", "ins", "allan", "walk", "rtk", "cadastral", "monitor", "sweep", "tune"):
         assert f"    {name} " in printed, name

@@ -5,7 +5,8 @@ RTK-level GNSS withheld on simulated 20 s outages; the 21-state model (Gauss-Mar
 factors from the industrial grade's datasheet values), automatic standstill detection with ZUPT and
 ZARU, and the non-holonomic constraint. Checked: the time offset recovered by the
 likelihood to 10 ms, the solution against the truth, errors explained by the reported sigmas, the RTS
-smoother better than the forward filter inside the outages, and every output file readable.
+smoother better than the forward filter inside the outages, every output file readable, and the
+scores against the car's true trajectory (``[evaluate] truth``, KF-GINS ``truth.nav``).
 """
 
 import json
@@ -14,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from _recording import car_config, write_car
+from _recording import car_config, write_car, write_truth_nav
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +24,9 @@ def done(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("car")
     rec = write_car(folder / "data")
-    cfg = car_config(rec, folder / "data", states=21,
+    write_truth_nav(rec, folder / "data" / "truth.nav", step=5)
+    cfg = car_config(rec, folder / "data", states=21, evaluate_extra='truth = "truth.nav"\ntruth_format = "kf-gins"',
+                     
                      extra='[constraints]\nzupt = "auto"\nzaru = true\nnhc = true\ndetector_threshold = 30.0\n'
                            "detector_sigma_a_m_s2 = 0.01\ndetector_sigma_w_deg_s = 0.05\ndetector_min_s = 1.0\n")
     out = folder / "out"
@@ -113,3 +116,25 @@ def test_output_files_readable(done):
     assert r["provenance"]["config"]["imu"]["format"] == "kf-gins" and r["provenance"]["jaxnav_version"]
     assert {"trajectory.csv", "track.kml", "biases.png", "results.json"} <= set(r["files"])
     assert r["mounting"]["source"].startswith("mounting_rpy_deg")
+
+
+def test_scored_against_the_true_trajectory(done):
+    """``[evaluate] truth``: position, velocity and attitude errors against the simulated car's truth,
+    the outage drift protocol and the NEES, under ``evaluation.truth`` with units in the keys."""
+    _, out, r = done
+    tr = r["evaluation"]["truth"]
+    assert tr["format"] == "kf-gins" and tr["n_records"] > 1000
+    f, s = tr["forward"], tr["smoothed"]
+    assert f["n_epochs"] > 100 and f["n_dropped_epochs"] <= 2
+    # RTK-level GNSS and an industrial IMU: cm with GNSS, decimetres at worst in the 20 s outages
+    assert 0.0 < f["all"]["pos_3d_rms_m"] < 0.5 and f["outages"]["pos_3d_max_m"] < 5.0
+    assert s["outages"]["pos_3d_rms_m"] < f["outages"]["pos_3d_rms_m"]
+    p = f["outage_protocol"]
+    assert p["n_windows"] == p["n_scored_windows"] == r["evaluation"]["n_windows"] >= 2
+    assert p["rms_of_max_3d_drift_m"] == pytest.approx(math.sqrt(np.mean(np.square(p["max_3d_drift_m"]))))
+    # velocity cm/s; attitude of the vehicle frame (the mounting undone), heading within a degree
+    assert f["all"]["vel_3d_rms_m_s"] < 0.2 and s["all"]["heading_rms_deg"] < 1.0
+    assert s["all"]["roll_rms_deg"] < 0.5 and s["all"]["pitch_rms_deg"] < 0.5
+    # consistency: errors explained by the sigmas
+    assert 0.3 < f["all"]["nees_pos_mean"] < 10.0 and f["all"]["share_pos_within_3_sigma"] > 0.9
+    assert (out / "truth_errors.png").is_file() and "truth_errors.png" in r["files"]

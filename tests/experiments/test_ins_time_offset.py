@@ -9,7 +9,7 @@ error, report a sigma, and fit nothing on the fixes ``[evaluate]`` withholds.
 import numpy as np
 import pytest
 
-from _recording import car_config, write_car
+from _recording import WEEK, car_config, write_car
 
 TAG_ERROR = -0.0437  # not a multiple of the grid step: some trials put a GNSS epoch inside an IMU interval
 
@@ -45,6 +45,10 @@ def test_search_across_imu_start(car):
     assert info["n_epochs_dropped_at_span_edges"] >= 1
     assert 0.0 < info["sigma_s"] < 0.02
     assert info["n_epochs_withheld_by_evaluate"] > 0
+    dr = info["drift"]  # a constant offset: both halves agree, no drift flagged
+    assert not dr["significant"] and abs(dr["change_s"]) < 0.005
+    for w in dr["windows"]:
+        assert w["offset_s"] == pytest.approx(-TAG_ERROR, abs=0.01)
     # fitted on the epochs the filter sees: none inside an [evaluate] outage at any trial offset
     from jaxnav.experiments.ins_run import _search_epochs, prepare
     from jaxnav.ins import sensor_to_body
@@ -67,3 +71,33 @@ def test_too_little_overlap_is_a_clear_error(car):
     late = pos._replace(t=np.asarray(pos.t) + (imu.t[-1] - pos.t[0]) - 2.0)  # 2 s of overlap
     with pytest.raises(ValueError, match="time_offset_search_s"):
         _search(cfg, late)
+
+
+def test_clock_drift_detected(tmp_path):
+    """IMU time tags that drift: the tag error goes from +0.03 s to -0.03 s over the 200 s drive (300 ppm, a
+    cheap logger's crystal). The drift of a linear clock model is recovered within 3 sigma and 10 %, and
+    flagged; the model's offsets at the halves match the tags there, and the run's single offset lies
+    between them."""
+    from jaxnav.experiments import load_ins_config
+    from jaxnav.experiments.ins_run import read_inputs
+
+    tag0, rate = 0.03, -3e-4
+    rec = write_car(tmp_path, tag_error_s=tag0, imu_rate=50.0)
+    rows = np.loadtxt(rec.imu_file)
+    t0 = rows[0, 0]
+    rows[:, 0] += rate * (rows[:, 0] - t0)
+    np.savetxt(rec.imu_file, rows, fmt=["%.4f"] + ["%.12e"] * 6)
+    p = car_config(rec, tmp_path)
+    p.write_text(p.read_text().replace("time_offset_search_s = 0.2", "time_offset_search_s = 0.1"))
+    cfg = load_ins_config(p)
+    _, pos = read_inputs(cfg)
+    off, info = _search(cfg, pos)
+    dr = info["drift"]
+    assert dr.get("significant") and "clock drift" in dr["warning"], dr
+    # offset to add = -tag error = -tag0 - rate (t - t0): +300 ppm
+    d, sd = dr["drift_s_per_s"], dr["drift_sigma_s_per_s"]
+    assert abs(d + rate) < 0.1 * abs(rate) and abs(d + rate) < 3 * sd + 1e-5, (d, sd)
+    tt0 = WEEK * 604800.0 + t0  # GPST of the first tag
+    for w in dr["windows"]:
+        assert w["offset_s"] == pytest.approx(-tag0 - rate * (w["t_mean_s"] - tt0), abs=0.01)
+    assert dr["windows"][0]["offset_s"] < off < dr["windows"][1]["offset_s"]

@@ -450,3 +450,24 @@ def test_F21_predicts_the_mechanization_error_growth():
     # without the scale-factor columns the prediction misses the dominant part of the error
     pred0 = (Phi @ x.at[15:21].set(0.0))[:6]
     assert float(jnp.max(jnp.abs(got[:3] - pred0[:3]))) > 10 * float(jnp.max(jnp.abs(got[:3] - pred[:3])))
+
+
+def test_odometer_scale_state_appended_without_dynamics():
+    """with_odometer_scale: one more state (a random constant) after the model's own, F and G padded with zeros,
+    the noise inputs unchanged; applied twice it refuses."""
+    from jaxnav import ins
+
+    m = ins.ERROR_MODEL_21.with_odometer_scale()
+    assert m.n == 22 and m.idx.s_odo == slice(21, 22) and m.p == ins.ERROR_MODEL_21.p and m.scale_factors
+    pos, v, f = jnp.array([0.8, 0.2, 300.0]), jnp.array([5.0, 3.0, 0.1]), jnp.array([0.1, 0.2, 9.8])
+    C, tau = jnp.eye(3), jnp.full(6, 300.0)
+    Cw = jnp.diag(jnp.array([0.1, 0.2, 0.3]))
+    F0 = ins.ERROR_MODEL_21.F(pos, v, f, C, tau, Cw=Cw, Cf=Cw)
+    F1 = m.F(pos, v, f, C, tau, Cw=Cw, Cf=Cw)
+    assert np.array_equal(F1[:21, :21], F0) and not np.any(F1[21]) and not np.any(F1[:, 21])
+    G1 = m.G(C)
+    assert np.array_equal(G1[:21], ins.ERROR_MODEL_21.G(C)) and not np.any(G1[21])
+    P0 = ins.error_model_P0(m, pos, att=0.01, vel=0.1, pos_enu=1.0, gyro_bias=1e-4, accel_bias=0.01, odo_scale=0.02)
+    assert float(P0[21, 21]) == pytest.approx(4e-4)
+    with pytest.raises(ValueError, match="already has"):
+        m.with_odometer_scale()

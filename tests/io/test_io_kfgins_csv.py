@@ -205,3 +205,33 @@ def test_csv_gnss(tmp_path):
     p.write_text("\n".join(rows[:3] + [rows[3].replace(",50.02,", ",-1e6,").replace(",52,", ",-1e6,")]) + "\n")
     with pytest.raises(ReaderError, match=r"g\.csv:4: height -1e\+06 is outside"):
         io.read_csv_gnss(p, cols, {"angle": "rad"})
+
+
+def test_kfgins_odometer_column_and_csv_series(tmp_path):
+    """The 8th column of a KF-GINS IMU file (wheel speed) read with its tags, the IMU part read with the column
+    count detected; aiding series from a CSV with units (km/h, deg), a missing reading kept as NaN."""
+    p, t, dth, dv = _kf_imu(tmp_path, n=50)
+    sp = np.linspace(0.0, 12.0, 50)
+    sp[7] = np.nan
+    lines = p.read_text().splitlines()
+    p.write_text("".join(f"{ln} {s:.4f}\n" for ln, s in zip(lines, sp)))
+    to, so = io.read_kfgins_odometer(p, gps_week=WEEK)
+    np.testing.assert_allclose(to, WEEK * 604800.0 + t, atol=1e-6)
+    np.testing.assert_allclose(so, sp, atol=1e-4)
+    assert np.isnan(so[7])
+    log = io.read_kfgins_imu(p, gps_week=WEEK, n_columns=None)
+    np.testing.assert_allclose(log.t, to, atol=0)
+    with pytest.raises(ReaderError, match=r"imu\.txt:1: 8 fields, expected 7"):
+        io.read_kfgins_imu(p)
+    c = tmp_path / "wheel.csv"
+    c.write_text("time,kmh\n1.0,36.0\n2.0,nan\n3.0,72.0\n")
+    d = io.read_csv_series(c, {"t": "time", "speed": "kmh"}, {"speed": "km/h"})
+    np.testing.assert_allclose(d["speed"], [10.0, np.nan, 20.0])
+    h = tmp_path / "hdg.csv"
+    h.write_text("1.0,90.0,0.5\n2.0,180.0,0.5\n")
+    d = io.read_csv_series(h, {"t": 0, "heading": 1, "sigma": 2}, kind="heading")
+    np.testing.assert_allclose(d["heading"], [math.pi / 2, math.pi])
+    np.testing.assert_allclose(d["sigma"], np.radians([0.5, 0.5]))
+    h.write_text("1.0,90.0\n1.0,91.0\n")
+    with pytest.raises(ReaderError, match=r"hdg\.csv:2: the time does not increase"):
+        io.read_csv_series(h, {"t": 0, "heading": 1}, kind="heading")

@@ -1,0 +1,226 @@
+"""Scoring a navigation solution against a reference trajectory (host side, numpy).
+
+The two series are brought to common epochs by linear interpolation of the denser one at the
+epochs of the sparser one (:func:`trajectory_errors`; attitude angles unwrapped first; epochs whose
+neighbours in the interpolated series are further apart than ``max_gap`` are left out). Errors are
+*solution minus reference*: position in the local east-north-up frame at the reference point (m,
+first order: :func:`jaxnav.geodesy.curvilinear_to_enu`), velocity east-north-up (m/s), roll, pitch
+and heading (rad, each wrapped to [-pi, pi)). :func:`error_statistics` reduces them over the whole
+run and inside outage windows: RMS and maxima, the outage protocol of KF-GINS-style evaluations
+(per outage the largest 3-D position error -- the drift since GNSS was lost -- and the RMS of those
+maxima over the outages), and where the solution's covariance is given the normalised estimation
+error squared NEES = e^T P^-1 e of the position (expected 3; Bar-Shalom, Li, Kirubarajan,
+*Estimation with Applications to Tracking and Navigation*, 2001, sect. 5.4.2) and the share of
+errors inside +-3 sigma (expected 99.73 % per component for a consistent Gaussian estimate).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple, Optional
+
+import numpy as np
+
+from jaxnav.geodesy import curvilinear_to_enu
+
+#: chi-square quantile of 3 degrees of freedom at 99.73 % (the 3-sigma probability): a position
+#: NEES below it is inside the 3-sigma ellipsoid
+NEES3_99_73 = 14.1564
+
+
+class TrajectoryErrors(NamedTuple):
+    """Solution minus reference at common epochs (SI).
+
+    Attributes:
+      t: (K,) s, the epochs scored.  pos_enu: (K, 3) m.  vel_enu: (K, 3) m/s (NaN where either series
+      has no velocity).  att: (K, 3) roll, pitch, heading error, rad in [-pi, pi) (NaN where either has none).
+      sig_pos_enu, sig_vel, sig_att: (K, 3) the solution's 1-sigma (NaN where not given).
+      nees_pos: (K,) position NEES (NaN without a covariance).
+      window: (K,) int, the outage window an epoch falls in (-1: none).
+      n_dropped: epochs of the sparser series left out (outside the other's span or across one of its gaps).
+      at: "solution" or "reference": whose epochs were scored.
+    """
+
+    t: Any
+    pos_enu: Any
+    vel_enu: Any
+    att: Any
+    sig_pos_enu: Any
+    sig_vel: Any
+    sig_att: Any
+    nees_pos: Any
+    window: Any
+    n_dropped: int
+    at: str
+
+
+def wrap_angle(a):
+    """Angles (rad) wrapped to [-pi, pi)."""
+    return (np.asarray(a, float) + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _interp(t_new, t, y, *, angle=False):
+    """Linear interpolation of (N, ...) ``y`` at ``t_new`` along axis 0 (angles unwrapped first, then wrapped)."""
+    y = np.asarray(y, float)
+    flat = y.reshape(y.shape[0], -1)
+    if angle:
+        flat = np.where(np.isnan(flat), np.nan, np.unwrap(np.nan_to_num(flat), axis=0))
+    out = np.stack([np.interp(t_new, t, flat[:, j]) for j in range(flat.shape[1])], -1)
+    out = out.reshape((len(t_new),) + y.shape[1:])
+    return wrap_angle(out) if angle else out
+
+
+def trajectory_errors(t_sol, pos_sol, v_sol, rpy_sol, t_ref, pos_ref, v_ref=None, rpy_ref=None, *, cov_pos_enu=None,
+                      sig_vel=None, sig_att=None, windows=None, at: str = "sparser",
+                      max_gap: Optional[float] = None) -> TrajectoryErrors:
+    """Errors of a solution against a reference at common epochs (module docstring).
+
+    Args:
+      t_sol: (N,) s, increasing.  pos_sol: (N, 3) [lat rad, lon rad, h m].  v_sol: (N, 3) ENU m/s or None.
+      rpy_sol: (N, 3) roll, pitch, heading rad or None.
+      t_ref, pos_ref, v_ref, rpy_ref: the same of the reference (M epochs, on the same time scale).
+      cov_pos_enu: (N, 3, 3) the solution's ENU position covariance, m^2, or None.
+      sig_vel, sig_att: (N, 3) the solution's velocity (m/s) and roll/pitch/heading (rad) 1-sigma, or None.
+      windows: (W, 2) outage windows [start, end) s, or None.
+      at: "solution", "reference", or "sparser" (default: the series with fewer epochs in the common span).
+      max_gap: s; an epoch is scored only if the interpolated series has samples within this on both
+        sides (default 5 times its median step).
+    Returns:
+      :class:`TrajectoryErrors`.
+    Raises:
+      ValueError: for shapes that do not match, times that do not increase, or no common epoch.
+    """
+    t_sol, t_ref = np.asarray(t_sol, float), np.asarray(t_ref, float)
+    N, M = t_sol.size, t_ref.size
+    nan = lambda n: np.full((n, 3), np.nan)  # noqa: E731
+    pos_sol, pos_ref = np.asarray(pos_sol, float), np.asarray(pos_ref, float)
+    v_sol = nan(N) if v_sol is None else np.asarray(v_sol, float)
+    v_ref = nan(M) if v_ref is None else np.asarray(v_ref, float)
+    rpy_sol = nan(N) if rpy_sol is None else np.asarray(rpy_sol, float)
+    rpy_ref = nan(M) if rpy_ref is None else np.asarray(rpy_ref, float)
+    for name, a, n in (("pos_sol", pos_sol, N), ("v_sol", v_sol, N), ("rpy_sol", rpy_sol, N), ("pos_ref", pos_ref, M),
+                       ("v_ref", v_ref, M), ("rpy_ref", rpy_ref, M)):
+        if a.shape != (n, 3):
+            raise ValueError(f"{name} must have shape ({n}, 3), got {a.shape}")
+    for name, t in (("t_sol", t_sol), ("t_ref", t_ref)):
+        if t.size < 2 or not np.all(np.diff(t) > 0):
+            raise ValueError(f"{name} must hold at least 2 increasing times")
+    cov = None if cov_pos_enu is None else np.asarray(cov_pos_enu, float)
+    if cov is not None and cov.shape != (N, 3, 3):
+        raise ValueError(f"cov_pos_enu must have shape ({N}, 3, 3), got {cov.shape}")
+    sv = nan(N) if sig_vel is None else np.asarray(sig_vel, float)
+    sa = nan(N) if sig_att is None else np.asarray(sig_att, float)
+    lo, hi = max(t_sol[0], t_ref[0]), min(t_sol[-1], t_ref[-1])
+    if at == "sparser":
+        at = "solution" if np.count_nonzero((t_sol >= lo) & (t_sol <= hi)) <= np.count_nonzero(
+            (t_ref >= lo) & (t_ref <= hi)) else "reference"
+    if at not in ("solution", "reference"):
+        raise ValueError(f"at must be 'solution', 'reference' or 'sparser', got {at!r}")
+    t_at, t_in = (t_sol, t_ref) if at == "solution" else (t_ref, t_sol)
+    gap = float(max_gap) if max_gap is not None else 5.0 * float(np.median(np.diff(t_in)))
+    j = np.searchsorted(t_in, t_at)
+    inside = (t_at >= t_in[0]) & (t_at <= t_in[-1])
+    jl, jr = np.clip(j - 1, 0, t_in.size - 1), np.clip(j, 0, t_in.size - 1)
+    exact = t_in[jr] == t_at
+    ok = inside & (exact | ((t_in[jr] - t_in[jl]) <= gap))
+    if not ok.any():
+        raise ValueError("the solution and the reference have no common epoch (different time scales?)")
+    te = t_at[ok]
+    if at == "solution":
+        ps, vs, rs = pos_sol[ok], v_sol[ok], rpy_sol[ok]
+        pr, vr = _interp(te, t_ref, pos_ref), _interp(te, t_ref, v_ref)
+        rr = _interp(te, t_ref, rpy_ref, angle=True)
+        c, svv, saa = (None if cov is None else cov[ok]), sv[ok], sa[ok]
+    else:
+        pr, vr, rr = pos_ref[ok], v_ref[ok], rpy_ref[ok]
+        ps, vs = _interp(te, t_sol, pos_sol), _interp(te, t_sol, v_sol)
+        rs = _interp(te, t_sol, rpy_sol, angle=True)
+        c = None if cov is None else _interp(te, t_sol, cov)
+        svv, saa = _interp(te, t_sol, sv), _interp(te, t_sol, sa)
+    e_pos = np.asarray(curvilinear_to_enu(pr, ps - pr))
+    e_att = wrap_angle(rs - rr)
+    if c is None:
+        nees = np.full(te.size, np.nan)
+        sp = nan(te.size)
+    else:
+        nees = np.einsum("ki,ki->k", e_pos, np.linalg.solve(c, e_pos[..., None])[..., 0])
+        sp = np.sqrt(np.clip(np.diagonal(c, axis1=-2, axis2=-1), 0.0, None))
+    win = np.full(te.size, -1, int)
+    if windows is not None:
+        for k, (a, b) in enumerate(np.asarray(windows, float).reshape(-1, 2)):
+            win[(te >= a) & (te < b)] = k
+    return TrajectoryErrors(t=te, pos_enu=e_pos, vel_enu=vs - vr, att=e_att, sig_pos_enu=sp, sig_vel=svv,
+                            sig_att=saa, nees_pos=nees, window=win, n_dropped=int(np.count_nonzero(~ok)), at=at)
+
+
+def _rms(x):
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
+
+
+def _max(x):
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.max(x)) if x.size else float("nan")
+
+
+def _share(e, s):
+    """Share of finite (error, sigma) pairs with |e| <= 3 sigma (all components pooled)."""
+    e, s = np.asarray(e, float).ravel(), np.asarray(s, float).ravel()
+    ok = np.isfinite(e) & np.isfinite(s)
+    return float(np.mean(np.abs(e[ok]) <= 3.0 * s[ok])) if ok.any() else float("nan")
+
+
+def _block(e: TrajectoryErrors, sel) -> dict:
+    """Statistics of the selected epochs (keys with unit suffixes, SI)."""
+    p, v, a = e.pos_enu[sel], e.vel_enu[sel], e.att[sel]
+    h, d3 = np.hypot(p[:, 0], p[:, 1]), np.linalg.norm(p, axis=1)
+    v3 = np.linalg.norm(v, axis=1)
+    out = {"n_epochs": int(np.count_nonzero(sel))}
+    for j, c in enumerate("enu"):
+        out[f"pos_{c}_rms_m"] = _rms(p[:, j])
+    out.update(pos_h_rms_m=_rms(h), pos_h_max_m=_max(h), pos_3d_rms_m=_rms(d3), pos_3d_max_m=_max(d3))
+    for j, c in enumerate("enu"):
+        out[f"vel_{c}_rms_m_s"] = _rms(v[:, j])
+    out.update(vel_3d_rms_m_s=_rms(v3), vel_3d_max_m_s=_max(v3))
+    for j, c in enumerate(("roll", "pitch", "heading")):
+        out[f"{c}_rms_rad"] = _rms(a[:, j])
+        out[f"{c}_max_abs_rad"] = _max(np.abs(a[:, j]))
+    nees = e.nees_pos[sel]
+    out["nees_pos_mean"] = float(np.nanmean(nees)) if np.isfinite(nees).any() else float("nan")
+    out["share_nees_pos_within_3_sigma"] = (float(np.mean(nees[np.isfinite(nees)] <= NEES3_99_73))
+                                            if np.isfinite(nees).any() else float("nan"))
+    out["share_pos_within_3_sigma"] = _share(p, e.sig_pos_enu[sel])
+    out["share_vel_within_3_sigma"] = _share(v, e.sig_vel[sel])
+    out["share_att_within_3_sigma"] = _share(a, e.sig_att[sel])
+    return out
+
+
+def error_statistics(e: TrajectoryErrors, n_windows: Optional[int] = None) -> dict:
+    """Whole-run and in-outage statistics and the outage protocol of :class:`TrajectoryErrors`.
+
+    Returns a dict (SI; unit in each key): ``all`` and ``outages`` (:func:`_block` of the epochs:
+    RMS per ENU component, horizontal and 3-D RMS and maximum of position and velocity, RMS and
+    largest |error| of roll, pitch, heading, mean position NEES, shares within 3 sigma), and
+    ``outage_protocol``: ``max_3d_drift_m`` and ``max_h_drift_m`` per window (NaN without an epoch),
+    ``rms_of_max_3d_drift_m``, ``mean_of_max_3d_drift_m``, ``rms_of_max_h_drift_m``, ``n_windows``,
+    ``n_scored_windows``.
+    """
+    W = int(n_windows if n_windows is not None else (e.window.max() + 1 if e.window.size else 0))
+    d3 = np.linalg.norm(e.pos_enu, axis=1)
+    dh = np.hypot(e.pos_enu[:, 0], e.pos_enu[:, 1])
+    m3 = np.full(W, np.nan)
+    mh = np.full(W, np.nan)
+    for k in range(W):
+        s = e.window == k
+        if s.any():
+            m3[k], mh[k] = float(np.max(d3[s])), float(np.max(dh[s]))
+    scored = np.isfinite(m3)
+    return {"n_epochs": int(e.t.size), "n_dropped_epochs": int(e.n_dropped), "scored_at": e.at,
+            "all": _block(e, np.ones(e.t.size, bool)), "outages": _block(e, e.window >= 0),
+            "outage_protocol": {"n_windows": W, "n_scored_windows": int(scored.sum()),
+                                "max_3d_drift_m": m3.tolist(), "max_h_drift_m": mh.tolist(),
+                                "rms_of_max_3d_drift_m": _rms(m3[scored]) if scored.any() else float("nan"),
+                                "mean_of_max_3d_drift_m": float(np.mean(m3[scored])) if scored.any() else float("nan"),
+                                "rms_of_max_h_drift_m": _rms(mh[scored]) if scored.any() else float("nan")}}
