@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from jaxnav import units as _u
+from jaxnav.io._csv import _check_map
 from jaxnav.io._errors import HEIGHT_RANGE_M, ReaderError
 from jaxnav.io._tables import check_times, gps_time, read_rows, unwrap_week
 
@@ -109,13 +110,7 @@ def read_csv_truth(path, columns: dict, units: dict | None = None, *, delimiter=
     """
     what = "read_csv_truth"
     allowed = ("t", "week", "tow", "lat", "lon", "h", "ve", "vn", "vu", "vd", "roll", "pitch", "heading", "yaw")
-    if not isinstance(columns, dict) or not columns:
-        raise ValueError(f"{what}: columns must be a non-empty dict {{quantity: index or header name}}")
-    for k, v in columns.items():
-        if k not in allowed:
-            raise ValueError(f"{what}: unknown column key {k!r}; known: {', '.join(allowed)}")
-        if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
-            raise ValueError(f"{what}: column {k!r} must be a 0-based index >= 0 or a header name, got {v!r}")
+    _check_map(columns, allowed, what)
     if "t" in columns and ("week" in columns or "tow" in columns):
         raise ValueError(f"{what}: give either 't' or 'week' + 'tow'")
     if "t" not in columns and not ("week" in columns and "tow" in columns):
