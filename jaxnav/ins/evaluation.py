@@ -32,8 +32,10 @@ class TrajectoryErrors(NamedTuple):
     """Solution minus reference at common epochs (SI).
 
     Attributes:
-      t: (K,) s, the epochs scored.  pos_enu: (K, 3) m.  vel_enu: (K, 3) m/s (NaN where either series
-      has no velocity).  att: (K, 3) roll, pitch, heading error, rad in [-pi, pi) (NaN where either has none).
+      t: (K,) s, the epochs scored.
+      pos_enu: (K, 3) m.
+      vel_enu: (K, 3) m/s, NaN where either series has no velocity.
+      att: (K, 3) roll, pitch, heading error, rad in [-pi, pi), NaN where either has none.
       sig_pos_enu, sig_vel, sig_att: (K, 3) the solution's 1-sigma (NaN where not given).
       nees_pos: (K,) position NEES (NaN without a covariance).
       window: (K,) int, the outage window an epoch falls in (-1: none).
