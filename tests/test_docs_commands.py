@@ -93,7 +93,7 @@ def clone(tmp_path, monkeypatch):
     def ready(out, option="--out"):
         raise _Ready(out)
 
-    for name in ("cadastral", "demo", "demo_filters", "ins", "monitor", "rtk", "sweep", "tune"):
+    for name in ("allan", "cadastral", "demo", "demo_filters", "ins", "monitor", "rtk", "sweep", "tune"):
         mod = __import__(f"jaxnav.cli.{name}", fromlist=["run"])
         if hasattr(mod, "prepare_out"):
             monkeypatch.setattr(mod, "prepare_out", ready)
