@@ -15,8 +15,6 @@ Both write ``monitor.json`` and PNG figures to ``--out``.
 
 from __future__ import annotations
 
-import datetime as _dt
-import re
 import shlex
 
 from jaxnav.cli._common import MAX_SEEDS, UsageError, float_range, input_file, int_range, prepare_out
@@ -82,19 +80,13 @@ def register(subparsers):
 
 
 def _epoch(text: str, option: str = "--step") -> float:
-    """YYYY-MM-DD or a decimal year -> s since J2000 (UsageError otherwise)."""
-    from jaxnav.units import YEAR
+    """YYYY-MM-DD or a decimal year -> s since J2000 (:func:`jaxnav.io.date_to_epoch`; UsageError otherwise)."""
+    from jaxnav.io import date_to_epoch
 
     try:
-        if re.fullmatch(r"\d{4}-\d{2}-\d{2}", text):
-            d = _dt.date.fromisoformat(text)
-            return (d - _dt.date(2000, 1, 1)).days * 86400.0 - 43200.0
-        y = float(text)
-    except ValueError:
-        raise UsageError(f"{option}: cannot read the date {text!r} (YYYY-MM-DD or a decimal year)") from None
-    if not 1950.0 <= y <= 2150.0:
-        raise UsageError(f"{option}: decimal year {text!r} is outside 1950 .. 2150")
-    return (y - 2000.0) * YEAR
+        return date_to_epoch(text)
+    except ValueError as exc:
+        raise UsageError(f"{option}: {exc}") from None
 
 
 def _steps(items) -> dict:
