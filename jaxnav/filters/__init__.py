@@ -5,7 +5,8 @@
   prior-inflation rules :func:`constant`, :func:`attenuated`, :func:`fading` (and
   :func:`switch` to pick one by an array index in one compiled program) and noise
   estimators :func:`variance_compensation`, :func:`sage_husa`, :func:`igg3`, :func:`chain`.
-  New plug-ins follow the protocols :class:`InflationRule` and :class:`NoiseEstimator`.
+  New plug-ins subclass the protocols :class:`InflationRule` and :class:`NoiseEstimator`
+  (which hold the default methods) and are made pytrees by :func:`pytree_dataclass`.
 * :func:`rts_smoother`: fixed-interval smoothing over the saved filter moments.
 * :func:`kalman_filter_batch`, :func:`rts_smoother_batch`: B sequences sharing one covariance
   recursion (Monte Carlo studies), the means in blocks of epochs as dense products.
@@ -53,6 +54,9 @@ from jaxnav.filters._plugins import (
     NoiseEstimator,
     PostUpdate,
     StepContext,
+    no_flags,
+    pytree_dataclass,
+    static_field,
 )
 from jaxnav.filters._robust import (
     IGG3,
@@ -103,6 +107,7 @@ __all__ = [
     "LoglikGradients", "log_likelihood", "loglik_and_gradients",
     "kalman_filter_batch", "rts_smoother_batch",
     "InflationRule", "NoiseEstimator", "NoInflation", "NoEstimator", "PostUpdate",
+    "no_flags", "pytree_dataclass", "static_field",
     "NonlinearGaussian", "extended_kalman_filter", "unscented_kalman_filter", "cubature_kalman_filter",
     "extended_rts_smoother", "unscented_rts_smoother",
 ]

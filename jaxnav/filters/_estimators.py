@@ -1,6 +1,8 @@
 """Noise estimators that plug into the shared filter step: variance compensation, Sage-Husa.
 
-An estimator is a frozen dataclass pytree following :class:`jaxnav.filters.NoiseEstimator`:
+An estimator is a :func:`~jaxnav.filters.pytree_dataclass` subclass of
+:class:`jaxnav.filters.NoiseEstimator` (its constructor checks the arguments; the lower-case
+functions are shorthands):
 
 * ``init(n, m, p, dtype) -> state``
 * ``noise(state, ctx) -> (GQG, R, state, (info, flags))``: the process noise G Q G^T (n, n) and
@@ -11,20 +13,21 @@ An estimator is a frozen dataclass pytree following :class:`jaxnav.filters.Noise
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Any, ClassVar, NamedTuple, Optional
+from typing import ClassVar, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import as_leaf, cho_solve, cholesky, symmetrize
-from jaxnav.filters._plugins import (  # noqa: F401  (PostUpdate: what after() sees)
-    NoEstimator,
-    PostUpdate,
+from jaxnav._numerics import cho_solve, cholesky, symmetrize
+from jaxnav.filters._plugins import (
+    NoiseEstimator,
     Range,
     check_ranges,
+    leaf,
+    pytree_dataclass,
     range_flags,
+    static_field,
 )
 
 
@@ -32,29 +35,42 @@ class VCState(NamedTuple):
     """Window of per-epoch equations E_j = A_j diag(D_Omega) + eta (S1 eqs. (12)-(18)).
 
     I = horizon (largest prediction step i), N = window epochs.
+
+    Attributes:
+      E: (N, I, m) diag(V V^T) - known part, per epoch and prediction step i.
+      A: (N, I, m, p) sum_r (B Phi_{k,r} Gamma_r)^2 element-wise.
+      W: (N, I, m) weights 1/0 of usable equations.
+      pos: int32 ring position.  count: int32 epochs stored.
+      x_lag: (I, n) Phi_{k,k-i} X(k-i/k-i), i = 1..I (propagated to the last epoch).
+      P_lag: (I, n, n) Phi_{k,k-i} D_X(k-i/k-i) Phi_{k,k-i}^T.
+      C_lag: (I, n, p) Phi_{k,r} Gamma_r for r = k, k-1, ..., k-I+1.
+      n_lag: int32, lag slots holding an estimate.
     """
 
-    E: Any  # (N, I, m) diag(V V^T) - known part, per epoch and prediction step i
-    A: Any  # (N, I, m, p) sum_r (B Phi_{k,r} Gamma_r)^2 element-wise
-    W: Any  # (N, I, m) weights 1/0 of usable equations
-    pos: Any  # int32 ring position
-    count: Any  # int32 epochs stored
-    x_lag: Any  # (I, n) Phi_{k,k-i} X(k-i/k-i), i = 1..I (propagated to the last epoch)
-    P_lag: Any  # (I, n, n) Phi_{k,k-i} D_X(k-i/k-i) Phi_{k,k-i}^T
-    C_lag: Any  # (I, n, p) Phi_{k,r} Gamma_r for r = k, k-1, ..., k-I+1
-    n_lag: Any  # int32, lag slots holding an estimate
+    E: jax.Array
+    A: jax.Array
+    W: jax.Array
+    pos: jax.Array
+    count: jax.Array
+    x_lag: jax.Array
+    P_lag: jax.Array
+    C_lag: jax.Array
+    n_lag: jax.Array
 
 
 class VCInfo(NamedTuple):
-    """Per-epoch output: q is diag(D_Omega) used at the epoch; estimated says it was not the prior."""
+    """Per-epoch output of :class:`VarianceCompensation`.
 
-    q: Any  # (p,)
-    estimated: Any  # bool
+    Attributes:
+      q: (p,) diag(D_Omega) used at the epoch.  estimated: scalar bool, q is not the model's prior.
+    """
+
+    q: jax.Array
+    estimated: jax.Array
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class VarianceCompensation:
+@pytree_dataclass
+class VarianceCompensation(NoiseEstimator):
     """Variance-compensation adaptive filter: diag(D_Omega) by windowed least squares (S1 eqs. (12)-(19)).
 
     At epoch k the i-step predicted residuals V_{k,i} = L_k - B Phi_{k,k-i} X(k-i/k-i),
@@ -86,17 +102,36 @@ class VarianceCompensation:
       window: static int N, epochs in the least-squares window.
       horizon: static int I >= 1, largest prediction step i of the residuals.
       min_epochs: static int, epochs needed before estimating (default: window).
+
+    Raises:
+      ValueError: window, horizon or min_epochs not a positive integer (min_epochs <= window);
+        concrete floor, floor_rel or ridge negative.
     """
 
-    data_independent: ClassVar[bool] = False
     ranges: ClassVar[dict] = {"floor": Range(0.0), "floor_rel": Range(0.0), "ridge": Range(0.0)}
 
-    floor: Any = 0.0
-    floor_rel: Any = 1e-2
-    ridge: Any = 0.0
-    window: int = dataclasses.field(default=30, metadata=dict(static=True))
-    horizon: int = dataclasses.field(default=1, metadata=dict(static=True))
-    min_epochs: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
+    floor: jax.Array = 0.0
+    floor_rel: jax.Array = 1e-2
+    ridge: jax.Array = 0.0
+    window: int = static_field(30)
+    horizon: int = static_field(1)
+    min_epochs: Optional[int] = static_field(None)
+
+    def __post_init__(self):
+        window, horizon, min_epochs = self.window, self.horizon, self.min_epochs
+        if int(window) != window or window < 1:
+            raise ValueError(f"VarianceCompensation: window must be a positive integer, got {window!r}")
+        if int(horizon) != horizon or horizon < 1:
+            raise ValueError(f"VarianceCompensation: horizon must be a positive integer, got {horizon!r}")
+        if min_epochs is not None and (int(min_epochs) != min_epochs or not 1 <= min_epochs <= window):
+            raise ValueError(f"VarianceCompensation: min_epochs must be in 1..window, got {min_epochs!r}")
+        check_ranges("VarianceCompensation", self.ranges, floor=self.floor, floor_rel=self.floor_rel,
+                     ridge=self.ridge)
+        for name in ("floor", "floor_rel", "ridge"):
+            object.__setattr__(self, name, leaf(getattr(self, name)))
+        object.__setattr__(self, "window", int(window))
+        object.__setattr__(self, "horizon", int(horizon))
+        object.__setattr__(self, "min_epochs", None if min_epochs is None else int(min_epochs))
 
     def init(self, n, m, p, dtype):
         N, I = int(self.window), int(self.horizon)
@@ -159,27 +194,31 @@ class VarianceCompensation:
         flag = flag | range_flags(self, self.ranges)
         return GQG, ctx.R_used, st, (VCInfo(q=q_used, estimated=ok), flag)
 
-    def after(self, state, ctx, post):
-        return state
-
-    def screen(self, info, ctx):
-        return jnp.zeros_like(ctx.valid)
-
 
 class SageHusaState(NamedTuple):
-    """Current noise estimates, the number of updates that formed them, and whether R hit a bound."""
+    """Current noise estimates, the number of updates that formed them, and whether R hit a bound.
 
-    Q: Any  # (n, n) estimated G Q G^T
-    R: Any  # (m, m) estimated R
-    count: Any  # float, updates so far
-    bounded: Any  # bool, the last update of R was clipped to [r_min, r_max] x the model's variances
+    Attributes:
+      Q: (n, n) estimated G Q G^T.  R: (m, m) estimated R.
+      count: scalar float, updates so far.
+      bounded: scalar bool, the last update of R was clipped to [r_min, r_max] x the model's variances.
+    """
+
+    Q: jax.Array
+    R: jax.Array
+    count: jax.Array
+    bounded: jax.Array
 
 
 class SageHusaInfo(NamedTuple):
-    """Per-epoch output: the noise used at the epoch."""
+    """Per-epoch output of :class:`SageHusa`: the noise used at the epoch.
 
-    Q: Any  # (n, n)
-    R: Any  # (m, m)
+    Attributes:
+      Q: (n, n) G Q G^T.  R: (m, m).
+    """
+
+    Q: jax.Array
+    R: jax.Array
 
 
 def _psd_clip(A, floor):
@@ -208,9 +247,8 @@ def _bound_variances(A, ref, lo, hi):
     return symmetrize(A), jnp.any(low), jnp.any(high)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class SageHusa:
+@pytree_dataclass
+class SageHusa(NoiseEstimator):
     """Sage-Husa noise estimation with fading weights d_k = (1 - b) / (1 - b^{k+1}), kept PSD.
 
     With the model's Q, R as the estimate before the first update (k = 0), after the k-th
@@ -249,17 +287,27 @@ class SageHusa:
       r_min: scalar array in (0, 1], lower bound of R_ii / R_model_ii.
       r_max: scalar array in [1, inf), upper bound of R_ii / R_model_ii.
       estimate: static, "R", "Q" or "QR".
+
+    Raises:
+      ValueError: unknown ``estimate``; concrete b, eig_floor, r_min or r_max out of range (traced
+        values are flagged in ``status`` instead).
     """
 
-    data_independent: ClassVar[bool] = False
     ranges: ClassVar[dict] = {"b": Range(0.0, 1.0, lo_open=True), "eig_floor": Range(0.0),
                               "r_min": Range(0.0, 1.0, lo_open=True, hi_open=False), "r_max": Range(1.0)}
 
-    b: Any = 0.95
-    eig_floor: Any = 0.0
-    r_min: Any = 1e-2
-    r_max: Any = 1e2
-    estimate: str = dataclasses.field(default="R", metadata=dict(static=True))
+    b: jax.Array = 0.95
+    eig_floor: jax.Array = 0.0
+    r_min: jax.Array = 1e-2
+    r_max: jax.Array = 1e2
+    estimate: str = static_field("R")
+
+    def __post_init__(self):
+        if self.estimate not in ("R", "Q", "QR"):
+            raise ValueError(f"SageHusa: estimate must be 'R', 'Q' or 'QR', got {self.estimate!r}")
+        check_ranges("SageHusa", self.ranges, b=self.b, eig_floor=self.eig_floor, r_min=self.r_min, r_max=self.r_max)
+        for name in ("b", "eig_floor", "r_min", "r_max"):
+            object.__setattr__(self, name, leaf(getattr(self, name)))
 
     def init(self, n, m, p, dtype):
         return SageHusaState(Q=jnp.zeros((n, n), dtype), R=jnp.zeros((m, m), dtype), count=jnp.zeros((), dtype),
@@ -301,9 +349,6 @@ class SageHusa:
             Q = jnp.where(obs, symmetrize(Qnew), Q)
         return SageHusaState(Q=Q, R=R, count=jnp.where(obs, c, state.count), bounded=bounded)
 
-    def screen(self, info, ctx):
-        return jnp.zeros_like(ctx.valid)
-
 
 def variance_compensation(window: int = 30, *, horizon: int = 1, floor=0.0, floor_rel=1e-2, ridge=0.0,
                           min_epochs: Optional[int] = None) -> VarianceCompensation:
@@ -318,19 +363,10 @@ def variance_compensation(window: int = 30, *, horizon: int = 1, floor=0.0, floo
       min_epochs: epochs required before the estimate replaces the model Q (default N).
 
     Raises:
-      ValueError: window or min_epochs not a positive integer.
+      ValueError: window, horizon or min_epochs not a positive integer; negative floor, floor_rel, ridge.
     """
-    if int(window) != window or window < 1:
-        raise ValueError(f"variance_compensation(): window must be a positive integer, got {window!r}")
-    if int(horizon) != horizon or horizon < 1:
-        raise ValueError(f"variance_compensation(): horizon must be a positive integer, got {horizon!r}")
-    if min_epochs is not None and (int(min_epochs) != min_epochs or not 1 <= min_epochs <= window):
-        raise ValueError(f"variance_compensation(): min_epochs must be in 1..window, got {min_epochs!r}")
-    check_ranges("variance_compensation()", VarianceCompensation.ranges, floor=floor, floor_rel=floor_rel, ridge=ridge)
-    return VarianceCompensation(
-        floor=as_leaf(floor), floor_rel=as_leaf(floor_rel), ridge=as_leaf(ridge),
-        window=int(window), horizon=int(horizon), min_epochs=None if min_epochs is None else int(min_epochs),
-    )
+    return VarianceCompensation(floor=floor, floor_rel=floor_rel, ridge=ridge, window=window, horizon=horizon,
+                                min_epochs=min_epochs)
 
 
 def sage_husa(b=0.95, *, estimate: str = "R", eig_floor=0.0, r_min=1e-2, r_max=1e2) -> SageHusa:
@@ -347,8 +383,4 @@ def sage_husa(b=0.95, *, estimate: str = "R", eig_floor=0.0, r_min=1e-2, r_max=1
       ValueError: unknown ``estimate``; concrete b, eig_floor, r_min or r_max out of range (traced
         values are flagged in ``status`` instead).
     """
-    if estimate not in ("R", "Q", "QR"):
-        raise ValueError(f"sage_husa(): estimate must be 'R', 'Q' or 'QR', got {estimate!r}")
-    check_ranges("sage_husa()", SageHusa.ranges, b=b, eig_floor=eig_floor, r_min=r_min, r_max=r_max)
-    return SageHusa(b=as_leaf(b), eig_floor=as_leaf(eig_floor), r_min=as_leaf(r_min), r_max=as_leaf(r_max),
-                    estimate=estimate)
+    return SageHusa(b=b, eig_floor=eig_floor, r_min=r_min, r_max=r_max, estimate=estimate)

@@ -25,12 +25,13 @@ import jax.numpy as jnp
 from jaxnav._numerics import cho_solve, mm, safe_cholesky, symmetrize
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
+from jaxnav.filters._plugins import pytree_dataclass, static_field
 from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, rts_smoother, smoothed_covs, smoothed_means
 from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, scan_setup, step_with_gain, update
 from jaxnav import _status
 
 
-@jax.tree_util.register_pytree_node_class
+@pytree_dataclass
 class NonlinearGaussian:
     """Nonlinear Gaussian model X_k = f(X_{k-1}, t) + W_{k-1},  Z_k = h(X_k, t) + V_k.
 
@@ -41,23 +42,26 @@ class NonlinearGaussian:
     Attributes:
       f: (n,), t -> (n,) transition.  h: (n,), t -> (m,) measurement.
       Q: (n, n) or (T, n, n) process-noise covariance.  R: (m, m) or (T, m, m) measurement noise.
-      F_jac, H_jac: optional Jacobians (x, t) -> (n, n), (m, n); default ``jax.jacfwd`` of f, h.
+      F_jac, H_jac: optional Jacobians (x, t) -> (n, n), (m, n); None: ``jax.jacfwd`` of f, h
+        (:meth:`jacobian_f`, :meth:`jacobian_h` give the one in use).
     """
 
-    def __init__(self, f: Callable, h: Callable, Q, R, F_jac: Optional[Callable] = None,
-                 H_jac: Optional[Callable] = None):
-        self.f, self.h, self.Q, self.R = f, h, Q, R
-        self.F_jac = jax.jacfwd(f) if F_jac is None else F_jac
-        self.H_jac = jax.jacfwd(h) if H_jac is None else H_jac
-        self._user_jac = (F_jac, H_jac)
+    f: Callable = static_field()
+    h: Callable = static_field()
+    Q: jax.Array
+    R: jax.Array
+    F_jac: Optional[Callable] = static_field(None)
+    H_jac: Optional[Callable] = static_field(None)
 
-    def tree_flatten(self):
-        return (self.Q, self.R), (self.f, self.h) + self._user_jac
+    @property
+    def jacobian_f(self) -> Callable:
+        """(x (n,), t) -> (n, n) df/dx: ``F_jac`` if given, else ``jax.jacfwd(f)``."""
+        return jax.jacfwd(self.f) if self.F_jac is None else self.F_jac
 
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        f, h, Fj, Hj = aux
-        return cls(f, h, *children, F_jac=Fj, H_jac=Hj)
+    @property
+    def jacobian_h(self) -> Callable:
+        """(x (n,), t) -> (m, n) dh/dx: ``H_jac`` if given, else ``jax.jacfwd(h)``."""
+        return jax.jacfwd(self.h) if self.H_jac is None else self.H_jac
 
     def __repr__(self):
         return f"NonlinearGaussian(f={self.f!r}, h={self.h!r}, Q={self.Q!r}, R={self.R!r})"
@@ -110,11 +114,11 @@ class _Taylor(NamedTuple):
     iterations: int
 
     def predict(self, x, P):
-        F = self.model.F_jac(x, self.t)
+        F = self.model.jacobian_f(x, self.t)
         return F, self.model.f(x, self.t), mm(mm(F, P), F.T)
 
     def measure(self, x, P):
-        return self.model.H_jac(x, self.t), self.model.h(x, self.t)
+        return self.model.jacobian_h(x, self.t), self.model.h(x, self.t)
 
     def update(self, x_pred, P_pred, z, R, valid, joseph, first, redo):
         H, z_hat = first
@@ -176,7 +180,7 @@ def _check_model(model, x0, zs, inputs):
     t0 = jax.tree_util.tree_map(lambda a: a[0], _epochs(inputs, T))
     x = jax.ShapeDtypeStruct((n,), jnp.result_type(x0, float))
     for name, fn, want in (("f", model.f, (n,)), ("h", model.h, (m,)),
-                           ("F_jac", model.F_jac, (n, n)), ("H_jac", model.H_jac, (m, n))):
+                           ("F_jac", model.jacobian_f, (n, n)), ("H_jac", model.jacobian_h, (m, n))):
         got = tuple(jax.eval_shape(fn, x, t0).shape)
         if got != want:
             raise ValueError(f"model.{name}(x, t) has shape {got}; expected {want} for x0 {xs} and zs {zsh}")
@@ -311,7 +315,7 @@ def _erts(model, filtered, *, inputs, unroll, save):
     T, n = filtered.means.shape
     ts = _epochs(inputs, T)
     t_next = jax.tree_util.tree_map(lambda a: a[1:], ts)
-    Fn = jax.vmap(model.F_jac)(filtered.means[:-1], t_next)
+    Fn = jax.vmap(model.jacobian_f)(filtered.means[:-1], t_next)
     Fs = jnp.concatenate([jnp.eye(n, dtype=Fn.dtype)[None], Fn], axis=0)
     return rts_smoother(LinearGaussian(F=Fs, H=None, Q=None, R=None), filtered, unroll=unroll, save=save)
 

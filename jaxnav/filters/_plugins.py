@@ -1,5 +1,6 @@
 """The plug-in interface of the shared filter step: what a prior-inflation rule or a noise
-estimator sees, what it must provide (``typing.Protocol``), and the two defaults.
+estimator sees, what it provides (:class:`InflationRule`, :class:`NoiseEstimator`: protocols
+whose default methods a plug-in inherits by subclassing), and the two defaults.
 
 The adaptive filters of the source papers differ from the classic Kalman filter only in a
 scalar factor on the predicted covariance (S0 eqs. (10), (12), (13): constant S, attenuated
@@ -9,40 +10,89 @@ epoch k, first the estimator's :meth:`NoiseEstimator.noise`, then the rule's
 :meth:`InflationRule.factor`, predicts with the factor, updates with the chosen noise, and
 finally calls :meth:`NoiseEstimator.after` with the update's results.
 
-A new variant is a frozen dataclass registered as a pytree (tunable numbers as array leaves,
-structural choices as static fields) that provides the attributes and methods of one protocol.
-For example, an inflation that grows linearly with the epoch number up to a cap::
+A new variant subclasses one protocol and is made a pytree by :func:`pytree_dataclass`
+(tunable numbers as array leaves, structural choices as static fields); it overrides what
+differs from the defaults. For example, an inflation that grows linearly with the epoch number
+up to a cap::
 
     import dataclasses, jax, jax.numpy as jnp
-    from typing import Any, ClassVar, Optional
+    from jaxnav.filters import InflationRule, pytree_dataclass
 
-    @jax.tree_util.register_dataclass
-    @dataclasses.dataclass(frozen=True)
-    class Linear:
-        rate: Any                       # array leaf: vmap/grad reach it
-        cap: Any = 10.0
-        states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
-        data_independent: ClassVar[bool] = True   # the factor never looks at the data
+    @pytree_dataclass
+    class Linear(InflationRule):
+        rate: jax.Array                 # array leaf: vmap/grad reach it
+        cap: jax.Array = 10.0
 
-        def init(self, n, m, p, dtype):
-            return ()                   # no state carried between epochs
+        @property
+        def data_independent(self):     # the factor never looks at the data
+            return True
 
         def factor(self, state, ctx):
-            return jnp.minimum(1.0 + self.rate * ctx.k, self.cap), state
+            f = jnp.minimum(1.0 + self.rate * ctx.k, self.cap)
+            return f, state, jnp.zeros((), jnp.int32)   # (factor, new state, status flags)
 
     jf.kalman_filter(model, x0, P0, zs, inflation=Linear(rate=jnp.asarray(0.01)))
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any, ClassVar, NamedTuple, Optional, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Optional, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxnav import _status
+from jaxnav._numerics import as_leaf
+
+
+def pytree_dataclass(cls):
+    """Make ``cls`` a frozen dataclass and a pytree: fields with ``metadata=dict(static=True)``
+    are part of the tree structure, all other fields are leaves.
+
+    JAX rebuilds a pytree from whatever its leaves became (tracers, shapes, ``in_axes``
+    entries, sharding specs), so rebuilding bypasses ``__init__`` and ``__post_init__``:
+    a constructor's validation applies to what a user builds, not to what JAX rebuilds.
+
+    Args:
+      cls: a class body with annotated fields (dataclass syntax).
+    Returns:
+      The same class, frozen dataclass and registered pytree (keys are the field names).
+    """
+    cls = dataclasses.dataclass(frozen=True)(cls)
+    fields = dataclasses.fields(cls)
+    data = tuple(f.name for f in fields if not f.metadata.get("static", False))
+    meta = tuple(f.name for f in fields if f.metadata.get("static", False))
+    keys = tuple(jax.tree_util.GetAttrKey(name) for name in data)
+
+    def flatten_with_keys(obj):
+        return [(key, getattr(obj, name)) for key, name in zip(keys, data)], tuple(getattr(obj, n) for n in meta)
+
+    def flatten(obj):
+        return [getattr(obj, name) for name in data], tuple(getattr(obj, n) for n in meta)
+
+    def unflatten(aux, children):
+        obj = object.__new__(cls)
+        for name, value in zip(meta, aux):
+            object.__setattr__(obj, name, value)
+        for name, value in zip(data, children):
+            object.__setattr__(obj, name, value)
+        return obj
+
+    jax.tree_util.register_pytree_with_keys(cls, flatten_with_keys, unflatten, flatten)
+    return cls
+
+
+def static_field(default=dataclasses.MISSING):
+    """A dataclass field of :func:`pytree_dataclass` that is tree structure (a Python value), not a leaf."""
+    return dataclasses.field(default=default, metadata=dict(static=True))
+
+
+def leaf(x):
+    """A plug-in's tunable number as a float array leaf (:func:`jaxnav._numerics.as_leaf`); None stays None."""
+    return None if x is None else as_leaf(x)
 
 
 class StepContext(NamedTuple):
@@ -65,20 +115,20 @@ class StepContext(NamedTuple):
       R_used: (m, m) measurement noise used in this update (after any noise estimator).
     """
 
-    k: Any
-    v: Any
-    z: Any
-    x_pred: Any
-    valid: Any
-    observed: Any
-    F: Any
-    H: Any
-    G: Any
-    Q: Any
-    R: Any
-    FPF: Any
-    GQG: Any
-    R_used: Any
+    k: jax.Array
+    v: jax.Array
+    z: jax.Array
+    x_pred: jax.Array
+    valid: jax.Array
+    observed: jax.Array
+    F: jax.Array
+    H: jax.Array
+    G: jax.Array
+    Q: jax.Array
+    R: jax.Array
+    FPF: jax.Array
+    GQG: jax.Array
+    R_used: jax.Array
 
 
 class PostUpdate(NamedTuple):
@@ -90,104 +140,109 @@ class PostUpdate(NamedTuple):
       eps: (m,) post-fit residual Z - H x (zero where invalid).  P_pred: (n, n) the prior covariance used.
     """
 
-    x: Any
-    P: Any
-    K: Any
-    eps: Any
-    P_pred: Any
+    x: jax.Array
+    P: jax.Array
+    K: jax.Array
+    eps: jax.Array
+    P_pred: jax.Array
+
+
+def no_flags() -> jax.Array:
+    """int32 status flags with no bit set (:mod:`jaxnav._status`)."""
+    return jnp.zeros((), jnp.int32)
 
 
 @runtime_checkable
 class InflationRule(Protocol):
     """A prior-inflation rule: the factor f_k of P_{k,k-1} = f_k F P_{k-1} F^T + G Q G^T.
 
+    Subclass it to inherit the defaults below (no state, no restriction to states, data
+    dependent); a class that provides every member without subclassing is accepted too.
+
     Attributes:
       data_independent: True when the factor never depends on the measurements (then the
         covariance recursion is the same for every data set with the same mask, which
-        :func:`jaxnav.filters.kalman_filter_batch` needs and ``vmap`` exploits).
+        :func:`jaxnav.filters.kalman_filter_batch` needs and ``vmap`` exploits). A read-only
+        property; default False.
       states: None (the factor scales all of F P F^T) or the static indices of the inflated
         states (then the block of those states is scaled by f_k, their cross terms by sqrt(f_k)).
     """
 
-    data_independent: ClassVar[bool]
-    states: Optional[tuple]
+    states: Optional[tuple] = None
+
+    @property
+    def data_independent(self) -> bool:
+        return False
 
     def init(self, n: int, m: int, p: int, dtype) -> Any:
-        """Initial rule state (a pytree) for n states, m measurements, p process noises."""
+        """Initial rule state (a pytree) for n states, m measurements, p process noises; default ()."""
+        return ()
 
-    def factor(self, state, ctx: StepContext) -> tuple[Any, ...]:
-        """(scalar factor f_k, new state) for the epoch described by ``ctx``, optionally followed by
-        int32 status flags (:mod:`jaxnav._status`, e.g. a parameter out of range or a capped factor)."""
+    def factor(self, state, ctx: StepContext) -> tuple[jax.Array, Any, jax.Array]:
+        """(scalar factor f_k, new state, int32 status flags) for the epoch described by ``ctx``.
+
+        The flags are :mod:`jaxnav._status` bits (e.g. a parameter out of range or a capped
+        factor); :func:`no_flags` when there is nothing to say.
+        """
+        raise NotImplementedError
 
 
 @runtime_checkable
 class NoiseEstimator(Protocol):
     """A noise estimator: the G Q G^T and R used at epoch k, and what it learns from the update.
 
+    Subclass it to inherit the defaults below (no state, learns nothing after the update,
+    screens nothing, data dependent); a class that provides every member without subclassing
+    is accepted too.
+
     Attributes:
-      data_independent: True when the noise never depends on the measurements.
+      data_independent: True when the noise never depends on the measurements. A read-only
+        property; default False.
     """
 
-    data_independent: ClassVar[bool]
+    @property
+    def data_independent(self) -> bool:
+        return False
 
     def init(self, n: int, m: int, p: int, dtype) -> Any:
-        """Initial estimator state (a pytree)."""
+        """Initial estimator state (a pytree); default ()."""
+        return ()
 
-    def noise(self, state, ctx: StepContext) -> tuple[Any, Any, Any, tuple[Any, Any]]:
+    def noise(self, state, ctx: StepContext) -> tuple[jax.Array, jax.Array, Any, tuple[Any, jax.Array]]:
         """(G Q G^T (n, n), R (m, m), new state, (per-epoch info pytree, int32 status flags))."""
+        raise NotImplementedError
 
     def after(self, state, ctx: StepContext, post: PostUpdate) -> Any:
-        """The state after learning from the update of this epoch."""
-
-    def screen(self, info, ctx: StepContext) -> Any:
-        """(m,) bool: components that estimators after this one in a chain must not learn from."""
-
-
-@jax.tree_util.register_pytree_node_class
-class NoInflation:
-    """The classic Kalman filter: factor 1 (S0 eq. (8))."""
-
-    data_independent: ClassVar[bool] = True
-    states: ClassVar[Optional[tuple]] = None
-
-    def init(self, n, m, p, dtype):
-        return ()
-
-    def factor(self, state, ctx):
-        return jnp.ones((), ctx.FPF.dtype), state
-
-    def tree_flatten(self):
-        return (), None
-
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        return cls()
-
-
-@jax.tree_util.register_pytree_node_class
-class NoEstimator:
-    """Keep the model's Q and R (the default)."""
-
-    data_independent: ClassVar[bool] = True
-
-    def init(self, n, m, p, dtype):
-        return ()
-
-    def noise(self, state, ctx):
-        return ctx.GQG, ctx.R, state, ((), jnp.zeros((), jnp.int32))
-
-    def after(self, state, ctx, post):
+        """The state after learning from the update of this epoch; default: unchanged."""
         return state
 
-    def screen(self, info, ctx):
+    def screen(self, info, ctx: StepContext) -> jax.Array:
+        """(m,) bool: components that estimators after this one in a chain must not learn from; default none."""
         return jnp.zeros_like(ctx.valid)
 
-    def tree_flatten(self):
-        return (), None
 
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        return cls()
+@pytree_dataclass
+class NoInflation(InflationRule):
+    """The classic Kalman filter: factor 1 (S0 eq. (8))."""
+
+    @property
+    def data_independent(self) -> bool:
+        return True
+
+    def factor(self, state, ctx):
+        return jnp.ones((), ctx.FPF.dtype), state, no_flags()
+
+
+@pytree_dataclass
+class NoEstimator(NoiseEstimator):
+    """Keep the model's Q and R (the default)."""
+
+    @property
+    def data_independent(self) -> bool:
+        return True
+
+    def noise(self, state, ctx):
+        return ctx.GQG, ctx.R, state, ((), no_flags())
 
 
 def data_independent(*plugins) -> bool:
@@ -251,12 +306,3 @@ def range_flags(plugin, ranges: dict):
         if x is not None:
             ok = ok & jnp.all(rng.holds(jnp.asarray(x)))
     return jnp.where(ok, 0, _status.PARAMETER_OUT_OF_RANGE).astype(jnp.int32)
-
-
-def rule_factor(rule, state, ctx):
-    """(factor, new state, int32 flags) of a rule, whether its ``factor`` returns flags or not."""
-    out = rule.factor(state, ctx)
-    if len(out) == 3:
-        return out
-    f, st = out
-    return f, st, jnp.zeros((), jnp.int32)

@@ -22,15 +22,23 @@ come out in ``KalmanResult.noise`` (:class:`RobustInfo`), the factors 1/alpha in
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Any, ClassVar, NamedTuple, Optional
+from typing import ClassVar, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import as_leaf, symmetrize
-from jaxnav.filters._plugins import NoiseEstimator, Range, check_ranges, range_flags
+from jaxnav._numerics import symmetrize
+from jaxnav.filters._plugins import (
+    InflationRule,
+    NoiseEstimator,
+    Range,
+    check_ranges,
+    leaf,
+    pytree_dataclass,
+    range_flags,
+    static_field,
+)
 from jaxnav.filters._rules import _states
 
 
@@ -84,10 +92,14 @@ def yang_alpha(stat, c0, c1=None):
 
 
 class IGG3State(NamedTuple):
-    """Per-component run of consecutive down-weighted epochs and the accept-a-change mode of :class:`IGG3`."""
+    """Per-component run of consecutive down-weighted epochs and the accept-a-change mode of :class:`IGG3`.
 
-    run: Any  # (m,) int32
-    accepting: Any  # (m,) bool
+    Attributes:
+      run: (m,) int32 consecutive down-weighted observed epochs.  accepting: (m,) bool, accepted as a change.
+    """
+
+    run: jax.Array
+    accepting: jax.Array
 
 
 class RobustInfo(NamedTuple):
@@ -100,15 +112,14 @@ class RobustInfo(NamedTuple):
       rejected: (m,) bool, component given (almost) no weight (|std_innov| > k1, not accepted as a change).
     """
 
-    w: Any
-    std_innov: Any
-    outlier: Any
-    rejected: Any
+    w: jax.Array
+    std_innov: jax.Array
+    outlier: jax.Array
+    rejected: jax.Array
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class IGG3:
+@pytree_dataclass
+class IGG3(NoiseEstimator):
     """IGG-III robust equivalent measurement noise as a noise estimator (Yang 1999).
 
     At epoch k each valid innovation component is standardised with the predicted innovation
@@ -134,8 +145,8 @@ class IGG3:
       model (3 mm noise, 300 epochs, 16 seeds, 5 % of the components with +-10 sigma gross
       errors, RMS against the classic filter on the clean data; acceleration std 1e-4, 1e-3,
       1.5e-3 m/s^2 per epoch, i.e. prediction weak to strong against the measurement):
-      1.09, 1.11, 1.14 (worst seed 1.38). The run used to count rejections (|u| > k1) and to
-      accept after 5: 1.08, 1.23, 1.47 (worst seed 3.5). The failure it fixes is a cascade: a
+      1.09, 1.11, 1.14 (worst seed 1.38). A run that counts only rejections (|u| > k1) and
+      accepts after 5 gives 1.08, 1.23, 1.47 (worst seed 3.5). Its failure is a cascade: a
       gross error early in the run (or with a weak prediction) is only down-weighted, pulls the
       velocity off, and the following clean measurements sit just under k1 with weights ~1e-3,
       neither rejected (so never counted) nor used, while the error grows (120 mm on 3 mm data).
@@ -156,17 +167,34 @@ class IGG3:
       w_min: scalar array > 0, floor of the weights.
       max_run: static int or None, consecutive down-weighted epochs after which a component is accepted.
       lockout: static int, consecutive down-weighted epochs that set ROBUST_LOCKOUT.
+
+    Raises:
+      ValueError: concrete k0, k1 not 0 < k0 < k1, w_min not in (0, 1] (traced values are
+        flagged in ``status`` instead); max_run or lockout not a positive integer.
     """
 
-    data_independent: ClassVar[bool] = False
     ranges: ClassVar[dict] = {"k0": Range(0.0, lo_open=True), "k1": Range(0.0, lo_open=True),
                               "w_min": Range(0.0, 1.0, lo_open=True, hi_open=False)}
 
-    k0: Any = 2.0
-    k1: Any = 4.5
-    w_min: Any = 1e-12
-    max_run: Optional[int] = dataclasses.field(default=2, metadata=dict(static=True))
-    lockout: int = dataclasses.field(default=20, metadata=dict(static=True))
+    k0: jax.Array = 2.0
+    k1: jax.Array = 4.5
+    w_min: jax.Array = 1e-12
+    max_run: Optional[int] = static_field(2)
+    lockout: int = static_field(20)
+
+    def __post_init__(self):
+        check_ranges("IGG3", self.ranges, k0=self.k0, k1=self.k1, w_min=self.w_min)
+        a, b = _concrete(self.k0), _concrete(self.k1)
+        if a is not None and b is not None and not 0.0 < a < b:
+            raise ValueError(f"IGG3: need 0 < k0 < k1, got k0={self.k0!r}, k1={self.k1!r}")
+        if self.max_run is not None and (int(self.max_run) != self.max_run or self.max_run < 1):
+            raise ValueError(f"IGG3: max_run must be a positive integer or None, got {self.max_run!r}")
+        if int(self.lockout) != self.lockout or self.lockout < 1:
+            raise ValueError(f"IGG3: lockout must be a positive integer, got {self.lockout!r}")
+        for name in ("k0", "k1", "w_min"):
+            object.__setattr__(self, name, leaf(getattr(self, name)))
+        object.__setattr__(self, "max_run", None if self.max_run is None else int(self.max_run))
+        object.__setattr__(self, "lockout", int(self.lockout))
 
     def init(self, n, m, p, dtype):
         return IGG3State(run=jnp.zeros((m,), jnp.int32), accepting=jnp.zeros((m,), bool))
@@ -198,17 +226,13 @@ class IGG3:
         flags = flags | jnp.where(jnp.any(run > int(self.lockout)), _status.ROBUST_LOCKOUT, 0)
         return ctx.GQG, R, state, (info, flags.astype(jnp.int32))
 
-    def after(self, state, ctx, post):
-        return state
-
     def screen(self, info, ctx):
         """(m,) bool components that later members of a :func:`chain` should not learn from."""
         return info.rejected
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class YangFactor:
+@pytree_dataclass
+class YangFactor(InflationRule):
     """Yang's adaptive factor as a prior-inflation rule: f_k = 1/alpha_k on F P F^T (Yang et al. 2001).
 
     The statistic is the standardised innovation norm
@@ -228,20 +252,28 @@ class YangFactor:
       c0: scalar array > 0 (typically 1.0-1.5).
       c1: None (two-segment function alpha = c0/dV) or scalar array > c0 (three-segment, 3-8).
       max_factor: scalar array >= 1, cap of 1/alpha (alpha = 0 beyond c1).
-      states: static indices of the inflated states (None = all).
+      states: static indices of the inflated states (None = all; a slice is accepted).
+
+    Raises:
+      ValueError: c0 <= 0, c1 <= c0 or max_factor < 1 (concrete values); bad ``states``.
     """
 
-    data_independent: ClassVar[bool] = False
     ranges: ClassVar[dict] = {"c0": Range(0.0, lo_open=True), "c1": Range(0.0, lo_open=True),
                               "max_factor": Range(1.0)}
 
-    c0: Any = 1.0
-    c1: Any = None
-    max_factor: Any = 1e6
-    states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
+    c0: jax.Array = 1.0
+    c1: Optional[jax.Array] = None
+    max_factor: jax.Array = 1e6
+    states: Optional[tuple] = static_field(None)
 
-    def init(self, n, m, p, dtype):
-        return ()
+    def __post_init__(self):
+        check_ranges("YangFactor", self.ranges, c0=self.c0, c1=self.c1, max_factor=self.max_factor)
+        a, b = _concrete(self.c0), None if self.c1 is None else _concrete(self.c1)
+        if a is not None and b is not None and b <= a:
+            raise ValueError(f"YangFactor: need c0 > 0 and c1 > c0, got c0={self.c0!r}, c1={self.c1!r}")
+        for name in ("c0", "c1", "max_factor"):
+            object.__setattr__(self, name, leaf(getattr(self, name)))
+        object.__setattr__(self, "states", _states(self.states))
 
     def statistic(self, ctx):
         """Scalar standardised innovation norm dV_k (0 without valid components)."""
@@ -273,9 +305,8 @@ class ChainInfo(NamedTuple):
     parts: tuple
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Chain:
+@pytree_dataclass
+class Chain(NoiseEstimator):
     """Several noise estimators run in sequence; each sees the G Q G^T and R the previous chose.
 
     An estimator with a ``screen(info)`` method (:class:`IGG3`: the rejected components) hides
@@ -285,12 +316,25 @@ class Chain:
 
     Attributes:
       parts: tuple of estimators (pytrees; their array leaves stay tunable).
+
+    Raises:
+      ValueError: no estimator given, or a part that is not a :class:`NoiseEstimator`.
     """
 
-    parts: tuple = ()
+    parts: tuple
+
+    def __post_init__(self):
+        parts = tuple(self.parts)
+        if not parts:
+            raise ValueError("Chain: give at least one estimator")
+        for e in parts:
+            if not isinstance(e, NoiseEstimator):
+                raise ValueError(f"Chain: {type(e).__name__} is not a noise estimator (jaxnav.filters.NoiseEstimator: "
+                                 "data_independent, init, noise, after, screen)")
+        object.__setattr__(self, "parts", parts)
 
     @property
-    def data_independent(self):
+    def data_independent(self) -> bool:
         return all(e.data_independent for e in self.parts)
 
     def init(self, n, m, p, dtype):
@@ -342,16 +386,7 @@ def igg3(k0=2.0, k1=4.5, *, w_min=1e-12, max_run: Optional[int] = 2, lockout: in
       ValueError: concrete k0, k1 not 0 < k0 < k1, or w_min not in (0, 1] (traced values are
         flagged in ``status`` instead).
     """
-    check_ranges("igg3()", IGG3.ranges, k0=k0, k1=k1, w_min=w_min)
-    a, b = _concrete(k0), _concrete(k1)
-    if a is not None and b is not None and not 0.0 < a < b:
-        raise ValueError(f"igg3(): need 0 < k0 < k1, got k0={k0!r}, k1={k1!r}")
-    if max_run is not None and (int(max_run) != max_run or max_run < 1):
-        raise ValueError(f"igg3(): max_run must be a positive integer or None, got {max_run!r}")
-    if int(lockout) != lockout or lockout < 1:
-        raise ValueError(f"igg3(): lockout must be a positive integer, got {lockout!r}")
-    return IGG3(k0=as_leaf(k0), k1=as_leaf(k1), w_min=as_leaf(w_min), max_run=None if max_run is None else int(max_run),
-                lockout=int(lockout))
+    return IGG3(k0=k0, k1=k1, w_min=w_min, max_run=max_run, lockout=lockout)
 
 
 def yang_factor(c0=1.0, c1=None, *, max_factor=1e6, states=None) -> YangFactor:
@@ -366,12 +401,7 @@ def yang_factor(c0=1.0, c1=None, *, max_factor=1e6, states=None) -> YangFactor:
     Raises:
       ValueError: c0 <= 0, c1 <= c0 or max_factor < 1 (concrete values).
     """
-    check_ranges("yang_factor()", YangFactor.ranges, c0=c0, c1=c1, max_factor=max_factor)
-    a, b = _concrete(c0), None if c1 is None else _concrete(c1)
-    if a is not None and b is not None and b <= a:
-        raise ValueError(f"yang_factor(): need c0 > 0 and c1 > c0, got c0={c0!r}, c1={c1!r}")
-    return YangFactor(c0=as_leaf(c0), c1=None if c1 is None else as_leaf(c1), max_factor=as_leaf(max_factor),
-                      states=_states(states))
+    return YangFactor(c0=c0, c1=c1, max_factor=max_factor, states=states)
 
 
 def chain(*estimators) -> Chain:
@@ -380,10 +410,4 @@ def chain(*estimators) -> Chain:
     Raises:
       ValueError: no estimator given, or an argument without ``init``/``noise``/``after``.
     """
-    if not estimators:
-        raise ValueError("chain(): give at least one estimator")
-    for e in estimators:
-        if not isinstance(e, NoiseEstimator):
-            raise ValueError(f"chain(): {type(e).__name__} is not a noise estimator (jaxnav.filters.NoiseEstimator: "
-                             "data_independent, init, noise, after, screen)")
-    return Chain(parts=tuple(estimators))
+    return Chain(parts=estimators)

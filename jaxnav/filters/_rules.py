@@ -2,29 +2,32 @@
 :class:`jaxnav.filters.InflationRule`).
 
 Every rule returns a scalar factor f_k and the predict step forms
-``P_{k,k-1} = f_k * F P_{k-1} F^T + G Q G^T`` (S0 eqs. (8), (10), (12), (13)). Rules are frozen
-dataclasses registered as pytrees: the tunable numbers (S, b, rho, smoothing temperature) are
-array leaves, so ``jax.vmap`` and ``jax.grad`` reach them; structural choices (window length,
-absolute value or not) are static fields.
+``P_{k,k-1} = f_k * F P_{k-1} F^T + G Q G^T`` (S0 eqs. (8), (10), (12), (13)). Rules are
+:func:`~jaxnav.filters.pytree_dataclass` subclasses of :class:`~jaxnav.filters.InflationRule`:
+the tunable numbers (S, b, rho, smoothing temperature) are array leaves, so ``jax.vmap`` and
+``jax.grad`` reach them; structural choices (window length, absolute value or not) are static
+fields. The constructors check their arguments (concrete values against the documented ranges;
+traced values are flagged in ``status`` at run time); the lower-case functions are shorthands.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Any, ClassVar, NamedTuple, Optional
+from typing import ClassVar, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import as_leaf, smooth_max1
-from jaxnav.filters._plugins import (  # noqa: F401  (StepContext: the rules' input)
+from jaxnav._numerics import smooth_max1
+from jaxnav.filters._plugins import (
+    InflationRule,
     NoInflation,
     Range,
-    StepContext,
     check_ranges,
+    leaf,
+    pytree_dataclass,
     range_flags,
-    rule_factor,
+    static_field,
 )
 
 
@@ -57,32 +60,39 @@ def _masked_trace(A, valid):
     return jnp.sum(jnp.where(valid, jnp.diagonal(A), 0.0))
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Constant:
+@pytree_dataclass
+class Constant(InflationRule):
     """Constant inflation S >= 1 (S0 eq. (10)); equals filterpy's fading ``alpha`` with S = alpha^2.
 
     Attributes:
       S: scalar array in [1, inf), the factor applied to F P F^T at every epoch (out of range at
         run time: PARAMETER_OUT_OF_RANGE in ``status``).
+      states: static indices of the inflated states (None = all; a slice is accepted).
+
+    Raises:
+      ValueError: a concrete S outside [1, inf); bad ``states``.
     """
 
-    data_independent: ClassVar[bool] = True
     ranges: ClassVar[dict] = {"S": Range(1.0)}
 
-    S: Any
-    states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
+    S: jax.Array
+    states: Optional[tuple] = static_field(None)
 
-    def init(self, n, m, p, dtype):
-        return ()
+    def __post_init__(self):
+        check_ranges("Constant", self.ranges, S=self.S)
+        object.__setattr__(self, "S", leaf(self.S))
+        object.__setattr__(self, "states", _states(self.states))
+
+    @property
+    def data_independent(self) -> bool:
+        return True
 
     def factor(self, state, ctx):
         return jnp.asarray(self.S, ctx.FPF.dtype), state, range_flags(self, self.ranges)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Attenuated:
+@pytree_dataclass
+class Attenuated(InflationRule):
     """Attenuated memory S_k = (1 - b^k) / (1 - b), 0 <= b < 1, k counting filter updates (S0 eqs. (11)-(12)).
 
     S_1 = 1 and S_k rises monotonically towards 1 / (1 - b); b = 0 is the classic filter.
@@ -96,19 +106,32 @@ class Attenuated:
       predictions instead would multiply P by up to 1/(1 - b) per empty epoch: a 60-epoch gap
       with b = 0.254 inflates the variance by 1.34^60 = 4e7 (sigma 185 m against 4.5 mm for the
       classic filter on the 3 mm constant-velocity model; in a 60 s INS/GNSS outage with the
-      navigation states inflated, sigma 1e5 m and a smoothed RMS of 189 m, now 17 m and 0.7 m).
+      navigation states inflated, sigma 1e5 m and a smoothed RMS of 189 m, against 17 m and 0.7 m
+      when counting updates).
       After a gap the sequence continues S_{k+1}, S_{k+2}, ... where it stopped.
 
     Attributes:
       b: scalar array in [0, 1), the attenuation factor (S0 used 0.254 chosen by trial and error);
         out of range at run time: PARAMETER_OUT_OF_RANGE in ``status``.
+      states: static indices of the inflated states (None = all; a slice is accepted).
+
+    Raises:
+      ValueError: a concrete b outside [0, 1); bad ``states``.
     """
 
-    data_independent: ClassVar[bool] = True  # the factor depends on the mask only, not on the values
     ranges: ClassVar[dict] = {"b": Range(0.0, 1.0)}
 
-    b: Any
-    states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
+    b: jax.Array
+    states: Optional[tuple] = static_field(None)
+
+    def __post_init__(self):
+        check_ranges("Attenuated", self.ranges, b=self.b)
+        object.__setattr__(self, "b", leaf(self.b))
+        object.__setattr__(self, "states", _states(self.states))
+
+    @property
+    def data_independent(self) -> bool:
+        return True  # the factor depends on the mask only, not on the values
 
     def init(self, n, m, p, dtype):
         return AttenuatedState(updates=jnp.zeros((), dtype))
@@ -122,24 +145,35 @@ class Attenuated:
 
 
 class AttenuatedState(NamedTuple):
-    """Filter updates counted by the attenuated-memory rule (the k of S_k)."""
+    """Filter updates counted by the attenuated-memory rule (the k of S_k).
 
-    updates: Any  # scalar float, epochs with at least one valid measurement so far
+    Attributes:
+      updates: scalar float, epochs with at least one valid measurement so far.
+    """
+
+    updates: jax.Array
 
 
 class FadingState(NamedTuple):
-    """Running innovation statistics of the fading-memory rule."""
+    """Running innovation statistics of the fading-memory rule.
 
-    buf: Any  # (window,) v^T v of the last epochs (window estimator), else (0,)
-    filled: Any  # (window,) bool
-    pos: Any  # int32 ring position
-    C: Any  # scalar, recursive estimate of tr E(v v^T)
-    started: Any  # bool, C holds a value
+    Attributes:
+      buf: (window,) v^T v of the last observed epochs (window estimator), else (0,).
+      filled: (window,) bool, slots of ``buf`` holding a value.
+      pos: int32 ring position in ``buf``.
+      C: scalar, recursive estimate of tr E(v v^T).
+      started: scalar bool, C holds a value.
+    """
+
+    buf: jax.Array
+    filled: jax.Array
+    pos: jax.Array
+    C: jax.Array
+    started: jax.Array
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Fading:
+@pytree_dataclass
+class Fading(InflationRule):
     """Fading memory lambda_k = max{1, |tr N_k / tr M_k|} (S0 eqs. (13)-(17)).
 
     N_k = P_vk - H G Q G^T H^T - R_k, M_k = H F P_{k-1} F^T H^T. Only traces enter, so the
@@ -172,19 +206,36 @@ class Fading:
       max_factor: scalar array >= 1, cap of lambda_k.
       window: static int or None, the window length n.
       absolute: static bool, take |tr N / tr M| as printed in S0 eq. (14).
-    """
+      states: static indices of the inflated states (None = all; a slice is accepted); M_k is
+        then taken over the inflated block of F P F^T.
 
-    data_independent: ClassVar[bool] = False
+    Raises:
+      ValueError: both window and rho given, window < 1, or concrete rho, smooth outside
+        (0, inf), max_factor outside [1, inf) (traced values are flagged in ``status`` instead).
+    """
 
     ranges: ClassVar[dict] = {"rho": Range(0.0, lo_open=True), "smooth": Range(0.0, lo_open=True),
                               "max_factor": Range(1.0)}
 
-    rho: Any = None
-    smooth: Any = None
-    max_factor: Any = 1e6
-    window: Optional[int] = dataclasses.field(default=None, metadata=dict(static=True))
-    absolute: bool = dataclasses.field(default=True, metadata=dict(static=True))
-    states: Optional[tuple] = dataclasses.field(default=None, metadata=dict(static=True))
+    rho: Optional[jax.Array] = None
+    smooth: Optional[jax.Array] = None
+    max_factor: jax.Array = 1e6
+    window: Optional[int] = static_field(None)
+    absolute: bool = static_field(True)
+    states: Optional[tuple] = static_field(None)
+
+    def __post_init__(self):
+        if self.window is not None and self.rho is not None:
+            raise ValueError("Fading: give either window=n or rho=..., not both")
+        if self.window is not None and (int(self.window) != self.window or self.window < 1):
+            raise ValueError(f"Fading: window must be a positive integer, got {self.window!r}")
+        check_ranges("Fading", self.ranges, rho=self.rho, smooth=self.smooth, max_factor=self.max_factor)
+        object.__setattr__(self, "rho", leaf(self.rho))
+        object.__setattr__(self, "smooth", leaf(self.smooth))
+        object.__setattr__(self, "max_factor", leaf(self.max_factor))
+        object.__setattr__(self, "window", None if self.window is None else int(self.window))
+        object.__setattr__(self, "absolute", bool(self.absolute))
+        object.__setattr__(self, "states", _states(self.states))
 
     def _n(self):
         return 1 if self.window is None else int(self.window)
@@ -234,9 +285,8 @@ class Fading:
         return lam, new, flags
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class Switch:
+@pytree_dataclass
+class Switch(InflationRule):
     """One of several prior-inflation rules, chosen by an array index at run time.
 
     Every rule's factor is computed and ``factors[index]`` is used, so the classic, attenuated
@@ -249,11 +299,25 @@ class Switch:
       index: integer-valued scalar array (float accepted, rounded), clipped to the rules. The
         status flags are those of the chosen rule.
       rules: tuple of rules (:class:`NoInflation`, :class:`Constant`, :class:`Attenuated`,
-        :class:`Fading`, ...) inflating the same states.
+        :class:`Fading`, ...) inflating the same states; None stands for the classic filter.
+
+    Raises:
+      ValueError: no rules, or rules that inflate different states.
     """
 
-    index: Any
+    index: jax.Array
     rules: tuple
+
+    def __post_init__(self):
+        rules = tuple(NoInflation() if r is None else r for r in self.rules)
+        if not rules:
+            raise ValueError("Switch: give at least one rule")
+        states = {r.states for r in rules if not isinstance(r, NoInflation)}  # factor 1: its states do not matter
+        if len(states) > 1:
+            raise ValueError(f"Switch: the rules inflate different states {sorted(map(str, states))}; "
+                             "one filter step needs one set")
+        object.__setattr__(self, "rules", rules)
+        object.__setattr__(self, "index", jnp.asarray(self.index))
 
     @property
     def states(self):
@@ -261,14 +325,14 @@ class Switch:
         return next((r.states for r in self.rules if not isinstance(r, NoInflation)), None)
 
     @property
-    def data_independent(self):
+    def data_independent(self) -> bool:
         return all(r.data_independent for r in self.rules)
 
     def init(self, n, m, p, dtype):
         return tuple(r.init(n, m, p, dtype) for r in self.rules)
 
     def factor(self, state, ctx):
-        out = [rule_factor(r, s, ctx) for r, s in zip(self.rules, state)]
+        out = [r.factor(s, ctx) for r, s in zip(self.rules, state)]
         factors = jnp.stack([jnp.asarray(f, ctx.FPF.dtype) for f, _, _ in out])
         flags = jnp.stack([jnp.asarray(g, jnp.int32) for _, _, g in out])
         i = jnp.clip(jnp.round(jnp.asarray(self.index)).astype(jnp.int32), 0, len(self.rules) - 1)
@@ -276,6 +340,7 @@ class Switch:
 
 
 def _states(states):
+    """Static inflated-state indices from None, a sequence or a slice with a stop (None: all states)."""
     if states is None:
         return None
     if isinstance(states, slice):
@@ -296,8 +361,7 @@ def constant(S, *, states=None) -> Constant:
     Raises:
       ValueError: a concrete S outside [1, inf) (a traced S is flagged in ``status`` instead).
     """
-    check_ranges("constant()", Constant.ranges, S=S)
-    return Constant(S=as_leaf(S), states=_states(states))
+    return Constant(S=S, states=states)
 
 
 def attenuated(b, *, states=None) -> Attenuated:
@@ -311,8 +375,7 @@ def attenuated(b, *, states=None) -> Attenuated:
     Raises:
       ValueError: a concrete b outside [0, 1) (a traced b is flagged in ``status`` instead).
     """
-    check_ranges("attenuated()", Attenuated.ranges, b=b)
-    return Attenuated(b=as_leaf(b), states=_states(states))
+    return Attenuated(b=b, states=states)
 
 
 def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True,
@@ -333,19 +396,7 @@ def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: boo
       ValueError: both window and rho given, window < 1, or concrete rho, smooth outside
         (0, inf), max_factor outside [1, inf) (traced values are flagged in ``status`` instead).
     """
-    if window is not None and rho is not None:
-        raise ValueError("fading(): give either window=n or rho=..., not both")
-    if window is not None and (int(window) != window or window < 1):
-        raise ValueError(f"fading(): window must be a positive integer, got {window!r}")
-    check_ranges("fading()", Fading.ranges, rho=rho, smooth=smooth, max_factor=max_factor)
-    return Fading(
-        rho=None if rho is None else as_leaf(rho),
-        smooth=None if smooth is None else as_leaf(smooth),
-        max_factor=as_leaf(max_factor),
-        window=None if window is None else int(window),
-        absolute=bool(absolute),
-        states=_states(states),
-    )
+    return Fading(rho=rho, smooth=smooth, max_factor=max_factor, window=window, absolute=absolute, states=states)
 
 
 def switch(index, rules) -> Switch:
@@ -354,11 +405,4 @@ def switch(index, rules) -> Switch:
     Raises:
       ValueError: no rules, or rules that inflate different states.
     """
-    rules = tuple(NoInflation() if r is None else r for r in rules)
-    if not rules:
-        raise ValueError("switch(): give at least one rule")
-    states = {r.states for r in rules if not isinstance(r, NoInflation)}  # factor 1: its states do not matter
-    if len(states) > 1:
-        raise ValueError(f"switch(): the rules inflate different states {sorted(map(str, states))}; "
-                         "one filter step needs one set")
-    return Switch(index=jnp.asarray(index), rules=rules)
+    return Switch(index=index, rules=tuple(rules))

@@ -8,8 +8,9 @@ estimators (:mod:`._plugins`) plug into :func:`filter_step`. The drivers
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Optional
 
+import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
@@ -25,7 +26,15 @@ from jaxnav._numerics import (
     whiten,
 )
 from jaxnav.filters._model import LinearGaussian, check_shapes
-from jaxnav.filters._plugins import NoEstimator, NoInflation, PostUpdate, StepContext, data_independent, rule_factor
+from jaxnav.filters._plugins import (
+    InflationRule,
+    NoEstimator,
+    NoiseEstimator,
+    NoInflation,
+    PostUpdate,
+    StepContext,
+    data_independent,
+)
 from jaxnav.filters._rules import inflation_scale
 
 #: every per-epoch output a filter run can save
@@ -45,62 +54,89 @@ class FilterState(NamedTuple):
       n_nonfinite: int32, non-finite measurement elements seen.  n_skipped: int32, epochs with no valid component.
     """
 
-    x: Any
-    P: Any
-    k: Any
+    x: jax.Array
+    P: jax.Array
+    k: jax.Array
     rule: Any
     est: Any
-    status: Any
-    loglik: Any
-    n_nonfinite: Any
-    n_skipped: Any
+    status: jax.Array
+    loglik: jax.Array
+    n_nonfinite: jax.Array
+    n_skipped: jax.Array
 
 
 class FilterParams(NamedTuple):
-    """Static-in-time model parts plus the plug-ins (time-varying leaves come as inputs)."""
+    """Static-in-time model parts plus the plug-ins (time-varying leaves come as inputs).
+
+    Attributes:
+      model: :class:`~jaxnav.filters.LinearGaussian` with None for the leaves given per epoch.
+      inflation: the :class:`~jaxnav.filters.InflationRule`.
+      estimator: the :class:`~jaxnav.filters.NoiseEstimator`.
+    """
 
     model: LinearGaussian
-    inflation: Any
-    estimator: Any
+    inflation: InflationRule
+    estimator: NoiseEstimator
 
 
 class StepInput(NamedTuple):
-    """Per-epoch inputs: the measurement, user mask, and any time-varying model leaves."""
+    """Per-epoch inputs: the measurement, user mask, and any time-varying model leaves.
 
-    z: Any  # (m,)
-    mask: Any  # (m,) bool
-    F: Any = None
-    H: Any = None
-    Q: Any = None
-    R: Any = None
-    G: Any = None
+    Attributes:
+      z: (m,) measurement.  mask: (m,) bool, components to use.
+      F: (n, n), H: (m, n), Q: (p, p), R: (m, m), G: (n, p) this epoch's model leaves, or None
+        for the static ones in :class:`FilterParams`.
+    """
 
-
-def _record(name: str, fields, doc: str):
-    """A NamedTuple class with the given fields, every one defaulting to None (fields not saved)."""
-    cls = NamedTuple(name, [(f, Any) for f in fields])
-    cls.__new__.__defaults__ = (None,) * len(fields)
-    cls.__doc__ = doc
-    return cls
+    z: jax.Array
+    mask: jax.Array
+    F: Optional[jax.Array] = None
+    H: Optional[jax.Array] = None
+    Q: Optional[jax.Array] = None
+    R: Optional[jax.Array] = None
+    G: Optional[jax.Array] = None
 
 
-StepInfo = _record("StepInfo", ALL_OUTPUTS, """Per-epoch outputs of :func:`filter_step` (fields not requested are None).
+class StepInfo(NamedTuple):
+    """Per-epoch outputs of :func:`filter_step`; fields not requested in ``save`` are None.
 
-    The fields are ``ALL_OUTPUTS``; see :class:`jaxnav.filters.KalmanResult` for their meaning.
-    """)
+    The fields are ``ALL_OUTPUTS``, one epoch of :class:`KalmanResult` (same meaning, no
+    leading axis T).
+    """
+
+    means: Optional[jax.Array] = None
+    covs: Optional[jax.Array] = None
+    pred_means: Optional[jax.Array] = None
+    pred_covs: Optional[jax.Array] = None
+    innovations: Optional[jax.Array] = None
+    innov_covs: Optional[jax.Array] = None
+    nis: Optional[jax.Array] = None
+    logliks: Optional[jax.Array] = None
+    factors: Optional[jax.Array] = None
+    noise: Any = None
+    valid: Optional[jax.Array] = None
 
 
 class UpdateResult(NamedTuple):
-    """Output of :func:`update`."""
+    """Output of :func:`update`.
 
-    x: Any  # (n,) posterior mean
-    P: Any  # (n, n) posterior covariance
-    v: Any  # (m,) innovation (zero where invalid)
-    S: Any  # (m, m) innovation covariance (identity rows/cols where invalid)
-    K: Any  # (n, m) gain
-    nis: Any  # scalar v^T S^{-1} v
-    loglik: Any  # scalar log N(v; 0, S) over the valid components
-    ok: Any  # bool, S was positive definite (else the prior is returned)
+    Attributes:
+      x: (n,) posterior mean.  P: (n, n) posterior covariance.
+      v: (m,) innovation (zero where invalid).
+      S: (m, m) innovation covariance (identity rows/cols where invalid).
+      K: (n, m) gain.  nis: scalar v^T S^{-1} v.
+      loglik: scalar log N(v; 0, S) over the valid components.
+      ok: scalar bool, S was positive definite (else the prior is returned).
+    """
+
+    x: jax.Array
+    P: jax.Array
+    v: jax.Array
+    S: jax.Array
+    K: jax.Array
+    nis: jax.Array
+    loglik: jax.Array
+    ok: jax.Array
 
 
 def predict(x, P, F, GQG, factor=1.0, FPF=None):
@@ -234,7 +270,7 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
                       FPF=FPF, GQG=GQG, R_used=R)
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
     ctx = ctx._replace(GQG=GQG, R_used=R_used)
-    factor, rule_state, rule_flag = rule_factor(rule, state.rule, ctx)
+    factor, rule_state, rule_flag = rule.factor(state.rule, ctx)
     if rule.states is not None:  # partial inflation: scale the block of the inflated states
         d = inflation_scale(factor, n, rule.states)
         FPF = d[:, None] * FPF * d[None, :]
@@ -353,8 +389,8 @@ def scan_setup(model, x0, P0, zs, inflation, estimator, mask, save, allow_float3
     return params, init, xs, save, (n, m, p, T), tv, dtype
 
 
-KalmanResult = _record("KalmanResult", ALL_OUTPUTS + (
-    "loglik", "n_nonfinite", "n_skipped", "status", "x_final", "P_final"), """Result of :func:`~jaxnav.filters.kalman_filter`; per-epoch arrays have a leading axis T (None if not saved).
+class KalmanResult(NamedTuple):
+    """Result of :func:`~jaxnav.filters.kalman_filter`; per-epoch arrays have a leading axis T (None if not saved).
 
     Attributes:
       means: (T, n) filtered means X_k.  covs: (T, n, n) P_k.
@@ -367,8 +403,27 @@ KalmanResult = _record("KalmanResult", ALL_OUTPUTS + (
       loglik: scalar total innovation log-likelihood.
       n_nonfinite: int, NaN/inf measurement elements masked.  n_skipped: int, epochs without update.
       status: int32 flags (see :func:`jaxnav.raise_for_status`).
-      x_final, P_final: the last estimate (always returned).
+      x_final, P_final: (n,), (n, n) the last estimate (always returned).
 
     The batch entry points (:func:`~jaxnav.filters.kalman_filter_batch`) return the same record
     with a leading batch axis B on the per-sequence fields and none on the shared ones.
-    """)
+    """
+
+    means: Optional[jax.Array] = None
+    covs: Optional[jax.Array] = None
+    pred_means: Optional[jax.Array] = None
+    pred_covs: Optional[jax.Array] = None
+    innovations: Optional[jax.Array] = None
+    innov_covs: Optional[jax.Array] = None
+    nis: Optional[jax.Array] = None
+    logliks: Optional[jax.Array] = None
+    factors: Optional[jax.Array] = None
+    noise: Any = None
+    valid: Optional[jax.Array] = None
+    loglik: Optional[jax.Array] = None
+    n_nonfinite: Optional[jax.Array] = None
+    n_skipped: Optional[jax.Array] = None
+    status: Optional[jax.Array] = None
+    x_final: Optional[jax.Array] = None
+    P_final: Optional[jax.Array] = None
+
