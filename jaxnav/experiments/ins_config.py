@@ -19,14 +19,12 @@ Frames (stated once, used everywhere):
 from __future__ import annotations
 
 import math
-import os
 import pathlib
-import re
 from typing import Any, NamedTuple, Optional
 
 import numpy as np
 
-from jaxnav._config import load_toml
+from jaxnav._config import ConfigError, Table, load_toml
 from jaxnav.ins.mounting import C_RFU_FRD, mounting_from_dcm, mounting_from_groves_deg, mounting_from_rpy_deg, sensor_to_body
 from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
 
@@ -91,10 +89,6 @@ RANGES = {
     "evaluate.gap_s": (0.1, 1e5),
     "evaluate.end_margin_s": (0.0, 1e5),
 }
-
-
-class ConfigError(ValueError):
-    """A config problem; the text names the file and the key (``FILE: section.key ...``)."""
 
 
 class ImuSection(NamedTuple):
@@ -282,95 +276,11 @@ class InsConfig(NamedTuple):
     heading: Optional[HeadingSection] = None
 
 
-_VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
-
-
-class _Reader:
-    """Typed access to one section with file/key named errors and unknown-key detection."""
+class _Reader(Table):
+    """One section of a ``jaxnav ins`` config: :class:`jaxnav._config.Table` with the plausible :data:`RANGES`."""
 
     def __init__(self, path, d: dict, section: str, variables=None):
-        self.path, self.section, self.variables = path, section, dict(variables or {})
-        if not isinstance(d, dict):
-            self.fail(None, f"must be a section [{section}], got {d!r}")
-        self.d, self.used = d, set()
-
-    def fail(self, key, msg):
-        where = self.section if key is None else f"{self.section}.{key}"
-        raise ConfigError(f"{self.path}: {where} {msg}")
-
-    def has(self, key):
-        return key in self.d
-
-    def get(self, key, kind, default=..., *, lo=None, hi=None, lo_open=False, choices=None):
-        self.used.add(key)
-        if key not in self.d:
-            if default is ...:
-                self.fail(key, "is required")
-            return default
-        v = self.d[key]
-        if kind is float:
-            if isinstance(v, bool) or not isinstance(v, _NUM):
-                self.fail(key, f"must be a number, got {v!r}")
-            v = float(v)
-            if not math.isfinite(v):
-                self.fail(key, f"must be finite, got {v!r}")
-        elif kind is int:
-            if isinstance(v, bool) or not isinstance(v, int):
-                self.fail(key, f"must be an integer, got {v!r}")
-        elif kind is bool:
-            if not isinstance(v, bool):
-                self.fail(key, f"must be true or false, got {v!r}")
-        elif kind is str:
-            if not isinstance(v, str):
-                self.fail(key, f"must be a string, got {v!r}")
-        elif kind == "vec3":
-            if (not isinstance(v, list) or len(v) != 3
-                    or not all(isinstance(x, _NUM) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
-                self.fail(key, f"must be a list of 3 finite numbers, got {v!r}")
-            return np.asarray(v, float)
-        if choices is not None and v not in choices:
-            self.fail(key, f"must be one of {list(choices)}, got {v!r}")
-        if lo is not None and (v <= lo if lo_open else v < lo):
-            self.fail(key, f"= {v!r} must be {'>' if lo_open else '>='} {lo:g}")
-        if hi is not None and v > hi:
-            self.fail(key, f"= {v!r} must be <= {hi:g}")
-        rng = RANGES.get(f"{self.section}.{key}")
-        if rng is not None and kind is float and not rng[0] <= v <= rng[1]:
-            self.fail(key, f"= {v!r} is outside the plausible range [{rng[0]:g}, {rng[1]:g}] (a typing slip or "
-                           "a unit mix-up?)")
-        return v
-
-    def file(self, key, required=True):
-        v = self.get(key, str, ... if required else None)
-        if v is None:
-            return None
-
-        def sub(m):
-            name = m.group(1)
-            if name in self.variables:
-                return self.variables[name]
-            if name not in os.environ:
-                self.fail(key, f"uses ${{{name}}}, which is not set in the environment (set it, or pass --data)")
-            return os.environ[name]
-
-        p = pathlib.Path(os.path.expanduser(_VAR.sub(sub, v)))
-        if p.is_absolute():
-            return p
-        # a path that starts with a variable is where the variable points (a relative JAXNAV_DATA is
-        # taken against the working directory, as the user typed it); any other against the config
-        return pathlib.Path(os.path.abspath(p)) if _VAR.match(v) else self.path.parent / p
-
-    def table(self, key):
-        self.used.add(key)
-        v = self.d.get(key)
-        if v is not None and not isinstance(v, dict):
-            self.fail(key, f"must be a table, got {v!r}")
-        return v
-
-    def done(self, allowed=None):
-        unknown = sorted(set(self.d) - self.used)
-        if unknown:
-            self.fail(None, f"has unknown key(s) {unknown}; expected some of {sorted(self.used)}")
+        super().__init__(d, section, source=path, error=ConfigError, plausible=RANGES, variables=variables)
 
 
 def _delimiter(r: "_Reader"):
@@ -394,7 +304,7 @@ def _imu(path, d, variables=None) -> ImuSection:
     tag = r.file("tag", required=False)
     if tag is not None and fmt != "rtklib-csv":
         r.fail("tag", f"is only used with format = 'rtklib-csv', not {fmt!r}")
-    cols, units = r.table("columns"), r.table("units")
+    cols, units = r.get("columns", dict, None), r.get("units", dict, None)
     if fmt == "csv" and cols is None:
         r.fail("columns", "is required for format = 'csv' (a table like {t = 0, gx = 1, ...})")
     if fmt != "csv" and (cols is not None or units is not None):
@@ -439,7 +349,7 @@ def _gnss(path, d, variables=None) -> GnssSection:
     r = _Reader(path, d, "gnss", variables)
     fmt = r.get("format", str, "rtklib-pos", choices=GNSS_FORMATS)
     f = r.file("file")
-    cols, units = r.table("columns"), r.table("units")
+    cols, units = r.get("columns", dict, None), r.get("units", dict, None)
     if fmt == "csv" and cols is None:
         r.fail("columns", "is required for format = 'csv'")
     if fmt != "csv" and (cols is not None or units is not None):
@@ -514,7 +424,7 @@ NOISE_KEY_STATES = {
 
 def _pair(r: _Reader, key, default):
     r.used.add(key)
-    v = r.d.get(key, list(default))
+    v = r.data.get(key, list(default))
     if (not isinstance(v, list) or len(v) != 2
             or not all(isinstance(x, _NUM) and not isinstance(x, bool) and 0 < x < 360 for x in v)):
         r.fail(key, f"must be [roll/pitch, heading] 1-sigma in deg, each in (0, 360), got {v!r}")
@@ -572,7 +482,7 @@ def _odometer(path, d, imu: ImuSection, variables=None) -> OdometerSection:
     r = _Reader(path, d, "odometer", variables)
     src = r.get("source", str, choices=("imu", "csv"))
     f = r.file("file", required=False)
-    cols, units = r.table("columns"), r.table("units")
+    cols, units = r.get("columns", dict, None), r.get("units", dict, None)
     week = r.get("gps_week", int, None, lo=0, hi=5000)
     delim = _delimiter(r)
     if src == "imu":
@@ -607,13 +517,13 @@ def _odometer(path, d, imu: ImuSection, variables=None) -> OdometerSection:
 def _heading(path, d, variables=None) -> HeadingSection:
     r = _Reader(path, d, "heading", variables)
     f = r.file("file")
-    cols = r.table("columns") or {"t": 0, "heading": 1}
+    cols = r.get("columns", dict, None) or {"t": 0, "heading": 1}
     for k, v in cols.items():
         if k not in ("t", "week", "tow", "heading", "sigma"):
             r.fail("columns", f"has unknown key {k!r}; known: ['t', 'week', 'tow', 'heading', 'sigma']")
         if isinstance(v, bool) or not isinstance(v, (int, str)) or (isinstance(v, int) and v < 0):
             r.fail("columns", f"{k} must be a 0-based column index >= 0 or a header name, got {v!r}")
-    units = r.table("units")
+    units = r.get("units", dict, None)
     for k, v in (units or {}).items():
         allowed = {"t": ("s", "ms", "us", "ns"), "heading": ("deg", "rad")}
         if k not in allowed or v not in allowed[k]:
@@ -634,8 +544,8 @@ def _evaluate(path, d, variables=None) -> EvaluateSection:
     r = _Reader(path, d, "evaluate", variables)
     truth = r.file("truth", required=False)
     fmt = r.get("truth_format", str, "kf-gins", choices=TRUTH_FORMATS)
-    cols, units = r.table("truth_columns"), r.table("truth_units")
-    delim = r.d.get("truth_delimiter", ",")
+    cols, units = r.get("truth_columns", dict, None), r.get("truth_units", dict, None)
+    delim = r.data.get("truth_delimiter", ",")
     r.used.add("truth_delimiter")
     if truth is None:
         for k in ("truth_format", "truth_columns", "truth_units", "truth_delimiter"):

@@ -26,7 +26,7 @@ from jaxnav import sim, tune
 from jaxnav.geodesy import meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_conj, quat_mul, quat_to_rv
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled
-from jaxnav.io import load_toml
+from jaxnav._config import Table, load_toml
 
 #: the three filters of S0's Table 1
 FILTERS = ("classic", "attenuated", "fading")
@@ -36,74 +36,42 @@ EXPERIMENT = pathlib.Path(__file__).with_name("s0_experiment.toml")
 S0_FILTERS = ("classic", "constant", "attenuated", "fading")
 S0_LOSSES = ("rms", "nll", "nis")
 S0_PARAMS = {"classic": (), "constant": ("S",), "attenuated": ("b",), "fading": ("rho",)}
+_POSITIVE = dict(lo=0.0, lo_open=True, hi=1e6)
+_COUNT = dict(lo=1, hi=100_000)
+#: every section's keys: (kind of :meth:`jaxnav._config.Table.get`, its bounds or choices); all are required
 _SCHEMA = {
-    "scenario": {"unsensed_velocity_steps": bool},
-    "filter": {"n_states": int, "q_scale": float, "r_scale": float, "inflate_states": list, "b": float,
-               "fading_window": int},
-    "monte_carlo": {"seeds": int, "chunk": int},
-    "sweep": {"b": list, "seeds": int},
-    "published": {"classic": list, "attenuated": list, "fading": list},
+    "scenario": {"unsensed_velocity_steps": (bool, {})},
+    "filter": {"n_states": (int, dict(choices=(15, 18))), "q_scale": (float, _POSITIVE),
+               "r_scale": (float, _POSITIVE), "inflate_states": (list, {}),
+               "b": (float, dict(lo=0.0, hi=1.0, hi_open=True)), "fading_window": (int, _COUNT)},
+    "monte_carlo": {"seeds": (int, _COUNT), "chunk": (int, _COUNT)},
+    "sweep": {"b": ("numbers", {}), "seeds": (int, _COUNT)},
+    "published": {"classic": ("numbers", {}), "attenuated": ("numbers", {}), "fading": ("numbers", {})},
 }
-
-
-#: allowed values of the experiment's numbers: (low, high, what), ends included unless named in _OPEN
-_RANGES = {
-    ("filter", "q_scale"): (0.0, 1e6), ("filter", "r_scale"): (0.0, 1e6), ("filter", "b"): (0.0, 1.0),
-    ("filter", "fading_window"): (1, 100_000), ("monte_carlo", "seeds"): (1, 100_000),
-    ("monte_carlo", "chunk"): (1, 100_000), ("sweep", "seeds"): (1, 100_000),
-}
-_OPEN = {("filter", "q_scale"): "lo", ("filter", "r_scale"): "lo", ("filter", "b"): "hi"}
-
-
-def _in_range(v, key):
-    lo, hi = _RANGES[key]
-    side = _OPEN.get(key)
-    ok = (v > lo if side == "lo" else v >= lo) and (v < hi if side == "hi" else v <= hi)
-    return ok and v == v, f"{'(' if side == 'lo' else '['}{lo:g}, {hi:g}{')' if side == 'hi' else ']'}"
 
 
 def load_experiment(path=EXPERIMENT) -> dict:
     """Read and check an S0 experiment TOML: every section and key present, of its type and in its
-    range; ValueError naming the file, the key and the allowed values otherwise."""
+    range; ValueError (:class:`jaxnav._config.ConfigError`) naming the file, the key and the
+    allowed values otherwise."""
     path = pathlib.Path(path)
-    d = load_toml(path)
-    for sec, v in d.items():
-        if sec not in _SCHEMA:
-            raise ValueError(f"{path}: unknown section [{sec}]; expected one of {sorted(_SCHEMA)}")
-        if not isinstance(v, dict):
-            raise ValueError(f"{path}: {sec} must be a section [{sec}], got {v!r}")
-        for k, val in v.items():
-            if k not in _SCHEMA[sec]:
-                raise ValueError(f"{path}: unknown key {sec}.{k}; expected one of {sorted(_SCHEMA[sec])}")
-            typ = _SCHEMA[sec][k]
-            if typ is float and isinstance(val, int) and not isinstance(val, bool):
-                val = float(val)
-                v[k] = val
-            if not isinstance(val, typ) or (typ is int and isinstance(val, bool)):
-                raise ValueError(f"{path}: {sec}.{k} must be {typ.__name__}, got {val!r}")
-            if (sec, k) in _RANGES:
-                ok, rng = _in_range(val, (sec, k))
-                if not ok:
-                    raise ValueError(f"{path}: {sec}.{k} = {val!r} is outside the allowed range {rng}")
-    for sec in _SCHEMA:
-        if sec not in d:
-            raise ValueError(f"{path}: missing section [{sec}]")
-        for k in _SCHEMA[sec]:
-            if k not in d[sec]:
-                raise ValueError(f"{path}: missing key {sec}.{k}")
+    doc = Table(load_toml(path), source=path)
+    d, tables = {}, {}
+    for sec, keys in _SCHEMA.items():
+        t = tables[sec] = doc.table(sec, required=True)
+        d[sec] = {k: t.get(k, kind, **bounds) for k, (kind, bounds) in keys.items()}
+        t.done()
+    doc.done()
     f = d["filter"]
-    if f["n_states"] not in (15, 18):
-        raise ValueError(f"{path}: filter.n_states must be 15 or 18, got {f['n_states']!r}")
     if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < f["n_states"] for i in f["inflate_states"]):
-        raise ValueError(f"{path}: filter.inflate_states must be a list of state indices in [0, {f['n_states'] - 1}], "
-                         f"got {f['inflate_states']!r}")
+        tables["filter"].fail("inflate_states", f"must be a list of state indices in [0, {f['n_states'] - 1}], "
+                                                f"got {f['inflate_states']!r}")
     bs = d["sweep"]["b"]
-    if not bs or not all(isinstance(b, (int, float)) and not isinstance(b, bool) and 0.0 <= b < 1.0 for b in bs):
-        raise ValueError(f"{path}: sweep.b must be a non-empty list of numbers in [0, 1), got {bs!r}")
+    if not bs or not all(0.0 <= b < 1.0 for b in bs):
+        tables["sweep"].fail("b", f"must be a non-empty list of numbers in [0, 1), got {bs!r}")
     for name, vals in d["published"].items():
-        if len(vals) != 6 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in vals):
-            raise ValueError(f"{path}: published.{name} must be 6 numbers (E, N, U position m, velocity m/s), "
-                             f"got {vals!r}")
+        if len(vals) != 6:
+            tables["published"].fail(name, f"must be 6 numbers (E, N, U position m, velocity m/s), got {vals!r}")
     return d
 
 

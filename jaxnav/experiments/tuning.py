@@ -32,171 +32,120 @@ from jaxnav.experiments.s0 import (
     load_experiment,
     s0_metrics,
 )
-from jaxnav.io import load_toml
+from jaxnav._config import Table, load_toml
 from jaxnav.sim import simulate_linear
 
 _log = logging.getLogger(__name__)
 
 #: the shipped sweep/tune configs (``s0_b``, ``cv_noise``)
 CONFIGS = pathlib.Path(__file__).with_name("configs")
-_PROBLEM = {"kind": str, "filter": str, "loss": str, "seeds": int, "seed": int, "duration": float,
-            "experiment": str, "series": int, "epochs": int, "sigma": float, "q": float}
-_TUNE = {"optimizer": str, "learning_rate": float, "steps": int, "mode": str, "landscape": int}
+_POS = dict(lo=0.0, lo_open=True, hi=1e6)
+#: keys of [problem] and [tune]: (kind of :meth:`jaxnav._config.Table.get`, bounds or choices)
+_PROBLEM = {"kind": (str, dict(choices=("s0", "cv"))), "filter": (str, dict(choices=S0_FILTERS)),
+            "loss": (str, dict(choices=S0_LOSSES)), "seeds": (int, dict(lo=1, hi=100_000)),
+            "seed": (int, dict(lo=0, hi=2**32 - 1)), "duration": (float, _POS), "experiment": (str, {}),
+            "series": (int, dict(lo=1, hi=100_000)), "epochs": (int, dict(lo=2, hi=10**6)),
+            "sigma": (float, dict(lo=0.0, lo_open=True, hi=1e4)), "q": (float, _POS)}
 _OPTIMIZERS = ("adam", "sgd", "lbfgs", "lbfgs_wolfe")
 _MODES = ("auto", "forward", "reverse")
-#: allowed ranges (lo, hi, open ends "lo"/"hi"/"") of the problem and tune numbers
-_PROBLEM_RANGE = {"seeds": (1, 100_000, ""), "series": (1, 100_000, ""), "epochs": (2, 10**6, ""),
-                  "seed": (0, 2**32 - 1, ""), "duration": (0.0, 1e6, "lo"), "sigma": (0.0, 1e4, "lo"),
-                  "q": (0.0, 1e6, "lo")}
-_TUNE_RANGE = {"learning_rate": (0.0, 1e6, "lo"), "steps": (1, 10**6, ""), "landscape": (0, 10**5, "")}
-#: allowed values of each tunable parameter (lo, hi, open ends)
-_PARAM_RANGE = {"b": (0.0, 1.0, "hi"), "q_scale": (0.0, 1e6, "lo"), "r_scale": (0.0, 1e6, "lo"),
-                "S": (1.0, 1e6, ""), "rho": (0.0, 1e6, "lo"), "tau": (0.0, 1e6, "lo")}
+_TUNE = {"optimizer": (str, dict(choices=_OPTIMIZERS)), "learning_rate": (float, _POS),
+         "steps": (int, dict(lo=1, hi=10**6)), "mode": (str, dict(choices=_MODES)),
+         "landscape": (int, dict(lo=0, hi=10**5))}
+#: allowed values of each tunable parameter (bounds of :meth:`jaxnav._config.Table.get`)
+_PARAM_RANGE = {"b": dict(lo=0.0, hi=1.0, hi_open=True), "q_scale": _POS, "r_scale": _POS,
+                "S": dict(lo=1.0, hi=1e6), "rho": _POS, "tau": _POS}
 
 
-def _number(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _check_range(path, key, v, rng):
-    """ValueError naming ``key`` unless ``v`` is a finite number inside ``rng`` = (lo, hi, open ends)."""
-    lo, hi, opn = rng
-    ok = _number(v) and v == v and (v > lo if "lo" in opn else v >= lo) and (v < hi if "hi" in opn else v <= hi)
-    if not ok:
-        _err(path, f"{key} = {v!r} is outside the allowed range {'(' if 'lo' in opn else '['}{lo:g}, {hi:g}"
-                   f"{')' if 'hi' in opn else ']'}")
-
-
-def _err(path, msg):
-    raise ValueError(f"{path}: {msg}")
+def _keys(t: Table, schema: dict) -> dict:
+    """The keys of ``schema`` given in table ``t``, checked; unknown keys refused."""
+    out = {k: t.get(k, kind, **bounds) for k, (kind, bounds) in schema.items() if t.has(k)}
+    for k in schema:
+        t.used.add(k)
+    t.done()
+    return out
 
 
 def load_config(spec) -> dict:
-    """Read and check a sweep/tune TOML (a path or a shipped name); errors name the file and key."""
+    """Read and check a sweep/tune TOML (a path or a shipped name); errors name the file and key
+    (:class:`jaxnav._config.ConfigError`, a ValueError)."""
     path = pathlib.Path(spec)
     if not path.exists() and (CONFIGS / f"{spec}.toml").exists():
         path = CONFIGS / f"{spec}.toml"
     if not path.exists():
         raise ValueError(f"{spec}: no such config file (shipped: {sorted(p.stem for p in CONFIGS.glob('*.toml'))})")
-    cfg = load_toml(path)
-    for sec in cfg:
-        if sec not in ("problem", "params", "sweep", "tune"):
-            _err(path, f"unknown section [{sec}]; expected problem, params, sweep, tune")
-    prob = cfg.get("problem") or _err(path, "missing section [problem]")
-    if not isinstance(prob, dict):
-        _err(path, f"problem must be a section [problem], got {prob!r}")
-    for k, v in prob.items():
-        if k not in _PROBLEM:
-            _err(path, f"unknown key problem.{k}; expected one of {sorted(_PROBLEM)}")
-        if _PROBLEM[k] is float and _number(v):
-            prob[k] = float(v)
-        elif not isinstance(prob[k], _PROBLEM[k]) or isinstance(v, bool):
-            _err(path, f"problem.{k} must be {_PROBLEM[k].__name__}, got {v!r}")
-        if k in _PROBLEM_RANGE:
-            _check_range(path, f"problem.{k}", prob[k], _PROBLEM_RANGE[k])
+    doc = Table(load_toml(path), source=path)
+    pt = doc.table("problem", required=True)
+    prob = _keys(pt, _PROBLEM)
+    kind = pt.get("kind", str)
     if "experiment" in prob and not pathlib.Path(prob["experiment"]).is_file():
-        _err(path, f"problem.experiment: {prob['experiment']}: no such file")
-    if prob.get("kind") == "s0":
-        load_experiment(prob.get("experiment") or EXPERIMENT)  # its keys checked now, not after a compile
-    kind = prob.get("kind")
+        pt.fail("experiment", f"= {prob['experiment']}: no such file")
     if kind == "s0":
+        load_experiment(prob.get("experiment") or EXPERIMENT)  # its keys checked now, not after a compile
         prob.setdefault("filter", "attenuated")
         prob.setdefault("loss", "rms")
         prob.setdefault("seeds", 8)
-        if prob["filter"] not in S0_FILTERS:
-            _err(path, f"problem.filter must be one of {S0_FILTERS}, got {prob['filter']!r}")
-        if prob["loss"] not in S0_LOSSES:
-            _err(path, f"problem.loss must be one of {S0_LOSSES}, got {prob['loss']!r}")
         allowed = set(S0_PARAMS[prob["filter"]]) | {"q_scale", "r_scale"} | (
             {"tau"} if prob["filter"] == "fading" else set())
-    elif kind == "cv":
+    else:
         prob.setdefault("loss", "nll")
         prob.setdefault("series", 64)
         prob.setdefault("epochs", 500)
         if prob["loss"] != "nll":
-            _err(path, "problem.loss must be 'nll' for kind = 'cv'")
+            pt.fail("loss", "must be 'nll' for kind = 'cv'")
         allowed = {"q_scale", "r_scale"}
-    else:
-        _err(path, f"problem.kind must be 's0' or 'cv', got {kind!r}")
     prob.setdefault("seed", 0)
-    params = cfg.get("params") or _err(path, "missing section [params.NAME] (at least one parameter)")
-    if not isinstance(params, dict):
-        _err(path, f"params must be sections [params.NAME], got {params!r}")
-    for name, p in params.items():
-        if not isinstance(p, dict):
-            _err(path, f"params.{name} must be a section [params.{name}] with init = ..., got {p!r}")
+    params_t = doc.table("params")
+    if params_t is None or not params_t.data:
+        doc.fail("params", "is required: sections [params.NAME] (at least one parameter)")
+    params = {}
+    for name in params_t.data:
         if name not in allowed:
-            _err(path, f"parameter {name!r} does not apply to this problem; allowed: {sorted(allowed)}")
-        if "init" not in p:
-            _err(path, f"params.{name}.init is missing")
-        unknown = set(p) - {"init", "bijector", "trainable"}
-        if unknown:
-            _err(path, f"unknown keys {sorted(unknown)} in [params.{name}]")
-        p.setdefault("bijector", "unit" if name == "b" else "log")
-        p.setdefault("trainable", True)
-        if not isinstance(p["trainable"], bool):
-            _err(path, f"params.{name}.trainable must be true or false, got {p['trainable']!r}")
+            params_t.fail(name, f"does not apply to this problem; allowed parameters: {sorted(allowed)}")
+        t = params_t.table(name)
+        init = t.get("init", float, **_PARAM_RANGE[name])
+        p = {"init": init, "bijector": t.get("bijector", str, "unit" if name == "b" else "log"),
+             "trainable": t.get("trainable", bool, True)}
+        t.done()
         try:
             tune.bijector(p["bijector"])
         except (ValueError, TypeError) as exc:
-            _err(path, f"params.{name}.bijector: {exc}")
-        _check_range(path, f"params.{name}.init", p["init"], _PARAM_RANGE[name])
-        if p["bijector"] == "unit" and not 0.0 < p["init"] < 1.0:
-            _err(path, f"params.{name}.init = {p['init']!r} must be in (0, 1) for bijector 'unit'")
-        if p["bijector"] == "log" and not p["init"] > 0.0:
-            _err(path, f"params.{name}.init = {p['init']!r} must be > 0 for bijector 'log'")
-    if kind == "s0" and prob["filter"] != "classic":
+            t.fail("bijector", f"{exc}")
+        if p["bijector"] == "unit" and not 0.0 < init < 1.0:
+            t.fail("init", f"= {init!r} must be in (0, 1) for bijector 'unit'")
+        if p["bijector"] == "log" and not init > 0.0:
+            t.fail("init", f"= {init!r} must be > 0 for bijector 'log'")
+        params[name] = p
+    if kind == "s0" and prob["filter"] not in ("classic", "fading"):
         need = S0_PARAMS[prob["filter"]]
-        if prob["filter"] != "fading" and not set(need) <= set(params):
-            _err(path, f"filter {prob['filter']} needs parameter(s) {need}")
-    sw = cfg.setdefault("sweep", {})
-    if not isinstance(sw, dict):
-        _err(path, f"sweep must be a section [sweep], got {sw!r}")
-    for name, ax in sw.items():
+        if not set(need) <= set(params):
+            params_t.fail(None, f"lacks {need}: filter {prob['filter']} needs them")
+    sw_t = doc.table("sweep") or Table({}, "sweep", source=path)
+    sweep = {}
+    for name in sw_t.data:
         if name == "chunk":
-            _check_range(path, "sweep.chunk", ax, (1, 10**6, ""))
-            if not isinstance(ax, int):
-                _err(path, f"sweep.chunk must be an integer, got {ax!r}")
+            sweep["chunk"] = sw_t.get("chunk", int, lo=1, hi=10**6)
             continue
         if name not in params:
-            _err(path, f"sweep axis {name!r} is not a parameter")
-        if not (isinstance(ax, dict) and {"start", "stop", "num"} <= set(ax)):
-            _err(path, f"sweep.{name} must be {{ start = , stop = , num = [, log = true] }}")
-        unknown = set(ax) - {"start", "stop", "num", "log"}
-        if unknown:
-            _err(path, f"unknown keys {sorted(unknown)} in sweep.{name}; expected start, stop, num, log")
-        if not isinstance(ax["num"], int) or isinstance(ax["num"], bool):
-            _err(path, f"sweep.{name}.num must be an integer, got {ax['num']!r}")
-        _check_range(path, f"sweep.{name}.num", ax["num"], (1, 10**6, ""))
-        if not isinstance(ax.get("log", False), bool):
-            _err(path, f"sweep.{name}.log must be true or false, got {ax['log']!r}")
+            sw_t.fail(name, "is not a parameter: a sweep axis needs a [params.NAME] section")
+        t = sw_t.table(name)
+        ax = {"start": t.get("start", float, **_PARAM_RANGE[name]), "stop": t.get("stop", float, **_PARAM_RANGE[name]),
+              "num": t.get("num", int, lo=1, hi=10**6)}
+        if t.has("log"):
+            ax["log"] = t.get("log", bool)
+        t.done()
         for end in ("start", "stop"):
-            _check_range(path, f"sweep.{name}.{end}", ax[end], _PARAM_RANGE[name])
             if ax.get("log") and not ax[end] > 0:
-                _err(path, f"sweep.{name}.{end} = {ax[end]!r} must be > 0 with log = true")
-    tn = cfg.setdefault("tune", {})
-    if not isinstance(tn, dict):
-        _err(path, f"tune must be a section [tune], got {tn!r}")
-    for k, v in tn.items():
-        if k not in _TUNE:
-            _err(path, f"unknown key tune.{k}; expected one of {sorted(_TUNE)}")
-        if _TUNE[k] is float and _number(v):
-            tn[k] = float(v)
-        elif not isinstance(v, _TUNE[k]) or isinstance(v, bool):
-            _err(path, f"tune.{k} must be {_TUNE[k].__name__}, got {v!r}")
-        if k in _TUNE_RANGE:
-            _check_range(path, f"tune.{k}", tn[k], _TUNE_RANGE[k])
-    if tn.get("mode", "auto") not in _MODES:
-        _err(path, f"tune.mode must be one of {_MODES}, got {tn['mode']!r}")
+                t.fail(end, f"= {ax[end]!r} must be > 0 with log = true")
+        sweep[name] = ax
+    tn_t = doc.table("tune") or Table({}, "tune", source=path)
+    tn = _keys(tn_t, _TUNE)
+    doc.done()
     tn.setdefault("optimizer", "adam")
     tn.setdefault("learning_rate", 0.1)
     tn.setdefault("steps", 50)
     tn.setdefault("mode", "auto")
     tn.setdefault("landscape", 0)
-    if tn["optimizer"] not in _OPTIMIZERS:
-        _err(path, f"tune.optimizer must be one of {_OPTIMIZERS}, got {tn['optimizer']!r}")
-    cfg["_path"] = str(path)
-    return cfg
+    return {"problem": prob, "params": params, "sweep": sweep, "tune": tn, "_path": str(path)}
 
 
 class Problem:

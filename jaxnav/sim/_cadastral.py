@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import functools
 import importlib.resources
-import math
 import os
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -24,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxnav import units
-from jaxnav._config import load_toml, loads_toml
+from jaxnav._config import Table, load_toml, loads_toml
 from jaxnav.sim._imu import SensorErrorModel
 from jaxnav.sim._scenario import (
     _ACCEL,
@@ -336,47 +335,41 @@ RANGES = {
 }
 
 
-def _check_range(v, key, where):
-    """``v`` (a number or a list of numbers, config units) inside ``RANGES[key]``; ``where`` names it."""
-    lo, hi = RANGES[key]
-    for x in (v if isinstance(v, list) else [v]):
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-            raise ScenarioError(f"{where} must be a finite number, got {x!r}")
-        if not lo <= x <= hi:
-            raise ScenarioError(f"{where} = {x!r} is outside the plausible range [{lo:g}, {hi:g}]")
+def _plausible(t: Table, key, generic: str):
+    """``key`` of table ``t`` (a number or a list of numbers, config units) inside ``RANGES[generic]``."""
+    if generic in RANGES:
+        t.check_plausible(key, t.data[key], RANGES[generic])
 
 
-def _check_ranges(d: dict):
-    """Every numeric key of a cadastral TOML dict inside :data:`RANGES` (before any conversion)."""
+def _check_ranges(doc: Table):
+    """Every numeric key of a cadastral TOML inside :data:`RANGES` (before any conversion)."""
     for sec in ("survey", "wild", "known_points", "pipeline"):
-        t = d.get(sec, {})
-        if not isinstance(t, dict):
-            raise ScenarioError(f"[{sec}] must be a table")
-        for k, v in t.items():
-            if f"{sec}.{k}" in RANGES:
-                _check_range(v, f"{sec}.{k}", f"{sec}.{k}")
-            elif sec == "pipeline":
-                names = sorted(q.split(".", 1)[1] for q in RANGES if q.startswith("pipeline."))
-                raise ScenarioError(f"pipeline.{k}: unknown field (expected one of {names})")
-    legs = d.get("legs", [])
-    if not isinstance(legs, list) or not all(isinstance(x, dict) for x in legs):
-        raise ScenarioError("[[legs]] must be a list of tables")
-    for i, leg in enumerate(legs):
-        for k, v in leg.items():
-            if f"legs.{k}" in RANGES:
-                _check_range(v, f"legs.{k}", f"legs[{i}].{k}")
-    imu = d.get("imu", {})
-    for g, gd in (imu.items() if isinstance(imu, dict) else ()):
-        for sec, t in (gd.items() if isinstance(gd, dict) else ()):
-            for k, v in (t.items() if isinstance(t, dict) else ()):
-                if f"imu.{sec}.{k}" in RANGES:
-                    _check_range(v, f"imu.{sec}.{k}", f"imu.{g}.{sec}.{k}")
+        t = doc.table(sec) or Table({}, sec, error=ScenarioError)
+        if sec == "pipeline":
+            t.used.update(q.split(".", 1)[1] for q in RANGES if q.startswith("pipeline."))
+            t.done()
+        for k in t.data:
+            _plausible(t, k, f"{sec}.{k}")
+    for leg in doc.tables("legs"):
+        for k in leg.data:
+            _plausible(leg, k, f"legs.{k}")
+    imu = doc.table("imu")
+    for g in (imu.data if imu is not None else ()):
+        gt = imu.table(g)
+        for sec in gt.data:
+            t = gt.table(sec)
+            for k in t.data:
+                _plausible(t, k, f"imu.{sec}.{k}")
 
 
-def _num(v, path):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ScenarioError(f"{path} must be a finite number, got {v!r}")
-    return float(v)
+def _number(t: Table, key, factor=1.0):
+    """A finite number ``key`` of ``t``, or each of a list of them, times ``factor``."""
+    v = t.data[key]
+    t.used.add(key)
+    if isinstance(v, list):
+        t.get(key, "numbers")
+        return tuple(float(a) * factor for a in v)
+    return t.get(key, float) * factor
 
 
 def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
@@ -387,60 +380,59 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
     Raises:
       ScenarioError: naming the offending field.
     """
-    allowed = {"name", "description", "survey", "legs", "imu", "wild", "known_points", "pipeline"}
-    for k in d:
-        if k not in allowed:
-            raise ScenarioError(f"{k}: unknown top-level field (expected one of {sorted(allowed)})")
-    sv = d.get("survey")
-    if not isinstance(sv, dict):
-        raise ScenarioError("[survey] section is required")
-    _check_ranges(d)
+    doc = Table(d, error=ScenarioError)
+    doc.used.update({"name", "description", "survey", "legs", "imu", "wild", "known_points", "pipeline"})
+    doc.done()
+    sv = doc.table("survey", required=True)
+    _check_ranges(doc)
     kw = {}
-    for k, v in sv.items():
+    sv.used.update(_SURVEY_ATTR)
+    sv.used.add("first_name")
+    sv.done()
+    for k in sv.data:
         if k == "first_name":
-            kw["first_name"] = str(v)
-            continue
-        if k not in _SURVEY_ATTR:
-            raise ScenarioError(f"survey.{k}: unknown field (expected one of {sorted(_SURVEY_ATTR)} or first_name)")
-        kw[_SURVEY_ATTR[k]] = _num(v, f"survey.{k}") * dict(_SURVEY)[k]
+            kw["first_name"] = str(sv.data[k])
+        else:
+            kw[_SURVEY_ATTR[k]] = sv.get(k, float) * dict(_SURVEY)[k]
     for req in ("lat", "lon", "h"):
         if req not in kw:
-            raise ScenarioError(f"survey.{[k for k, a in _SURVEY_ATTR.items() if a == req][0]} is required")
+            sv.fail([k for k, a in _SURVEY_ATTR.items() if a == req][0], "is required")
     kw.setdefault("heading", 0.0)
     legs = []
-    for i, ld in enumerate(d.get("legs", [])):
+    for lt in doc.tables("legs"):
+        lt.used.update(_LEG)
+        lt.done()
         lk = {}
-        for k, v in ld.items():
-            if k not in _LEG:
-                raise ScenarioError(f"legs[{i}].{k}: unknown field (expected one of {sorted(_LEG)})")
+        for k in lt.data:
             attr, fac = _LEG[k]
-            lk[attr] = str(v) if fac is None else _num(v, f"legs[{i}].{k}") * fac
+            lk[attr] = str(lt.data[k]) if fac is None else lt.get(k, float) * fac
         for req in ("walk", "kind", "stop"):
             if req not in lk:
-                raise ScenarioError(f"legs[{i}] needs {[k for k, a in _LEG.items() if a[0] == req][0]}")
+                lt.fail([k for k, a in _LEG.items() if a[0] == req][0], "is required")
         legs.append(Leg(**lk))
     kw["legs"] = tuple(legs)
     for sec, table in (("wild", _WILD), ("known_points", _KNOWN)):
-        for k, v in d.get(sec, {}).items():
-            if k not in table:
-                raise ScenarioError(f"{sec}.{k}: unknown field (expected one of {sorted(table)})")
+        t = doc.table(sec) or Table({}, sec, error=ScenarioError)
+        t.used.update(table)
+        t.done()
+        for k in t.data:
             attr, fac = table[k]
             if attr == "sigma_known":
-                vv = v if isinstance(v, list) else [v] * 3
-                kw[attr] = tuple(_num(a, f"{sec}.{k}") for a in vv)
+                v = _number(t, k)
+                kw[attr] = v if isinstance(v, tuple) else (v,) * 3
             else:
-                kw[attr] = _num(v, f"{sec}.{k}") * fac
-    imu = d.get("imu")
-    if not isinstance(imu, dict) or not imu:
+                kw[attr] = t.get(k, float) * fac
+    imu = doc.table("imu")
+    if imu is None or not imu.data:
         raise ScenarioError("[imu.<grade>] sections are required (e.g. [imu.tactical.gyro])")
     out = {}
-    for gname, gd in imu.items():
-        for k in gd:
-            if k not in ("gyro", "accel", "initial_errors"):
-                raise ScenarioError(f"imu.{gname}.{k}: unknown section (gyro, accel, initial_errors)")
-        g = _read(gd.get("gyro", {}), f"imu.{gname}.gyro", _GYRO)
-        a = _read(gd.get("accel", {}), f"imu.{gname}.accel", _ACCEL)
-        ie = _read(gd.get("initial_errors", {}), f"imu.{gname}.initial_errors", _INIT)
+    for gname in imu.data:
+        gt = imu.table(gname)
+        gt.used.update(("gyro", "accel", "initial_errors"))
+        gt.done()
+        g = _read(gt.table("gyro") or Table({}, f"imu.{gname}.gyro", error=ScenarioError), _GYRO)
+        a = _read(gt.table("accel") or Table({}, f"imu.{gname}.accel", error=ScenarioError), _ACCEL)
+        ie = _read(gt.table("initial_errors") or Table({}, f"imu.{gname}.initial_errors", error=ScenarioError), _INIT)
         grade = ImuGrade(name=gname, gyro=SensorErrorModel(**g), accel=SensorErrorModel(**a),
                          initial_errors=InitialErrorConfig(**ie))
         out[gname] = CadastralScenario(grade=grade, **kw)

@@ -24,7 +24,7 @@ from jaxnav import units
 from jaxnav.geodesy import WGS84, meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_mul, rv_to_quat
 from jaxnav.ins.mechanization import NavState
-from jaxnav._config import load_toml, loads_toml
+from jaxnav._config import Table, load_toml, loads_toml
 from jaxnav.sim._gnss import GnssConfig, GnssData, gnss_epochs, simulate_gnss
 from jaxnav.sim._imu import SensorErrorModel, corrupt_increments
 from jaxnav.sim._trajectory import (
@@ -33,7 +33,6 @@ from jaxnav.sim._trajectory import (
     Segment,
     Trajectory,
     TrajectorySpec,
-    _num,
     _vec3,
     generate_trajectory,
     segment_table,
@@ -319,27 +318,23 @@ def _is_num(x):
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
-def _convert(x, path, factor, kind):
+def _convert(t: Table, key, factor, kind):
+    """Field ``key`` of table ``t`` of the given kind, times ``factor`` (edge unit -> SI)."""
     if kind == "str":
-        if not isinstance(x, str):
-            raise ScenarioError(f"{path} must be a string, got {x!r}")
-        return x
+        return t.get(key, str)
     if kind == "bool":
-        if not isinstance(x, bool):
-            raise ScenarioError(f"{path} must be true or false, got {x!r}")
-        return x
+        return t.get(key, bool)
     if kind == "int>=1":
-        if not isinstance(x, int) or isinstance(x, bool) or x < 1:
-            raise ScenarioError(f"{path} must be an integer >= 1, got {x!r}")
-        return x
+        return t.get(key, int, lo=1)
+    x, path = t.data[key], t.key(key)
     if kind.startswith("vec3"):
         if not (_is_num(x) or (isinstance(x, list) and len(x) == 3 and all(_is_num(a) for a in x))):
-            raise ScenarioError(f"{path} must be a number or a list of 3 numbers, got {x!r}")
+            t.fail(key, f"must be a number or a list of 3 numbers, got {x!r}")
         v = _vec3(x, path, nonneg=kind == "vec3>=0", positive=kind == "vec3>0")
         return tuple(a * factor for a in v)
     if kind == "outages":
         if not isinstance(x, list):
-            raise ScenarioError(f"{path} must be a list of [start, end] pairs (s), got {x!r}")
+            t.fail(key, f"must be a list of [start, end] pairs (s), got {x!r}")
         out = []
         for i, o in enumerate(x):
             if not (isinstance(o, list) and len(o) == 2 and all(_is_num(a) for a in o)):
@@ -348,59 +343,45 @@ def _convert(x, path, factor, kind):
                 raise ScenarioError(f"{path}[{i}] must have end > start, got {o!r}")
             out.append((float(o[0]), float(o[1])))
         return tuple(out)
-    if not _is_num(x):
-        raise ScenarioError(f"{path} must be a number, got {x!r}")
-    v = _num(x, path, nonneg=kind in ("num>=0", "prob"), positive=kind == "num>0")
-    if kind == "prob" and v > 1:
-        raise ScenarioError(f"{path} must be in [0, 1], got {x!r}")
-    return v * factor
+    bounds = {"num>=0": dict(lo=0.0), "num>0": dict(lo=0.0, lo_open=True), "prob": dict(lo=0.0, hi=1.0)}
+    return t.get(key, float, **bounds.get(kind, {})) * factor
 
 
-def _read(d, path, schema, required=()):
-    if not isinstance(d, dict):
-        raise ScenarioError(f"{path} must be a table, got {type(d).__name__}")
-    keys = [s[0] for s in schema]
-    for k in d:
-        if k not in keys:
-            raise ScenarioError(f"{path}.{k}: unknown field (expected one of: {', '.join(keys)})")
+def _read(t: Table, schema, required=()):
+    """The fields of ``schema`` given in table ``t``, in SI; unknown fields and missing ``required`` ones refused."""
+    t.used.update(s[0] for s in schema)
+    t.done()
     for k in required:
-        if k not in d:
-            raise ScenarioError(f"{path}.{k} is required")
-    return {attr: _convert(d[k], f"{path}.{k}", fac, kind) for k, attr, fac, kind in schema if k in d}
+        if not t.has(k):
+            t.fail(k, "is required")
+    return {attr: _convert(t, k, fac, kind) for k, attr, fac, kind in schema if t.has(k)}
 
 
 def scenario_from_dict(d: dict, *, validate: bool = True) -> ScenarioConfig:
     """Build a :class:`ScenarioConfig` from a TOML-shaped dict in edge units.
 
     Raises :class:`ScenarioError` (a ``ValueError``) naming the offending field, e.g.
-    ``gyro.markov_tau_s must be > 0``, ``segments[3].dheading_deg is not allowed for kind 'accelerate'``.
+    ``gyro.markov_tau_s = -3.0 must be > 0``, ``segments[3].dheading_deg is not allowed for kind 'accelerate'``.
     """
-    if not isinstance(d, dict):
-        raise ScenarioError(f"scenario must be a table, got {type(d).__name__}")
-    allowed = {s[0] for s in _TOP} | set(_SECTIONS) | {"segments"}
-    for k in d:
-        if k not in allowed:
-            raise ScenarioError(f"{k}: unknown top-level field (expected one of: {', '.join(sorted(allowed))})")
-    top = _read({k: v for k, v in d.items() if k in ("name", "description")}, "scenario", _TOP)
-    sec = {name: _read(d.get(name, {}), name, schema, _REQUIRED.get(name, ()))
-           for name, schema in _SECTIONS.items()}
+    doc = Table(d, error=ScenarioError)
+    doc.used.update([s[0] for s in _TOP] + list(_SECTIONS) + ["segments"])
+    doc.done()
+    top = {attr: doc.get(k, str) for k, attr, _, _ in _TOP if doc.has(k)}
     for name in _REQUIRED:
-        if name not in d:
+        if not doc.has(name):
             raise ScenarioError(f"[{name}] section is required")
-    segs_in = d.get("segments", [])
-    if not isinstance(segs_in, list):
-        raise ScenarioError("segments must be an array of tables ([[segments]])")
+    sec = {name: _read(doc.table(name) or Table({}, name, error=ScenarioError), schema, _REQUIRED.get(name, ()))
+           for name, schema in _SECTIONS.items()}
     segs = []
-    for i, sd in enumerate(segs_in):
-        path = f"segments[{i}]"
-        s = _read(sd, path, _SEGMENT, ("kind", "duration_s"))
+    for st in doc.tables("segments"):
+        s = _read(st, _SEGMENT, ("kind", "duration_s"))
         kind = s["kind"]
         if kind not in SEGMENT_KINDS:
-            raise ScenarioError(f"{path}.kind must be one of {sorted(SEGMENT_KINDS)}, got {kind!r}")
+            st.fail("kind", f"must be one of {sorted(SEGMENT_KINDS)}, got {kind!r}")
         for attr, key in _SEG_FIELD.items():
-            if key in sd and attr not in SEGMENT_KINDS[kind]:
+            if st.has(key) and attr not in SEGMENT_KINDS[kind]:
                 ok = [_SEG_FIELD[a] for a in SEGMENT_KINDS[kind]]
-                raise ScenarioError(f"{path}.{key} is not allowed for kind {kind!r} (allowed: {ok or 'none'})")
+                st.fail(key, f"is not allowed for kind {kind!r} (allowed: {ok or 'none'})")
         segs.append(Segment(**s))
     spec = TrajectorySpec(segments=tuple(segs), **sec["start"])
     t = sec["time"]

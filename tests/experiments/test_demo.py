@@ -86,7 +86,7 @@ def test_experiment_file_errors_name_the_key(tmp_path):
     with pytest.raises(ValueError, match="unknown key filter.q_scal"):
         load_experiment(bad)
     bad.write_text(EXPERIMENT.read_text().replace("seeds = 32", 'seeds = "many"'))
-    with pytest.raises(ValueError, match="monte_carlo.seeds must be int"):
+    with pytest.raises(ValueError, match="monte_carlo.seeds must be an integer"):
         load_experiment(bad)
 
 

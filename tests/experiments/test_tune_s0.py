@@ -155,13 +155,13 @@ def test_sweep_and_tune_cli_write_results_and_figures(tmp_path, kind, capsys):
 def test_config_errors_name_file_and_key(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text('[problem]\nkind = "s0"\nfilter = "attenuated"\n[params.rho]\ninit = 3.0\n')
-    with pytest.raises(ValueError, match=r"bad.toml: parameter 'rho' does not apply"):
+    with pytest.raises(ValueError, match=r"bad.toml: params.rho does not apply"):
         load_config(p)
     p.write_text('[problem]\nkind = "s0"\nloss = "mse"\n[params.b]\ninit = 0.3\n')
     with pytest.raises(ValueError, match=r"bad.toml: problem.loss must be one of"):
         load_config(p)
     p.write_text('[problem]\nkind = "cv"\n[params.q_scale]\ninit = 1.0\n[sweep]\nr_scale = {start=1, stop=2, num=2}\n')
-    with pytest.raises(ValueError, match=r"sweep axis 'r_scale' is not a parameter"):
+    with pytest.raises(ValueError, match=r"sweep.r_scale is not a parameter"):
         load_config(p)
     with pytest.raises(ValueError, match="no such config file"):
         load_config(tmp_path / "missing.toml")
