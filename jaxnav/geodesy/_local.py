@@ -19,7 +19,7 @@ def curvilinear_to_enu(pos, dpos, ellipsoid: Ellipsoid = WGS84):
 
     dE = dlon (R_N + h) cos lat,  dN = dlat (R_M + h),  dU = dh,
     with the meridian and prime-vertical radii R_M, R_N taken at pos (the D matrix of the INS
-    position measurement, :func:`jaxnav.ins.measurement_model`).
+    position measurement, :func:`jaxnav.ins.predict_gnss_pv`).
     The neglected terms are of relative size |d| / R (about 1.6e-7 per metre of offset).
 
     Args:

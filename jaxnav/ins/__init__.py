@@ -26,7 +26,6 @@ from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU 
     mounting_from_rpy_deg,
     mounting_to_rpy,
     sensor_to_body,
-    sensor_to_body_from_upstream,
 )
 from jaxnav.ins.noise import NOISE_GRADES, ImuNoise, imu_noise_from_datasheet, imu_noise_to_datasheet, noise_preset
 from jaxnav.ins.standstill import (
@@ -84,7 +83,7 @@ from jaxnav.ins.integration import (
     SensorBiases,
     chi2_quantile,
     loosely_coupled,
-    measurement_model,
+    predict_gnss_pv,
     segment_imu,
     smooth,
 )
@@ -117,10 +116,10 @@ __all__ = [
     "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",
     "ERROR_MODEL_15", "ERROR_MODEL_18", "ErrorModel", "error_model_for", "gravity_minus_coriolis",
     "LC_OUTPUTS", "LCEpochs", "LCParams", "LCResult", "PVMeasurements", "SensorBiases", "integration",
-    "loosely_coupled", "measurement_model", "segment_imu", "smooth",
+    "loosely_coupled", "predict_gnss_pv", "segment_imu", "smooth",
     "EarthParams", "ImuSample", "MechParams", "MechResult", "MechState", "NavState", "attitude",
     "check_imu", "earth", "earth_params", "mech_step", "mechanize", "mechanize_backward",
-    "normal_gravity", "position_rate", "Alignment", "coarse_alignment", "sensor_to_body_from_upstream",
+    "normal_gravity", "position_rate", "Alignment", "coarse_alignment",
     # inputs: mounting, alignment, time offset, standstill, noise grades
     "HEADING_METHODS", "C_RFU_FRD", "mounting_from_dcm", "mounting_from_groves", "mounting_from_groves_deg",
     "mounting_from_rpy", "mounting_from_rpy_deg", "mounting_to_rpy", "sensor_to_body",

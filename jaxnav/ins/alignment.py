@@ -4,9 +4,6 @@
 mean specific force, gyro bias from the mean rate, heading by gyrocompassing where the gyros are
 good enough, else from the GNSS course once moving, or a given heading / attitude. The returned
 :class:`Alignment` records which heading method was used and its predicted accuracy.
-
-The IMU mounting rotations live in :mod:`jaxnav.ins.mounting`; :func:`sensor_to_body_from_upstream`
-is re-exported here under its old (deprecated) name.
 """
 
 from __future__ import annotations
@@ -21,7 +18,6 @@ import numpy as np
 from jaxnav.geodesy import WGS84, curvilinear_to_enu
 from jaxnav.ins.attitude import euler_to_dcm, euler_to_quat, heading_to_yaw, quat_mul, quat_to_dcm, rv_to_quat
 from jaxnav.ins.mechanization import NavState
-from jaxnav.ins.mounting import sensor_to_body_from_upstream  # noqa: F401  (deprecated name, re-exported)
 
 #: heading methods :func:`coarse_alignment` reports
 HEADING_METHODS = ("gnss_course", "gyrocompass", "given")

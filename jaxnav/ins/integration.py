@@ -73,7 +73,7 @@ from jaxnav.ins.mechanization import (
     _TwoSpeed,
     mech_step,
 )
-from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows, measurement_model  # noqa: F401
+from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows, predict_gnss_pv  # noqa: F401
 
 
 #: per-epoch outputs that :func:`loosely_coupled` can save

@@ -22,7 +22,7 @@ Built-in models (Groves, *Principles of GNSS, Inertial, and Multisensor Integrat
 Systems*, 2nd ed., 2013, sections 14.2 (loosely coupled GNSS), 15.3 (ZUPT, ZARU, NHC, odometer),
 and heading aiding):
 
-* :data:`GNSS_PV`: antenna position (ENU m) and velocity with lever arm (:func:`jaxnav.ins.measurement_model`).
+* :data:`GNSS_PV`: antenna position (ENU m) and velocity with lever arm (:func:`jaxnav.ins.predict_gnss_pv`).
 * :data:`ZUPT`: v_n = 0 at the IMU;  z = v_n, H[dV] = I.
 * :data:`ZARU`: mean corrected angular rate over the interval's standstill samples = Earth rate;
   z = w_mean_b - C_bn^T w_ie_n, H[eps_b] = I (and eps_r), H[phi] = C_bn^T [w_ie_n x],
@@ -132,7 +132,7 @@ def _block(idx_slice, n, rows, block, dtype):
 # --------------------------------------------------------------------------------------- GNSS
 
 
-def measurement_model(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid=WGS84):
+def predict_gnss_pv(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid=WGS84):
     """Predicted antenna position/velocity and H (6 x n) of the PV measurement.
 
     z = [D (pos_ins_ant - pos_meas) (ENU m), v_ins_ant - v_meas (ENU m/s)] with
@@ -140,6 +140,10 @@ def measurement_model(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid=W
     (C_computed = (I - [phi x]) C_true): dz_pos = D dpos + [(C_bn l) x] phi,
     dz_vel = dV + [(C_bn (w x l)) x] phi.
 
+    Args:
+      nav: :class:`NavState` of the IMU.  w_ib_b: (3,) body angular rate, rad/s.
+      lever_b: (3,) antenna minus IMU in the body frame, m.  n_states: static error-state size n.
+      ellipsoid: the reference ellipsoid.
     Returns:
       (pos_ant (3,), v_ant (3,), H (6, n)).
     """
@@ -173,11 +177,11 @@ def _gnss_pv(ctx: MeasContext, data: GnssData, params, idx, n, ellipsoid=WGS84) 
     """GNSS antenna position and velocity with lever arm (S0 eqs. (4)-(19); Groves 14.2.1).
 
     The INS is extrapolated by ``ctx.dtx`` to the epoch time; z = [D (pos_ant - pos_meas) (ENU m),
-    v_ant - v_meas (m/s)], H from :func:`jaxnav.ins.measurement_model`; R = params (R scale) * data.R.
+    v_ant - v_meas (m/s)], H from :func:`jaxnav.ins.predict_gnss_pv`; R = params (R scale) * data.R.
     """
     nav = ctx.nav
     nav_x = nav._replace(pos=nav.pos + ctx.dtx * position_rate(nav.pos, nav.v_n, ellipsoid))
-    pos_ant, v_ant, H = measurement_model(nav_x, ctx.w_ib_b, data.lever, n, ellipsoid)
+    pos_ant, v_ant, H = predict_gnss_pv(nav_x, ctx.w_ib_b, data.lever, n, ellipsoid)
     z = jnp.concatenate([curvilinear_to_enu(nav_x.pos, pos_ant - data.pos, ellipsoid), v_ant - data.vel])
     return MeasRows(z=z, H=H, R=params * data.R, mask=data.mask)
 
@@ -434,5 +438,5 @@ def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active
 
 
 __all__ = ["Aid", "GNSS_PV", "GnssData", "HEADING", "HeadingParams", "MeasContext", "MeasRows", "MeasurementModel",
-           "NHC", "ODOMETER", "VehicleParams", "ZARU", "ZUPT", "ZaruParams", "ZuptParams", "heading", "measurement_model",
+           "NHC", "ODOMETER", "VehicleParams", "ZARU", "ZUPT", "ZaruParams", "ZuptParams", "heading", "predict_gnss_pv",
            "nhc", "odometer", "zaru", "zupt"]

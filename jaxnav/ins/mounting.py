@@ -25,7 +25,6 @@ Conventions (stated once, tested in ``tests/ins/test_mounting.py``):
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
@@ -144,16 +143,3 @@ def sensor_to_body(C_vs) -> np.ndarray:
     C = C_RFU_FRD @ mounting_from_dcm(C_vs)
     C[np.abs(C) < 1e-12] = 0.0
     return C
-
-
-def sensor_to_body_from_upstream(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
-    """Deprecated name of ``sensor_to_body(mounting_from_groves_deg(roll_deg, pitch_deg, yaw_deg))``.
-
-    C_bs (sensor -> jaxnav right-forward-up body) from a Groves-style (upstream ``imu_misalign``)
-    IMU orientation in degrees. An earlier version used Rz Ry Rx on the angles (the transpose of
-    what upstream applies: 13.6 deg off for (180, -6.79, 185.35) deg); the walk set's (180, 0, -90)
-    is symmetric and gives diag(-1, -1, 1) either way.
-    """
-    warnings.warn("sensor_to_body_from_upstream is deprecated: use "
-                  "sensor_to_body(mounting_from_groves_deg(roll, pitch, yaw))", DeprecationWarning, stacklevel=2)
-    return sensor_to_body(mounting_from_groves_deg(roll_deg, pitch_deg, yaw_deg))

@@ -413,8 +413,7 @@ def imu_increments(imu: ImuLog, C_bs):
     Args:
       imu: :class:`ImuLog` (or any record with ``t`` (N,) s, ``w_b`` (N, 3) rad/s and ``f_b``
         (N, 3) m/s^2 in the sensor axes).
-      C_bs: (3, 3) sensor -> body rotation (e.g. from
-        :func:`jaxnav.ins.sensor_to_body_from_upstream`).
+      C_bs: (3, 3) sensor -> body rotation (e.g. from :func:`jaxnav.ins.sensor_to_body`).
     Returns:
       (t (N,) s, dtheta (N, 3) rad, dv (N, 3) m/s, dt (N,) s), increments in the body frame.
     """

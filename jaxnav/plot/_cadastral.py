@@ -152,7 +152,7 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
         ax.set_xlim(t[0], t[-1])
     ax.grid(alpha=0.3, which="major")
     ax.set_title(title, fontsize=10)
-    # outside the data: the last stop is no longer hidden under the legend
+    # outside the data, so that the legend hides no stop
     ax.legend(handles, labels, fontsize=8, loc="upper left", bbox_to_anchor=(1.08 if extra is not None else 1.01, 1.0),
               borderaxespad=0.0)
     fig.tight_layout()

@@ -2,7 +2,6 @@
 the RFU body rotation; independent references built with scipy's Rotation."""
 
 import math
-import warnings
 
 import numpy as np
 import pytest
@@ -47,9 +46,7 @@ def test_the_issue_case_is_13_6_deg_off():
     old = Rotation.from_euler("ZYX", [185.35, -6.79, 180.0], degrees=True).as_matrix()
     new = ins.mounting_from_groves_deg(180.0, -6.79, 185.35)
     assert abs(_angle_deg(old, new) - 13.6) < 0.05
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        C_bs = ins.sensor_to_body_from_upstream(180.0, -6.79, 185.35)
+    C_bs = ins.sensor_to_body(ins.mounting_from_groves_deg(180.0, -6.79, 185.35))
     np.testing.assert_allclose(C_bs, ins.C_RFU_FRD @ new, atol=1e-12)
     assert _angle_deg(C_bs, ins.C_RFU_FRD @ old) > 13.5
 
@@ -58,14 +55,9 @@ def test_walk_mounting_unchanged():
     """The walk set's (180, 0, -90) is symmetric: diag(-1, -1, 1), as the walk pipeline uses today."""
     from jaxnav.experiments import WALK_SENSOR_TO_BODY
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        old_name = ins.sensor_to_body_from_upstream(180.0, 0.0, -90.0)
     new = ins.sensor_to_body(ins.mounting_from_groves_deg(180.0, 0.0, -90.0))
-    for C in (old_name, new, ins.sensor_to_body(ins.mounting_from_rpy_deg(180.0, 0.0, -90.0)), WALK_SENSOR_TO_BODY):
+    for C in (new, ins.sensor_to_body(ins.mounting_from_rpy_deg(180.0, 0.0, -90.0)), WALK_SENSOR_TO_BODY):
         np.testing.assert_array_equal(C, np.diag([-1.0, -1.0, 1.0]))
-    with pytest.warns(DeprecationWarning, match="mounting_from_groves_deg"):
-        ins.sensor_to_body_from_upstream(180.0, 0.0, -90.0)
 
 
 def test_sensor_to_body_maps_vehicle_axes_to_rfu():
