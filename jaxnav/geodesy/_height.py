@@ -16,7 +16,7 @@ observation beyond its 6 parameters), otherwise the plane (at least 3 points).
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -40,12 +40,12 @@ class HeightAnomalyModel(NamedTuple):
       dof: N - p.
     """
 
-    coef: Any
-    center: Any
+    coef: jax.Array
+    center: jax.Array
     scale: Any
-    residuals: Any = None
+    residuals: Optional[jax.Array] = None
     sigma0: Any = None
-    cov: Any = None
+    cov: Optional[jax.Array] = None
     dof: int = 0
 
     @property

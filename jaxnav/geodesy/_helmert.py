@@ -41,9 +41,9 @@ class Helmert7(NamedTuple):
       s: scalar scale deviation (unitless; 1 ppm = 1e-6), the factor is 1 + s.
     """
 
-    t: Any
-    r: Any
-    s: Any
+    t: jax.Array
+    r: jax.Array
+    s: jax.Array
 
 
 class Similarity2D(NamedTuple):
@@ -54,7 +54,7 @@ class Similarity2D(NamedTuple):
       m: scale deviation (unitless), the factor is 1 + m.
     """
 
-    t: Any
+    t: jax.Array
     theta: Any
     m: Any
 
@@ -74,12 +74,12 @@ class HelmertFit(NamedTuple):
     """
 
     params: Any
-    residuals: Any
+    residuals: jax.Array
     sigma0: Any
-    cov: Any
-    std: Any
+    cov: jax.Array
+    std: jax.Array
     dof: int
-    rms: Any
+    rms: jax.Array
 
 
 def _check_convention(convention):

@@ -51,12 +51,12 @@ class DailySeries(NamedTuple):
     station: str
     path: str
     fmt: str
-    t: Any
-    year: Any
-    enu: Any
-    cov: Any
-    origin: Any
-    llh: Any
+    t: np.ndarray
+    year: np.ndarray
+    enu: np.ndarray
+    cov: np.ndarray
+    origin: np.ndarray
+    llh: np.ndarray
     reference_velocity: Optional[Any] = None
     reference_velocity_sigma: Optional[Any] = None
     n_masked: int = 0

@@ -36,7 +36,7 @@ import datetime as _dt
 import math
 import pathlib
 import struct
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -82,11 +82,11 @@ class ImuLog(NamedTuple):
     """
 
     path: str
-    t: Any
-    f_b: Any
-    w_b: Any
-    counter: Any
-    lineno: Any
+    t: np.ndarray
+    f_b: np.ndarray
+    w_b: np.ndarray
+    counter: np.ndarray
+    lineno: np.ndarray
     n_skipped_lines: int
     skipped: tuple
     timing: str
@@ -110,8 +110,8 @@ class TimeTags(NamedTuple):
     version: str
     tick_f: int
     t_start: float
-    tick: Any
-    fpos: Any
+    tick: np.ndarray
+    fpos: np.ndarray
     fpos_bytes: int
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import pathlib
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -40,17 +40,17 @@ class PosSolution(NamedTuple):
     """
 
     path: str
-    t: Any
-    lat: Any
-    lon: Any
-    h: Any
-    q: Any
-    ns: Any
-    cov_enu: Any
-    age: Any
-    ratio: Any
-    v_enu: Any
-    vcov_enu: Any
+    t: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    q: np.ndarray
+    ns: np.ndarray
+    cov_enu: np.ndarray
+    age: np.ndarray
+    ratio: np.ndarray
+    v_enu: np.ndarray
+    vcov_enu: np.ndarray
     n_masked: int = 0
 
 

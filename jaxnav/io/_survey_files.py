@@ -55,16 +55,16 @@ class EpochLog(NamedTuple):
     """
 
     path: str
-    point: Any
-    line: Any
-    t: Any
-    x: Any
-    y: Any
-    h: Any
-    lat: Any
-    lon: Any
-    H: Any
-    sigma: Any
+    point: np.ndarray
+    line: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    h: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    H: np.ndarray
+    sigma: np.ndarray
     n_masked: int = 0
 
 
@@ -87,13 +87,13 @@ class ControlPoints(NamedTuple):
     """
 
     path: str
-    point: Any
-    lat: Any
-    lon: Any
-    H: Any
-    x: Any
-    y: Any
-    h: Any
+    point: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    H: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    h: np.ndarray
 
 
 def _rows(path, required, alternatives=None):

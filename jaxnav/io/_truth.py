@@ -15,7 +15,7 @@ Values are converted to SI here (rad, m, m/s; velocity east-north-up). Malformed
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,11 +37,11 @@ class TruthTrajectory(NamedTuple):
     """
 
     path: str
-    t: Any
-    pos: Any
-    v_enu: Any
-    rpy: Any
-    lineno: Any
+    t: np.ndarray
+    pos: np.ndarray
+    v_enu: np.ndarray
+    rpy: np.ndarray
+    lineno: np.ndarray
 
 
 _TIME = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}

@@ -44,19 +44,19 @@ class StationVelocity(NamedTuple):
     station: str
     n: int
     span_years: float
-    velocity: Any
-    sigma: Any
-    sigma_ar1: Any
-    ls_velocity: Any
-    ls_sigma: Any
+    velocity: jax.Array
+    sigma: jax.Array
+    sigma_ar1: jax.Array
+    ls_velocity: jax.Array
+    ls_sigma: jax.Array
     reference_velocity: Optional[Any]
     reference_sigma: Optional[Any]
-    accel_psd: Any
-    t: Any
-    smoothed_velocity: Any
-    smoothed_sigma: Any
-    loglik_grid: Any
-    residuals: Any
+    accel_psd: jax.Array
+    t: jax.Array
+    smoothed_velocity: jax.Array
+    smoothed_sigma: jax.Array
+    loglik_grid: jax.Array
+    residuals: jax.Array
 
 
 def weighted_slope(t, y, sigma):

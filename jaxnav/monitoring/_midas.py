@@ -7,7 +7,7 @@ year apart (so annual terms cancel), pairs straddling a step left out, the slope
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,11 +26,11 @@ class MidasVelocity(NamedTuple):
       slope_sigma: (C,) 1.4826 x MAD of the kept slopes about ``velocity``.
     """
 
-    velocity: Any
-    sigma: Any
-    pairs: Any
-    pairs_kept: Any
-    slope_sigma: Any
+    velocity: np.ndarray
+    sigma: np.ndarray
+    pairs: np.ndarray
+    pairs_kept: np.ndarray
+    slope_sigma: np.ndarray
 
 
 def midas_pairs(t_years, steps=(), *, tolerance: float = 0.001):

@@ -134,16 +134,16 @@ class Forecast(NamedTuple):
       status: int32 flags.
     """
 
-    forecast: Any
-    filtered: Any
-    velocity: Any
-    velocity_sigma: Any
-    forecast_sigma: Any
-    deviation: Any
-    factors: Any
+    forecast: jax.Array
+    filtered: jax.Array
+    velocity: jax.Array
+    velocity_sigma: jax.Array
+    forecast_sigma: jax.Array
+    deviation: jax.Array
+    factors: jax.Array
     noise: Any
-    loglik: Any
-    status: Any
+    loglik: jax.Array
+    status: jax.Array
 
 
 def forecast(model: LinearGaussian, x0, P0, zs, *, estimator=None, inflation=None, mask=None,

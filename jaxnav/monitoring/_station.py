@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import datetime as _dt
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -61,11 +61,11 @@ class Screening(NamedTuple):
         limits at the median formal sigma (each value's limit scales with its own sigma).
     """
 
-    keep: Any
+    keep: jax.Array
     records: list
     counts: dict
-    sigma_limit_m: Any
-    residual_limit_m: Any
+    sigma_limit_m: jax.Array
+    residual_limit_m: jax.Array
 
 
 def _running_median(day, r, window_days):
@@ -183,9 +183,9 @@ class DailyGrid(NamedTuple):
       n_days: T without padding.  duplicates: file epochs that fell on an already used day (dropped).
     """
 
-    t: Any
-    y: Any
-    valid: Any
+    t: jax.Array
+    y: jax.Array
+    valid: jax.Array
     n_days: int
     duplicates: int
 
@@ -268,35 +268,35 @@ class StationFit(NamedTuple):
     station: str
     path: str
     fmt: str
-    velocity: Any
-    velocity_sigma: Any
-    velocity_sigma_white: Any
-    offset: Any
+    velocity: jax.Array
+    velocity_sigma: jax.Array
+    velocity_sigma_white: jax.Array
+    offset: jax.Array
     t_ref: float
-    annual_amplitude: Any
+    annual_amplitude: jax.Array
     annual_amplitude_sigma: Any
     annual_phase: Any
-    semiannual_amplitude: Any
+    semiannual_amplitude: jax.Array
     semiannual_amplitude_sigma: Any
     semiannual_phase: Any
-    steps: Any
-    step_sizes: Any
-    step_sigmas: Any
+    steps: jax.Array
+    step_sizes: jax.Array
+    step_sigmas: jax.Array
     step_sources: tuple
-    white_sigma: Any
-    kappa: Any
-    powerlaw_amplitude: Any
-    random_walk: Any
+    white_sigma: jax.Array
+    kappa: jax.Array
+    powerlaw_amplitude: jax.Array
+    random_walk: jax.Array
     noise: Any
     model: str
     warnings: list
     screening: Screening
     grid: DailyGrid
     design_names: tuple
-    A: Any
+    A: jax.Array
     gm_max_rel_error: float
-    step_gains: Any = ()
-    residual_trend: Any = None
+    step_gains: jax.Array = ()
+    residual_trend: Optional[jax.Array] = None
     poly_degree: int = 1
     postseismic: tuple = ()
 
@@ -317,10 +317,10 @@ class PostseismicTerm(NamedTuple):
     form: str
     tau: float
     estimated: bool
-    tau_range: Any
+    tau_range: jax.Array
     tau_at_edge: bool
-    amplitude: Any
-    amplitude_sigma: Any
+    amplitude: jax.Array
+    amplitude_sigma: jax.Array
 
 
 #: time constant a post-seismic term to be estimated starts from (screening, first noise fit), s

@@ -7,7 +7,9 @@ epochs) are left out of every statistic.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
+
+import jax
 
 import jax.numpy as jnp
 
@@ -38,13 +40,13 @@ class PeriodStatistics(NamedTuple):
       count: (P, S) epochs with a deviation.
     """
 
-    max_abs: Any
-    mean_abs: Any
-    share_under: Any
-    rms: Any
-    m_P: Any
-    m_H: Any
-    count: Any
+    max_abs: jax.Array
+    mean_abs: jax.Array
+    share_under: jax.Array
+    rms: jax.Array
+    m_P: jax.Array
+    m_H: jax.Array
+    count: jax.Array
 
 
 def period_statistics(dev, period: int, thresholds=S1_THRESHOLDS_XYH) -> PeriodStatistics:
@@ -86,9 +88,9 @@ class InternalPrecision(NamedTuple):
       height: (P, S) sigma of the third axis, m.
     """
 
-    sigma: Any
-    plane: Any
-    height: Any
+    sigma: jax.Array
+    plane: jax.Array
+    height: jax.Array
 
 
 def internal_precision(values, period: int) -> InternalPrecision:

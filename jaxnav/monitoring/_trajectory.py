@@ -65,10 +65,10 @@ class Design(NamedTuple):
       steps: (S,) step epochs, s since J2000.
     """
 
-    A: Any
+    A: jax.Array
     names: tuple
     t_ref: float
-    steps: Any
+    steps: jax.Array
 
 
 #: forms of a post-seismic transient (:func:`postseismic_column`)
@@ -175,20 +175,20 @@ class NoiseFit(NamedTuple):
       residuals: (T,) y - A beta (NaN where masked), m.
     """
 
-    theta: Any
-    lo: Any
-    hi: Any
-    at_lower: Any
-    at_upper: Any
-    free: Any
-    theta_sigma: Any
-    beta: Any
-    beta_cov: Any
+    theta: jax.Array
+    lo: jax.Array
+    hi: jax.Array
+    at_lower: jax.Array
+    at_upper: jax.Array
+    free: jax.Array
+    theta_sigma: jax.Array
+    beta: jax.Array
+    beta_cov: jax.Array
     loglik: Any
     loglik_reml: Any
     grad_norm: Any
     iterations: Any
-    residuals: Any
+    residuals: jax.Array
 
 
 def _noise_arrays(theta, r, W, d_grid, estimate_kappa: bool, random_walk: bool):
@@ -364,9 +364,9 @@ class NoiseSpec(NamedTuple):
       kappa: the fixed spectral index (None when estimated).  max_rel_error: of the approximation.
     """
 
-    r: Any
-    W: Any
-    d_grid: Any
+    r: jax.Array
+    W: jax.Array
+    d_grid: jax.Array
     kappa: Any
     max_rel_error: float
 

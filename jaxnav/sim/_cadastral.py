@@ -186,10 +186,10 @@ class SurveyTruth(NamedTuple):
     """
 
     stops: Any
-    t_imu: Any
-    pos: Any
-    stop_pos: Any
-    targets: Any
+    t_imu: jax.Array
+    pos: jax.Array
+    stop_pos: jax.Array
+    targets: jax.Array
 
 
 def survey_truth(scn: CadastralScenario) -> SurveyTruth:
@@ -246,13 +246,13 @@ class CadastralRun(NamedTuple):
       gyro_bias, accel_bias: (3,) the run's sensor random constants (rad/s, m/s^2).
     """
 
-    dtheta: Any
-    dv: Any
+    dtheta: jax.Array
+    dv: jax.Array
     nav0: Any
-    known_pos: Any
+    known_pos: jax.Array
     n_wild: Any
-    gyro_bias: Any
-    accel_bias: Any
+    gyro_bias: jax.Array
+    accel_bias: jax.Array
 
 
 def simulate_cadastral(scn: CadastralScenario, key, truth: SurveyTruth | None = None) -> CadastralRun:
@@ -502,10 +502,10 @@ class CalibrationRecord(NamedTuple):
       n_wild: wild values injected.
     """
 
-    gyro: Any
-    accel: Any
-    gyro_coloured: Any
-    accel_coloured: Any
+    gyro: jax.Array
+    accel: jax.Array
+    gyro_coloured: jax.Array
+    accel_coloured: jax.Array
     n_wild: Any
 
 

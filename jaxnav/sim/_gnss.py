@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -114,15 +114,15 @@ class GnssData(NamedTuple):
       vel_error: (M, 3) injected ENU velocity error, m/s.
     """
 
-    t: Any
-    index: Any
-    pos: Any
-    enu: Any
-    vel: Any
-    valid: Any
-    outlier: Any
-    pos_error: Any
-    vel_error: Any
+    t: jax.Array
+    index: jax.Array
+    pos: jax.Array
+    enu: jax.Array
+    vel: jax.Array
+    valid: jax.Array
+    outlier: jax.Array
+    pos_error: jax.Array
+    vel_error: jax.Array
 
 
 def simulate_gnss(key, cfg: GnssConfig, truth: Trajectory, epochs: GnssEpochs, origin,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -63,10 +63,10 @@ class SensorDraw(NamedTuple):
       white: (N, 3) white-noise increments (rad or m/s), or None.
     """
 
-    bias: Any
-    markov: Any
-    scale: Any
-    white: Any
+    bias: jax.Array
+    markov: Optional[jax.Array]
+    scale: Optional[jax.Array]
+    white: Optional[jax.Array]
 
 
 def _any(v):

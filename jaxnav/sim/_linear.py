@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -54,11 +54,11 @@ class CVScenario(NamedTuple):
       change: (T,) bool, epochs inside the change of dynamics.
     """
 
-    t: Any
-    x_true: Any
-    zs: Any
-    accel: Any
-    change: Any
+    t: jax.Array
+    x_true: jax.Array
+    zs: jax.Array
+    accel: jax.Array
+    change: jax.Array
 
 
 def simulate_cv_scenario(key, *, T: int = 600, dt=1.0, sigma=0.003, accel_std=1e-5,

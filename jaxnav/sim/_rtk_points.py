@@ -24,7 +24,7 @@ All draws come from one explicit PRNG key; shapes are static ((P, max_epochs) pa
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -93,27 +93,27 @@ class RtkPointsSim(NamedTuple):
       control_xy: (C, 2) reference-grid coordinates, m.  control_h: (C,) levelled normal heights, m.
     """
 
-    t: Any
-    mask: Any
-    n: Any
-    lat: Any
-    lon: Any
-    H: Any
-    sigma: Any
-    xy_terminal: Any
-    h_terminal: Any
-    true_lat: Any
-    true_lon: Any
-    true_H: Any
-    true_h: Any
-    true_xy: Any
-    true_zeta: Any
-    h_level: Any
-    control_lat: Any
-    control_lon: Any
-    control_H: Any
-    control_xy: Any
-    control_h: Any
+    t: jax.Array
+    mask: jax.Array
+    n: jax.Array
+    lat: jax.Array
+    lon: jax.Array
+    H: jax.Array
+    sigma: jax.Array
+    xy_terminal: jax.Array
+    h_terminal: jax.Array
+    true_lat: jax.Array
+    true_lon: jax.Array
+    true_H: jax.Array
+    true_h: jax.Array
+    true_xy: jax.Array
+    true_zeta: jax.Array
+    h_level: jax.Array
+    control_lat: jax.Array
+    control_lon: jax.Array
+    control_H: jax.Array
+    control_xy: jax.Array
+    control_h: jax.Array
 
 
 def true_height_anomaly(cfg: RtkPointsConfig, dx, dy):

@@ -15,7 +15,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -119,11 +119,11 @@ class ImuData(NamedTuple):
       dtheta_ideal, dv_ideal: (N, 3) error-free increments (the same arrays as the truth's).
     """
 
-    dt: Any
-    dtheta: Any
-    dv: Any
-    dtheta_ideal: Any
-    dv_ideal: Any
+    dt: jax.Array
+    dtheta: jax.Array
+    dv: jax.Array
+    dtheta_ideal: jax.Array
+    dv_ideal: jax.Array
 
 
 class SensorErrors(NamedTuple):
@@ -137,12 +137,12 @@ class SensorErrors(NamedTuple):
       accel_scale: (3,) or None.
     """
 
-    gyro_bias: Any
-    gyro_markov: Any
-    gyro_scale: Any
-    accel_bias: Any
-    accel_markov: Any
-    accel_scale: Any
+    gyro_bias: jax.Array
+    gyro_markov: jax.Array
+    gyro_scale: Optional[jax.Array]
+    accel_bias: jax.Array
+    accel_markov: Optional[jax.Array]
+    accel_scale: Optional[jax.Array]
 
 
 class InitialErrorDraw(NamedTuple):

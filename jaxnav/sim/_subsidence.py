@@ -15,7 +15,7 @@ common to all stations.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -39,16 +39,16 @@ class SubsidenceConfig(NamedTuple):
       tau_common: scalar correlation time of the common-mode noise, s.
     """
 
-    w_max: Any
-    rate: Any
-    onset: Any
-    horizontal: Any
-    v0: Any
-    sigma_white: Any
-    sigma_corr: Any
-    tau_corr: Any
-    sigma_common: Any
-    tau_common: Any
+    w_max: jax.Array
+    rate: jax.Array
+    onset: jax.Array
+    horizontal: jax.Array
+    v0: jax.Array
+    sigma_white: jax.Array
+    sigma_corr: jax.Array
+    tau_corr: jax.Array
+    sigma_common: jax.Array
+    tau_common: jax.Array
 
 
 def subsidence_config(n_stations: int = 2, *, w_max=40 * MM, time_constant=600.0, onset=900.0,
@@ -96,11 +96,11 @@ class SubsidenceSim(NamedTuple):
       noise: (T, S, 3) total measurement error, m.
     """
 
-    t: Any
-    pos: Any
-    vel: Any
-    zs: Any
-    noise: Any
+    t: jax.Array
+    pos: jax.Array
+    vel: jax.Array
+    zs: jax.Array
+    noise: jax.Array
 
 
 def _ar1(key, T, shape, dt, sigma, tau):

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -273,11 +273,11 @@ def segment_table(spec: TrajectorySpec, dt: float, duration: float | None = None
 class Kinematics(NamedTuple):
     """Closed-form kinematic quantities at given times (all (..., k))."""
 
-    euler: Any  # (..., 3) [pitch, roll, yaw], rad
-    v_n: Any  # (..., 3) ENU velocity, m/s
-    a_n: Any  # (..., 3) dv_n/dt, m/s^2
-    w_nb_b: Any  # (..., 3) body rate relative to n, in b, rad/s
-    a_pulse: Any  # (..., 3) nav-frame pulse acceleration, m/s^2
+    euler: jax.Array  # (..., 3) [pitch, roll, yaw], rad
+    v_n: jax.Array  # (..., 3) ENU velocity, m/s
+    a_n: jax.Array  # (..., 3) dv_n/dt, m/s^2
+    w_nb_b: jax.Array  # (..., 3) body rate relative to n, in b, rad/s
+    a_pulse: jax.Array  # (..., 3) nav-frame pulse acceleration, m/s^2
 
 
 def kinematics(start, rate, tau) -> Kinematics:
@@ -325,17 +325,17 @@ class Trajectory(NamedTuple):
       segment: (N,) int32 index of the config segment each interval belongs to (-1: fill-up).
     """
 
-    t: Any
-    dt: Any
-    euler: Any
-    q_bn: Any
-    v_n: Any
-    pos: Any
-    a_n: Any
-    dtheta: Any
-    dv: Any
-    dv_unsensed: Any
-    segment: Any
+    t: jax.Array
+    dt: jax.Array
+    euler: jax.Array
+    q_bn: jax.Array
+    v_n: jax.Array
+    pos: jax.Array
+    a_n: jax.Array
+    dtheta: jax.Array
+    dv: jax.Array
+    dv_unsensed: Optional[jax.Array]
+    segment: jax.Array
 
 
 _GL_C = (0.5 - math.sqrt(15.0) / 10.0, 0.5, 0.5 + math.sqrt(15.0) / 10.0)

@@ -15,7 +15,7 @@ variance R: the filter separates the correlated error process from the white noi
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -38,14 +38,14 @@ class ARFit(NamedTuple):
       n_eff: () number of equations (N - p for least squares, N for Yule-Walker).
     """
 
-    phi: Any
-    sigma2: Any
-    se: Any
-    cov: Any
-    mean: Any
-    aic: Any
-    bic: Any
-    n_eff: Any
+    phi: jax.Array
+    sigma2: jax.Array
+    se: jax.Array
+    cov: jax.Array
+    mean: jax.Array
+    aic: jax.Array
+    bic: jax.Array
+    n_eff: jax.Array
 
 
 def autocovariance(x, max_lag: int):
@@ -137,9 +137,9 @@ class OrderSelection(NamedTuple):
 
     order: int
     fit: ARFit
-    orders: Any
-    aic: Any
-    bic: Any
+    orders: jax.Array
+    aic: jax.Array
+    bic: jax.Array
     criterion: str
 
 
@@ -235,9 +235,9 @@ class ARKalmanResult(NamedTuple):
       variance: (N,) posterior variance of x_k.
     """
 
-    error: Any
-    noise: Any
-    variance: Any
+    error: jax.Array
+    noise: jax.Array
+    variance: jax.Array
 
 
 def white_noise_variance(y):

@@ -56,9 +56,9 @@ class OutlierResult(NamedTuple):
     """
 
     clean: Any
-    flags: Any
-    scale: Any
-    n_rejected: Any
+    flags: jax.Array
+    scale: jax.Array
+    n_rejected: jax.Array
 
 
 @partial(jax.jit, static_argnames=("half_window", "block"))
@@ -252,11 +252,11 @@ class PreprocessResult(NamedTuple):
       gyro_flags, accel_flags: (N, 3) bool wild values replaced.  n_rejected: int total.
     """
 
-    dtheta: Any
-    dv: Any
-    gyro_flags: Any
-    accel_flags: Any
-    n_rejected: Any
+    dtheta: jax.Array
+    dv: jax.Array
+    gyro_flags: jax.Array
+    accel_flags: jax.Array
+    n_rejected: jax.Array
 
 
 @partial(jax.jit, static_argnames=("lowpass", "block"))

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+import jax
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -37,11 +39,11 @@ class StopList(NamedTuple):
       name: tuple of K point names.
     """
 
-    t_start: Any
-    t_end: Any
-    kind: Any
-    pos: Any
-    sigma: Any
+    t_start: jax.Array
+    t_end: jax.Array
+    kind: jax.Array
+    pos: jax.Array
+    sigma: jax.Array
     name: tuple
 
 
@@ -101,11 +103,11 @@ class DataClasses(NamedTuple):
       next_known: (K,) int, first known-coordinate stop after each stop (-1 if none).
     """
 
-    sample_class: Any
-    stop_of_sample: Any
-    class3: Any
-    prev_known: Any
-    next_known: Any
+    sample_class: jax.Array
+    stop_of_sample: jax.Array
+    class3: jax.Array
+    prev_known: jax.Array
+    next_known: jax.Array
 
 
 def classify(stops: StopList, t_imu) -> DataClasses:

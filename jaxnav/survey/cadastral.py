@@ -71,9 +71,9 @@ class CadastralParams(NamedTuple):
       pre: :class:`jaxnav.survey.PreprocessParams`.
     """
 
-    P0: Any
-    Qc: Any
-    tau_markov: Any
+    P0: jax.Array
+    Qc: jax.Array
+    tau_markov: jax.Array
     zupt_sigma: Any = 0.005
     pre: Any = PreprocessParams()
 
@@ -99,28 +99,28 @@ class SurveyPlan(NamedTuple):
     """
 
     stops: StopList
-    t_imu: Any
+    t_imu: jax.Array
     dt: float
-    t_meas: Any
-    meas_stop: Any
-    meas_mask: Any
-    sample_epoch: Any
-    targets: Any
-    class3: Any
-    fwd_reset: Any
-    bwd_reset: Any
-    known: Any
-    known_epoch_f: Any
-    known_epoch_b: Any
-    arrival: Any
-    departure: Any
-    arr_epoch: Any
-    dep_epoch: Any
-    has_next: Any
-    stop_epochs: Any
+    t_meas: jax.Array
+    meas_stop: jax.Array
+    meas_mask: jax.Array
+    sample_epoch: jax.Array
+    targets: jax.Array
+    class3: jax.Array
+    fwd_reset: jax.Array
+    bwd_reset: jax.Array
+    known: jax.Array
+    known_epoch_f: jax.Array
+    known_epoch_b: jax.Array
+    arrival: jax.Array
+    departure: jax.Array
+    arr_epoch: jax.Array
+    dep_epoch: jax.Array
+    has_next: jax.Array
+    stop_epochs: jax.Array
     stop_epoch_w: Any
-    fwd_epoch_reset: Any
-    bwd_epoch_reset: Any
+    fwd_epoch_reset: jax.Array
+    bwd_epoch_reset: jax.Array
 
 
 def plan_survey(stops: StopList, t_imu, *, meas_rate_hz: float = 1.0, margin_s: float = 0.5) -> SurveyPlan:
@@ -362,15 +362,15 @@ class SurveyOutput(NamedTuple):
     """
 
     targets: Any
-    sigma_forward: Any
-    sigma_backward: Any
-    weight_forward: Any
-    backward: Any
+    sigma_forward: jax.Array
+    sigma_backward: jax.Array
+    weight_forward: jax.Array
+    backward: jax.Array
     biases: Any
     nav_smoothed: Any
     nav_filtered: Any
     n_rejected: Any
-    status: Any
+    status: jax.Array
     route: Any = None
 
 

@@ -57,14 +57,14 @@ class RtkSeries(NamedTuple):
       xy_terminal: (P, T, 2) the terminal's own local plane coordinates, m (NaN if unknown).
     """
 
-    t: Any
-    lat: Any
-    lon: Any
-    H: Any
-    sigma: Any
-    mask: Any
-    h_terminal: Any
-    xy_terminal: Any
+    t: jax.Array
+    lat: jax.Array
+    lon: jax.Array
+    H: jax.Array
+    sigma: jax.Array
+    mask: jax.Array
+    h_terminal: jax.Array
+    xy_terminal: jax.Array
 
 
 class InitialValues(NamedTuple):
@@ -76,9 +76,9 @@ class InitialValues(NamedTuple):
       dt: mean sampling interval, s.  n: number of valid epochs.
     """
 
-    x0: Any
-    P0: Any
-    D_omega: Any
+    x0: jax.Array
+    P0: jax.Array
+    D_omega: jax.Array
     dt: Any
     n: Any
 
@@ -106,22 +106,22 @@ class RtkResult(NamedTuple):
       status: (P,) filter status flags.
     """
 
-    n: Any
-    xyh: Any
-    precision: Any
-    H: Any
-    raw_xyh: Any
-    raw_precision: Any
-    formal_precision: Any
-    terminal_xyh: Any
-    terminal_precision: Any
-    epochs: Any
-    raw_epochs: Any
-    gk: Any
+    n: jax.Array
+    xyh: jax.Array
+    precision: jax.Array
+    H: jax.Array
+    raw_xyh: jax.Array
+    raw_precision: jax.Array
+    formal_precision: jax.Array
+    terminal_xyh: jax.Array
+    terminal_precision: jax.Array
+    epochs: jax.Array
+    raw_epochs: jax.Array
+    gk: jax.Array
     init: Any
-    n_skipped: Any
-    n_nonfinite: Any
-    status: Any
+    n_skipped: jax.Array
+    n_nonfinite: jax.Array
+    status: jax.Array
 
 
 def initial_values(t, z, sigma, mask) -> InitialValues:
@@ -374,14 +374,14 @@ class LevellingComparison(NamedTuple):
       share_within: (K,) the same as a fraction.
     """
 
-    diff: Any
+    diff: jax.Array
     max_abs: Any
     mean: Any
     std: Any
     rms: Any
-    thresholds: Any
-    count_within: Any
-    share_within: Any
+    thresholds: jax.Array
+    count_within: jax.Array
+    share_within: jax.Array
 
 
 def compare_levelling(h, h_level, thresholds=(0.007, 0.010, 0.015)) -> LevellingComparison:
@@ -505,10 +505,10 @@ class MotionSegments(NamedTuple):
       n_segments: number of static segments.
     """
 
-    segment: Any
-    moving: Any
-    short: Any
-    speed: Any
+    segment: jax.Array
+    moving: jax.Array
+    short: jax.Array
+    speed: jax.Array
     n_segments: int
 
 
@@ -642,12 +642,12 @@ class PointSigmas(NamedTuple):
       method: name of the method (``sigma_method`` in the outputs).
     """
 
-    sigma: Any
-    sigma_naive: Any
-    n_eff: Any
-    lag1: Any
-    segment_epochs: Any
-    segment_points: Any
+    sigma: jax.Array
+    sigma_naive: jax.Array
+    n_eff: jax.Array
+    lag1: jax.Array
+    segment_epochs: jax.Array
+    segment_points: jax.Array
     method: str
 
 

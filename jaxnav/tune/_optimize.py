@@ -28,10 +28,10 @@ class TuneResult(NamedTuple):
     """
 
     params: Any
-    loss: Any
-    losses: Any
+    loss: jax.Array
+    losses: jax.Array
     path: Any
-    grad_norm: Any
+    grad_norm: jax.Array
     n_evals: Any
     wall_time_s: float = 0.0
     compile_time_s: float = 0.0
