@@ -622,9 +622,9 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
     """
     path = find_config(spec)
     d = load_toml(path)
-    for sec in d:
-        if sec not in _SECTIONS:
-            raise ConfigError(f"{path}: unknown section [{sec}]; expected some of {list(_SECTIONS)}")
+    doc = Table(d, source=path, error=ConfigError)
+    doc.used.update(_SECTIONS)
+    doc.done()
     for sec in ("imu", "gnss"):
         if sec not in d:
             raise ConfigError(f"{path}: missing section [{sec}]")
