@@ -235,6 +235,12 @@ class Table:
             return pathlib.Path(os.path.abspath(p))
         return pathlib.Path(self.source).parent / p
 
+    def expect(self, keys):
+        """Declare ``keys`` as this table's keys and refuse any other now (a misspelt key is then
+        named as unknown before its correct spelling is reported missing)."""
+        self.used.update(keys)
+        self.done()
+
     def done(self):
         """Refuse the keys not read, each by its dotted name ("unknown key gnss.rate; expected some
         of [...]"; "unknown section [x]" for the document root)."""

@@ -623,8 +623,7 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
     path = find_config(spec)
     d = load_toml(path)
     doc = Table(d, source=path, error=ConfigError)
-    doc.used.update(_SECTIONS)
-    doc.done()
+    doc.expect(_SECTIONS)
     for sec in ("imu", "gnss"):
         if sec not in d:
             raise ConfigError(f"{path}: missing section [{sec}]")

@@ -56,12 +56,12 @@ def load_experiment(path=EXPERIMENT) -> dict:
     allowed values otherwise."""
     path = pathlib.Path(path)
     doc = Table(load_toml(path), source=path)
+    doc.expect(_SCHEMA)
     d, tables = {}, {}
     for sec, keys in _SCHEMA.items():
         t = tables[sec] = doc.table(sec, required=True)
+        t.expect(keys)
         d[sec] = {k: t.get(k, kind, **bounds) for k, (kind, bounds) in keys.items()}
-        t.done()
-    doc.done()
     f = d["filter"]
     if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < f["n_states"] for i in f["inflate_states"]):
         tables["filter"].fail("inflate_states", f"must be a list of state indices in [0, {f['n_states'] - 1}], "

@@ -58,11 +58,8 @@ _PARAM_RANGE = {"b": dict(lo=0.0, hi=1.0, hi_open=True), "q_scale": _POS, "r_sca
 
 def _keys(t: Table, schema: dict) -> dict:
     """The keys of ``schema`` given in table ``t``, checked; unknown keys refused."""
-    out = {k: t.get(k, kind, **bounds) for k, (kind, bounds) in schema.items() if t.has(k)}
-    for k in schema:
-        t.used.add(k)
-    t.done()
-    return out
+    t.expect(schema)
+    return {k: t.get(k, kind, **bounds) for k, (kind, bounds) in schema.items() if t.has(k)}
 
 
 def load_config(spec) -> dict:
@@ -74,6 +71,7 @@ def load_config(spec) -> dict:
     if not path.exists():
         raise ValueError(f"{spec}: no such config file (shipped: {sorted(p.stem for p in CONFIGS.glob('*.toml'))})")
     doc = Table(load_toml(path), source=path)
+    doc.expect(("problem", "params", "sweep", "tune"))
     pt = doc.table("problem", required=True)
     prob = _keys(pt, _PROBLEM)
     kind = pt.get("kind", str)
@@ -102,10 +100,10 @@ def load_config(spec) -> dict:
         if name not in allowed:
             params_t.fail(name, f"does not apply to this problem; allowed parameters: {sorted(allowed)}")
         t = params_t.table(name)
+        t.expect(("init", "bijector", "trainable"))
         init = t.get("init", float, **_PARAM_RANGE[name])
         p = {"init": init, "bijector": t.get("bijector", str, "unit" if name == "b" else "log"),
              "trainable": t.get("trainable", bool, True)}
-        t.done()
         try:
             tune.bijector(p["bijector"])
         except (ValueError, TypeError) as exc:
@@ -128,18 +126,17 @@ def load_config(spec) -> dict:
         if name not in params:
             sw_t.fail(name, "is not a parameter: a sweep axis needs a [params.NAME] section")
         t = sw_t.table(name)
+        t.expect(("start", "stop", "num", "log"))
         ax = {"start": t.get("start", float, **_PARAM_RANGE[name]), "stop": t.get("stop", float, **_PARAM_RANGE[name]),
               "num": t.get("num", int, lo=1, hi=10**6)}
         if t.has("log"):
             ax["log"] = t.get("log", bool)
-        t.done()
         for end in ("start", "stop"):
             if ax.get("log") and not ax[end] > 0:
                 t.fail(end, f"= {ax[end]!r} must be > 0 with log = true")
         sweep[name] = ax
     tn_t = doc.table("tune") or Table({}, "tune", source=path)
     tn = _keys(tn_t, _TUNE)
-    doc.done()
     tn.setdefault("optimizer", "adam")
     tn.setdefault("learning_rate", 0.1)
     tn.setdefault("steps", 50)

@@ -346,8 +346,7 @@ def _check_ranges(doc: Table):
     for sec in ("survey", "wild", "known_points", "pipeline"):
         t = doc.table(sec) or Table({}, sec, error=ScenarioError)
         if sec == "pipeline":
-            t.used.update(q.split(".", 1)[1] for q in RANGES if q.startswith("pipeline."))
-            t.done()
+            t.expect(q.split(".", 1)[1] for q in RANGES if q.startswith("pipeline."))
         for k in t.data:
             _plausible(t, k, f"{sec}.{k}")
     for leg in doc.tables("legs"):
@@ -381,14 +380,11 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
       ScenarioError: naming the offending field.
     """
     doc = Table(d, error=ScenarioError)
-    doc.used.update({"name", "description", "survey", "legs", "imu", "wild", "known_points", "pipeline"})
-    doc.done()
+    doc.expect(("name", "description", "survey", "legs", "imu", "wild", "known_points", "pipeline"))
     sv = doc.table("survey", required=True)
     _check_ranges(doc)
     kw = {}
-    sv.used.update(_SURVEY_ATTR)
-    sv.used.add("first_name")
-    sv.done()
+    sv.expect([*_SURVEY_ATTR, "first_name"])
     for k in sv.data:
         if k == "first_name":
             kw["first_name"] = str(sv.data[k])
@@ -400,8 +396,7 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
     kw.setdefault("heading", 0.0)
     legs = []
     for lt in doc.tables("legs"):
-        lt.used.update(_LEG)
-        lt.done()
+        lt.expect(_LEG)
         lk = {}
         for k in lt.data:
             attr, fac = _LEG[k]
@@ -413,8 +408,7 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
     kw["legs"] = tuple(legs)
     for sec, table in (("wild", _WILD), ("known_points", _KNOWN)):
         t = doc.table(sec) or Table({}, sec, error=ScenarioError)
-        t.used.update(table)
-        t.done()
+        t.expect(table)
         for k in t.data:
             attr, fac = table[k]
             if attr == "sigma_known":
@@ -428,8 +422,7 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
     out = {}
     for gname in imu.data:
         gt = imu.table(gname)
-        gt.used.update(("gyro", "accel", "initial_errors"))
-        gt.done()
+        gt.expect(("gyro", "accel", "initial_errors"))
         g = _read(gt.table("gyro") or Table({}, f"imu.{gname}.gyro", error=ScenarioError), _GYRO)
         a = _read(gt.table("accel") or Table({}, f"imu.{gname}.accel", error=ScenarioError), _ACCEL)
         ie = _read(gt.table("initial_errors") or Table({}, f"imu.{gname}.initial_errors", error=ScenarioError), _INIT)

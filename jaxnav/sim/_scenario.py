@@ -349,8 +349,7 @@ def _convert(t: Table, key, factor, kind):
 
 def _read(t: Table, schema, required=()):
     """The fields of ``schema`` given in table ``t``, in SI; unknown fields and missing ``required`` ones refused."""
-    t.used.update(s[0] for s in schema)
-    t.done()
+    t.expect(s[0] for s in schema)
     for k in required:
         if not t.has(k):
             t.fail(k, "is required")
@@ -364,8 +363,7 @@ def scenario_from_dict(d: dict, *, validate: bool = True) -> ScenarioConfig:
     ``gyro.markov_tau_s = -3.0 must be > 0``, ``segments[3].dheading_deg is not allowed for kind 'accelerate'``.
     """
     doc = Table(d, error=ScenarioError)
-    doc.used.update([s[0] for s in _TOP] + list(_SECTIONS) + ["segments"])
-    doc.done()
+    doc.expect([s[0] for s in _TOP] + list(_SECTIONS) + ["segments"])
     top = {attr: doc.get(k, str) for k, attr, _, _ in _TOP if doc.has(k)}
     for name in _REQUIRED:
         if not doc.has(name):
