@@ -5,7 +5,7 @@ The data (``rtk_pos_matrtklib/kinematic`` of the shared data sets): ``rover_1Hz_
 epochs of a 20-minute drive, 142 fixed and 389 float, with gaps of up to 56 s) and
 ``reference_1Hz.pos`` (the reference trajectory at every second). Everything here composes public
 calls: :func:`jaxnav.io.read_pos`, :func:`jaxnav.geodesy.geodetic_to_enu`, the nonlinear filters
-and smoothers and the plug-ins of :mod:`jaxnav.filters`, :func:`jaxnav.plot.plot_ct_drive`.
+and smoothers and the plug-ins of :mod:`jaxnav.filters`, :func:`jaxnav.experiments.figures.plot_ct_drive`.
 
 The model (state east, north m, speed m/s, heading rad from east counter-clockwise, turn rate
 rad/s; 1 s steps on a 1 s grid, epochs without a solution are NaN rows that the filters mask):
@@ -253,7 +253,7 @@ def run_ct_drive(folder, out: Optional[str] = None, *, kinds=FILTERS, plugins=PL
         "figure": None,
     }
     if out is not None:
-        from jaxnav.plot import plot_ct_drive
+        from jaxnav.experiments.figures import plot_ct_drive
         outdir = pathlib.Path(out)
         outdir.mkdir(parents=True, exist_ok=True)
         result["figure"] = outdir / "ct_drive.png"
