@@ -40,6 +40,7 @@ from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
                        read_kfgins_odometer, read_pos, read_rtklib_imu)
 from jaxnav.ins.error_model import ERROR_MODEL_15
+from jaxnav.ins import interpolate_on_samples, nearest_samples
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 
 
@@ -101,40 +102,19 @@ def read_odometer(cfg: InsConfig):
 def heading_on_imu(cfg: InsConfig, t_imu):
     """The ``[heading]`` CSV at the IMU samples: (heading (N,) rad, sigma (N,) rad), NaN where no reading.
 
-    Each reading goes to the IMU sample nearest its time (GNSS time scale); readings outside the IMU span or
-    farther than one sample interval from every sample are dropped.
+    Each reading goes to the IMU sample nearest its time (GNSS time scale, :func:`jaxnav.ins.nearest_samples`);
+    readings outside the IMU span or farther than one sample interval from every sample are dropped.
     """
     h = cfg.heading
     d = _csv(cfg, "heading", lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter))
     t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * 604800.0
     t_imu = np.asarray(t_imu, float)
     hd, sg = np.full(t_imu.size, np.nan), np.full(t_imu.size, np.nan)
-    j = np.clip(np.searchsorted(t_imu, t), 1, t_imu.size - 1)
-    j = np.where(np.abs(t_imu[j - 1] - t) < np.abs(t_imu[j] - t), j - 1, j)
-    dt = float(np.median(np.diff(t_imu)))
-    ok = np.abs(t_imu[j] - t) <= dt
+    j, ok = nearest_samples(t, t_imu)
     hd[j[ok]] = d["heading"][ok]
     if d["sigma"] is not None:
         sg[j[ok]] = d["sigma"][ok]
     return hd, sg
-
-
-def speed_on_imu(t_odo, speed, t_imu, *, max_gap_factor: float = 3.0):
-    """Wheel speed (N,) m/s at the IMU sample times ``t_imu`` (N,): linear between the two readings around
-    each sample, NaN outside the readings' span, across a gap longer than ``max_gap_factor`` times the
-    median reading interval, or next to a missing (NaN) reading. Readings at the IMU tags are taken as they are."""
-    t_odo, speed, t_imu = (np.asarray(a, float) for a in (t_odo, speed, t_imu))
-    ok = np.isfinite(speed) & np.isfinite(t_odo)
-    out = np.full(t_imu.shape, np.nan)
-    if ok.sum() < 2:
-        return out
-    med = float(np.median(np.diff(t_odo))) if t_odo.size > 1 else 0.0
-    to, so = t_odo[ok], speed[ok]
-    j = np.clip(np.searchsorted(to, t_imu, side="right"), 1, to.size - 1)
-    gap = to[j] - to[j - 1]
-    valid = (t_imu >= to[0]) & (t_imu <= to[-1]) & (gap <= max_gap_factor * med + 1e-9)
-    out[valid] = np.interp(t_imu[valid], to, so)
-    return out
 
 
 def _floored(c, floor):
@@ -424,7 +404,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     odo = None
     if cfg.odometer is not None:
         t_odo, sp = read_odometer(cfg)
-        odo = speed_on_imu(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
+        odo = interpolate_on_samples(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
         if not np.isfinite(odo).any():
             raise ConfigError(f"{cfg.path}: odometer: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s "
                               f"(readings [{t_odo[0]:.3f}, {t_odo[-1]:.3f}] s before the time offset): check the "

@@ -28,6 +28,7 @@ from jaxnav.ins.evaluation import (  # GNSS outage protocol and sigmas of error 
     training_windows,
 )
 from jaxnav.ins.likelihood import horizontal_fix_nll
+from jaxnav.ins.resample import interpolate_on_samples, nearest_samples
 from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
 from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU body)
     C_RFU_FRD,
@@ -159,5 +160,5 @@ __all__ += [
     "OutageScores", "attitude_sigmas", "horizontal_sigma", "in_windows", "outage_windows", "position_cov_enu",
     "position_sigmas_enu", "score_outages", "training_windows", "horizontal_fix_nll",
     "LikelihoodOffset", "clock_drift", "likelihood_time_offset", "offset_search_epochs", "parabola_peak",
-    "CheckedStandstill", "gnss_checked_standstill",
+    "CheckedStandstill", "gnss_checked_standstill", "interpolate_on_samples", "nearest_samples",
 ]
