@@ -29,8 +29,9 @@ import numpy as np
 from jaxnav.experiments.ins_config import ConfigError, InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (OutageScores, attitude_sigmas, clock_drift, estimate_time_offset, horizontal_fix_nll,
-                        horizontal_sigma, in_windows, likelihood_time_offset, offset_search_epochs, outage_windows,
-                        position_cov_enu, score_outages, trajectory_errors, training_windows)
+                        horizontal_sigma, in_windows, interpolate_on_samples, likelihood_time_offset, nearest_samples,
+                        offset_search_epochs, outage_windows, position_cov_enu, score_outages, trajectory_errors,
+                        training_windows)
 from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, coarse_alignment, gnss_checked_standstill,
                         gnss_speed_test, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
@@ -40,7 +41,6 @@ from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
                        read_kfgins_odometer, read_pos, read_rtklib_imu)
 from jaxnav.ins.error_model import ERROR_MODEL_15
-from jaxnav.ins import interpolate_on_samples, nearest_samples
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 
 
