@@ -23,7 +23,9 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
 * :mod:`~jaxnav.experiments.ct_drive`: a coordinated-turn model on the real 1 Hz RTK car drive,
   EKF/UKF x classic/fading/IGG-III against the reference: :func:`run_ct_drive`.
 * :mod:`~jaxnav.experiments.walk`: the walk set as the shipped ``walk_0827`` config (``jaxnav walk``):
-  :func:`run_walk`, :func:`frame_check`.
+  :func:`run_walk`, :func:`frame_check`, the set's reader :func:`load_walk`.
+* :mod:`~jaxnav.experiments.figures`: figures of single experiments (``plot_s0``, ``plot_walk``,
+  ``plot_filter_family``, ``plot_ct_drive``).
 """
 
 from jaxnav.experiments.filter_family import format_filter_family, run_filter_family
@@ -62,10 +64,9 @@ from jaxnav.experiments.s3 import (ar_identification, detector_params_for, forma
                                    preprocessing_check, run_cadastral, survey_monte_carlo, walk_detection)
 from jaxnav.experiments.ins_config import InsConfig, load_ins_config
 from jaxnav.experiments.ins_output import format_ins, process
-from jaxnav.experiments.ins_run import (InsRun, OutageScores, gnss_measurements, outage_windows, prepare, run_ins,
-                                        score_outages, tune_noise)
-from jaxnav.experiments.walk import (WALK_LEVER_RFU, WALK_SENSOR_TO_BODY, format_walk, frame_check, run_walk,
-                                     walk_config, write_walk_scores)
+from jaxnav.experiments.ins_run import InsRun, gnss_measurements, prepare, run_ins, tune_noise
+from jaxnav.experiments.walk import (WALK_LEVER_RFU, WALK_SENSOR_TO_BODY, WalkData, format_walk, frame_check,
+                                     load_walk, run_walk, walk_config, write_walk_scores)
 
 __all__ = [
     "CONFIGS", "EXPERIMENT", "FILTERS", "Problem", "S0Setup", "S0_FILTERS", "S0_LOSSES", "S0_PARAMS", "S1Settings",
@@ -79,8 +80,8 @@ __all__ += [
     "format_rtk", "run_rtk", "write_simulated_survey",
     "ar_identification", "detector_params_for", "format_cadastral", "grade_params", "preprocessing_check",
     "run_cadastral", "survey_monte_carlo", "walk_detection",
-    "WALK_LEVER_RFU", "WALK_SENSOR_TO_BODY", "OutageScores", "format_walk", "frame_check",
-    "outage_windows", "run_walk", "walk_config", "write_walk_scores",
+    "WALK_LEVER_RFU", "WALK_SENSOR_TO_BODY", "WalkData", "format_walk", "frame_check", "load_walk",
+    "run_walk", "walk_config", "write_walk_scores",
     "InsConfig", "InsRun", "format_ins", "gnss_measurements", "load_ins_config", "prepare", "process", "run_ins",
-    "score_outages", "tune_noise",
+    "tune_noise",
 ]

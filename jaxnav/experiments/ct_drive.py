@@ -5,10 +5,11 @@ The data (``rtk_pos_matrtklib/kinematic`` of the shared data sets): ``rover_1Hz_
 epochs of a 20-minute drive, 142 fixed and 389 float, with gaps of up to 56 s) and
 ``reference_1Hz.pos`` (the reference trajectory at every second). Everything here composes public
 calls: :func:`jaxnav.io.read_pos`, :func:`jaxnav.geodesy.geodetic_to_enu`, the nonlinear filters
-and smoothers and the plug-ins of :mod:`jaxnav.filters`, :func:`jaxnav.plot.plot_ct_drive`.
+and smoothers and the plug-ins of :mod:`jaxnav.filters`, :func:`jaxnav.experiments.figures.plot_ct_drive`.
 
-The model (state east, north m, speed m/s, heading rad from east counter-clockwise, turn rate
-rad/s; 1 s steps on a 1 s grid, epochs without a solution are NaN rows that the filters mask):
+The model (:func:`jaxnav.filters.coordinated_turn`: state east, north m, speed m/s, heading rad from
+east counter-clockwise, turn rate rad/s; 1 s steps on a 1 s grid, epochs without a solution are NaN
+rows that the filters mask):
 
     e' = e + v cos(th) dt,  n' = n + v sin(th) dt,  v' = v,  th' = th + om dt,  om' = om,
 
@@ -88,30 +89,9 @@ def load_drive(folder) -> Drive:
 DT = 1.0  # s, the grid step
 
 
-def ct_transition(x, t):
-    """Coordinated-turn transition (n = 5): [e, n, v, th, om] -> one grid step (DT = 1 s) ahead (m, m/s, rad, rad/s)."""
-    e, n, v, th, om = x
-    return jnp.stack([e + v * jnp.cos(th) * DT, n + v * jnp.sin(th) * DT, v, th + om * DT, om])
-
-
-def position(x, t):
-    """Measurement: the east, north position (m) of the state (2,)."""
-    return x[:2]
-
-
 def ct_model(R, *, accel_std=1.0, turn_std=0.1, pos_std=0.1) -> jf.NonlinearGaussian:
-    """The coordinated-turn :class:`~jaxnav.filters.NonlinearGaussian` with position measurements.
-
-    Q = diag(pos_std^2, pos_std^2, (accel_std dt)^2, (turn_std dt^2 / 2)^2, (turn_std dt)^2).
-
-    Args:
-      R: (2, 2) or (T, 2, 2) measurement covariance, m^2.
-      accel_std: along-track acceleration std, m/s^2.  turn_std: turn-rate change std, rad/s^2.
-      pos_std: position process-noise std per step, m (unmodelled lateral motion).
-    """
-    dt = DT
-    q = jnp.array([pos_std**2, pos_std**2, (accel_std * dt) ** 2, (turn_std * dt**2 / 2) ** 2, (turn_std * dt) ** 2])
-    return jf.NonlinearGaussian(ct_transition, position, jnp.diag(q), jnp.asarray(R))
+    """:func:`jaxnav.filters.coordinated_turn` on the drive's 1 s grid; R (2, 2) or (T, 2, 2) m^2."""
+    return jf.coordinated_turn(DT, R, accel_std=accel_std, turn_std=turn_std, pos_std=pos_std)
 
 
 def measurement_cov(drive: Drive, sigma_floor=0.1):
@@ -253,7 +233,7 @@ def run_ct_drive(folder, out: Optional[str] = None, *, kinds=FILTERS, plugins=PL
         "figure": None,
     }
     if out is not None:
-        from jaxnav.plot import plot_ct_drive
+        from jaxnav.experiments.figures import plot_ct_drive
         outdir = pathlib.Path(out)
         outdir.mkdir(parents=True, exist_ok=True)
         result["figure"] = outdir / "ct_drive.png"

@@ -99,7 +99,7 @@ def run_filter_family(out="out/demo", seeds=64, epochs=1200, b=0.254, progress=T
 
     fig_path = outdir / "filter_family.png"
     if writer:
-        from jaxnav.plot import plot_filter_family
+        from jaxnav.experiments.figures import plot_filter_family
 
         plot_filter_family({k: {kk: v[0] for kk, v in r.items()} for k, r in res.items()}, np.asarray(sc0.t),
                            (i0, i1), fig_path, b=b)

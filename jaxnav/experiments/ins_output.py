@@ -7,148 +7,70 @@ roll, pitch, heading (clockwise from north), deg. Sigmas are the solution's own 
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 import pathlib
 
 import jax
 import numpy as np
 
-from jaxnav.experiments.ins_run import InsRun, position_sigmas_enu
+from jaxnav.experiments.ins_run import InsRun, run_error_model
+from jaxnav.ins import position_sigmas_enu
 from jaxnav.ins.attitude import quat_to_euler
-from jaxnav.io import GPS_EPOCH
+from jaxnav.io import NavSolution, Track, write_geojson, write_kml, write_pos, write_trajectory_csv
 
-#: trajectory CSV columns with their units (the header says the same)
-TRAJECTORY_COLUMNS = (
-    ("gpst_s", "s"), ("gpst_iso", "GPST"), ("lat_deg", "deg"), ("lon_deg", "deg"), ("h_m", "m"),
-    ("ve_m_s", "m/s"), ("vn_m_s", "m/s"), ("vu_m_s", "m/s"), ("roll_deg", "deg"), ("pitch_deg", "deg"),
-    ("heading_deg", "deg"), ("sigma_e_m", "m"), ("sigma_n_m", "m"), ("sigma_u_m", "m"), ("sigma_ve_m_s", "m/s"),
-    ("sigma_vn_m_s", "m/s"), ("sigma_vu_m_s", "m/s"), ("sigma_tilt_e_deg", "deg"), ("sigma_tilt_n_deg", "deg"),
-    ("sigma_heading_deg", "deg"), ("gnss_used", "0/1"))
-
-
-def gpst_iso(t, *, date_sep="-", sep="T") -> str:
-    """GPST seconds since 1980-01-06 -> 'YYYY-MM-DDTHH:MM:SS.sss' (GPST calendar, no leap seconds; rounded to ms)."""
-    d = GPS_EPOCH + _dt.timedelta(milliseconds=round(float(t) * 1000.0))
-    return d.strftime(f"%Y{date_sep}%m{date_sep}%d{sep}%H:%M:%S.") + f"{d.microsecond // 1000:03d}"
-
-
-def _solution(run: InsRun, which: str):
+def _solution(run: InsRun, which: str) -> NavSolution:
+    """The forward or smoothed solution at the filter epochs as :class:`jaxnav.io.NavSolution`."""
     ep = run.result.epochs
     if which == "smoothed":
         nav, P = run.smoothed_nav, run.smoothed_covs
     else:
         nav, P = ep.nav, ep.covs
+    idx = run_error_model(run.prep.cfg).idx
     pos = np.asarray(nav.pos)
-    v = np.asarray(nav.v_n)
     att = np.asarray(quat_to_euler(np.asarray(nav.q_bn)))  # [pitch, roll, yaw], body RFU in ENU
-    heading = np.mod(-np.degrees(att[:, 2]), 360.0)
+    rpy = np.stack([att[:, 1], att[:, 0], np.mod(-att[:, 2], 2 * math.pi)], -1)
     sd = np.sqrt(np.clip(np.diagonal(np.asarray(P), axis1=-2, axis2=-1), 0.0, None))
     row = np.asarray(ep.gnss_row)
     mask = np.asarray(run.prep.meas.mask)[:, :3].any(-1)
     used = np.where(row >= 0, mask[np.maximum(row, 0)], False)
     q = np.where(used, np.asarray(run.prep.pos.q)[run.prep.keep][np.maximum(row, 0)], 0)
-    return dict(t=np.asarray(ep.t_nav, float), pos=pos, v=v, roll=np.degrees(att[:, 1]), pitch=np.degrees(att[:, 0]),
-                heading=heading, sig_enu=position_sigmas_enu(P, pos), sig_v=sd[:, 3:6], sig_att=np.degrees(sd[:, 0:3]),
-                used=used, q=q)
+    return NavSolution(t=np.asarray(ep.t_nav, float), pos=pos, v_enu=np.asarray(nav.v_n), rpy=rpy,
+                       sig_pos_enu=position_sigmas_enu(P, pos, idx), sig_vel=sd[:, idx.dv], sig_att=sd[:, idx.phi],
+                       gnss_used=used, quality=q)
 
 
-def write_trajectory_csv(path, run: InsRun, which: str = "smoothed") -> pathlib.Path:
-    """Write the smoothed (or ``which="forward"``) solution at the filter epochs as CSV with a units header.
-
-    The filter's epochs are the GNSS epochs and, with ``[constraints]``, the pseudo-measurement
-    (ZUPT / NHC) epochs; ``gnss_used`` says where GNSS entered.
-    """
-    s = _solution(run, which)
-    path = pathlib.Path(path)
-    with path.open("w", encoding="utf-8") as f:
-        f.write(f"# jaxnav ins: {which} solution of {run.prep.cfg.name}; time GPST, WGS-84 geodetic, ellipsoidal height;\n"
-                "# attitude of the forward-right-down vehicle frame (roll, pitch, heading clockwise from north);\n"
-                "# sigma_tilt_e/n and sigma_heading are 1-sigma misalignments about east, north and up;\n"
-                "# units: " + ", ".join(f"{n} [{u}]" for n, u in TRAJECTORY_COLUMNS) + "\n")
-        f.write(",".join(n for n, _ in TRAJECTORY_COLUMNS) + "\n")
-        for k in range(s["t"].size):
-            row = [f"{s['t'][k]:.3f}", gpst_iso(s["t"][k]), f"{math.degrees(s['pos'][k, 0]):.9f}",
-                   f"{math.degrees(s['pos'][k, 1]):.9f}", f"{s['pos'][k, 2]:.4f}",
-                   *(f"{x:.4f}" for x in s["v"][k]), f"{s['roll'][k]:.4f}", f"{s['pitch'][k]:.4f}",
-                   f"{s['heading'][k]:.4f}", *(f"{x:.4f}" for x in s["sig_enu"][k]),
-                   *(f"{x:.4f}" for x in s["sig_v"][k]), *(f"{x:.4f}" for x in s["sig_att"][k]),
-                   str(int(s["used"][k]))]
-            f.write(",".join(row) + "\n")
-    return path
-
-
-def write_pos(path, run: InsRun, which: str = "smoothed") -> pathlib.Path:
-    """Write the solution as an RTKLIB-style ``.pos`` (readable by :func:`jaxnav.io.read_pos` and RTKLIB tools).
-
-    Q is the GNSS quality of the epoch where GNSS was used, 0 where the solution is inertial only
-    (outage, masked, gated); ns is 0; sdne/sdeu/sdun are 0 (the ENU cross terms are not written).
-    """
-    s = _solution(run, which)
-    q = s["q"]
-    path = pathlib.Path(path)
-    with path.open("w", encoding="utf-8") as f:
-        f.write(f"% program   : jaxnav ins ({which} INS/GNSS solution)\n% config    : {run.prep.cfg.path}\n")
-        f.write("% Q         : GNSS quality used at the epoch (0: inertial only)\n")
-        f.write("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
-                "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)      sdvn     sdve     sdvu"
-                "    sdvne    sdveu    sdvun\n")
-        for k in range(s["t"].size):
-            tt = gpst_iso(s["t"][k], date_sep="/", sep=" ")
-            e, n, u = s["sig_enu"][k]
-            ve, vn, vu = s["v"][k]
-            sve, svn, svu = s["sig_v"][k]
-            f.write(f"{tt} {math.degrees(s['pos'][k, 0]):14.9f} {math.degrees(s['pos'][k, 1]):14.9f} "
-                    f"{s['pos'][k, 2]:10.4f} {int(q[k]):3d} {0:3d} {n:8.4f} {e:8.4f} {u:8.4f} {0:8.4f} {0:8.4f} "
-                    f"{0:8.4f} {0:6.2f} {0:6.1f} {vn:10.5f} {ve:10.5f} {vu:10.5f} {svn:9.5f} {sve:9.5f} {svu:9.5f} "
-                    f"{0:8.5f} {0:8.5f} {0:8.5f}\n")
-    return path
-
-
-def _lonlath(pos):
-    return [(math.degrees(p[1]), math.degrees(p[0]), float(p[2])) for p in np.asarray(pos)]
-
-
-def write_geojson(path, run: InsRun) -> pathlib.Path:
-    """Write ``track.geojson``: the smoothed and forward tracks and the outage windows as LineStrings (lon, lat, h)."""
-    import geojson
-
+def _tracks(run: InsRun) -> list:
+    """:class:`jaxnav.io.Track` lines: smoothed and forward solutions, the smoothed one inside each outage."""
     sm = np.asarray(run.smoothed_nav.pos)
-    fw = np.asarray(run.result.epochs.nav.pos)
-    feats = [geojson.Feature(geometry=geojson.LineString(_lonlath(sm)), properties={"name": "RTS smoothed"}),
-             geojson.Feature(geometry=geojson.LineString(_lonlath(fw)), properties={"name": "forward filter"})]
+    tracks = [Track("RTS smoothed", sm, color=KML_ORANGE, width=2, clamp_to_ground=True),
+              Track("forward filter", np.asarray(run.result.epochs.nav.pos), color=KML_BLUE, width=2,
+                    clamp_to_ground=True)]
     t = np.asarray(run.result.epochs.t)
     for k, (a, b) in enumerate(run.prep.outages):
         w = (t >= a) & (t < b)
         if w.sum() >= 2:
-            feats.append(geojson.Feature(geometry=geojson.LineString(_lonlath(sm[w])),
-                                         properties={"name": f"simulated outage {k + 1}", "gpst_start_s": float(a),
-                                                     "gpst_end_s": float(b)}))
-    path = pathlib.Path(path)
-    path.write_text(geojson.dumps(geojson.FeatureCollection(feats), allow_nan=False) + "\n", encoding="utf-8")
-    return path
+            tracks.append(Track(f"simulated outage {k + 1}", sm[w], {"gpst_start_s": float(a), "gpst_end_s": float(b)},
+                                color=KML_RED, width=4))
+    return tracks
 
 
-def write_kml(path, run: InsRun) -> pathlib.Path:
-    """Write ``track.kml`` (Google Earth): smoothed track, forward track and outage windows."""
-    import simplekml
+#: KML line colours (aabbggrr)
+KML_ORANGE, KML_BLUE, KML_RED = "ff00a5ff", "ffff0000", "ff0000ff"
 
-    kml = simplekml.Kml(name=f"jaxnav ins: {run.prep.cfg.name}")
-    for name, pos, color in (("RTS smoothed", run.smoothed_nav.pos, simplekml.Color.orange),
-                             ("forward filter", run.result.epochs.nav.pos, simplekml.Color.blue)):
-        ls = kml.newlinestring(name=name, coords=_lonlath(pos))
-        ls.altitudemode = simplekml.AltitudeMode.clamptoground
-        ls.style.linestyle.color, ls.style.linestyle.width = color, 2
-    t = np.asarray(run.result.epochs.t)
-    sm = np.asarray(run.smoothed_nav.pos)
-    for k, (a, b) in enumerate(run.prep.outages):
-        w = (t >= a) & (t < b)
-        if w.sum() >= 2:
-            ls = kml.newlinestring(name=f"simulated outage {k + 1}", coords=_lonlath(sm[w]))
-            ls.style.linestyle.color, ls.style.linestyle.width = simplekml.Color.red, 4
-    path = pathlib.Path(path)
-    kml.save(str(path))
-    return path
+
+def write_outputs(run: InsRun, out) -> list:
+    """The solution files of a run into ``out``: trajectory CSVs (smoothed, forward), ``.pos``, GeoJSON, KML."""
+    out = pathlib.Path(out)
+    cfg = run.prep.cfg
+    sm, fw = _solution(run, "smoothed"), _solution(run, "forward")
+    tracks = _tracks(run)
+    return [str(write_trajectory_csv(out / "trajectory.csv", sm, title=f"jaxnav ins: smoothed solution of {cfg.name}")),
+            str(write_trajectory_csv(out / "trajectory_forward.csv", fw,
+                                     title=f"jaxnav ins: forward solution of {cfg.name}")),
+            str(write_pos(out / f"{cfg.name}_ins.pos", sm,
+                          comments=[("program", "jaxnav ins (smoothed INS/GNSS solution)"), ("config", str(cfg.path))])),
+            str(write_geojson(out / "track.geojson", tracks)),
+            str(write_kml(out / "track.kml", tracks, name=f"jaxnav ins: {cfg.name}"))]
 
 
 def _evaluation(sc) -> dict:
@@ -183,7 +105,8 @@ def _evaluation(sc) -> dict:
 def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     """The figures of a run into ``out``: track + outage errors, differences to GNSS, attitude, biases, and
     the time offset likelihood where it was estimated."""
-    from jaxnav.plot import plot_ins_attitude, plot_ins_biases, plot_ins_differences, plot_walk
+    from jaxnav.experiments.figures import plot_walk
+    from jaxnav.plot import plot_ins_attitude, plot_ins_biases, plot_ins_differences
 
     out = pathlib.Path(out)
     name = run.prep.cfg.name
@@ -194,20 +117,19 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     g = run.gnss_epochs
     ep = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], run.result.epochs)
     t = np.asarray(run.prep.meas.t)
-    f = {k: v[g] for k, v in _solution(run, "forward").items()}
-    s = {k: v[g] for k, v in _solution(run, "smoothed").items()}
+    f = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], _solution(run, "forward"))
+    s = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], _solution(run, "smoothed"))
     from jaxnav.experiments.ins_run import _mask_without_outages
 
     m = _mask_without_outages(run.prep)  # the GNSS epochs usable, withheld ones included
     d_pos = np.where(m[:, :3], run.enu_fwd - run.enu_ref, np.nan)
     v_ref = np.asarray(run.prep.pos.v_enu, float)[run.prep.keep]
     d_vel = np.where(m[:, 3:], np.asarray(ep.nav.v_n) - v_ref, np.nan)
-    paths.append(plot_ins_differences(t, d_pos, f["sig_enu"], d_vel, f["sig_v"], run.prep.outages,
+    paths.append(plot_ins_differences(t, d_pos, f.sig_pos_enu, d_vel, f.sig_vel, run.prep.outages,
                                       out / f"differences_to_gnss.{fmt}",
                                       title=f"{name}: forward filter minus GNSS (antenna position, velocity) with the filter's "
                                             "+-3 sigma; GNSS withheld in the grey windows"))
-    paths.append(plot_ins_attitude(t, np.stack([f["roll"], f["pitch"], f["heading"]], -1),
-                                   np.stack([s["roll"], s["pitch"], s["heading"]], -1), s["sig_att"],
+    paths.append(plot_ins_attitude(t, np.degrees(f.rpy), np.degrees(s.rpy), np.degrees(s.sig_att),
                                    run.prep.outages, out / f"attitude.{fmt}", title=f"{name}: attitude of the vehicle frame"))
     from jaxnav.ins import error_model_for
     from jaxnav.units import DEG_PER_HOUR, MG
@@ -401,12 +323,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
     if truth is not None:
         say(f"scoring against the reference trajectory {cfg.evaluate.truth.name}")
         errs, results["evaluation"] = _truth_evaluation(run, truth, results.get("evaluation"), tuned=tune)
-    files = []
-    for nm, fn in (("trajectory.csv", lambda p: write_trajectory_csv(p, run)),
-                   ("trajectory_forward.csv", lambda p: write_trajectory_csv(p, run, "forward")),
-                   (f"{cfg.name}_ins.pos", lambda p: write_pos(p, run)),
-                   ("track.geojson", lambda p: write_geojson(p, run)), ("track.kml", lambda p: write_kml(p, run))):
-        files.append(str(fn(out / nm)))
+    files = write_outputs(run, out)
     files += write_figures(run, out)
     if errs is not None:
         from jaxnav.plot import plot_truth_errors

@@ -9,7 +9,7 @@ Pipeline (host-side glue around the pure, jitted library functions):
 3. run the loosely coupled filter (:func:`jaxnav.ins.loosely_coupled`) and the RTS smoother
    (:func:`jaxnav.ins.smooth`);
 4. optionally withhold GNSS on simulated outages and score forward and smoothed solutions
-   against the withheld RTK-fixed epochs (:func:`outage_windows`, :func:`score_outages`);
+   against the withheld RTK-fixed epochs (:func:`jaxnav.ins.outage_windows`, :func:`jaxnav.ins.score_outages`);
 5. optionally tune the noise densities by maximum likelihood (:func:`tune_noise`): gradient of
    the GNSS innovation negative log-likelihood over the whole run.
 
@@ -28,9 +28,12 @@ import numpy as np
 
 from jaxnav.experiments.ins_config import ConfigError, InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins import (PLATFORMS, LCParams, PVMeasurements, SensorBiases, StandstillParams, coarse_alignment,
-                        detection_scores, gnss_motion_labels, gnss_speed_test, keep_runs, quiet_threshold, runs_touching,
-                        shoe_statistic, standstill_intervals,
+from jaxnav.ins import (OutageScores, attitude_sigmas, clock_drift, estimate_time_offset, horizontal_fix_nll,
+                        horizontal_sigma, in_windows, interpolate_on_samples, likelihood_time_offset, nearest_samples,
+                        offset_search_epochs, outage_windows, position_cov_enu, score_outages, trajectory_errors,
+                        training_windows)
+from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, coarse_alignment, gnss_checked_standstill,
+                        gnss_speed_test, standstill_intervals,
                         error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
                         noise_preset, odometer, sensor_to_body, smooth, zaru, zupt)
 from jaxnav.ins import heading as heading_aid
@@ -38,6 +41,7 @@ from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
                        read_kfgins_odometer, read_pos, read_rtklib_imu)
 from jaxnav.ins.error_model import ERROR_MODEL_15
+from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 
 
 def read_inputs(cfg: InsConfig):
@@ -98,54 +102,19 @@ def read_odometer(cfg: InsConfig):
 def heading_on_imu(cfg: InsConfig, t_imu):
     """The ``[heading]`` CSV at the IMU samples: (heading (N,) rad, sigma (N,) rad), NaN where no reading.
 
-    Each reading goes to the IMU sample nearest its time (GNSS time scale); readings outside the IMU span or
-    farther than one sample interval from every sample are dropped.
+    Each reading goes to the IMU sample nearest its time (GNSS time scale, :func:`jaxnav.ins.nearest_samples`);
+    readings outside the IMU span or farther than one sample interval from every sample are dropped.
     """
     h = cfg.heading
     d = _csv(cfg, "heading", lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter))
     t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * 604800.0
     t_imu = np.asarray(t_imu, float)
     hd, sg = np.full(t_imu.size, np.nan), np.full(t_imu.size, np.nan)
-    j = np.clip(np.searchsorted(t_imu, t), 1, t_imu.size - 1)
-    j = np.where(np.abs(t_imu[j - 1] - t) < np.abs(t_imu[j] - t), j - 1, j)
-    dt = float(np.median(np.diff(t_imu)))
-    ok = np.abs(t_imu[j] - t) <= dt
+    j, ok = nearest_samples(t, t_imu)
     hd[j[ok]] = d["heading"][ok]
     if d["sigma"] is not None:
         sg[j[ok]] = d["sigma"][ok]
     return hd, sg
-
-
-def speed_on_imu(t_odo, speed, t_imu, *, max_gap_factor: float = 3.0):
-    """Wheel speed (N,) m/s at the IMU sample times ``t_imu`` (N,): linear between the two readings around
-    each sample, NaN outside the readings' span, across a gap longer than ``max_gap_factor`` times the
-    median reading interval, or next to a missing (NaN) reading. Readings at the IMU tags are taken as they are."""
-    t_odo, speed, t_imu = (np.asarray(a, float) for a in (t_odo, speed, t_imu))
-    ok = np.isfinite(speed) & np.isfinite(t_odo)
-    out = np.full(t_imu.shape, np.nan)
-    if ok.sum() < 2:
-        return out
-    med = float(np.median(np.diff(t_odo))) if t_odo.size > 1 else 0.0
-    to, so = t_odo[ok], speed[ok]
-    j = np.clip(np.searchsorted(to, t_imu, side="right"), 1, to.size - 1)
-    gap = to[j] - to[j - 1]
-    valid = (t_imu >= to[0]) & (t_imu <= to[-1]) & (gap <= max_gap_factor * med + 1e-9)
-    out[valid] = np.interp(t_imu[valid], to, so)
-    return out
-
-
-def outage_windows(t_start: float, t_end: float, *, first_s: float = 40.0, outage_s: float = 15.0,
-                   gap_s: float = 45.0, end_margin_s: float = 30.0) -> np.ndarray:
-    """(K, 2) simulated GNSS outage windows [a, b), s.
-
-    The first starts ``first_s`` after ``t_start``; GNSS is back for ``gap_s`` between windows;
-    a window is kept if it ends at least ``end_margin_s`` before ``t_end``.
-    """
-    out, a = [], t_start + first_s
-    while a + outage_s <= t_end - end_margin_s:
-        out.append((a, a + outage_s))
-        a += outage_s + gap_s
-    return np.array(out, float).reshape(-1, 2)
 
 
 def _floored(c, floor):
@@ -329,18 +298,9 @@ class Prepared(NamedTuple):
 
 
 def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
-    """Standstill per IMU sample: SHOE GLRT with the platform's window, a threshold from the quiet
-    periods, and a GNSS veto (:func:`jaxnav.ins.gnss_speed_test`, :func:`jaxnav.ins.gnss_motion_labels`).
-
-    Gravity for the test is the mean |f| over the first ``static_s`` seconds (absorbs a scale error).
-    Quiet samples: GNSS-static ones (speed within its 95 % uncertainty of zero at both neighbouring
-    usable epochs) and the declared static start. With ``detector_threshold = "auto"`` the threshold is
-    :func:`jaxnav.ins.quiet_threshold` over them (the fixed fallback: 10 times the rest expectation
-    6 of T_n with the configured sigmas, when too few quiet samples exist). Samples where a usable
-    GNSS epoch says the platform moves (q > ``zupt_gnss_k``) are vetoed, and on platforms whose preset
-    asks for it a standstill must contain a GNSS-static sample (one wholly inside a GNSS gap is
-    dropped, counted as unconfirmed). Only epochs in ``meas.mask`` (the ones the filter sees) are
-    used, so withheld fixes never decide a ZUPT.
+    """Standstill per IMU sample by :func:`jaxnav.ins.gnss_checked_standstill` with the ``[constraints]``
+    detector keys, checked by the GNSS epochs the filter sees (``meas.mask``: withheld fixes never
+    decide a ZUPT) through :func:`jaxnav.ins.gnss_speed_test`.
 
     Args:
       t: (N,) s.  dth, dv: (N, 3) increments.  dt: (N,) s.  meas: PVMeasurements or None (no GNSS check).
@@ -348,65 +308,36 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
       (standstill (N,) bool, info dict for results.json).
     """
     c = cfg.constraints
-    f = dv / dt[:, None]
-    w = dth / dt[:, None]
-    st = t <= t[0] + static_s
-    g = float(np.mean(np.linalg.norm(f[st], axis=1)))
-    pf = PLATFORMS[c.platform]
     rate = 1.0 / float(np.median(dt))
-    window = int(c.detector_window) if c.detector_window is not None else max(1, int(round(pf["window_s"] * rate)))
-    min_s = float(pf["min_s"] if c.detector_min_s is None else c.detector_min_s)
-    m = max(1, int(round(min_s * rate)))
-    params = StandstillParams(sigma_a=c.detector_sigma_a, sigma_w=c.detector_sigma_w, threshold=1.0, g=g)
-    stat = np.asarray(shoe_statistic(f, w, params, window=window))
-    moving = np.zeros(t.size, bool)
-    static = np.zeros(t.size, bool)
-    covered = np.zeros(t.size, bool)
-    q = spd = sig = None
+    tg = q = spd = sig = None
     if meas is not None:
         mk = np.asarray(meas.mask, bool)
         pos = np.asarray(meas.pos, float)
         enu = np.asarray(curvilinear_to_enu(pos[0], pos - pos[0]))
         q, spd, sig = gnss_speed_test(meas.t, enu, meas.vel, meas.R, mk[:, :3].all(1), mk[:, 3:].all(1))
         tg = np.asarray(meas.t, float)
-        gap = 1.5 * float(np.median(np.diff(tg))) if tg.size > 1 else 1.0
-        moving, static, covered = gnss_motion_labels(t, tg, q, k_moving=c.zupt_gnss_k, max_gap_s=max(gap, 0.3))
-    quiet = (static | st) & ~moving
-    fallback = 10.0 * 6.0
-    if c.detector_threshold == "auto":
-        gamma = quiet_threshold(stat, quiet, margin=pf["margin"], min_samples=m)
-        source = "quiet periods" if np.isfinite(gamma) else "fallback (too few quiet samples)"
-        gamma = gamma if np.isfinite(gamma) else fallback
-    else:
-        gamma, source = float(c.detector_threshold), "config"
-    raw = np.asarray(keep_runs(stat < gamma, m))
-    if not pf["gnss_veto"]:
-        moving = np.zeros(t.size, bool)
-    vetoed = raw & moving
-    det = np.asarray(keep_runs(raw & ~moving, m))
-    unchecked = np.zeros(t.size, bool)
-    if pf["need_gnss_static"] and meas is not None and static.any():
-        kept = runs_touching(det, static)
-        unchecked, det = det & ~kept, kept
-    iv_v = standstill_intervals(t, vetoed)
-    # scored where GNSS brackets the sample; GNSS-static is the truth (undecided speeds count as not static)
-    sc = detection_scores(det[covered], static[covered])
-    sc_imu = detection_scores(raw[covered], static[covered])
-    info = {"kind": "SHOE GLRT", "platform": c.platform, "window_samples": window, "min_s": min_s,
-            "threshold": float(gamma), "threshold_source": source, "quiet_samples": int(np.count_nonzero(quiet)),
+    gap = 1.5 * float(np.median(np.diff(tg))) if tg is not None and tg.size > 1 else 1.0
+    r = gnss_checked_standstill(t, dv / dt[:, None], dth / dt[:, None], sigma_a=c.detector_sigma_a,
+                                sigma_w=c.detector_sigma_w, platform=c.platform, static_s=static_s,
+                                window=c.detector_window, min_s=c.detector_min_s, threshold=c.detector_threshold,
+                                t_gnss=tg, q_gnss=q, k_moving=c.zupt_gnss_k, max_gap_s=gap, rate_hz=rate)
+    sc, sc_imu = r.scores, r.imu_only_scores
+    info = {"kind": "SHOE GLRT", "platform": c.platform, "window_samples": r.window, "min_s": r.min_s,
+            "threshold": r.threshold, "threshold_source": "config" if r.threshold_source == "given" else r.threshold_source,
+            "quiet_samples": r.quiet_samples,
             "sigma_a_m_s2": c.detector_sigma_a, "sigma_w_rad_s": c.detector_sigma_w, "gnss_check": meas is not None,
-            "gnss_k": c.zupt_gnss_k, "vetoed_samples": int(np.count_nonzero(vetoed)),
-            "vetoed_intervals": int(iv_v.shape[0]),
-            "vetoed_s": float(np.count_nonzero(vetoed) / rate),
-            "unconfirmed_samples": int(np.count_nonzero(unchecked)),
-            "unconfirmed_intervals": int(standstill_intervals(t, unchecked).shape[0]),
-            "gnss_static_samples": int(np.count_nonzero(static)), "gnss_moving_samples": int(np.count_nonzero(moving)),
-            "scored_samples": int(np.count_nonzero(covered)),
+            "gnss_k": c.zupt_gnss_k, "vetoed_samples": int(np.count_nonzero(r.vetoed)),
+            "vetoed_intervals": int(standstill_intervals(t, r.vetoed).shape[0]),
+            "vetoed_s": float(np.count_nonzero(r.vetoed) / rate),
+            "unconfirmed_samples": int(np.count_nonzero(r.unconfirmed)),
+            "unconfirmed_intervals": int(standstill_intervals(t, r.unconfirmed).shape[0]),
+            "gnss_static_samples": int(np.count_nonzero(r.static)), "gnss_moving_samples": int(np.count_nonzero(r.moving)),
+            "scored_samples": int(np.count_nonzero(r.covered)),
             "precision": sc.precision, "recall": sc.recall, "tp": sc.tp, "fp": sc.fp, "fn": sc.fn, "tn": sc.tn,
             "imu_only_precision": sc_imu.precision, "imu_only_recall": sc_imu.recall}
-    info["_series"] = {"stat": stat, "raw": raw, "moving": moving, "unconfirmed": unchecked, "static": static,
-                       "t_gnss": None if meas is None else np.asarray(meas.t, float), "speed": spd, "speed_sigma": sig}
-    return det, info
+    info["_series"] = {"stat": r.stat, "raw": r.raw, "moving": r.moving, "unconfirmed": r.unconfirmed,
+                       "static": r.static, "t_gnss": tg, "speed": spd, "speed_sigma": sig}
+    return r.detected, info
 
 
 def build_aids(cfg: InsConfig, standstill, odo_speed=None, hdg=None):
@@ -441,7 +372,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     off_info: dict = {"source": "config"}
     off = cfg.imu.time_offset_s
     if off == "estimate":
-        off, off_info = likelihood_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
+        off, off_info = recording_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
     ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
@@ -473,7 +404,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     odo = None
     if cfg.odometer is not None:
         t_odo, sp = read_odometer(cfg)
-        odo = speed_on_imu(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
+        odo = interpolate_on_samples(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
         if not np.isfinite(odo).any():
             raise ConfigError(f"{cfg.path}: odometer: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s "
                               f"(readings [{t_odo[0]:.3f}, {t_odo[-1]:.3f}] s before the time offset): check the "
@@ -520,73 +451,6 @@ def antenna_enu(nav, t_nav, t, lever, pos0):
     return enu + (np.asarray(t) - np.asarray(t_nav))[:, None] * v + np.einsum("mij,mj->mi", C, lever)
 
 
-class OutageScores(NamedTuple):
-    """Scores of a run against the withheld RTK-fixed positions (horizontal, m).
-
-    Attributes:
-      windows: (K, 2) outage windows, s (GPST).  n_ref: (K,) fixed epochs scored per window.
-      fwd_max, sm_max: (K,) max horizontal error per outage (NaN where no fixed epoch).
-      fwd_rms, sm_rms: (K,) RMS horizontal error per outage.
-      fwd_rms_all, sm_rms_all: RMS over all scored epochs of all outages.
-      fwd_max_mean, sm_max_mean: mean of the per-outage maxima.
-      fwd_rms_outside: RMS horizontal error of the forward filter against fixed epochs *outside*
-        the outages (sanity: should be cm-level).
-      t, err_fwd, err_sm: (M,) epoch times and horizontal errors (NaN where not a fixed reference).
-      sig_fwd, sig_sm: (M,) the solutions' own horizontal 1-sigma (sqrt of the east + north variances), m.
-      withheld: (M,) bool.  runtime_s: wall time of filter + smoother (incl. compilation).
-      figure: path of the figure, or None.  n_nonfinite_nav: NaN count in the navigation outputs.
-    """
-
-    windows: Any
-    n_ref: Any
-    fwd_max: Any
-    sm_max: Any
-    fwd_rms: Any
-    sm_rms: Any
-    fwd_rms_all: float
-    sm_rms_all: float
-    fwd_max_mean: float
-    sm_max_mean: float
-    fwd_rms_outside: float
-    t: Any
-    err_fwd: Any
-    err_sm: Any
-    withheld: Any
-    runtime_s: float
-    figure: Optional[str]
-    n_nonfinite_nav: int
-    sig_fwd: Any = None
-    sig_sm: Any = None
-
-
-def _rms(x):
-    return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
-
-
-def score_outages(t, err_f, err_s, fixed, withheld, outages, *, runtime_s=float("nan"), n_nonfinite=0,
-                  sig_f=None, sig_s=None) -> OutageScores:
-    """Per-window and overall horizontal error statistics (m) at the fixed epochs inside the outages."""
-    e_f = np.where(fixed, err_f, np.nan)
-    e_s = np.where(fixed, err_s, np.nan)
-    K = outages.shape[0]
-    n_ref = np.zeros(K, int)
-    st = {k: np.full(K, np.nan) for k in ("fm", "sm", "fr", "sr")}
-    for k, (a, b) in enumerate(outages):
-        s = (t >= a) & (t < b) & fixed
-        n_ref[k] = int(s.sum())
-        if n_ref[k]:
-            st["fm"][k], st["sm"][k] = e_f[s].max(), e_s[s].max()
-            st["fr"][k], st["sr"][k] = _rms(e_f[s]), _rms(e_s[s])
-    sc = withheld & fixed
-    return OutageScores(
-        windows=outages, n_ref=n_ref, fwd_max=st["fm"], sm_max=st["sm"], fwd_rms=st["fr"], sm_rms=st["sr"],
-        fwd_rms_all=_rms(e_f[sc]), sm_rms_all=_rms(e_s[sc]),
-        fwd_max_mean=float(np.nanmean(st["fm"])) if np.any(n_ref) else float("nan"),
-        sm_max_mean=float(np.nanmean(st["sm"])) if np.any(n_ref) else float("nan"),
-        fwd_rms_outside=_rms(e_f[~withheld & fixed]), t=np.asarray(t), err_fwd=e_f, err_sm=e_s, withheld=withheld,
-        runtime_s=runtime_s, figure=None, n_nonfinite_nav=n_nonfinite, sig_fwd=sig_f, sig_sm=sig_s)
-
-
 class InsRun(NamedTuple):
     """One processed recording.
 
@@ -615,25 +479,13 @@ class InsRun(NamedTuple):
     gnss_epochs: Any = None
 
 
-def position_sigmas_enu(covs, pos):
-    """(M, 3) east, north, up 1-sigma, m, from error covariances (M, n, n) whose states 6:9 are (dlat, dlon, dh)."""
-    P = np.asarray(covs)
-    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1)[:, 6:9], 0.0, None))
-    return np.abs(np.asarray(curvilinear_to_enu(np.asarray(pos), sd)))
-
-
-def horizontal_sigma(covs, pos):
-    """(M,) horizontal 1-sigma sqrt(var_E + var_N), m; see :func:`position_sigmas_enu`."""
-    s = position_sigmas_enu(covs, pos)
-    return np.hypot(s[:, 0], s[:, 1])
-
-
 def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
     """Forward filter + RTS smoother on a prepared recording, scored on its outages if it has any."""
     d = prep.densities if d is None else d
     t0 = time.perf_counter()
     res = run_filter(prep, d)
-    sm_nav, sm_b, sm_P = smooth(res, error_model=run_error_model(prep.cfg))
+    model = run_error_model(prep.cfg)
+    sm_nav, sm_b, sm_P = smooth(res, error_model=model)
     jax.block_until_ready(sm_nav.pos)
     runtime = time.perf_counter() - t0
     meas = prep.meas
@@ -654,33 +506,55 @@ def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
         e_f = np.hypot(*(enu_f - enu_ref)[:, :2].T)
         e_s = np.hypot(*(enu_s - enu_ref)[:, :2].T)
         scores = score_outages(np.asarray(meas.t), e_f, e_s, fixed, prep.withheld, prep.outages, runtime_s=runtime,
-                               n_nonfinite=nonfinite, sig_f=horizontal_sigma(ep.covs, ep.nav.pos),
-                               sig_s=horizontal_sigma(sm_P_g, sm_nav_g.pos))
+                               n_nonfinite=nonfinite, sig_f=horizontal_sigma(ep.covs, ep.nav.pos, model.idx),
+                               sig_s=horizontal_sigma(sm_P_g, sm_nav_g.pos, model.idx))
     return InsRun(prep=prep, result=res, smoothed_nav=sm_nav, smoothed_biases=sm_b, smoothed_covs=sm_P,
                   enu_ref=enu_ref, enu_fwd=enu_f, enu_sm=enu_s, fixed=fixed, scores=scores, runtime_s=runtime,
                   densities=d, gnss_epochs=g)
 
 
-def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
-    """IMU-GNSS time offset (s, added to IMU times): innovation likelihood over a grid around a first guess.
+def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
+    """The GNSS solution restricted to the epochs every trial offset in [-span, span] s can use, and counts
+    (:func:`jaxnav.ins.offset_search_epochs`; with ``[evaluate]`` its outages are left out).
 
-    The filter runs (no outages) on a 50 ms grid over +-``imu.time_offset_search_s`` plus the
-    cross-correlation estimate of the yaw rate against the GNSS course rate
-    (:func:`jaxnav.ins.estimate_time_offset`, reported as the first guess; it assumes the body points
-    along the velocity, which a handheld device does not), then on a 10 ms grid within +-50 ms of the
-    best, and a parabola through the three best log-likelihoods refines the maximum and gives its
-    1-sigma from the curvature (:func:`_parabola_peak`). Every trial scores the same GNSS epochs: those
-    inside the IMU span at every trial offset and outside the ``[evaluate]`` outages
-    (:func:`_search_epochs`; the others are dropped and counted). A clock drift (the offset changing
-    linearly over the run) is estimated at the best offset by :func:`_offset_drift` and reported under
-    ``drift``, with a warning when significant.
+    Raises:
+      ValueError: fewer than :data:`jaxnav.ins.timing.MIN_SEARCH_EPOCHS` epochs remain (names
+        ``imu.time_offset_search_s``).
+    """
+    gt = np.asarray(pos.t, float)
+    t0, t1 = float(t_imu[0]), float(t_imu[-1])
+    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
+    windows = None if ev is None else outage_windows(t0, t1, first_s=ev.first_s, outage_s=ev.outage_s,
+                                                     gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
+    sel = offset_search_epochs(gt, t_imu, span, windows)
+    use, n = sel["use"], sel["n_used"]
+    if n < MIN_SEARCH_EPOCHS:
+        raise ValueError(f"time offset search: only {n} GNSS epoch(s) lie inside the IMU span "
+                         f"[{t0:.3f}, {t1:.3f}] s at every trial offset within +-{span} s (GNSS "
+                         f"[{gt[0]:.3f}, {gt[-1]:.3f}] s; at least {MIN_SEARCH_EPOCHS} needed): check the time "
+                         "systems, or reduce imu.time_offset_search_s")
+    M = gt.size
+    sub = pos._replace(**{f: np.asarray(v)[use] for f, v in zip(pos._fields, pos)
+                          if isinstance(v, (np.ndarray, jnp.ndarray)) and np.ndim(v) >= 1 and np.shape(v)[0] == M})
+    return sub, {"n_epochs_used": n, "n_epochs_dropped_at_span_edges": sel["n_dropped_at_span_edges"],
+                 "n_epochs_withheld_by_evaluate": sel["n_withheld"],
+                 "fitted_on": ("GNSS epochs inside the IMU span at every trial offset"
+                               + (", outside the [evaluate] outages (widened by the search span)" if ev else ""))}
+
+
+def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
+    """IMU-GNSS time offset (s, added to IMU times) of a recording by the filter's innovation likelihood.
+
+    First guess: :func:`jaxnav.ins.estimate_time_offset` (yaw rate against GNSS course rate; it assumes the
+    body points along the velocity, which a handheld device does not). Search:
+    :func:`jaxnav.ins.likelihood_time_offset` over +-``imu.time_offset_search_s`` with this recording's
+    filter (no outages, gate or pseudo-measurements) on the epochs of :func:`_search_epochs`; clock drift:
+    :func:`jaxnav.ins.clock_drift` at the best offset, with a warning when significant.
 
     Returns:
       (offset s, info dict with the grid, its log-likelihoods, the estimate's sigma, the epoch counts
       and the method).
     """
-    from jaxnav.ins import estimate_time_offset as xcorr  # yaw rate vs GNSS course rate
-
     t, dth, dv, dt = imu_increments(imu, C_bs)
     span = cfg.imu.time_offset_search_s
     pos, common = _search_epochs(cfg, pos, t, span)
@@ -688,8 +562,8 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
     v = np.asarray(pos.v_enu, float)
     info = {"source": "estimate", **common}
     try:
-        est = xcorr(t, dth / dt[:, None], np.asarray(pos.t, float), v if np.all(np.isfinite(v)) else None, llh=llh,
-                    f_b=dv / dt[:, None], max_offset_s=max(1.0, cfg.imu.time_offset_search_s + 0.5))
+        est = estimate_time_offset(t, dth / dt[:, None], np.asarray(pos.t, float), v if np.all(np.isfinite(v)) else None,
+                                   llh=llh, f_b=dv / dt[:, None], max_offset_s=max(1.0, span + 0.5))
         guess = float(est.offset_s)
         info.update(first_guess="yaw rate vs GNSS course rate cross-correlation", first_guess_s=guess,
                     first_guess_sigma_s=float(est.sigma_s), first_guess_corr=float(est.corr),
@@ -716,182 +590,22 @@ def likelihood_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progres
             cache[key] = float(run_filter(p, save=("nav",)).loglik)
         return cache[key]
 
-    # coarse: 50 ms steps over +-span (zero included) and the cross-correlation guess; fine: 10 ms
-    # steps within +-50 ms of the coarse best; a parabola through the best three refines it
-    coarse = np.union1d(np.round(np.arange(-span, span + 1e-9, 0.05), 6), [round(guess, 6)] if abs(guess) <= span else [])
-    for k, off in enumerate(coarse):
-        loglik(off)
-        if progress and (k % 10 == 0 or k == len(coarse) - 1):
-            progress(f"time offset: coarse grid {k + 1}/{len(coarse)}")
-    c_best = max((o for o in coarse), key=loglik)
-    fine = np.round(c_best + np.arange(-0.05, 0.05 + 1e-9, 0.01), 6)
-    fine = fine[np.abs(fine) <= span + 1e-9]
-    ll = np.array([loglik(o) for o in fine])
-    best, sigma = _parabola_peak(fine, ll)
-    drift = _offset_drift(loglik, best, tg, span)
+    res = likelihood_time_offset(loglik, span, guess=guess, progress=progress)
+    best = res.offset_s
+    drift = clock_drift(loglik, best, tg, span, widen_hint="widen imu.time_offset_search_s")
     grid = np.array(sorted(k[0] for k in cache if k[1] == 0.0))
-    at_edge = abs(best) >= span - 0.01
     info.update(method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
                        "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[(g, 0.0)] for g in grid]),
-                offset_s=best, sigma_s=sigma,
+                offset_s=best, sigma_s=res.sigma_s,
                 sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
                              "(treats the innovations as independent: optimistic when GNSS errors are correlated "
-                             "in time)", at_search_edge=bool(at_edge), drift=drift)
-    if at_edge and progress:
+                             "in time)", at_search_edge=res.at_edge, drift=drift)
+    if res.at_edge and progress:
         progress(f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
                  "imu.time_offset_search_s")
     if drift.get("significant") and progress:
         progress(f"warning: {drift['warning']}")
     return best, info
-
-
-#: a clock drift is flagged when the offset's change over the run exceeds this many of its sigmas...
-DRIFT_SIGMAS = 3.0
-#: ... and this, s (below it the 10 ms grid and its parabola do not resolve a change)
-DRIFT_MIN_CHANGE_S = 0.005
-
-
-def _offset_drift(loglik, offset: float, t_gnss, span: float, *, step_o: float = 0.01,
-                  step_c: float = 0.02) -> dict:
-    """IMU clock drift by the innovation likelihood of a linear clock error.
-
-    The IMU times become t + o + c (t - t_ref) / T (t_ref the middle, T the span of the GNSS epochs
-    ``t_gnss``): o is the offset at mid-run, c its change over the run, d = c / T the drift (s/s). Every
-    trial is a whole run with one consistent clock (offsets fitted to separate halves of one-offset runs
-    are pulled towards the run's offset: a mistimed half spoils the state the other starts from). From
-    (``offset``, 0) a grid of ``step_o`` x ``step_c`` is walked (|o| + |c| / 2 within ``span``, so every
-    trial scores the same epochs) by Newton steps: a quadratic ll = a + g^T x + x^T H x / 2 through six grid
-    points around x (x, x +- one step in o and in c, x + one step in both), x moved to the grid point nearest
-    its maximum -H^-1 g until that lies within one step; (o, c) = that maximum, their covariance -H^-1 (independent innovations assumed:
-    optimistic, as the offset's sigma). Flagged significant when |c| exceeds
-    :data:`DRIFT_SIGMAS` sigmas and :data:`DRIFT_MIN_CHANGE_S`. Cost: three runs beyond the offset search
-    when there is no drift, three to six per Newton step otherwise.
-
-    Args:
-      loglik: (o s, c s) -> log-likelihood of the run.  offset: the one-offset estimate, s.
-      t_gnss: (M,) the search's GNSS epoch times, s.  span: the search half-width, s.
-    Returns:
-      dict for results.json: ``offset_mid_s``, ``change_s``, ``change_sigma_s``, ``drift_s_per_s``,
-      ``drift_sigma_s_per_s``, ``windows`` (the model's offset at the mean epoch time of each half),
-      ``significant``, ``warning`` (when significant); ``note`` only when it cannot be estimated.
-    """
-    tg = np.asarray(t_gnss, float)
-    T = float(tg[-1] - tg[0])
-    if tg.size < 2 * MIN_SEARCH_EPOCHS or T <= 0:
-        return {"note": "not estimated: too few GNSS epochs"}
-    ok = lambda o, c: abs(o) + 0.5 * abs(c) <= span + 1e-9  # noqa: E731
-    key = lambda o, c: (round(o, 6), round(c, 6))  # noqa: E731
-    ll = lambda x: loglik(*x)  # noqa: E731
-    x = key(round(offset / step_o) * step_o, 0.0)
-    stencil = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (1, 1))  # the fewest points that fix a 2-D quadratic
-    nbrs = lambda x: [key(x[0] + i * step_o, x[1] + j * step_c) for i, j in stencil]  # noqa: E731
-    S = np.diag([step_o, step_c])
-    for _ in range(12):  # Newton steps on the grid: fit the stencil around x, move to the grid point nearest its maximum
-        pts = nbrs(x)
-        if not all(ok(*y) for y in pts):
-            return {"note": "not estimated: the clock model reaches the edge of the search span; widen "
-                            "imu.time_offset_search_s"}
-        u = np.array([((y[0] - x[0]) / step_o, (y[1] - x[1]) / step_c) for y in pts])
-        A = np.column_stack([np.ones(len(pts)), u[:, 0], u[:, 1], 0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1],
-                             0.5 * u[:, 1] ** 2])
-        coef = np.linalg.solve(A, np.array([ll(y) for y in pts]))
-        H = np.array([[coef[3], coef[4]], [coef[4], coef[5]]])
-        if not np.all(np.linalg.eigvalsh(H) < 0):  # not concave here: step to the best stencil point
-            up = max(pts, key=ll)
-            if up == x:
-                return {"note": "not estimated: the likelihood has no maximum in offset and drift (too little "
-                                "dynamics)"}
-            x = up
-            continue
-        du = np.linalg.solve(H, -coef[1:3])  # the maximum, in grid steps from x
-        if np.all(np.abs(du) <= 1.0):
-            break
-        x = key(x[0] + float(np.clip(np.round(du[0]), -5, 5)) * step_o, x[1] + float(np.clip(np.round(du[1]), -5, 5)) * step_c)
-    else:
-        return {"note": "not estimated: the Newton steps did not settle"}
-    est = np.array(x) + S @ du
-    cov = S @ np.linalg.inv(-H) @ S
-    o, c = float(est[0]), float(est[1])
-    sc = float(np.sqrt(cov[1, 1]))
-    t_ref = 0.5 * (tg[0] + tg[-1])
-    wins = []
-    for h in (tg < t_ref, tg >= t_ref):
-        f = (float(np.mean(tg[h])) - t_ref) / T
-        wins.append({"t_start_s": float(tg[h][0]), "t_end_s": float(tg[h][-1]), "t_mean_s": float(np.mean(tg[h])),
-                     "n_epochs": int(h.sum()), "offset_s": o + c * f,
-                     "sigma_s": float(np.sqrt(max(cov[0, 0] + 2 * f * cov[0, 1] + f * f * cov[1, 1], 0.0)))})
-    sig = bool(abs(c) > DRIFT_SIGMAS * sc and abs(c) > DRIFT_MIN_CHANGE_S)
-    out = {"method": "innovation log-likelihood of a linear clock error t + o + c (t - t_mid) / T: Newton steps "
-                     "on a 10 ms x 20 ms grid, quadratic through six points around the best (sigmas from its curvature, "
-                     "optimistic as the offset's); windows: the model's offset at each half's mean epoch",
-           "offset_mid_s": o, "change_s": c, "change_sigma_s": sc, "drift_s_per_s": c / T,
-           "drift_sigma_s_per_s": sc / T, "windows": wins, "significant": sig}
-    if sig:
-        out["warning"] = (f"the IMU-GNSS time offset changes over the run by {c * 1e3:+.0f} +- {sc * 1e3:.0f} ms "
-                          f"({c / T * 1e6:+.0f} +- {sc / T * 1e6:.0f} ppm clock drift: {wins[0]['offset_s']:+.3f} s in "
-                          f"the first half, {wins[1]['offset_s']:+.3f} s in the second); one offset fits neither end: "
-                          "re-tag the IMU (e.g. from GNSS time pulses) or process shorter pieces")
-    return out
-
-
-def _parabola_peak(x, ll):
-    """(maximiser, 1-sigma) of a log-likelihood on an even grid ``x`` (K,): parabola through the best three points.
-
-    ll(x) ~ c - (x - x*)^2 / (2 sigma^2): x* = x_j + h (l_- - l_+) / (2 (l_- - 2 l_j + l_+)),
-    sigma = h / sqrt(-(l_- - 2 l_j + l_+)); sigma is NaN at a grid edge or without curvature.
-    """
-    x, ll = np.asarray(x, float), np.asarray(ll, float)
-    j = int(np.nanargmax(ll))
-    best, sigma = float(x[j]), float("nan")
-    if 0 < j < len(x) - 1:
-        y0, y1, y2 = ll[j - 1:j + 2]
-        den = y0 - 2 * y1 + y2
-        h = x[1] - x[0]
-        if den < 0:
-            best += 0.5 * (y0 - y2) / den * h
-            sigma = float(h / math.sqrt(-den))
-    return best, sigma
-
-
-#: fewest GNSS epochs the time offset search needs inside the IMU span at every trial offset
-MIN_SEARCH_EPOCHS = 10
-
-
-def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
-    """The GNSS solution restricted to the epochs every trial offset in [-span, span] s can use, and counts.
-
-    An epoch is used when it lies inside the IMU span (``t_imu`` (N,), s, before any offset) for every
-    trial offset, so all trials score the same epochs; with ``[evaluate]`` the epochs its outages
-    withhold at any trial offset (windows widened by ``span``) are left out as well, so the offset is
-    fitted only on fixes the filter may see.
-
-    Raises:
-      ValueError: fewer than :data:`MIN_SEARCH_EPOCHS` epochs remain (names ``imu.time_offset_search_s``).
-    """
-    gt = np.asarray(pos.t, float)
-    t0, t1 = float(t_imu[0]), float(t_imu[-1])
-    reach = (gt >= t0 - span - 1e-9) & (gt <= t1 + span)
-    inside = (gt >= t0 + span + 1e-6) & (gt <= t1 - span - 1e-6)
-    withheld = np.zeros(gt.size, bool)
-    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
-    if ev is not None:
-        for a, b in outage_windows(t0, t1, first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
-                                   end_margin_s=ev.end_margin_s):
-            withheld |= (gt >= a - span) & (gt < b + span)
-    use = inside & ~withheld
-    n = int(use.sum())
-    if n < MIN_SEARCH_EPOCHS:
-        raise ValueError(f"time offset search: only {n} GNSS epoch(s) lie inside the IMU span "
-                         f"[{t0:.3f}, {t1:.3f}] s at every trial offset within +-{span} s (GNSS "
-                         f"[{gt[0]:.3f}, {gt[-1]:.3f}] s; at least {MIN_SEARCH_EPOCHS} needed): check the time "
-                         "systems, or reduce imu.time_offset_search_s")
-    M = gt.size
-    sub = pos._replace(**{f: np.asarray(v)[use] for f, v in zip(pos._fields, pos)
-                          if isinstance(v, (np.ndarray, jnp.ndarray)) and np.ndim(v) >= 1 and np.shape(v)[0] == M})
-    return sub, {"n_epochs_used": n, "n_epochs_dropped_at_span_edges": int((reach & ~inside).sum()),
-                 "n_epochs_withheld_by_evaluate": int((inside & withheld).sum()),
-                 "fitted_on": ("GNSS epochs inside the IMU span at every trial offset"
-                               + (", outside the [evaluate] outages (widened by the search span)" if ev else ""))}
 
 
 #: ``[tune] params`` name -> (Densities field or "lever_arm", bijector)
@@ -918,29 +632,15 @@ class TuneReport(NamedTuple):
     n_epochs: int = 0
 
 
-def training_windows(prep: Prepared) -> np.ndarray:
-    """(K, 2) GNSS outages for ``--tune`` with ``loss = "outages"``, disjoint from the evaluation windows.
-
-    With ``[evaluate]``: one window of ``outage_s`` (at most the gap) centred in every GNSS-on gap
-    between two evaluation windows, so tuning never scores the fixes the evaluation withholds; without
-    it, the default protocol's windows (40 s convergence, 15 s outages, 45 s gaps).
-    """
+def run_training_windows(prep: Prepared) -> np.ndarray:
+    """(K, 2) GNSS outages for ``--tune`` with ``loss = "outages"``: :func:`jaxnav.ins.training_windows`
+    between the ``[evaluate]`` windows, or without them the default protocol's windows
+    (:func:`jaxnav.ins.outage_windows`)."""
     ev = prep.cfg.evaluate
     t0, t1 = float(prep.t[0]), float(prep.t[-1])
     if ev is None or not ev.outages:
         return outage_windows(t0, t1)
-    w = np.asarray(prep.outages, float).reshape(-1, 2)
-    out = []
-    for (a0, b0), (a1, _) in zip(w[:-1], w[1:]):
-        L = min(ev.outage_s, a1 - b0)
-        mid = 0.5 * (b0 + a1)
-        if L > 1.0:
-            out.append((mid - L / 2, mid + L / 2))
-    if not out and w.size:  # one evaluation window: train on the GNSS-on time after it
-        L = min(ev.outage_s, t1 - w[-1, 1] - 1.0)
-        if L > 1.0:
-            out.append((w[-1, 1] + 0.5, w[-1, 1] + 0.5 + L))
-    return np.asarray(out, float).reshape(-1, 2)
+    return training_windows(prep.outages, t1, ev.outage_s)
 
 
 def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse",
@@ -953,7 +653,7 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
       whole run (every GNSS epoch the filter sees; the ``[evaluate]`` outages stay withheld) — the
       classic ML criterion; at a GNSS rate of several Hz it weighs predictions over fractions of a second.
     * "outages": the negative predictive log-likelihood of the GNSS fixes withheld on
-      :func:`training_windows` (disjoint from the evaluation windows): horizontal antenna position
+      :func:`run_training_windows` (disjoint from the evaluation windows): horizontal antenna position
       predicted by the forward filter against each withheld fixed-quality fix, with the filter's
       predicted position variance plus the fix's own — the criterion for bridging outages.
 
@@ -977,11 +677,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     base_mask = np.asarray(prep.meas.mask).copy()
     scored = None
     if loss_kind == "outages":
-        tw = training_windows(prep)
-        t = np.asarray(prep.meas.t)
-        inside = np.zeros(t.size, bool)
-        for a, b in tw:
-            inside |= (t >= a) & (t < b)
+        tw = run_training_windows(prep)
+        inside = in_windows(prep.meas.t, tw)
         fixed = np.asarray(prep.pos.q)[prep.keep] == 1
         scored = inside & fixed & base_mask[:, :3].any(-1)
         if scored.sum() < 5:
@@ -1002,6 +699,7 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     pos0 = jnp.asarray(np.asarray(prep.alignment.nav0.pos, float))
     ref = jnp.asarray(np.asarray(prep.meas.pos, float))
     R_h = jnp.asarray(np.asarray(prep.meas.R, float)[:, :2, :2])
+    idx = run_error_model(prep.cfg).idx
 
     def unpack(p):
         d = d0._replace(**{_TUNE_MAP[n][0]: p[n] for n in names if _TUNE_MAP[n][0] != "lever_arm"})
@@ -1016,16 +714,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
         res = run_filter(prep, d, meas=m, save=("nav", "covs"))
         g = np.nonzero(np.asarray(res.epochs.gnss_row) >= 0)[0]
         nav = jax.tree_util.tree_map(lambda a: a[g], res.epochs.nav)
-        P = res.epochs.covs[g]
-        C = quat_to_dcm(nav.q_bn)
-        dt = jnp.asarray(np.asarray(prep.meas.t)) - res.epochs.t_nav[g]
-        ant = (curvilinear_to_enu(pos0, nav.pos - pos0) + dt[:, None] * nav.v_n + jnp.einsum("mij,j->mi", C, lev))
-        e = ant[:, :2] - curvilinear_to_enu(pos0, ref - pos0)[:, :2]
-        sc = jnp.abs(curvilinear_to_enu(nav.pos, jnp.ones(3)))  # metres per (rad, rad, m)
-        var = jnp.stack([P[:, 7, 7] * sc[:, 0] ** 2, P[:, 6, 6] * sc[:, 1] ** 2], -1)
-        S = R_h * d.pos_sigma_scale**2 + jax.vmap(jnp.diag)(var)
-        nll = 0.5 * (jnp.einsum("mi,mi->m", e, jnp.linalg.solve(S, e[..., None])[..., 0])
-                     + jnp.linalg.slogdet(S)[1] + 2 * jnp.log(2 * jnp.pi))
+        nll = horizontal_fix_nll(nav, res.epochs.covs[g], res.epochs.t_nav[g], jnp.asarray(np.asarray(prep.meas.t)),
+                                 ref, R_h * d.pos_sigma_scale**2, lev, pos0, idx)
         return jnp.sum(jnp.where(jnp.asarray(scored), nll, 0.0))
 
     t0 = time.perf_counter()
@@ -1080,33 +770,12 @@ def read_truth(cfg: InsConfig):
         raise ValueError(f"{cfg.path}: evaluate.truth_columns / evaluate.truth_units: {exc}") from None
 
 
-def _position_cov_enu(P, pos):
-    """(M, 3, 3) ENU position covariance, m^2, from error covariances whose states 6:9 are (dlat, dlon, dh)."""
-    pos = np.asarray(pos, float)
-    J = np.stack([np.asarray(curvilinear_to_enu(pos, np.broadcast_to(e, pos.shape))) for e in np.eye(3)], -1)
-    Pp = np.asarray(P)[:, 6:9, 6:9]
-    return np.einsum("mij,mjk,mlk->mil", J, Pp, J)
-
-
-def _attitude_sigmas(P, heading):
-    """(M, 3) 1-sigma of roll, pitch, heading, rad: the tilt covariance about east/north (states 0:2)
-    projected on the forward and right axes at ``heading`` (rad, clockwise from north); heading from
-    the tilt about up (state 2)."""
-    P = np.asarray(P)
-    f = np.stack([np.sin(heading), np.cos(heading)], -1)  # forward in (east, north)
-    r = np.stack([np.cos(heading), -np.sin(heading)], -1)  # right
-    T = P[:, 0:2, 0:2]
-    var = lambda u: np.einsum("mi,mij,mj->m", u, T, u)  # noqa: E731
-    return np.sqrt(np.clip(np.stack([var(f), var(r), P[:, 2, 2]], -1), 0.0, None))
-
-
 def truth_errors(run: InsRun, truth, which: str):
     """:class:`jaxnav.ins.TrajectoryErrors` of the forward or smoothed IMU solution against the reference.
 
     The solution's epochs are the filter's (GNSS and pseudo-measurement epochs); a reference in GPST
     since 1980 is put on seconds of week when the solution is (an IMU file without ``gps_week``).
     """
-    from jaxnav.ins import trajectory_errors
     from jaxnav.ins.attitude import quat_to_euler
 
     ep = run.result.epochs
@@ -1127,7 +796,8 @@ def truth_errors(run: InsRun, truth, which: str):
         raise ConfigError(f"{run.prep.cfg.path}: evaluate.truth: {truth.path} spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, "
                           f"the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no common epoch (another time scale? the "
                           "reference must be in GPST like the GNSS solution)")
+    idx = run_error_model(run.prep.cfg).idx
     sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None))
     return trajectory_errors(t, pos, v, rpy, tt, truth.pos, truth.v_enu, truth.rpy,
-                             cov_pos_enu=_position_cov_enu(P, pos), sig_vel=sd[:, 3:6],
-                             sig_att=_attitude_sigmas(P, heading), windows=run.prep.outages)
+                             cov_pos_enu=position_cov_enu(P, pos, idx), sig_vel=sd[:, idx.dv],
+                             sig_att=attitude_sigmas(P, heading, idx), windows=run.prep.outages)

@@ -244,7 +244,7 @@ def s0_metrics(setup: S0Setup, params: Mapping, key, *, filter="attenuated", los
 def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progress=True) -> dict:
     """The S0 reproduction (``jaxnav demo``): Table 1 over Monte Carlo seeds and a b sweep.
 
-    Writes ``results.json`` and the figures of :func:`jaxnav.plot.plot_s0` into ``out`` (with several
+    Writes ``results.json`` and the figures of :func:`jaxnav.experiments.figures.plot_s0` into ``out`` (with several
     processes, see :func:`jaxnav.tune.initialize`: the runs are sharded over all of them and only
     process 0 writes; every process returns the results).
 
@@ -333,7 +333,7 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
 
     figs = []
     if writer:
-        from jaxnav.plot import plot_s0
+        from jaxnav.experiments.figures import plot_s0
 
         figs = plot_s0(outdir, truth=S.truth, gidx=S.gidx, t=S.t_gnss, detail=detail, sweep_b=bs,
                        sweep_rms=sweep_mean, b_paper=exp["filter"]["b"],

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.io import write_json
+from jaxnav.io import gpst_iso, write_json
 from jaxnav.geodesy import zone_central_meridian
 from jaxnav.io import (
     read_control_points,
@@ -92,15 +92,6 @@ def _point_grid(t, mask, grid):
         dt = dt if dt > 0 else 1.0
         out[p] = np.round((t[p] - (tv[0] if tv.size else t[p, 0])) / dt).astype(np.int64)
     return out
-
-
-def gpst_iso(t) -> str:
-    """GPST seconds since 1980-01-06 as ISO 8601 'YYYY-MM-DDTHH:MM:SS.sss' (GPST, no leap seconds)."""
-    import datetime as _dt
-
-    from jaxnav.io import GPS_EPOCH
-
-    return (GPS_EPOCH + _dt.timedelta(seconds=float(t))).isoformat(timespec="milliseconds")
 
 
 def _ratio(a: float, b: float) -> float:

@@ -20,7 +20,7 @@ import numpy as np
 from jaxnav.io import write_json
 from jaxnav.experiments.walk import WALK_SENSOR_TO_BODY
 from jaxnav.geodesy import curvilinear_to_enu
-from jaxnav.io import imu_increments, load_walk, read_stop_list, write_stop_list
+from jaxnav.io import imu_increments, read_stop_list, write_stop_list
 from jaxnav.plot import plot_cadastral_errors, plot_cadastral_route, plot_stop_detection
 from jaxnav.sim import calibration_record, load_cadastral, short_survey, simulate_cadastral, survey_truth
 from jaxnav.survey import (
@@ -179,9 +179,11 @@ def preprocessing_check(scn, seed: int = 0, n: int = 60000, axis: int = 0):
 
 
 def walk_detection(data_dir, out_dir=None):
-    """S3 step 2 on real data: the stop detector on the walk set (``data_dir``, see :func:`jaxnav.io.load_walk`)
+    """S3 step 2 on real data: the stop detector on the walk set (``data_dir``, see :func:`jaxnav.experiments.walk.load_walk`)
     against the stops seen by RTK (horizontal speed < 0.1 m/s); spans in s from the IMU start; the figure goes
     to ``out_dir`` if given."""
+    from jaxnav.experiments.walk import load_walk
+
     w = load_walk(data_dir)
     t, dth, dv, dt = imu_increments(w.imu, WALK_SENSOR_TO_BODY)
     f, g = dv / dt[:, None], dth / dt[:, None]

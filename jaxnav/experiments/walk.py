@@ -22,23 +22,45 @@ GNSS innovation log-likelihood over the walk (the forward axis is the walking di
 The run itself is the shipped ``jaxnav ins`` config ``walk_0827``
 (``jaxnav/experiments/configs/ins/walk_0827.toml``, processed by :mod:`jaxnav.experiments.ins_run`);
 this module keeps the walk-specific checks (:func:`frame_check`) and a programmatic entry point
-(:func:`run_walk`) over an already loaded :class:`jaxnav.io.WalkData`.
+(:func:`run_walk`) over an already loaded :class:`WalkData`.
 """
 
 from __future__ import annotations
 
 import math
 import pathlib
-from typing import Optional, Sequence
+from typing import Any, NamedTuple, Optional, Sequence
 
 import numpy as np
 
 from jaxnav.experiments.ins_config import load_ins_config
-from jaxnav.experiments.ins_run import OutageScores, filter_params, gnss_measurements, prepare, run_ins
-from jaxnav.ins import SensorBiases, coarse_alignment, loosely_coupled, mounting_from_groves_deg, sensor_to_body
+from jaxnav.experiments.ins_run import filter_params, gnss_measurements, prepare, run_ins
+from jaxnav.ins import OutageScores, SensorBiases, coarse_alignment, loosely_coupled, mounting_from_groves_deg, sensor_to_body
 from jaxnav.ins.attitude import quat_to_euler
-from jaxnav.io import WalkData, imu_increments, load_walk, write_json
-from jaxnav.plot import plot_walk
+from jaxnav.experiments.figures import plot_walk
+from jaxnav.io import imu_increments, read_pos, read_rtklib_imu, write_json
+
+class WalkData(NamedTuple):
+    """The walk recording: :class:`jaxnav.io.ImuLog` and :class:`jaxnav.io.PosSolution` (both GPST s since 1980)."""
+
+    imu: Any
+    pos: Any
+
+
+def load_walk(data_dir) -> WalkData:
+    """Read ``walk_0827`` (``imu_1730.csv`` + ``.tag``, ``gnss_1730_sf.pos``) from ``data_dir``.
+
+    Args:
+      data_dir: the ``walk_0827`` folder, or a folder holding it (the rtklibexplorer-gnss-imu set).
+    Returns:
+      :class:`WalkData` in SI units (IMU in the sensor axes).
+    """
+    d = pathlib.Path(data_dir)
+    if (d / "walk_0827").is_dir():
+        d = d / "walk_0827"
+    imu = read_rtklib_imu(d / "imu_1730.csv", d / "imu_1730.csv.tag")
+    return WalkData(imu=imu, pos=read_pos(d / "gnss_1730_sf.pos"))
+
 
 #: Upstream walk_0827 IMU orientation (roll, pitch, yaw), deg, relative to a forward-right-down body frame.
 WALK_UPSTREAM_ORIENTATION_DEG = (180.0, 0.0, -90.0)
@@ -63,11 +85,11 @@ def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None
     """The shipped ``walk_0827`` config (15-state LC filter + RTS, simulated 15 s outages) on loaded data.
 
     Args:
-      data: :class:`jaxnav.io.WalkData` (or a directory for :func:`jaxnav.io.load_walk`).
-      out_dir: if given, the track/outage figure (:func:`jaxnav.plot.plot_walk`) is written there.
+      data: :class:`WalkData` (or a directory for :func:`load_walk`).
+      out_dir: if given, the track/outage figure (:func:`jaxnav.experiments.figures.plot_walk`) is written there.
       cfg: a config to use instead of the shipped one (:func:`walk_config`).
     Returns:
-      (:class:`jaxnav.experiments.ins_run.OutageScores`, extras dict with "alignment", "result", "meas",
+      (:class:`jaxnav.ins.OutageScores`, extras dict with "alignment", "result", "meas",
       "smoothed_nav", "smoothed_biases", "enu_fwd", "enu_sm", "enu_ref", "fixed", "run").
     """
     if not isinstance(data, WalkData):

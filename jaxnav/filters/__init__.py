@@ -37,7 +37,7 @@ from jaxnav.filters._estimators import (
 from jaxnav.filters._kalman import KalmanResult, kalman_filter
 from jaxnav.filters._loglik import LoglikGradients, log_likelihood, loglik_and_gradients
 from jaxnav.filters._model import LinearGaussian, check_shapes, validate_model
-from jaxnav.filters._models import constant_velocity
+from jaxnav.filters._models import constant_velocity, coordinated_turn
 from jaxnav.filters._nonlinear import (
     NonlinearGaussian,
     cubature_kalman_filter,
@@ -99,7 +99,7 @@ __all__ = [
     "ALL_OUTPUTS", "Attenuated", "Constant", "Fading", "FilterParams", "FilterState",
     "KalmanResult", "LinearGaussian", "SageHusa", "SageHusaInfo", "SmootherResult", "StepContext",
     "StepInfo", "StepInput", "UpdateResult", "VCInfo", "VarianceCompensation", "attenuated",
-    "check_shapes", "constant", "constant_velocity", "fading", "filter_step", "init_state", "kalman_filter",
+    "check_shapes", "constant", "constant_velocity", "coordinated_turn", "fading", "filter_step", "init_state", "kalman_filter",
     "predict", "rts_smoother", "sage_husa", "update", "validate_model", "variance_compensation",
     "IGG3", "IGG3State", "Chain", "ChainInfo", "RobustInfo", "YangFactor", "chain", "igg3", "igg3_weight", "yang_alpha",
     "yang_factor",

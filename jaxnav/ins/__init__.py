@@ -16,6 +16,19 @@ from jaxnav.ins.allan import (  # Allan variance and noise identification from a
     uniform_rates,
 )
 from jaxnav.ins.evaluation import TrajectoryErrors, error_statistics, trajectory_errors, wrap_angle
+from jaxnav.ins.evaluation import (  # GNSS outage protocol and sigmas of error covariances
+    OutageScores,
+    attitude_sigmas,
+    horizontal_sigma,
+    in_windows,
+    outage_windows,
+    position_cov_enu,
+    position_sigmas_enu,
+    score_outages,
+    training_windows,
+)
+from jaxnav.ins.likelihood import horizontal_fix_nll
+from jaxnav.ins.resample import interpolate_on_samples, nearest_samples
 from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
 from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU body)
     C_RFU_FRD,
@@ -30,6 +43,8 @@ from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU 
 from jaxnav.ins.noise import NOISE_GRADES, ImuNoise, imu_noise_from_datasheet, imu_noise_to_datasheet, noise_preset
 from jaxnav.ins.standstill import (
     PLATFORMS,
+    CheckedStandstill,
+    gnss_checked_standstill,
     DetectionScores,
     StandstillParams,
     detect_standstill,
@@ -44,6 +59,13 @@ from jaxnav.ins.standstill import (
     threshold_standstill,
 )
 from jaxnav.ins.timing import TimeOffset, estimate_time_offset
+from jaxnav.ins.timing import (  # refinement by the filter's innovation likelihood
+    LikelihoodOffset,
+    clock_drift,
+    likelihood_time_offset,
+    offset_search_epochs,
+    parabola_peak,
+)
 from jaxnav.ins.earth import EarthParams, earth_params, gravity_minus_coriolis, normal_gravity, position_rate
 from jaxnav.ins.error_model import (
     ERROR_MODEL_15,
@@ -132,4 +154,10 @@ __all__ = [
     "ERROR_MODEL_15GM", "ERROR_MODEL_21", "IDX21", "STATE_NAMES21", "error_model_Qc21", "error_model_F21",
     "error_model_G21", "error_model_P0", "chi2_quantile", "measurements", "Aid", "MeasContext", "MeasRows",
     "MeasurementModel", "heading", "nhc", "odometer", "zaru", "zupt",
+]
+__all__ += [
+    "OutageScores", "attitude_sigmas", "horizontal_sigma", "in_windows", "outage_windows", "position_cov_enu",
+    "position_sigmas_enu", "score_outages", "training_windows", "horizontal_fix_nll",
+    "LikelihoodOffset", "clock_drift", "likelihood_time_offset", "offset_search_epochs", "parabola_peak",
+    "CheckedStandstill", "gnss_checked_standstill", "interpolate_on_samples", "nearest_samples",
 ]

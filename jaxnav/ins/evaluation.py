@@ -155,9 +155,11 @@ def trajectory_errors(t_sol, pos_sol, v_sol, rpy_sol, t_ref, pos_ref, v_ref=None
                             sig_att=saa, nees_pos=nees, window=win, n_dropped=int(np.count_nonzero(~ok)), at=at)
 
 
-def _rms(x):
+def _rms(x, *, finite_only: bool = True):
+    """Root mean square of ``x`` (NaN when empty); ``finite_only``: NaN/inf entries left out (else they propagate)."""
     x = np.asarray(x, float)
-    x = x[np.isfinite(x)]
+    if finite_only:
+        x = x[np.isfinite(x)]
     return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
 
 
@@ -226,3 +228,165 @@ def error_statistics(e: TrajectoryErrors, n_windows: Optional[int] = None) -> di
                                 "rms_of_max_3d_drift_m": _rms(m3[scored]) if scored.any() else float("nan"),
                                 "mean_of_max_3d_drift_m": float(np.mean(m3[scored])) if scored.any() else float("nan"),
                                 "rms_of_max_h_drift_m": _rms(mh[scored]) if scored.any() else float("nan")}}
+
+
+# ----------------------------------------------------------------------------- GNSS outage protocol
+def outage_windows(t_start: float, t_end: float, *, first_s: float = 40.0, outage_s: float = 15.0,
+                   gap_s: float = 45.0, end_margin_s: float = 30.0) -> np.ndarray:
+    """(K, 2) simulated GNSS outage windows [a, b), s, of the outage protocol.
+
+    The first starts ``first_s`` after ``t_start`` (the filter's convergence); GNSS is back for
+    ``gap_s`` between windows of ``outage_s``; a window is kept if it ends at least
+    ``end_margin_s`` before ``t_end``. All arguments in s.
+    """
+    out, a = [], t_start + first_s
+    while a + outage_s <= t_end - end_margin_s:
+        out.append((a, a + outage_s))
+        a += outage_s + gap_s
+    return np.array(out, float).reshape(-1, 2)
+
+
+def training_windows(windows, t_end: float, outage_s: float) -> np.ndarray:
+    """(J, 2) outage windows for fitting, disjoint from the evaluation ``windows`` (K, 2), s.
+
+    One window of ``outage_s`` (at most the gap) centred in every GNSS-on gap between two
+    evaluation windows, so a fit never scores the fixes the evaluation withholds; with a single
+    evaluation window, one of up to ``outage_s`` starting 0.5 s after it (ending 1 s before
+    ``t_end``). Windows shorter than 1 s are dropped.
+    """
+    w = np.asarray(windows, float).reshape(-1, 2)
+    out = []
+    for (a0, b0), (a1, _) in zip(w[:-1], w[1:]):
+        L = min(outage_s, a1 - b0)
+        mid = 0.5 * (b0 + a1)
+        if L > 1.0:
+            out.append((mid - L / 2, mid + L / 2))
+    if not out and w.size:
+        L = min(outage_s, t_end - w[-1, 1] - 1.0)
+        if L > 1.0:
+            out.append((w[-1, 1] + 0.5, w[-1, 1] + 0.5 + L))
+    return np.asarray(out, float).reshape(-1, 2)
+
+
+def in_windows(t, windows) -> np.ndarray:
+    """(M,) bool: which times ``t`` (M,) s fall inside any window [a, b) of ``windows`` (K, 2) s."""
+    t = np.asarray(t, float)
+    inside = np.zeros(t.shape, bool)
+    for a, b in np.asarray(windows, float).reshape(-1, 2):
+        inside |= (t >= a) & (t < b)
+    return inside
+
+
+class OutageScores(NamedTuple):
+    """Horizontal errors of a forward and a smoothed solution against withheld fixed GNSS positions, m.
+
+    Attributes:
+      windows: (K, 2) outage windows, s (GPST).  n_ref: (K,) fixed epochs scored per window.
+      fwd_max, sm_max: (K,) max horizontal error per outage (NaN where no fixed epoch).
+      fwd_rms, sm_rms: (K,) RMS horizontal error per outage.
+      fwd_rms_all, sm_rms_all: RMS over all scored epochs of all outages.
+      fwd_max_mean, sm_max_mean: mean of the per-outage maxima.
+      fwd_rms_outside: RMS horizontal error of the forward solution against fixed epochs *outside*
+        the outages (sanity: should be cm-level).
+      t, err_fwd, err_sm: (M,) epoch times and horizontal errors (NaN where not a fixed reference).
+      sig_fwd, sig_sm: (M,) the solutions' own horizontal 1-sigma (sqrt of the east + north variances), m.
+      withheld: (M,) bool.  runtime_s: wall time of the run that produced the solutions, s.
+      figure: path of a figure of the scores, or None.  n_nonfinite_nav: NaN count in the navigation outputs.
+    """
+
+    windows: Any
+    n_ref: Any
+    fwd_max: Any
+    sm_max: Any
+    fwd_rms: Any
+    sm_rms: Any
+    fwd_rms_all: float
+    sm_rms_all: float
+    fwd_max_mean: float
+    sm_max_mean: float
+    fwd_rms_outside: float
+    t: Any
+    err_fwd: Any
+    err_sm: Any
+    withheld: Any
+    runtime_s: float
+    figure: Optional[str]
+    n_nonfinite_nav: int
+    sig_fwd: Any = None
+    sig_sm: Any = None
+
+
+def score_outages(t, err_f, err_s, fixed, withheld, outages, *, runtime_s=float("nan"), n_nonfinite=0,
+                  sig_f=None, sig_s=None) -> OutageScores:
+    """Per-window and overall horizontal error statistics (m) at the fixed epochs inside the outages.
+
+    Args:
+      t: (M,) GNSS epochs, s.  err_f, err_s: (M,) horizontal errors of the forward and smoothed
+        solutions, m.  fixed: (M,) bool fixed-quality reference epochs.  withheld: (M,) bool.
+      outages: (K, 2) windows, s.  sig_f, sig_s: (M,) the solutions' horizontal 1-sigma, m, or None.
+    Returns:
+      :class:`OutageScores` (a NaN error propagates into its window's statistics).
+    """
+    t = np.asarray(t, float)
+    outages = np.asarray(outages, float).reshape(-1, 2)
+    e_f = np.where(fixed, err_f, np.nan)
+    e_s = np.where(fixed, err_s, np.nan)
+    rms = lambda x: _rms(x, finite_only=False)  # noqa: E731
+    K = outages.shape[0]
+    n_ref = np.zeros(K, int)
+    st = {k: np.full(K, np.nan) for k in ("fm", "sm", "fr", "sr")}
+    for k, (a, b) in enumerate(outages):
+        s = (t >= a) & (t < b) & fixed
+        n_ref[k] = int(s.sum())
+        if n_ref[k]:
+            st["fm"][k], st["sm"][k] = e_f[s].max(), e_s[s].max()
+            st["fr"][k], st["sr"][k] = rms(e_f[s]), rms(e_s[s])
+    sc = withheld & fixed
+    return OutageScores(
+        windows=outages, n_ref=n_ref, fwd_max=st["fm"], sm_max=st["sm"], fwd_rms=st["fr"], sm_rms=st["sr"],
+        fwd_rms_all=rms(e_f[sc]), sm_rms_all=rms(e_s[sc]),
+        fwd_max_mean=float(np.nanmean(st["fm"])) if np.any(n_ref) else float("nan"),
+        sm_max_mean=float(np.nanmean(st["sm"])) if np.any(n_ref) else float("nan"),
+        fwd_rms_outside=rms(e_f[~withheld & fixed]), t=t, err_fwd=e_f, err_sm=e_s, withheld=withheld,
+        runtime_s=runtime_s, figure=None, n_nonfinite_nav=n_nonfinite, sig_fwd=sig_f, sig_sm=sig_s)
+
+
+# ----------------------------------------------------------------------------- sigmas from error covariances
+def position_sigmas_enu(covs, pos, idx) -> np.ndarray:
+    """(M, 3) east, north, up 1-sigma, m, of error covariances (M, n, n) at positions ``pos`` (M, 3)
+    [lat rad, lon rad, h m]; ``idx``: the model's :class:`jaxnav.ins.error_model.ErrorStateIndex`
+    (its ``dpos`` block is (dlat rad, dlon rad, dh m)). Cross terms are ignored."""
+    P = np.asarray(covs)
+    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1)[:, idx.dpos], 0.0, None))
+    return np.abs(np.asarray(curvilinear_to_enu(np.asarray(pos), sd)))
+
+
+def horizontal_sigma(covs, pos, idx) -> np.ndarray:
+    """(M,) horizontal 1-sigma sqrt(var_E + var_N), m; arguments as :func:`position_sigmas_enu`."""
+    s = position_sigmas_enu(covs, pos, idx)
+    return np.hypot(s[:, 0], s[:, 1])
+
+
+def position_cov_enu(covs, pos, idx) -> np.ndarray:
+    """(M, 3, 3) ENU position covariance, m^2: the ``idx.dpos`` block of ``covs`` (M, n, n) mapped by the
+    Jacobian of (dlat, dlon, dh) -> ENU at ``pos`` (M, 3) [lat rad, lon rad, h m]."""
+    pos = np.asarray(pos, float)
+    J = np.stack([np.asarray(curvilinear_to_enu(pos, np.broadcast_to(e, pos.shape))) for e in np.eye(3)], -1)
+    Pp = np.asarray(covs)[:, idx.dpos, idx.dpos]
+    return np.einsum("mij,mjk,mlk->mil", J, Pp, J)
+
+
+def attitude_sigmas(covs, heading, idx) -> np.ndarray:
+    """(M, 3) 1-sigma of roll, pitch, heading, rad, of error covariances (M, n, n).
+
+    The tilt covariance about east/north (the first two states of ``idx.phi``) projected on the
+    forward and right axes at ``heading`` (M,) rad (clockwise from north); heading from the tilt
+    about up (the third).
+    """
+    P = np.asarray(covs)
+    e, n, u = range(idx.phi.start, idx.phi.start + 3)
+    f = np.stack([np.sin(heading), np.cos(heading)], -1)  # forward in (east, north)
+    r = np.stack([np.cos(heading), -np.sin(heading)], -1)  # right
+    T = P[:, e:n + 1, e:n + 1]
+    var = lambda w: np.einsum("mi,mij,mj->m", w, T, w)  # noqa: E731
+    return np.sqrt(np.clip(np.stack([var(f), var(r), P[:, u, u]], -1), 0.0, None))

@@ -324,3 +324,106 @@ def quiet_threshold(stat, quiet, *, margin: float = 2.0, quantile: float = 0.95,
     if v.size < max(int(min_samples), 1):
         return float("nan")
     return float(margin * np.quantile(v, quantile))
+
+
+class CheckedStandstill(NamedTuple):
+    """Result of :func:`gnss_checked_standstill` (host side, per IMU sample unless noted).
+
+    Attributes:
+      detected: (N,) bool, the standstills kept.  stat: (N,) SHOE statistic T_n.
+      raw: (N,) bool, T_n below the threshold (runs of at least ``min_samples``), before any GNSS check.
+      moving, static, covered: (N,) bool GNSS labels (:func:`gnss_motion_labels`; all False without GNSS;
+        ``moving`` also False on platforms without the GNSS veto).
+      vetoed: (N,) bool, IMU standstills GNSS says are moving.  unconfirmed: (N,) bool, standstills
+        dropped for touching no GNSS-static sample.
+      threshold: gamma used.  threshold_source: "quiet periods", "fallback (too few quiet samples)" or "given".
+      quiet_samples: samples the threshold was taken over.  window: SHOE window, samples.
+      min_samples: shortest standstill kept, samples.  min_s: the same, s.  g: gravity used, m/s^2.
+      scores, imu_only_scores: :class:`DetectionScores` of ``detected`` and ``raw`` against the
+        GNSS-static labels where GNSS brackets the sample (``covered``).
+    """
+
+    detected: Any
+    stat: Any
+    raw: Any
+    moving: Any
+    static: Any
+    covered: Any
+    vetoed: Any
+    unconfirmed: Any
+    threshold: float
+    threshold_source: str
+    quiet_samples: int
+    window: int
+    min_samples: int
+    min_s: float
+    g: float
+    scores: DetectionScores
+    imu_only_scores: DetectionScores
+
+
+def gnss_checked_standstill(t, f_b, w_b, *, sigma_a: float, sigma_w: float, platform: str = "car",
+                            static_s: float = 0.0, window=None, min_s=None, threshold="auto",
+                            fallback_threshold: float = 60.0, t_gnss=None, q_gnss=None, k_moving: float = 3.0,
+                            max_gap_s: float = 1.5, rate_hz=None) -> CheckedStandstill:
+    """Standstill per IMU sample: SHOE GLRT, a threshold from the quiet periods, and a GNSS check (host side).
+
+    Gravity for the test is the mean |f| over the first ``static_s`` seconds (absorbs a scale error).
+    The platform preset (:data:`PLATFORMS`) gives the window, the shortest standstill and the threshold
+    margin unless ``window`` (samples) or ``min_s`` (s) are given. Quiet samples are the GNSS-static ones
+    (:func:`gnss_motion_labels` on the normalised speeds ``q_gnss`` (M,) of :func:`gnss_speed_test` at
+    ``t_gnss`` (M,) s) and the declared static start; with ``threshold = "auto"`` gamma is
+    :func:`quiet_threshold` over them (``fallback_threshold``, by default 10 times the rest expectation 6
+    of T_n, when too few exist), else the number given. Samples where GNSS says the platform moves are
+    vetoed on platforms whose preset asks for it, and there a standstill must also touch a GNSS-static
+    sample (one wholly inside a GNSS gap is dropped as unconfirmed).
+
+    Args:
+      t: (N,) s.  f_b, w_b: (N, 3) specific force m/s^2 and angular rate rad/s, body axes.
+      sigma_a: accelerometer noise per sample at rest, m/s^2.  sigma_w: gyro noise per sample, rad/s.
+      max_gap_s: GNSS epochs further than this from a sample do not label it (at least 0.3 s is used).
+      rate_hz: IMU rate, Hz, for the preset durations (default: from the median step of ``t``).
+    Returns:
+      :class:`CheckedStandstill`.
+    """
+    t = np.asarray(t, float)
+    f, w = np.asarray(f_b, float), np.asarray(w_b, float)
+    if f.shape != (t.size, 3) or w.shape != (t.size, 3):
+        raise ValueError(f"t {t.shape}, f_b {f.shape}, w_b {w.shape}: need (N,), (N, 3), (N, 3)")
+    if platform not in PLATFORMS:
+        raise ValueError(f"platform must be one of {sorted(PLATFORMS)}, got {platform!r}")
+    pf = PLATFORMS[platform]
+    st = t <= t[0] + static_s
+    g = float(np.mean(np.linalg.norm(f[st], axis=1)))
+    rate = float(rate_hz) if rate_hz is not None else 1.0 / float(np.median(np.diff(t)))
+    window = int(window) if window is not None else max(1, int(round(pf["window_s"] * rate)))
+    min_s = float(pf["min_s"] if min_s is None else min_s)
+    m = max(1, int(round(min_s * rate)))
+    stat = np.asarray(shoe_statistic(f, w, StandstillParams(sigma_a=sigma_a, sigma_w=sigma_w, threshold=1.0, g=g),
+                                     window=window))
+    N = t.size
+    moving, static, covered = np.zeros(N, bool), np.zeros(N, bool), np.zeros(N, bool)
+    gnss = t_gnss is not None
+    if gnss:
+        moving, static, covered = gnss_motion_labels(t, t_gnss, q_gnss, k_moving=k_moving, max_gap_s=max(max_gap_s, 0.3))
+    quiet = (static | st) & ~moving
+    if threshold == "auto":
+        gamma = quiet_threshold(stat, quiet, margin=pf["margin"], min_samples=m)
+        source = "quiet periods" if np.isfinite(gamma) else "fallback (too few quiet samples)"
+        gamma = gamma if np.isfinite(gamma) else fallback_threshold
+    else:
+        gamma, source = float(threshold), "given"
+    raw = np.asarray(keep_runs(stat < gamma, m))
+    if not pf["gnss_veto"]:
+        moving = np.zeros(N, bool)
+    vetoed = raw & moving
+    det = np.asarray(keep_runs(raw & ~moving, m))
+    unconfirmed = np.zeros(N, bool)
+    if pf["need_gnss_static"] and gnss and static.any():
+        kept = runs_touching(det, static)
+        unconfirmed, det = det & ~kept, kept
+    return CheckedStandstill(detected=det, stat=stat, raw=raw, moving=moving, static=static, covered=covered,
+                             vetoed=vetoed, unconfirmed=unconfirmed, threshold=float(gamma), threshold_source=source,
+                             quiet_samples=int(np.count_nonzero(quiet)), window=window, min_samples=m, min_s=min_s,
+                             g=g, scores=detection_scores(det[covered], static[covered]),
+                             imu_only_scores=detection_scores(raw[covered], static[covered]))

@@ -3,8 +3,13 @@
 A vehicle's turns show twice: in the gyro about the vertical and in the rate of change of the GNSS
 course. :func:`estimate_time_offset` shifts the first against the second, maximises their
 correlation coefficient over a grid of lags, refines the peak by a parabola through its
-neighbours, and returns the offset with quality figures. It is the first guess; a refinement by
-the filter's innovation likelihood belongs to the caller (``jaxnav.tune``).
+neighbours, and returns the offset with quality figures. It is the first guess.
+
+The refinement maximises the filter's GNSS innovation log-likelihood over the offset
+(:func:`likelihood_time_offset`: grids and a parabola, :func:`parabola_peak`) and, at the best
+offset, over a linear clock drift (:func:`clock_drift`). Both take the log-likelihood as a callable
+of the trial clock, so any filter run can be plugged in; :func:`offset_search_epochs` picks the GNSS
+epochs that every trial scores.
 
 It assumes the vehicle's body points along its velocity (wheeled vehicles: no sideslip). For a
 pedestrian the path and the device's yaw are related by the gait, not a clock: on the handheld
@@ -17,7 +22,7 @@ t_gnss = t_imu + offset (an IMU that time-tags its samples 0.15 s late has offse
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import Any, Callable, NamedTuple, Optional
 
 import numpy as np
 
@@ -189,3 +194,183 @@ def estimate_time_offset(t_imu, w_b, t_gnss, v_enu=None, *, llh=None, f_b=None, 
     return TimeOffset(offset_s=tau, sigma_s=sigma, corr=corr(x), n_epochs=int(idx.size),
                       turn_rate_rms=float(np.sqrt(np.mean(y**2))), at_bound=bool(at_bound), lags_s=lags,
                       corr_curve=cc, source=source)
+
+
+#: fewest GNSS epochs the likelihood search needs inside the IMU span at every trial offset
+MIN_SEARCH_EPOCHS = 10
+#: a clock drift is flagged when the offset's change over the run exceeds this many of its sigmas...
+DRIFT_SIGMAS = 3.0
+#: ... and this, s (below it the 10 ms grid and its parabola do not resolve a change)
+DRIFT_MIN_CHANGE_S = 0.005
+
+
+def parabola_peak(x, ll) -> tuple[float, float]:
+    """(maximiser, 1-sigma) of a log-likelihood on an even grid ``x`` (K,): parabola through the best three points.
+
+    ll(x) ~ c - (x - x*)^2 / (2 sigma^2): x* = x_j + h (l_- - l_+) / (2 (l_- - 2 l_j + l_+)),
+    sigma = h / sqrt(-(l_- - 2 l_j + l_+)); sigma is NaN at a grid edge or without curvature.
+    """
+    x, ll = np.asarray(x, float), np.asarray(ll, float)
+    j = int(np.nanargmax(ll))
+    best, sigma = float(x[j]), float("nan")
+    if 0 < j < len(x) - 1:
+        y0, y1, y2 = ll[j - 1:j + 2]
+        den = y0 - 2 * y1 + y2
+        h = x[1] - x[0]
+        if den < 0:
+            best += 0.5 * (y0 - y2) / den * h
+            sigma = float(h / math.sqrt(-den))
+    return best, sigma
+
+
+def offset_search_epochs(t_gnss, t_imu, span: float, windows=None) -> dict:
+    """The GNSS epochs every trial offset in [-``span``, ``span``] s can score, and counts.
+
+    An epoch is used when it lies inside the IMU span (``t_imu`` (N,) s, before any offset) for every
+    trial offset, so all trials score the same epochs; epochs inside ``windows`` (K, 2) s (GNSS
+    withheld for an evaluation) widened by ``span`` are left out as well.
+
+    Returns:
+      dict: ``use`` (M,) bool, ``n_used``, ``n_dropped_at_span_edges`` (reachable by some trial but not
+      by all), ``n_withheld`` (inside the IMU span at every trial, left out by ``windows``).
+    """
+    gt = np.asarray(t_gnss, float)
+    t0, t1 = float(t_imu[0]), float(t_imu[-1])
+    reach = (gt >= t0 - span - 1e-9) & (gt <= t1 + span)
+    inside = (gt >= t0 + span + 1e-6) & (gt <= t1 - span - 1e-6)
+    withheld = np.zeros(gt.size, bool)
+    for a, b in np.asarray(() if windows is None else windows, float).reshape(-1, 2):
+        withheld |= (gt >= a - span) & (gt < b + span)
+    use = inside & ~withheld
+    return {"use": use, "n_used": int(use.sum()), "n_dropped_at_span_edges": int((reach & ~inside).sum()),
+            "n_withheld": int((inside & withheld).sum())}
+
+
+class LikelihoodOffset(NamedTuple):
+    """Result of :func:`likelihood_time_offset`.
+
+    Attributes:
+      offset_s: the maximiser, s (added to the IMU times).  sigma_s: its 1-sigma from the curvature
+        (independent innovations assumed: optimistic when GNSS errors are correlated in time), s;
+        NaN at a grid edge.  at_edge: the maximum lies within 10 ms of +-span (widen the search).
+      fine_s: (K,) the fine grid, s.  fine_loglik: (K,) its log-likelihoods.
+    """
+
+    offset_s: float
+    sigma_s: float
+    at_edge: bool
+    fine_s: Any
+    fine_loglik: Any
+
+
+def likelihood_time_offset(loglik: Callable[[float], float], span: float, *, guess: float = 0.0,
+                           coarse_step: float = 0.05, fine_step: float = 0.01, fine_half: float = 0.05,
+                           progress: Optional[Callable[[str], Any]] = None) -> LikelihoodOffset:
+    """IMU-GNSS time offset maximising a filter's innovation log-likelihood over grids around a first guess.
+
+    ``loglik(offset)`` (s -> log-likelihood of a run with the IMU times shifted by ``offset``) is
+    evaluated on a ``coarse_step`` grid over +-``span`` (zero included) plus ``guess`` (e.g. the
+    cross-correlation of :func:`estimate_time_offset`, when within the span), then on a ``fine_step``
+    grid within +-``fine_half`` of the coarse best; :func:`parabola_peak` through the best three fine
+    points refines the maximum and gives its 1-sigma. Every trial should score the same GNSS epochs
+    (:func:`offset_search_epochs`). ``loglik`` may be called again with the same offset: memoise it
+    when a run is expensive. All times in s; ``progress`` takes one line of text, or None.
+    """
+    coarse = np.union1d(np.round(np.arange(-span, span + 1e-9, coarse_step), 6),
+                        [round(guess, 6)] if abs(guess) <= span else [])
+    for k, off in enumerate(coarse):
+        loglik(off)
+        if progress and (k % 10 == 0 or k == len(coarse) - 1):
+            progress(f"time offset: coarse grid {k + 1}/{len(coarse)}")
+    c_best = max((o for o in coarse), key=loglik)
+    fine = np.round(c_best + np.arange(-fine_half, fine_half + 1e-9, fine_step), 6)
+    fine = fine[np.abs(fine) <= span + 1e-9]
+    ll = np.array([loglik(o) for o in fine])
+    best, sigma = parabola_peak(fine, ll)
+    return LikelihoodOffset(offset_s=best, sigma_s=sigma, at_edge=bool(abs(best) >= span - 0.01), fine_s=fine,
+                            fine_loglik=ll)
+
+
+def clock_drift(loglik: Callable[[float, float], float], offset: float, t_gnss, span: float, *,
+                step_o: float = 0.01, step_c: float = 0.02, widen_hint: str = "widen the search span") -> dict:
+    """IMU clock drift by the innovation likelihood of a linear clock error.
+
+    The IMU times become t + o + c (t - t_ref) / T (t_ref the middle, T the span of the GNSS epochs
+    ``t_gnss``): o is the offset at mid-run, c its change over the run, d = c / T the drift (s/s). Every
+    trial is a whole run with one consistent clock (offsets fitted to separate halves of one-offset runs
+    are pulled towards the run's offset: a mistimed half spoils the state the other starts from). From
+    (``offset``, 0) a grid of ``step_o`` x ``step_c`` is walked (|o| + |c| / 2 within ``span``, so every
+    trial scores the same epochs) by Newton steps: a quadratic ll = a + g^T x + x^T H x / 2 through six grid
+    points around x (x, x +- one step in o and in c, x + one step in both), x moved to the grid point nearest
+    its maximum -H^-1 g until that lies within one step; (o, c) = that maximum, their covariance -H^-1
+    (independent innovations assumed: optimistic, as the offset's sigma). Flagged significant when |c|
+    exceeds :data:`DRIFT_SIGMAS` sigmas and :data:`DRIFT_MIN_CHANGE_S`. Cost: three runs beyond the offset
+    search when there is no drift, three to six per Newton step otherwise.
+
+    Args:
+      loglik: (o s, c s) -> log-likelihood of the run.  offset: the one-offset estimate, s.
+      t_gnss: (M,) the search's GNSS epoch times, s.  span: the search half-width, s.
+      widen_hint: what the note says to do when the clock model reaches the edge of the span.
+    Returns:
+      dict: ``offset_mid_s``, ``change_s``, ``change_sigma_s``, ``drift_s_per_s``,
+      ``drift_sigma_s_per_s``, ``windows`` (the model's offset at the mean epoch time of each half),
+      ``significant``, ``warning`` (when significant); ``note`` only when it cannot be estimated.
+    """
+    tg = np.asarray(t_gnss, float)
+    T = float(tg[-1] - tg[0])
+    if tg.size < 2 * MIN_SEARCH_EPOCHS or T <= 0:
+        return {"note": "not estimated: too few GNSS epochs"}
+    ok = lambda o, c: abs(o) + 0.5 * abs(c) <= span + 1e-9  # noqa: E731
+    key = lambda o, c: (round(o, 6), round(c, 6))  # noqa: E731
+    ll = lambda x: loglik(*x)  # noqa: E731
+    x = key(round(offset / step_o) * step_o, 0.0)
+    stencil = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (1, 1))  # the fewest points that fix a 2-D quadratic
+    nbrs = lambda x: [key(x[0] + i * step_o, x[1] + j * step_c) for i, j in stencil]  # noqa: E731
+    S = np.diag([step_o, step_c])
+    for _ in range(12):
+        pts = nbrs(x)
+        if not all(ok(*y) for y in pts):
+            return {"note": f"not estimated: the clock model reaches the edge of the search span; {widen_hint}"}
+        u = np.array([((y[0] - x[0]) / step_o, (y[1] - x[1]) / step_c) for y in pts])
+        A = np.column_stack([np.ones(len(pts)), u[:, 0], u[:, 1], 0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1],
+                             0.5 * u[:, 1] ** 2])
+        coef = np.linalg.solve(A, np.array([ll(y) for y in pts]))
+        H = np.array([[coef[3], coef[4]], [coef[4], coef[5]]])
+        if not np.all(np.linalg.eigvalsh(H) < 0):  # not concave here: step to the best stencil point
+            up = max(pts, key=ll)
+            if up == x:
+                return {"note": "not estimated: the likelihood has no maximum in offset and drift (too little "
+                                "dynamics)"}
+            x = up
+            continue
+        du = np.linalg.solve(H, -coef[1:3])  # the maximum, in grid steps from x
+        if np.all(np.abs(du) <= 1.0):
+            break
+        x = key(x[0] + float(np.clip(np.round(du[0]), -5, 5)) * step_o,
+                x[1] + float(np.clip(np.round(du[1]), -5, 5)) * step_c)
+    else:
+        return {"note": "not estimated: the Newton steps did not settle"}
+    est = np.array(x) + S @ du
+    cov = S @ np.linalg.inv(-H) @ S
+    o, c = float(est[0]), float(est[1])
+    sc = float(np.sqrt(cov[1, 1]))
+    t_ref = 0.5 * (tg[0] + tg[-1])
+    wins = []
+    for h in (tg < t_ref, tg >= t_ref):
+        f = (float(np.mean(tg[h])) - t_ref) / T
+        wins.append({"t_start_s": float(tg[h][0]), "t_end_s": float(tg[h][-1]), "t_mean_s": float(np.mean(tg[h])),
+                     "n_epochs": int(h.sum()), "offset_s": o + c * f,
+                     "sigma_s": float(np.sqrt(max(cov[0, 0] + 2 * f * cov[0, 1] + f * f * cov[1, 1], 0.0)))})
+    sig = bool(abs(c) > DRIFT_SIGMAS * sc and abs(c) > DRIFT_MIN_CHANGE_S)
+    out = {"method": "innovation log-likelihood of a linear clock error t + o + c (t - t_mid) / T: Newton steps "
+                     f"on a {step_o * 1e3:g} ms x {step_c * 1e3:g} ms grid, quadratic through six points around the "
+                     "best (sigmas from its curvature, optimistic as the offset's); windows: the model's offset at "
+                     "each half's mean epoch",
+           "offset_mid_s": o, "change_s": c, "change_sigma_s": sc, "drift_s_per_s": c / T,
+           "drift_sigma_s_per_s": sc / T, "windows": wins, "significant": sig}
+    if sig:
+        out["warning"] = (f"the IMU-GNSS time offset changes over the run by {c * 1e3:+.0f} +- {sc * 1e3:.0f} ms "
+                          f"({c / T * 1e6:+.0f} +- {sc / T * 1e6:.0f} ppm clock drift: {wins[0]['offset_s']:+.3f} s in "
+                          f"the first half, {wins[1]['offset_s']:+.3f} s in the second); one offset fits neither end: "
+                          "re-tag the IMU (e.g. from GNSS time pulses) or process shorter pieces")
+    return out

@@ -1,7 +1,8 @@
 """File readers (host side): RTKLIB solutions, raw IMU logs with RTKLIB time tags, daily station
-series (NGL tenv3, SIO .neu, .col tables, EarthScope/PBO .pos), TOML configuration files; the walk_0827
-set; S3 stop lists and S2 result tables (readers and writers); KF-GINS IMU/GNSS text files and generic
-CSV tables with a column map and units; reference (truth) trajectories: KF-GINS ``truth.nav`` and CSV.
+series (NGL tenv3, SIO .neu, .col tables, EarthScope/PBO .pos), TOML configuration files;
+S3 stop lists and S2 result tables (readers and writers); KF-GINS IMU/GNSS text files and generic
+CSV tables with a column map and units; reference (truth) trajectories: KF-GINS ``truth.nav`` and CSV;
+writers of a navigation solution (trajectory CSV, ``.pos``, GeoJSON, KML).
 
 Errors are :class:`ReaderError` (a ValueError) naming the file and line; units are converted to SI
 here, at the edge. :func:`write_json` is the one strict JSON writer (non-finite numbers as null
@@ -29,18 +30,21 @@ from jaxnav.io._survey_files import (
     write_epoch_log,
     write_levelling,
 )
-from jaxnav.io._walk import WalkData, load_walk
 from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
 from jaxnav.io._csv import read_csv_gnss, read_csv_imu, read_csv_series
 from jaxnav.io._truth import TruthTrajectory, read_csv_truth, read_kfgins_truth
+from jaxnav.io._solution_files import (TRAJECTORY_COLUMNS, NavSolution, Track, gpst_iso, write_geojson, write_kml,
+                                       write_pos, write_trajectory_csv)
 
 __all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags", "read_pos", "read_rtklib_imu",
            "read_rtklib_tag", "ControlPoints", "EpochLog", "Levelling", "read_control_points", "read_epoch_log",
            "read_levelling", "write_control_points", "write_epoch_log", "write_levelling", "load_toml",
            "loads_toml",
            "imu_increments", "RTK_RESULT_COLUMNS", "write_rtk_results", "read_stop_list", "write_stop_list",
-           "WalkData", "load_walk", "ReaderError", "json_ready", "write_json",
+           "ReaderError", "json_ready", "write_json",
            "provenance", "git_commit", "utc_now", "files_snapshot", "files_written",
            "read_kfgins_imu", "read_kfgins_gnss", "read_kfgins_odometer", "read_csv_imu", "read_csv_gnss",
            "read_csv_series", "TruthTrajectory", "read_kfgins_truth", "read_csv_truth",
            "STEP_KINDS", "KnownStep", "date_to_epoch", "parse_postseismic", "read_steps_file"]
+__all__ += ["TRAJECTORY_COLUMNS", "NavSolution", "Track", "gpst_iso", "write_geojson", "write_kml", "write_pos",
+            "write_trajectory_csv"]

@@ -6,8 +6,6 @@ headless machine matplotlib falls back to Agg; the ``jaxnav`` commands select Ag
 
 from jaxnav.plot._allan import plot_allan
 from jaxnav.plot._cadastral import plot_cadastral_errors, plot_cadastral_route, plot_stop_detection
-from jaxnav.plot._ct_drive import plot_ct_drive
-from jaxnav.plot._filters import plot_filter_family
 from jaxnav.plot._ins import (
     plot_ins_attitude,
     plot_ins_biases,
@@ -25,11 +23,8 @@ from jaxnav.plot._monitoring import (
 )
 from jaxnav.plot._rtk import plot_rtk
 from jaxnav.plot._save import FORMATS, figure_formats, save_figure
-from jaxnav.plot._s0 import plot_s0
 from jaxnav.plot._tune import plot_sweep, plot_tune
-from jaxnav.plot._walk import plot_walk
 
-__all__ = ["plot_allan", "FORMATS", "figure_formats", "save_figure", "plot_sweep", "plot_tune", "plot_cadastral_errors", "plot_cadastral_route", "plot_stop_detection", "plot_filter_family", "plot_ct_drive", "plot_ins_attitude", "plot_ins_biases",
-           "plot_ins_differences", "plot_standstill", "plot_time_offset_likelihood", "plot_truth_errors", "plot_rtk", "plot_s0",
-           "plot_daily_velocity", "plot_s1_period", "plot_s1_statistics", "plot_station_fit", "plot_velocity_map",
-           "plot_walk"]
+__all__ = ["plot_allan", "FORMATS", "figure_formats", "save_figure", "plot_sweep", "plot_tune", "plot_cadastral_errors", "plot_cadastral_route", "plot_stop_detection", "plot_ins_attitude", "plot_ins_biases",
+           "plot_ins_differences", "plot_standstill", "plot_time_offset_likelihood", "plot_truth_errors", "plot_rtk",
+           "plot_daily_velocity", "plot_s1_period", "plot_s1_statistics", "plot_station_fit", "plot_velocity_map"]

@@ -160,7 +160,7 @@ def test_every_command_has_its_own_default_folder():
 
 def test_walk_scores_json_strict_with_units(tmp_path):
     from jaxnav.experiments import write_walk_scores
-    from jaxnav.experiments.ins_run import OutageScores
+    from jaxnav.ins import OutageScores
 
     nan = float("nan")
     sc = OutageScores(windows=np.array([[10.0, 25.0], [40.0, 55.0]]), n_ref=np.array([3, 0]),

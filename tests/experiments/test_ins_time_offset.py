@@ -26,12 +26,12 @@ def car(tmp_path_factory):
 
 
 def _search(cfg, pos):
-    from jaxnav.experiments.ins_run import likelihood_time_offset, read_inputs
+    from jaxnav.experiments.ins_run import read_inputs, recording_time_offset
     from jaxnav.ins import sensor_to_body
 
     imu, _ = read_inputs(cfg)
     lever = sensor_to_body(np.eye(3)) @ np.asarray(cfg.gnss.lever_arm_frd, float)
-    return likelihood_time_offset(cfg, imu, pos, sensor_to_body(cfg.imu.mounting), lever, progress=None)
+    return recording_time_offset(cfg, imu, pos, sensor_to_body(cfg.imu.mounting), lever, progress=None)
 
 
 def test_search_across_imu_start(car):

@@ -15,7 +15,6 @@ import pathlib
 import numpy as np
 import pytest
 
-from jaxnav import io
 from jaxnav.experiments import walk as rd
 from _paths import DATA_ROOT
 
@@ -26,7 +25,7 @@ pytestmark = pytest.mark.skipif(not (DATA / "imu_1730.csv").exists(), reason=f"w
 
 @pytest.fixture(scope="module")
 def data():
-    return io.load_walk(DATA)
+    return rd.load_walk(DATA)
 
 
 @pytest.fixture(scope="module")

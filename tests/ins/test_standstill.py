@@ -87,7 +87,9 @@ def test_walk_set_stops():
     d = DATA_ROOT / "rtklibexplorer-gnss-imu" / "walk_0827"
     if not d.exists():
         pytest.skip("shared data walk_0827 not present")
-    wk = io.load_walk(d)
+    from jaxnav.experiments.walk import load_walk
+
+    wk = load_walk(d)
     C_bs = ins.sensor_to_body(ins.mounting_from_groves_deg(180.0, 0.0, -90.0))
     t, dth, dv, dt = io.imu_increments(wk.imu, C_bs)
     f, w = dv / dt[:, None], dth / dt[:, None]

@@ -17,9 +17,8 @@ from matplotlib.container import ErrorbarContainer  # noqa: E402
 
 from jaxnav import plot  # noqa: E402
 import jaxnav.plot._ins as _ins  # noqa: E402
-import jaxnav.plot._s0 as _s0  # noqa: E402
 import jaxnav.plot._tune as _tune  # noqa: E402
-import jaxnav.plot._walk as _walk  # noqa: E402
+import jaxnav.experiments.figures as _experiment_figures  # noqa: E402
 
 # JAXNAV_KEEP_FIGURES=DIR keeps the PNGs for a look
 KEEP = os.environ.get("JAXNAV_KEEP_FIGURES")
@@ -43,7 +42,7 @@ def captured(monkeypatch):
             return save(fig, path, **kw) if KEEP else pathlib.Path(path)
         return wrapper
 
-    for mod in (_s0, _tune, _ins, _walk):
+    for mod in (_experiment_figures, _tune, _ins):
         monkeypatch.setattr(mod, "save_figure", keep(mod.save_figure))
     return figs
 
@@ -78,7 +77,7 @@ def test_filter_family_every_curve_and_band_labelled(tmp_path):
     runs = {name: {"err": rng.normal(0, 3e-3, (T, 3)), "factors": 1 + rng.random(T),
                    "q": rng.random((T, 3)) * 1e-9} for name in ("classic", "attenuated", "fading",
                                                                   "variance_compensation")}
-    fig = plot.plot_filter_family(runs, t, (80, 100), _out(tmp_path, "filter_family.png"), b=0.254)
+    fig = _experiment_figures.plot_filter_family(runs, t, (80, 100), _out(tmp_path, "filter_family.png"), b=0.254)
     r = _renderer(fig)
     for ax in fig.axes:
         texts = _legend_texts(ax)
@@ -146,7 +145,7 @@ def test_s0_factors_in_separate_panels_sweep_with_spread_and_seed_named(tmp_path
     per_seed = np.array([[3.0, 4.0, 5.0], [2.0, 2.5, 3.0], [1.5, 2.0, 2.2], [1.8, 2.4, 3.1]])
     outdir = _out(tmp_path, "s0")
     outdir.mkdir(exist_ok=True)
-    plot.plot_s0(outdir, truth=_truth(), gidx=np.arange(M), t=t, detail=detail, sweep_b=bs,
+    _experiment_figures.plot_s0(outdir, truth=_truth(), gidx=np.arange(M), t=t, detail=detail, sweep_b=bs,
                  sweep_rms=per_seed.mean(1), b_paper=0.254, sweep_per_seed=per_seed, seed_label="seed 0 of 3")
     fig = captured["factors_and_b_sweep.png"]
     fac = [ax for ax in fig.axes if ax.get_ylabel() == "inflation factor"]
@@ -360,7 +359,7 @@ def _walk_inputs(K=16):
 
 def test_walk_outages_one_legend_entry_per_solution_and_labels_apart(tmp_path, captured):
     scores, extras = _walk_inputs()
-    plot.plot_walk(scores, extras, tmp_path / "track_outages.png", title="synthetic")
+    _experiment_figures.plot_walk(scores, extras, tmp_path / "track_outages.png", title="synthetic")
     fig = captured["track_outages.png"]
     track, errors = fig.axes
     texts = _legend_texts(errors)

@@ -1,0 +1,49 @@
+"""Predictive log-likelihood of GNSS fixes withheld from an INS/GNSS filter (pure jnp, differentiable).
+
+A fix withheld from the filter scores its prediction honestly: the horizontal antenna position the
+filter predicts at the fix epoch (its navigation state carried to the fix time by its velocity,
+plus the lever arm rotated into ENU) against the fix, with the filter's predicted horizontal
+position variance plus the fix's own covariance,
+
+    nll_m = 1/2 (e_m^T S_m^-1 e_m + log det S_m + 2 log 2 pi),   S_m = R_m + diag(var_E, var_N),
+
+the Gaussian negative log predictive density of the 2-D error e_m (Bar-Shalom, Li, Kirubarajan,
+*Estimation with Applications to Tracking and Navigation*, 2001, sect. 5.2.5). Summed over withheld
+fixes it is the loss for fitting noise densities to bridge GNSS outages.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from jaxnav.geodesy import curvilinear_to_enu
+from jaxnav.ins.attitude import quat_to_dcm
+
+
+def horizontal_fix_nll(nav, covs, t_nav, t_fix, pos_fix, R_h, lever_b, pos0, idx):
+    """(M,) negative log predictive density of M horizontal GNSS fixes given the filter's predictions.
+
+    Args:
+      nav: :class:`jaxnav.ins.NavState` with (M, ...) leaves: the filter's state at each fix's epoch
+        (pos [lat rad, lon rad, h m], v_n ENU m/s, q_bn).  covs: (M, n, n) its error covariances.
+      t_nav: (M,) times of ``nav``, s.  t_fix: (M,) fix times, s.  pos_fix: (M, 3) fixes [lat rad, lon rad, h m].
+      R_h: (M, 2, 2) the fixes' east/north covariance, m^2.  lever_b: (3,) antenna minus IMU, body frame, m.
+      pos0: (3,) origin of the local ENU frame [lat rad, lon rad, h m].
+      idx: :class:`jaxnav.ins.error_model.ErrorStateIndex` of the covariances (``dpos`` = dlat, dlon, dh).
+    """
+    M = jnp.shape(t_fix)[0]
+    for name, a, shp in (("covs", covs, None), ("t_nav", t_nav, (M,)), ("pos_fix", pos_fix, (M, 3)),
+                         ("R_h", R_h, (M, 2, 2))):
+        if (shp is not None and jnp.shape(a) != shp) or (shp is None and jnp.shape(a)[0] != M):
+            raise ValueError(f"horizontal_fix_nll: {name} has shape {jnp.shape(a)}, expected {shp or (M, 'n', 'n')}")
+    ilat, ilon = idx.dpos.start, idx.dpos.start + 1
+    C = quat_to_dcm(nav.q_bn)
+    dt = jnp.asarray(t_fix) - t_nav
+    ant = curvilinear_to_enu(pos0, nav.pos - pos0) + dt[:, None] * nav.v_n + jnp.einsum("mij,j->mi", C, lever_b)
+    e = ant[:, :2] - curvilinear_to_enu(pos0, pos_fix - pos0)[:, :2]
+    sc = jnp.abs(curvilinear_to_enu(nav.pos, jnp.ones(3)))  # metres per (rad, rad, m)
+    var = jnp.stack([covs[:, ilon, ilon] * sc[:, 0] ** 2, covs[:, ilat, ilat] * sc[:, 1] ** 2], -1)
+    S = R_h + jax.vmap(jnp.diag)(var)
+    return 0.5 * (jnp.einsum("mi,mi->m", e, jnp.linalg.solve(S, e[..., None])[..., 0])
+                  + jnp.linalg.slogdet(S)[1] + 2 * jnp.log(2 * jnp.pi))
