@@ -294,6 +294,12 @@ def report(out, tol):
                  f"{sum(ok_amp)}/{len(recs)} (worst {100 * worst:.1f} %), all three rates within 1 sigma in "
                  f"{sum(ok_rate)}/{len(recs)}, tau interval covers the truth in {sum(ok_tau)}/{len(recs)}; "
                  f"{np.mean([r['wall_s'] for r in recs]):.0f} s per station")
+        zr = np.concatenate([(np.array(r["rate_est"]) - np.array(r["rate"])) / np.array(r["rate_sigma"]) for r in recs])
+        za = np.concatenate([(np.array(r["amp_est_mm"]) - np.array(r["amp_mm"])) / np.array(r["amp_sigma_mm"])
+                             for r in recs])
+        L.append(f"standardised errors over the {zr.size} components: rates RMS {np.sqrt(np.mean(zr ** 2)):.2f}, "
+                 f"within 1 sigma {100 * np.mean(np.abs(zr) <= 1):.0f} % (68 % expected); amplitudes RMS "
+                 f"{np.sqrt(np.mean(za ** 2)):.2f}, within 1 sigma {100 * np.mean(np.abs(za) <= 1):.0f} %")
         for r in recs:
             L.append(f"  P{r['station']:03d}: tau {r['tau_days']:.0f} -> {r['tau_est_days']:.0f} d "
                      f"[{r['tau_range_days'][0]:.0f}, {r['tau_range_days'][1]:.0f}], amplitude mm "
