@@ -19,13 +19,22 @@ A script, not a test. It runs in the environment with the bench extra (hector-ts
    power law started at the first day, 10 % days missing, rate 3 mm/yr): share of 95 % rate
    intervals covering the truth, spread of the standardised errors, beside white-noise sigmas.
 3. **Batch.** 1000 simulated stations x 3 components (3000 series) of 10 years in one call
-   (``fit_series_batch``, vmap in chunks of 250 series for memory), wall time with compilation.
+   (``fit_series_batch``, vmap in chunks of 250 series for memory), wall time with compilation,
+   peak resident memory of the process.
+4. **Network** (``--part network``): ``jaxnav monitor`` with its defaults on the five real series
+   (``run_monitor_velocities``, the function behind the command: white + flicker + random walk,
+   REML, up to 5 steps detected per station by the BIC criterion), writing ``monitor.json``,
+   ``velocities.csv`` and ``velocity_map.png`` into ``--out``: the steps found (date, size and
+   sigma per component, likelihood gain) and MIDAS beside the model rate. ``--from-json`` formats
+   an existing ``monitor.json`` instead of running.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import resource
 import sys
 import time
 from pathlib import Path
@@ -143,7 +152,7 @@ def part_mc(B=500, n=3653):
                 at_bound=int(np.sum(np.asarray(fit.at_lower | fit.at_upper)[:, :2])))
 
 
-def part_batch(stations=1000, n=3653, chunk=250):
+def part_batch(stations=1000, n=3653, chunk=250, hector_sample=0):
     B = 3 * stations
     y, t = _simulate(jax.random.PRNGKey(1000), B, n)
     valid = np.isfinite(y)
@@ -154,8 +163,56 @@ def part_batch(stations=1000, n=3653, chunk=250):
                                chunk=chunk)
     jax.block_until_ready(fit)
     wall = time.perf_counter() - t0
-    return dict(stations=stations, series=B, n_days=n, chunk=chunk, wall_s=wall,
-                per_station_s=wall / stations, grad_ok=float(np.mean(np.asarray(fit.grad_norm) < 1e-3)))
+    hector = []
+    for i in range(hector_sample):  # estimatetrend on the first stations' three components, in its own process
+        v = valid[3 * i:3 * i + 3]
+        hector.append(sum(run_hector(t[v[c]] + 10 * YEAR, y[3 * i + c, v[c]])["wall_s"] for c in range(3)))
+        print(f"Hector station {i + 1}/{hector_sample}: {hector[-1]:.1f} s (load {os.getloadavg()[0]:.1f})", flush=True)
+    return dict(stations=stations, series=B, n_days=n, chunk=chunk, wall_s=wall, hector_station_s=hector,
+                per_station_s=wall / stations, grad_ok=float(np.mean(np.asarray(fit.grad_norm) < 1e-3)),
+                peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, load=os.getloadavg())
+
+
+def part_network(out, from_json=None):
+    """jaxnav monitor (defaults) on the five real series; the monitor.json it wrote."""
+    if from_json:
+        return json.loads(Path(from_json).read_text())
+    from jaxnav.experiments.velocities import run_monitor_velocities
+
+    t0 = time.perf_counter()
+    res = run_monitor_velocities([DATA / f for f in FILES], out, detect=5,
+                                 command="bench_monitoring.py --part network")
+    res["bench_wall_s"] = time.perf_counter() - t0
+    return res
+
+
+def network_report(res):
+    """Markdown tables: steps found per station and MIDAS beside the model rate."""
+    L = ["| station | step date | source | east mm | north mm | up mm | 2 ln L gain |", "|---|---|---|---|---|---|---|"]
+    for name, st in res["stations"].items():
+        for d in st["steps"]:
+            sz, sg = d["size_mm"], d["sigma_mm"]
+            L.append(f"| {name} | {d['date']} | {d['source']} | "
+                     + " | ".join(f"{sz[c]:+.1f} +- {sg[c]:.1f}" for c in mon.COMPONENTS)
+                     + f" | {'-' if d['gain_2lnL'] is None else format(d['gain_2lnL'], '.0f')} |")
+        if not st["steps"]:
+            L.append(f"| {name} | none | | | | | |")
+    L += ["", "| station | comp | model rate +- sigma | MIDAS rate +- sigma | difference / combined sigma | "
+              "residual trend | MIDAS pairs kept |", "|---|---|---|---|---|---|---|"]
+    for name, st in res["stations"].items():
+        for c in mon.COMPONENTS:
+            v, s = st["velocity_mm_per_yr"][c], st["velocity_sigma_mm_per_yr"][c]
+            m, ms = st["midas_velocity_mm_per_yr"][c], st["midas_velocity_sigma_mm_per_yr"][c]
+            L.append(f"| {name} | {c} | {v:+.2f} +- {s:.2f} | {m:+.2f} +- {ms:.2f} | "
+                     f"{(m - v) / np.hypot(s, ms):+.2f} | {st['residual_trend_mm_per_yr'][c]:+.2f} | "
+                     f"{st['midas_pairs'][c]} |")
+    L.append("")
+    for name, st in res["stations"].items():
+        for w in st["warnings"]:
+            L.append(f"{name}: {w}")
+    if "wall_time_s" in res:
+        L.append(f"\nwall time of the monitor run: {res['wall_time_s']:.0f} s")
+    return "\n".join(L)
 
 
 def report(res):
@@ -200,17 +257,25 @@ def report(res):
         b = res["batch"]
         L.append(f"\nbatch: {b['stations']} stations x 3 components ({b['series']} series) x {b['n_days']} days, "
                  f"chunks of {b['chunk']}: {b['wall_s']:.0f} s with compilation ({b['per_station_s']:.2f} s per "
-                 f"station); {100 * b['grad_ok']:.1f} % with gradient < 1e-3")
+                 f"station); {100 * b['grad_ok']:.1f} % with gradient < 1e-3; peak resident memory "
+                 f"{b['peak_rss_mb']:.0f} MB; load average at the end {b['load'][0]:.1f}")
+        if b["hector_station_s"]:
+            h = np.array(b["hector_station_s"])
+            L.append(f"Hector estimatetrend, 3 components of {h.size} of these stations: {h.mean():.1f} s per station "
+                     f"({h.min():.1f}-{h.max():.1f}); {b['stations']} stations in turn: {h.mean() * b['stations']:.0f} s")
     return "\n".join(L)
 
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--part", choices=["real", "kappa", "mc", "batch", "all"], default="all")
+    ap.add_argument("--part", choices=["real", "kappa", "mc", "batch", "network", "all"], default="all")
+    ap.add_argument("--out", default="bench_monitor_network", help="output folder of the network part")
+    ap.add_argument("--from-json", help="network part: format this monitor.json instead of running")
     ap.add_argument("--json")
     ap.add_argument("--stations", type=int, default=1000)
     ap.add_argument("--days", type=int, default=3653, help="length of the batch part's series")
     ap.add_argument("--chunk", type=int, default=250, help="series per vmap chunk in the batch part")
+    ap.add_argument("--hector-sample", type=int, default=3, help="batch part: stations also run through Hector")
     a = ap.parse_args()
     res = {}
     if a.part in ("real", "all"):
@@ -221,7 +286,11 @@ def main():
         res["mc"] = part_mc()
         print(report({"mc": res["mc"]}), flush=True)
     if a.part in ("batch", "all"):
-        res["batch"] = part_batch(stations=a.stations, n=a.days, chunk=a.chunk)
+        res["batch"] = part_batch(stations=a.stations, n=a.days, chunk=a.chunk, hector_sample=a.hector_sample)
+    if a.part == "network":
+        res["network"] = part_network(Path(a.out), a.from_json)
+        print(network_report(res["network"]))
+        return
     print(report(res))
     if a.json:
         Path(a.json).write_text(json.dumps(res, indent=1))
