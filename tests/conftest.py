@@ -65,7 +65,8 @@ import pytest  # noqa: E402
 # their compilations are built once. Scopes are handed out in collection order, so the long ones
 # (measured cold, serial) are put first and the run does not end on one of them.
 HEAVY = (
-    "test_notebooks.py::TestNotebook05", "test_tune_s0.py", "test_demo.py", "test_integration.py",
+    "test_docs_snippets.py", "test_notebooks.py::TestNotebook05", "test_tune_s0.py", "test_ins_time_offset.py",
+    "test_demo.py", "test_distributed.py", "test_ins_simulated.py", "test_integration.py",
     "test_notebooks.py::TestNotebook01", "test_notebooks.py::TestNotebook04", "test_cadastral.py",
     "test_notebooks.py::TestNotebook02", "test_sim.py", "test_notebooks.py::TestNotebook03", "test_tune.py",
     "test_notebooks.py::TestNotebook00", "test_monitoring.py", "test_parallel.py", "test_filters_transforms.py",
