@@ -41,8 +41,14 @@ def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOT
 
     The gains depend only on the filter's covariances: under ``jax.vmap`` with a shared model they
     are computed once for the batch when the covariances are not batched, or when every
-    sequence's equal the first's (checked at run time; what ``vmap(kalman_filter)`` returns for
-    a clean batch), else per sequence. Derivatives are the plain smoother's.
+    sequence's equal the first's (checked at run time), else per sequence. Given the result of
+    :func:`~jaxnav.filters.kalman_filter` unchanged (the same arrays), the smoother redoes that
+    filter behind one run-time choice under ``vmap`` (:func:`_batch_aware_filter_rts`): a clean
+    batch runs :func:`~jaxnav.filters.kalman_filter_batch` and
+    :func:`~jaxnav.filters.rts_smoother_batch`, so the filter's covariances are never written B
+    times; a batch with unmasked NaN/inf runs the filter and smoother of every sequence (if the
+    filter's own outputs are used too, its per-sequence filter then runs twice). Derivatives are
+    the plain smoother's.
     :func:`~jaxnav.filters.rts_smoother_batch` smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
 
     Args:
