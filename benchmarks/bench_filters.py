@@ -12,7 +12,8 @@ T epochs simulated from the model with a fixed NumPy seed; float64 throughout.
 
 Cases: (a) one sequence, filter only; (b) one sequence, filter + RTS smoother; (c) a batch of
 B sequences, filter only (vmap for the JAX implementations, native batching for simdkalman,
-a few sequences timed and extrapolated linearly for the loop-based NumPy peers).
+a few sequences timed and extrapolated linearly for the loop-based NumPy peers); (d)-(h): per-sequence
+covariances, gradients and batch filter + RTS, as the section titles of the report say.
 
 See benchmarks/README.md for what every column means.
 """
@@ -381,8 +382,20 @@ def run_benchmarks(args, zs_batch, log):
     fg = jax.jit(jax.vmap(lambda z: jf.rts_smoother(model, jf.kalman_filter(model, jx0, jP0, z)).means))
     first, runs, out = jit_time(fg, (jzB,), max(3, reps // 2))
     rows.append(Row("g", "jaxnav vmap(filter + RTS)", first, runs, smoothed=np.asarray(out), jax_impl=True,
-                    note="jit(vmap(lambda z: rts_smoother(m, kalman_filter(m, x0, P0, z)).means)): NaN masking on, "
-                         "P per sequence"))
+                    note="jit(vmap(lambda z: rts_smoother(m, kalman_filter(m, x0, P0, z)).means)), as a user writes "
+                         "it: NaN masking on; a clean batch runs one P recursion (run-time choice)"))
+
+    # (h): filter + RTS with a covariance per sequence, written as a user writes it
+    log("jaxnav (h) filter + RTS, a covariance per sequence")
+    fh = jax.jit(jax.vmap(lambda z, P: jf.rts_smoother(model, jf.kalman_filter(model, jx0, P, z)).means))
+    first, runs, out = jit_time(fh, (jzB, jP0B), max(3, reps // 2))
+    rows.append(Row("h", "jaxnav", first, runs, smoothed=np.asarray(out), jax_impl=True,
+                    note=f"jit(vmap) over (zs, P0), B={B}: rts_smoother(m, kalman_filter(m, x0, P0, z)).means, "
+                         "Joseph update"))
+    fh = jax.jit(jax.vmap(lambda z: jf.rts_smoother(model, jf.kalman_filter(model, jx0, jP0, z)).means))
+    first, runs, out = jit_time(fh, (jzN,), max(3, reps // 2))
+    rows.append(Row("h", "jaxnav (one NaN per sequence, shared P0)", first, runs, jax_impl=True,
+                    note="jit(vmap) over zs: every sequence masks its own NaN, so each has its own P"))
 
     # ---------------- plain lax.scan ----------------
     log("plain lax.scan")
@@ -415,6 +428,12 @@ def run_benchmarks(args, zs_batch, log):
     first, runs, out = jit_time(pfg, (jzB,), max(3, reps // 2))
     rows.append(Row("g", "plain lax.scan", first, runs, smoothed=np.asarray(out), jax_impl=True,
                     note=f"jit(vmap) of the plain filter + RTS over B={B} (no NaN handling: vmap shares P)"))
+    for label, joseph in (("", False), (", Joseph form", True)):
+        pfh = jax.jit(jax.vmap(lambda z, P, joseph=joseph: (lambda o: plain_rts(jF, *o))(
+            plain_filter(jF, jH, jQ, jR, jx0, P, z, keep_all=True, joseph=joseph))))
+        first, runs, out = jit_time(pfh, (jzB, jP0B), max(3, reps // 2))
+        rows.append(Row("h", "plain lax.scan" + label, first, runs, smoothed=np.asarray(out), jax_impl=True,
+                        note=f"jit(vmap) of the plain filter + RTS over (zs, P0), B={B}"))
 
     # ---------------- dynamax ----------------
     try:
@@ -448,6 +467,11 @@ def run_benchmarks(args, zs_batch, log):
         first, runs, out = jit_time(dsg, (jzB,), max(3, reps // 2))
         rows.append(Row("g", "dynamax", first, runs, smoothed=np.asarray(out), jax_impl=True,
                         note=f"jit(vmap(lgssm_smoother)) over B={B}"))
+        dsh = jax.jit(jax.vmap(lambda z, P: lgssm_smoother(make_lgssm_params(jm1, P, jF, jQ, jH, jR),
+                                                           z).smoothed_means))
+        first, runs, out = jit_time(dsh, (jzB, jP1B), max(3, reps // 2))
+        rows.append(Row("h", "dynamax", first, runs, smoothed=np.asarray(out), jax_impl=True,
+                        note=f"jit(vmap(lgssm_smoother)) over (zs, initial cov), B={B}"))
 
     # ---------------- (e), (f): value_and_grad of the innovation log-likelihood ----------------
     # theta = (log q, log sigma); the forward pass (log-likelihood only) is the reference row
@@ -770,7 +794,9 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                    "(ratio column: times jaxnav's forward pass)",
               "f": f"(f) value_and_grad of the innovation log-likelihood, batch of B = {B}, T = {T} "
                    "(ratio column: times jaxnav's default forward pass)",
-              "g": f"(g) batch of B = {B} sequences, filter + RTS smoother (smoothed means returned), T = {T}"}
+              "g": f"(g) batch of B = {B} sequences, filter + RTS smoother (smoothed means returned), T = {T}",
+              "h": f"(h) batch of B = {B} sequences with a covariance per sequence (P0 per sequence, or one NaN "
+                   f"per sequence), filter + RTS smoother (smoothed means returned), T = {T}"}
     out = []
     v = info["versions"]
     cmd = " ".join(["benchmarks/bench_filters.py"] + sys.argv[1:])
@@ -790,7 +816,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                f"{max(2, args.repeats // 3)} (NumPy peers, their batch loops included); repeats run round-robin in shuffled order |")
     out.append(f"| total wall time | {wall:.0f} s |")
     out.append("")
-    for case in "abcdgef":
+    for case in "abcdghef":
         crow = [r for r in rows if r.case == case]
         if not crow:
             continue
@@ -803,7 +829,7 @@ def build_report(args, rows, info, rates, load0, load1, profile, wall):
                    "max abs Δ smoothed vs jaxnav | vs filterpy | notes |")
         out.append("|---|---|---|---|---|---|---|---|---|---|---|")
         for r in crow:
-            steps = T * (B if case in "cdfg" else 1)
+            steps = T * (B if case in "cdfgh" else 1)
             ratio = "1.00" if r is ref else (f"{r.tmin / ref.tmin:.2f}" if ref and r.tmin == r.tmin else "n/a")
             per = "n/a" if r.tmin != r.tmin else (
                 f"{r.tmin / steps * 1e9:.0f} ns" if r.tmin / steps < 1e-6 else f"{r.tmin / steps * 1e6:.2f} µs")

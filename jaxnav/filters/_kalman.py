@@ -7,13 +7,14 @@ covariance recursion for a clean batch with shared model, P0, mask and a data-in
 
 from __future__ import annotations
 
+import weakref
 from functools import lru_cache, partial
+from typing import Any, NamedTuple
+
 import jax
 
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, filter_step, scan_setup
-
-
 
 
 def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimator=None, mask=None,
@@ -68,8 +69,51 @@ def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimato
       ValueError: at trace time, for inconsistent shapes (naming them), unknown output names, or
         a float32 computation without ``allow_float32``.
     """
-    run = _batch_aware(tuple(save), unroll, allow_float32, check_finite, joseph)
-    return run(model, x0, P0, zs, inflation, estimator, mask)
+    static = (tuple(save), unroll, allow_float32, check_finite, joseph)
+    args = (model, x0, P0, zs, inflation, estimator, mask)
+    out = _batch_aware(*static)(*args)
+    _remember(out, FilterCall(args=args, static=static))
+    return out
+
+
+class FilterCall(NamedTuple):
+    """How a :func:`kalman_filter` result was made: its arguments and static options (save, unroll,
+    allow_float32, check_finite, joseph), for :func:`filter_call_of`."""
+
+    args: Any
+    static: Any
+
+
+#: id of a filter result's ``covs`` -> (weak references to its four moments, the call)
+_CALLS: dict = {}
+_MOMENTS = ("means", "covs", "pred_means", "pred_covs")
+
+
+def _remember(out, call):
+    """Record ``call`` as the maker of ``out`` for as long as ``out.covs`` lives."""
+    moments = tuple(getattr(out, name) for name in _MOMENTS)
+    if any(a is None for a in moments):
+        return
+    try:
+        refs = tuple(weakref.ref(a) for a in moments)
+    except TypeError:  # values without weak references are not recorded
+        return
+    key = id(moments[1])
+    _CALLS[key] = (refs, call)
+    weakref.finalize(moments[1], _CALLS.pop, key, None)
+
+
+def filter_call_of(means, covs, pred_means, pred_covs):
+    """The :class:`FilterCall` whose result holds exactly these four moments (the same objects), else None.
+
+    Lets :func:`~jaxnav.filters.rts_smoother` given a filter's result unchanged redo the filter
+    behind its own ``vmap`` rule (:func:`jaxnav.filters._smoother.rts_smoother`).
+    """
+    entry = _CALLS.get(id(covs))
+    if entry is None:
+        return None
+    refs, call = entry
+    return call if all(r() is a for r, a in zip(refs, (means, covs, pred_means, pred_covs))) else None
 
 
 @lru_cache(maxsize=None)

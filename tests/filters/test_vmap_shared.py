@@ -129,3 +129,40 @@ def test_unsaved_covariances_cost_no_batch_copies(data):
     assert f"f64[{B},{T},6,6]" not in text
     g = jax.jit(jax.vmap(lambda z: jf.kalman_filter(m, X0, P0, z, save=("means", "covs"))))
     assert f"f64[{B},{T},6,6]" in g.lower(zs).compile().as_text()
+
+
+@pytest.mark.parametrize("case", ["clean", "one NaN"])
+def test_user_filter_and_smoother_composition(data, case):
+    """``vmap(lambda z: rts_smoother(m, kalman_filter(m, x0, P0, z)).means)``: the loop's results, with
+    inputs per sequence or shared, the smoother's own model or the filter's result changed in between."""
+    zs = data[case]
+    m = model()
+    x0s = 0.01 * jnp.arange(B * 6, dtype=float).reshape(B, 6)
+    mask = jnp.arange(T) % 5 != 2
+
+    def both(x0, z):
+        return jf.rts_smoother(m, jf.kalman_filter(m, x0, P0, z, mask=mask, inflation=jf.constant(1.1)))
+
+    def other_f(z):  # the smoother's F is not the filter's: no redone filter
+        return jf.rts_smoother(model(q=2e-4)._replace(F=2.0 * m.F), jf.kalman_filter(m, X0, P0, z))
+
+    def changed(z):  # the filter's result changed before smoothing: the moments given are used
+        f = jf.kalman_filter(m, X0, P0, z)
+        return jf.rts_smoother(m, f._replace(means=f.means + 1.0))
+
+    assert_tree_close(jax.jit(jax.vmap(both))(x0s, zs), stack([both(x, z) for x, z in zip(x0s, zs)]))
+    means = jax.jit(jax.vmap(lambda z: both(X0, z).means))(zs)
+    assert_tree_close(means, jnp.stack([both(X0, z).means for z in zs]))
+    for fn in (other_f, changed):
+        assert_tree_close(jax.jit(jax.vmap(fn))(zs), stack([fn(z) for z in zs]))
+
+
+def test_user_composition_writes_no_batch_covariances(data):
+    """Smoothed means only: neither the filter's nor the smoother's covariances are held B times."""
+    zs = data["clean"]
+    m = model()
+    f = jax.jit(jax.vmap(lambda z: jf.rts_smoother(m, jf.kalman_filter(m, X0, P0, z)).means))
+    text = f.lower(zs).compile().as_text()
+    assert f"f64[{B},{T},6,6]" not in text
+    np.testing.assert_allclose(f(zs), jnp.stack([jf.rts_smoother(m, jf.kalman_filter(m, X0, P0, z)).means
+                                                 for z in zs]), rtol=1e-12, atol=1e-12)
