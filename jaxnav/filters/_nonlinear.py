@@ -22,12 +22,12 @@ from typing import Any, Callable, NamedTuple, Optional
 import jax
 import jax.numpy as jnp
 
-from jaxnav._numerics import cho_solve, mm, safe_cholesky, symmetrize
+from jaxnav._numerics import cho_solve, gaussian_loglik, masked_measurement, safe_cholesky, symmetrize, whiten
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import pytree_dataclass, static_field
 from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, rts_smoother, smoothed_covs, smoothed_means
-from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, scan_setup, step_with_gain, update
+from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, UpdateResult, scan_setup, step_with_gain
 from jaxnav import _status
 
 
@@ -68,6 +68,52 @@ class NonlinearGaussian:
 
 
 # ---------------------------------------------------------------------------------------------
+# per-epoch algebra, written as unrolled multiply-adds
+
+
+def _mul(A, B):
+    """A B for one sequence's small matrices: A (i, k), B (k, j) or (k,), as k multiply-adds.
+
+    Elementwise code with no reduction: XLA fuses it with its neighbours into a few loop kernels,
+    single or under ``vmap`` (where a batched ``dot`` of tiny matrices costs a kernel each).
+    """
+    K = A.shape[-1]
+    if B.ndim == 1:
+        return sum(A[:, k] * B[k] for k in range(K))
+    return sum(A[:, k, None] * B[None, k, :] for k in range(K))
+
+
+def _update(x_pred, P_pred, z, H, R, valid, joseph):
+    """:func:`~jaxnav.filters._step.update` (masking, Cholesky solves, log-likelihood, result record)
+    with the products of :func:`_mul`, which XLA fuses into loop kernels under ``vmap`` instead of
+    one batched dot per tiny product; the Joseph form stays the congruence
+    (I - K H) P (I - K H)^T + K R K^T, positive semi-definite by construction.
+
+    Args:
+      x_pred: (n,) prior mean.  P_pred: (n, n).  z: (m,).  H: (m, n).  R: (m, m).  valid: (m,) bool.
+    Returns:
+      :class:`~jaxnav.filters._step.UpdateResult`.
+    """
+    n = P_pred.shape[-1]
+    Hm, Rm = masked_measurement(H, R, valid)
+    v = jnp.where(valid, z - _mul(Hm, x_pred), 0.0)
+    PHt = _mul(P_pred, Hm.T)
+    S = symmetrize(_mul(Hm, PHt) + Rm)
+    L, ok = safe_cholesky(S)
+    K = cho_solve(L, PHt.T).T
+    x = x_pred + _mul(K, v)
+    if joseph:
+        IKH = jnp.eye(n, dtype=P_pred.dtype) - _mul(K, Hm)
+        P = symmetrize(_mul(_mul(IKH, P_pred), IKH.T) + _mul(_mul(K, Rm), K.T))
+    else:
+        P = symmetrize(P_pred - _mul(K, PHt.T))
+    w = whiten(L, v)
+    loglik = gaussian_loglik(w, L, jnp.sum(valid))
+    return UpdateResult(x=jnp.where(ok, x, x_pred), P=jnp.where(ok, P, P_pred), v=v, S=S,
+                        K=jnp.where(ok, K, 0.0), nis=jnp.sum(w * w), loglik=loglik, ok=ok)
+
+
+# ---------------------------------------------------------------------------------------------
 # sigma points
 
 
@@ -98,10 +144,10 @@ def sigma_points(x, P, c):
 
 def _moments(points, fx, Wm, Wc):
     """Weighted mean of fx (N, d), its covariance and the cross-covariance with the points (N, n)."""
-    mean = Wm @ fx
+    mean = _mul(fx.T, Wm)
     D = fx - mean
     X = points - points[0]
-    return mean, mm((D * Wc[:, None]).T, D), mm((X * Wc[:, None]).T, D)
+    return mean, _mul((D * Wc[:, None]).T, D), _mul((X * Wc[:, None]).T, D)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -115,7 +161,7 @@ class _Taylor(NamedTuple):
 
     def predict(self, x, P):
         F = self.model.jacobian_f(x, self.t)
-        return F, self.model.f(x, self.t), mm(mm(F, P), F.T)
+        return F, self.model.f(x, self.t), _mul(_mul(F, P), F.T)
 
     def measure(self, x, P):
         return self.model.jacobian_h(x, self.t), self.model.h(x, self.t)
@@ -126,8 +172,8 @@ class _Taylor(NamedTuple):
         for it in range(self.iterations):
             if it > 0:  # Gauss-Newton: re-expand h at the last iterate
                 H, z_hat = self.measure(xi, P_pred)
-            z_lin = jnp.where(valid, z - z_hat + mm(H, xi), 0.0)
-            up = update(x_pred, P_pred, z_lin, H, R, valid, joseph)
+            z_lin = jnp.where(valid, z - z_hat + _mul(H, xi), 0.0)
+            up = _update(x_pred, P_pred, z_lin, H, R, valid, joseph)
             xi = up.x
         return up, jnp.where(valid[:, None], H, 0.0), z_lin
 
@@ -150,12 +196,12 @@ class _SigmaPoints(NamedTuple):
         hx = jax.vmap(lambda p: self.model.h(p, self.t))(pts)
         z_hat, Pzz, Pxz = _moments(pts, hx, Wm, Wc)
         H = cho_solve(L, Pxz).T
-        return H, z_hat, symmetrize(Pzz - mm(H, Pxz))
+        return H, z_hat, symmetrize(Pzz - _mul(H, Pxz))
 
     def update(self, x_pred, P_pred, z, R, valid, joseph, first, redo):
         H, z_hat, Om = self.measure(x_pred, P_pred) if redo else first
-        z_lin = jnp.where(valid, z - z_hat + mm(H, x_pred), 0.0)
-        up = update(x_pred, P_pred, z_lin, H, R + Om, valid, joseph)
+        z_lin = jnp.where(valid, z - z_hat + _mul(H, x_pred), 0.0)
+        up = _update(x_pred, P_pred, z_lin, H, R + Om, valid, joseph)
         return up, jnp.where(valid[:, None], H, 0.0), z_lin
 
 
