@@ -99,17 +99,16 @@ def _setup(duration):
     g, a = cfg.gyro, cfg.accel
     kw = dict(att=v3(cfg.initial_errors.attitude), vel=0.1, pos_enu=1.0, gyro_bias=v3(g.bias_sigma),
               accel_bias=v3(a.bias_sigma))
-    p15 = LCParams(P0=ins.error_model_P0(ins.ERROR_MODEL_15, truth.pos[0], **kw),
-                   Qc=ins.error_model_Qc15(v3(g.white), v3(a.white)), tau_markov=300.0)
-    p21 = LCParams(P0=ins.error_model_P0(ins.ERROR_MODEL_21, truth.pos[0], gyro_scale=1e-2, accel_scale=1e-3, **kw),
-                   Qc=ins.error_model_Qc21(v3(g.white), v3(a.white), gyro_bias_sigma=v3(g.bias_sigma) * 0.1,
-                                           gyro_bias_tau=3600.0, accel_bias_sigma=v3(a.bias_sigma) * 0.1,
-                                           accel_bias_tau=3600.0),
-                   tau_markov=np.full(6, 3600.0))
+    p15 = LCParams(P0=ins.ERROR_MODEL_15.P0(truth.pos[0], **kw),
+                   Qc=ins.ERROR_MODEL_15.Qc(ins.ImuNoise(gyro_arw=v3(g.white), accel_vrw=v3(a.white))), tau_markov=300.0)
+    noise21 = ins.ImuNoise(gyro_arw=v3(g.white), accel_vrw=v3(a.white), gyro_bias_instability=v3(g.bias_sigma) * 0.1,
+                           gyro_bias_tau=3600.0, accel_bias_instability=v3(a.bias_sigma) * 0.1, accel_bias_tau=3600.0)
+    p21 = LCParams(P0=ins.ERROR_MODEL_21.P0(truth.pos[0], gyro_scale=1e-2, accel_scale=1e-3, **kw),
+                   Qc=ins.ERROR_MODEL_21.Qc(noise21), tau_markov=np.full(6, 3600.0))
     return cfg, truth, r, meas, p15, p21
 
 
-SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections")
+SAVE = ins.LCSave(("nav", "biases", "covs", "pred_covs", "Phi", "corrections"))
 
 
 def main(argv=None):
@@ -137,9 +136,11 @@ def main(argv=None):
     out = []
     for name, n, params, aids, gate, ne in rows:
         def call():
-            res = ins.loosely_coupled(nav0, t_imu, dth, dv, meas, params, dt_imu=cfg.dt, n_states=n, aids=aids,
-                                      gate_prob=gate, nav_every=ne, save=SAVE)
-            nav_s, _, _ = ins.smooth(res, n_states=n)
+            model = ins.error_model_for(n)
+            res = ins.loosely_coupled(nav0, t_imu, dth, dv, meas, params, dt_imu=cfg.dt, error_model=model, aids=aids,
+                                      gate=None if gate is None else ins.LCGate(gate),
+                                      propagation=ins.LCPropagation(nav_every=ne), save=SAVE)
+            nav_s, _, _ = ins.smooth(res, error_model=model)
             return np.asarray(nav_s.pos), res
 
         t1 = time.perf_counter()

@@ -36,7 +36,7 @@ from bench_insgnss import PyinsCase, enu_err, make_setup, pyins_pos_after_fix, r
 import jax
 
 from jaxnav.experiments import S0Setup, s0_measurements  # noqa: E402
-from jaxnav.ins.integration import loosely_coupled, smooth  # noqa: E402
+from jaxnav.ins import LCPropagation, LCSave, loosely_coupled, smooth  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -73,12 +73,12 @@ def main(argv=None):
     N, M = S.t_imu.size, S.t_gnss.size
 
     def fwd(nav_every=1, save=SAVE):
-        return loosely_coupled(nav0, S.t_imu, dth, dv, meas, S.params, dt_imu=S.cfg.dt, n_states=18, save=save,
-                               nav_every=nav_every)
+        return loosely_coupled(nav0, S.t_imu, dth, dv, meas, S.params, dt_imu=S.cfg.dt, save=LCSave(tuple(save)),
+                               propagation=LCPropagation(nav_every=nav_every))
 
     def fwd_rts(nav_every=1):
         res = fwd(nav_every)
-        nav, _, _ = smooth(res, n_states=18)
+        nav, _, _ = smooth(res)
         return res.epochs.nav, nav
 
     rows = []

@@ -79,7 +79,7 @@ from pyins import inertial_sensor, measurements, strapdown, transform  # noqa: E
 from jaxnav import sim  # noqa: E402
 from jaxnav.experiments import S0Setup, load_experiment, s0_measurements  # noqa: E402
 from jaxnav.ins import attitude as att  # noqa: E402
-from jaxnav.ins.integration import loosely_coupled  # noqa: E402
+from jaxnav.ins import LCPropagation, LCSave, error_model_for, loosely_coupled  # noqa: E402
 
 warnings.filterwarnings("ignore", message="The copy keyword is deprecated")  # pandas 3 vs pyins 1.0.1
 warnings.filterwarnings("ignore", category=FutureWarning)
@@ -301,8 +301,9 @@ def main(argv=None):
 
     def lc(dth, dv, gpos, gvel, valid, nav0, nav_every=1):
         meas = s0_measurements(S.cfg, SimpleNamespace(pos=gpos, vel=gvel, valid=valid), t_g)
-        return loosely_coupled(nav0, t_imu, dth, dv, meas, S.params, dt_imu=S.cfg.dt, n_states=n_states,
-                               inflation=None, save=("nav",), nav_every=nav_every)
+        return loosely_coupled(nav0, t_imu, dth, dv, meas, S.params, dt_imu=S.cfg.dt,
+                               error_model=error_model_for(n_states), inflation=None, save=LCSave(("nav",)),
+                               propagation=LCPropagation(nav_every=nav_every))
 
     K = args.nav_every
 

@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 from jaxnav import filters as jf  # noqa: E402
 from jaxnav import sim  # noqa: E402
 from jaxnav import tune  # noqa: E402
-from jaxnav.ins import loosely_coupled  # noqa: E402
+from jaxnav.ins import LCDiscretization, LCPropagation, LCSave, error_model_for, loosely_coupled  # noqa: E402
 from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules, s0_measurements  # noqa: E402
 
 BEGIN, END = "<!-- BEGIN bench_s0_study -->", "<!-- END bench_s0_study -->"
@@ -60,8 +60,9 @@ def study(exp, seeds, chunk, discretization, nav_every=1):
     def run(key, rule):
         r = sim.simulate(S.cfg, key, trajectory=S.truth)
         return loosely_coupled(r.nav0, S.t_imu, r.imu.dtheta, r.imu.dv, s0_measurements(S.cfg, r.gnss, S.t_gnss),
-                               S.params, dt_imu=S.cfg.dt, n_states=exp["filter"]["n_states"], inflation=rule,
-                               save=save, discretization=discretization, nav_every=nav_every)
+                               S.params, dt_imu=S.cfg.dt, error_model=error_model_for(exp["filter"]["n_states"]),
+                               inflation=rule, save=LCSave(save), discretization=LCDiscretization(discretization),
+                               propagation=LCPropagation(nav_every=nav_every))
 
     def summary(res):
         pe, ve = S.errors(res)

@@ -42,7 +42,7 @@ _MESSAGES = {
     NONFINITE_IMU: "a NaN/inf IMU sample was mechanized: the navigation solution is invalid from there on",
     BAD_IMU_TIME: "an IMU sample interval was non-positive or non-finite",
     DISCRETIZATION_INACCURATE: "the Taylor discretisation of the error model had not converged (last term above "
-                               "1e-10 of Phi): raise taylor_order or use discretization='van_loan'",
+                               "1e-10 of Phi): raise LCDiscretization.order or use LCDiscretization('van_loan')",
     COVARIANCE_INDEFINITE: "a filtered or predicted covariance of an adaptive filter lost positive "
                            "semi-definiteness (eigenvalue below -1e-10 of its largest variance): the "
                            "inflation or noise estimate diverged and the results are unreliable",

@@ -129,7 +129,8 @@ class GnssSection(NamedTuple):
 class NoiseSection(NamedTuple):
     """[noise], SI; None where the grade's preset value is used.
 
-    Densities: arw rad/sqrt(s), vrw m/s/sqrt(s), bias instabilities rad/s and m/s^2 with their
+    Noise densities (fields of :class:`jaxnav.ins.ImuNoise`, ``jaxnav.experiments.ins_run.NOISE_KEYS``):
+    arw rad/sqrt(s), vrw m/s/sqrt(s), bias instabilities rad/s and m/s^2 with their
     correlation times s (``bias_correlation_time``: gyro, and accelerometer unless
     ``bias_correlation_time_accel`` is given), bias random walks rad/s/sqrt(s) and m/s^2/sqrt(s),
     initial scale-factor sigmas (dimensionless; 21 states).

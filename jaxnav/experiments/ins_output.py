@@ -198,11 +198,13 @@ def _truth_evaluation(run: InsRun, truth, evaluation, *, tuned: bool):
 def _densities_dict(d) -> dict:
     from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
 
-    return {"arw_deg_per_sqrt_h": float(d.arw) / DEG_PER_SQRT_HOUR,
-            "vrw_m_per_s_per_sqrt_h": float(d.vrw) * math.sqrt(HOUR),
-            "gyro_bias_instability_deg_per_h": float(d.gyro_markov) / DEG_PER_HOUR,
-            "bias_correlation_time_s": float(d.tau), "init_gyro_bias_deg_per_s": float(d.init_gyro_bias) / DEG,
-            "init_accel_bias_mg": float(d.init_accel_bias) / MG, "pos_sigma_scale": float(d.pos_sigma_scale)}
+    n = d.imu
+    return {"arw_deg_per_sqrt_h": float(n.gyro_arw) / DEG_PER_SQRT_HOUR,
+            "vrw_m_per_s_per_sqrt_h": float(n.accel_vrw) * math.sqrt(HOUR),
+            "gyro_bias_instability_deg_per_h": float(n.gyro_bias_instability) / DEG_PER_HOUR,
+            "bias_correlation_time_s": float(n.gyro_bias_tau),
+            "init_gyro_bias_deg_per_s": float(n.gyro_bias_initial) / DEG,
+            "init_accel_bias_mg": float(n.accel_bias_initial) / MG, "pos_sigma_scale": float(d.pos_sigma_scale)}
 
 
 def _constraints(prep, run) -> dict:

@@ -32,15 +32,14 @@ from jaxnav.ins import (OutageScores, attitude_sigmas, clock_drift, estimate_tim
                         horizontal_sigma, in_windows, interpolate_on_samples, likelihood_time_offset, nearest_samples,
                         offset_search_epochs, outage_windows, position_cov_enu, score_outages, trajectory_errors,
                         training_windows)
-from jaxnav.ins import (LCParams, PVMeasurements, SensorBiases, coarse_alignment, gnss_checked_standstill,
-                        gnss_speed_test, standstill_intervals,
-                        error_model_for, error_model_P0, error_model_Qc, error_model_Qc21, loosely_coupled, nhc,
+from jaxnav.ins import (ImuNoise, LCGate, LCParams, LCSave, SensorBiases, coarse_alignment, gnss_checked_standstill,
+                        gnss_speed_test, standstill_intervals, error_model_for, lc_params, loosely_coupled, nhc,
                         noise_preset, odometer, sensor_to_body, smooth, zaru, zupt)
+from jaxnav.ins import gnss_measurements as ins_gnss_measurements
 from jaxnav.ins import heading as heading_aid
 from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
                        read_kfgins_odometer, read_pos, read_rtklib_imu)
-from jaxnav.ins.error_model import ERROR_MODEL_15
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 
 
@@ -117,20 +116,9 @@ def heading_on_imu(cfg: InsConfig, t_imu):
     return hd, sg
 
 
-def _floored(c, floor):
-    """Covariances (M, 3, 3) with standard deviations raised to ``floor`` (correlations kept)."""
-    c = np.array(c, float)
-    d = np.sqrt(np.clip(np.diagonal(c, axis1=-2, axis2=-1), 0, None))
-    s = np.maximum(d, floor) / np.where(d > 0, d, 1.0)
-    c = c * s[:, :, None] * s[:, None, :]
-    for i in range(3):
-        c[:, i, i] = np.maximum(c[:, i, i], floor**2)
-    return c
-
-
 def gnss_measurements(pos_sol, t_imu, outages=(), *, lever_rfu=(0.0, 0.0, 0.0), pos_sigma_floor: float = 0.02,
                       vel_sigma_floor: float = 0.05, use_velocity: bool = True, qualities=(1, 2)):
-    """GNSS position/velocity measurements inside the IMU span, masked inside the outage windows.
+    """The solution's epochs inside the IMU span as :func:`jaxnav.ins.gnss_measurements`, masked inside the outages.
 
     Epochs inside an outage keep an all-False mask, so the filter reports its free-inertial
     prediction there (and the smoother its estimate). Covariances: the solution's ENU position
@@ -152,88 +140,54 @@ def gnss_measurements(pos_sol, t_imu, outages=(), *, lever_rfu=(0.0, 0.0, 0.0), 
         raise ValueError(f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
                          f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s")
     t = gt[keep]
-    M = keep.size
     pos = np.stack([np.asarray(pos_sol.lat)[keep], np.asarray(pos_sol.lon)[keep], np.asarray(pos_sol.h)[keep]], -1)
-    vel = np.asarray(pos_sol.v_enu, float)[keep]
-    R = np.zeros((M, 6, 6))
-    R[:, :3, :3] = _floored(np.asarray(pos_sol.cov_enu)[keep], pos_sigma_floor)
-    vc = np.asarray(pos_sol.vcov_enu, float)[keep]
-    R[:, 3:, 3:] = _floored(np.where(np.isfinite(vc), vc, 1.0), vel_sigma_floor)
-    ok = np.isin(np.asarray(pos_sol.q)[keep], np.asarray(qualities))
-    withheld = np.zeros(M, bool)
+    withheld = np.zeros(keep.size, bool)
     for a, b in np.asarray(outages, float).reshape(-1, 2):
         withheld |= (t >= a) & (t < b)
-    mask = np.zeros((M, 6), bool)
-    mask[:, :3] = (ok & ~withheld)[:, None]
-    if use_velocity:
-        mask[:, 3:] = (ok & ~withheld)[:, None] & np.isfinite(vel)
-    vel = np.where(np.isfinite(vel), vel, 0.0)
-    lev = np.broadcast_to(np.asarray(lever_rfu, float), (M, 3)).copy()
-    return PVMeasurements(t=t, pos=pos, vel=vel, R=R, mask=mask, lever=lev), keep, withheld
+    use = np.isin(np.asarray(pos_sol.q)[keep], np.asarray(qualities)) & ~withheld
+    meas = ins_gnss_measurements(t, pos, np.asarray(pos_sol.v_enu, float)[keep], np.asarray(pos_sol.cov_enu)[keep],
+                                 np.asarray(pos_sol.vcov_enu, float)[keep], use=use,
+                                 use_vel=use if use_velocity else np.zeros_like(use), lever=lever_rfu,
+                                 pos_sigma_floor=pos_sigma_floor, vel_sigma_floor=vel_sigma_floor)
+    return meas, keep, withheld
 
 
-class Densities(NamedTuple):
-    """Noise densities and initial sigmas of a run (SI; array leaves, so ``--tune`` differentiates them).
+class RunNoise(NamedTuple):
+    """The noise of a run: the IMU's and the initial sigmas (SI; array leaves, so ``--tune`` differentiates them).
 
-    arw rad/sqrt(s); vrw m/s/sqrt(s); gyro_markov rad/s and accel_markov m/s^2: bias instability
-    (stationary sigma of a first-order Gauss-Markov bias) with the correlation times tau / tau_accel s;
-    gyro_bias_rw rad/s/sqrt(s), accel_bias_rw m/s^2/sqrt(s): bias random walks (21 states);
-    init_att (2,) rad (roll/pitch, heading); init_vel m/s; init_pos m; init_gyro_bias rad/s;
-    init_accel_bias m/s^2; init_gyro_scale, init_accel_scale: scale-factor 1-sigma (21 states);
-    pos_sigma_scale: factor on the GNSS position sigmas.
-
-    Which enter the filter depends on ``noise.states``: 15 (random-constant biases: arw, vrw and the
-    initial sigmas), 18 (S0: plus the gyro Gauss-Markov drift), 21 (Gauss-Markov / random-walk gyro and
-    accelerometer biases and scale factors: every datasheet density as given).
+    Attributes:
+      imu: :class:`jaxnav.ins.ImuNoise`; which of its densities enter the filter depends on
+        ``noise.states`` (:meth:`jaxnav.ins.ErrorModel.Qc`).
+      init_att: (2,) rad (roll/pitch, heading).  init_vel: m/s.  init_pos: m.
+      pos_sigma_scale: factor on the GNSS position sigmas.
     """
 
-    arw: Any
-    vrw: Any
-    gyro_markov: Any
-    tau: Any
+    imu: ImuNoise
     init_att: Any
     init_vel: Any
     init_pos: Any
-    init_gyro_bias: Any
-    init_accel_bias: Any
     pos_sigma_scale: Any = 1.0
-    accel_markov: Any = 0.0
-    tau_accel: Any = 3600.0
-    gyro_bias_rw: Any = 0.0
-    accel_bias_rw: Any = 0.0
-    init_gyro_scale: Any = 0.0
-    init_accel_scale: Any = 0.0
 
 
-def densities(cfg: InsConfig) -> Densities:
-    """The run's :class:`Densities` from ``[noise]`` (values given there, else the grade's preset)."""
+#: ``[noise]`` keys (SI) -> :class:`jaxnav.ins.ImuNoise` fields
+NOISE_KEYS = {"arw": "gyro_arw", "vrw": "accel_vrw", "gyro_bias_instability": "gyro_bias_instability",
+              "bias_correlation_time": "gyro_bias_tau", "accel_bias_instability": "accel_bias_instability",
+              "bias_correlation_time_accel": "accel_bias_tau", "gyro_bias_rw": "gyro_bias_rw",
+              "accel_bias_rw": "accel_bias_rw", "init_gyro_bias": "gyro_bias_initial",
+              "init_accel_bias": "accel_bias_initial", "init_gyro_scale": "gyro_sf", "init_accel_scale": "accel_sf"}
+
+
+def run_noise(cfg: InsConfig) -> RunNoise:
+    """The run's :class:`RunNoise` from ``[noise]``: values given there, else the grade's :func:`jaxnav.ins.noise_preset`
+    (without a grade: zeros, a 300 s gyro and a 3600 s accelerometer correlation time). The accelerometer's
+    correlation time defaults to the gyro's when only that is given."""
     n = cfg.noise
-    preset = _preset(n.grade) if n.grade else {}
-
-    def pick(name, default=0.0):
-        v = getattr(n, name, None)
-        return preset.get(name, default) if v is None else v
-
-    return Densities(arw=pick("arw"), vrw=pick("vrw"), gyro_markov=pick("gyro_bias_instability"),
-                     tau=pick("bias_correlation_time", 300.0), init_att=np.asarray(n.init_attitude, float),
-                     init_vel=n.init_velocity, init_pos=n.init_position, init_gyro_bias=pick("init_gyro_bias"),
-                     init_accel_bias=pick("init_accel_bias"), accel_markov=pick("accel_bias_instability"),
-                     tau_accel=(n.bias_correlation_time_accel if n.bias_correlation_time_accel is not None
-                                else n.bias_correlation_time if n.bias_correlation_time is not None
-                                else preset.get("bias_correlation_time_accel", 3600.0)),
-                     gyro_bias_rw=pick("gyro_bias_rw"), accel_bias_rw=pick("accel_bias_rw"),
-                     init_gyro_scale=pick("init_gyro_scale"), init_accel_scale=pick("init_accel_scale"))
-
-
-def _preset(grade):
-    """The grade's :func:`jaxnav.ins.noise_preset` values under the names of :class:`Densities` (SI)."""
-    p = noise_preset(grade)
-    return {"arw": float(p.gyro_arw), "vrw": float(p.accel_vrw), "gyro_bias_instability": float(p.gyro_bias_instability),
-            "bias_correlation_time": float(p.gyro_bias_tau), "bias_correlation_time_accel": float(p.accel_bias_tau),
-            "accel_bias_instability": float(p.accel_bias_instability), "gyro_bias_rw": float(p.gyro_bias_rw),
-            "accel_bias_rw": float(p.accel_bias_rw), "init_gyro_bias": float(p.gyro_bias_initial),
-            "init_accel_bias": float(p.accel_bias_initial), "init_gyro_scale": float(p.gyro_sf),
-            "init_accel_scale": float(p.accel_sf)}
+    imu = noise_preset(n.grade) if n.grade else ImuNoise(gyro_arw=0.0, accel_vrw=0.0, gyro_bias_tau=300.0)
+    given = {f: getattr(n, k) for k, f in NOISE_KEYS.items() if getattr(n, k, None) is not None}
+    if n.bias_correlation_time is not None:
+        given.setdefault("accel_bias_tau", n.bias_correlation_time)
+    return RunNoise(imu=imu._replace(**given), init_att=np.asarray(n.init_attitude, float), init_vel=n.init_velocity,
+                    init_pos=n.init_position)
 
 
 def run_error_model(cfg: InsConfig):
@@ -244,30 +198,16 @@ def run_error_model(cfg: InsConfig):
     return model.with_odometer_scale() if o is not None and o.estimate_scale else model
 
 
-def filter_params(d: Densities, pos0, n_states: int, *, odo_scale_sigma=None) -> LCParams:
-    """:class:`jaxnav.ins.LCParams` for 15, 18 or 21 states from :class:`Densities` at ``pos0`` (3,) rad, rad, m;
-    ``odo_scale_sigma``: initial 1-sigma of the odometer scale-factor state (dimensionless), appended as the
-    last state (None: no such state)."""
-    att = jnp.asarray(d.init_att)
-    att3 = jnp.stack([att[0], att[0], att[1]])
-    tiny = 1e-12
-    model = error_model_for(n_states)
-    if odo_scale_sigma is not None:
-        model = model.with_odometer_scale()
-    P0 = error_model_P0(model, jnp.asarray(pos0, float), att=att3, vel=d.init_vel, pos_enu=d.init_pos,
-                        gyro_bias=d.init_gyro_bias, accel_bias=d.init_accel_bias,
-                        gyro_markov=jnp.maximum(d.gyro_markov, tiny), gyro_scale=d.init_gyro_scale,
-                        accel_scale=d.init_accel_scale, odo_scale=0.0 if odo_scale_sigma is None else odo_scale_sigma)
-    if n_states == 21:
-        Qc = error_model_Qc21(d.arw, d.vrw, gyro_bias_sigma=d.gyro_markov, gyro_bias_tau=d.tau,
-                              accel_bias_sigma=d.accel_markov, accel_bias_tau=d.tau_accel,
-                              gyro_bias_rw=d.gyro_bias_rw, accel_bias_rw=d.accel_bias_rw)
-        tau = jnp.concatenate([jnp.full(3, d.tau), jnp.full(3, d.tau_accel)])
-        return LCParams(P0=P0, Qc=Qc, tau_markov=tau, R_scale=1.0)
-    Qc = error_model_Qc(d.arw, jnp.maximum(d.gyro_markov, tiny), d.tau, d.vrw)
-    if n_states == 15:
-        Qc = ERROR_MODEL_15.Qc(Qc)
-    return LCParams(P0=P0, Qc=Qc, tau_markov=d.tau, R_scale=1.0)
+def filter_params(noise: RunNoise, pos0, model, *, odo_scale_sigma=0.0) -> LCParams:
+    """:func:`jaxnav.ins.lc_params` of ``model`` from :class:`RunNoise` at ``pos0`` (3,) rad, rad, m; the roll/pitch
+    sigma serves phi_E and phi_N, the heading sigma phi_U; ``odo_scale_sigma``: initial 1-sigma of the odometer
+    scale-factor state (models with it), dimensionless."""
+    att = jnp.asarray(noise.init_att)
+    imu = noise.imu
+    if model.idx.eps_r is not None:  # a Markov drift state with zero sigma would have no variance at all
+        imu = imu._replace(gyro_bias_instability=jnp.maximum(imu.gyro_bias_instability, 1e-12))
+    return lc_params(model, imu, jnp.asarray(pos0, float), att=jnp.stack([att[0], att[0], att[1]]),
+                     vel=noise.init_vel, pos_enu=noise.init_pos, odo_scale=odo_scale_sigma)
 
 
 class Prepared(NamedTuple):
@@ -289,7 +229,7 @@ class Prepared(NamedTuple):
     meas: Any
     keep: Any
     withheld: Any
-    densities: Densities
+    densities: RunNoise
     standstill: Any = None  # (N,) bool per IMU sample, or None (no detection)
     aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC, odometer)
     standstill_info: dict = {}  # detector report (detect_stops), with its series under "_series"
@@ -382,11 +322,12 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
                           f"end_margin_s = {ev.end_margin_s:g} s leave no outage window in the {t[-1] - t[0]:.1f} s "
                           "IMU span, so nothing would be withheld: lower them, or drop [evaluate]")
     a = cfg.alignment
-    dens = densities(cfg)
+    dens = run_noise(cfg)
     att = None if a.attitude is None else np.array([a.attitude[1], a.attitude[0], -a.attitude[2]])
     align = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], pos, static_s=a.static_s,
                              min_speed=a.min_speed, course_s=a.course_s, heading=a.heading, attitude=att,
-                             gyro_arw=float(dens.arw), gyro_bias_sigma=float(dens.gyro_markov))
+                             gyro_arw=float(dens.imu.gyro_arw),
+                             gyro_bias_sigma=float(dens.imu.gyro_bias_instability))
     # the alignment starts at the first GNSS fix, i.e. at the antenna: move it to the IMU
     C_bn = np.asarray(quat_to_dcm(np.asarray(align.nav0.q_bn)))
     p0 = np.asarray(align.nav0.pos, float)
@@ -425,21 +366,21 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
 
 
-def run_filter(prep: Prepared, d: Optional[Densities] = None, *, meas=None, save=_SAVE):
+def run_filter(prep: Prepared, d: Optional[RunNoise] = None, *, meas=None, save=_SAVE):
     """The loosely coupled filter on a prepared recording; returns :class:`jaxnav.ins.LCResult`."""
     d = prep.densities if d is None else d
-    n = prep.cfg.noise.states
     o = prep.cfg.odometer
     model = run_error_model(prep.cfg)
-    params = filter_params(d, prep.alignment.nav0.pos, n,
-                           odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else None)
+    params = filter_params(d, prep.alignment.nav0.pos, model,
+                           odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else 0.0)
     m = prep.meas if meas is None else meas
     m = m._replace(R=jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
+    g = prep.cfg.gnss
+    gate = None if g.gate_probability is None else LCGate(g.gate_probability, g.gate_max_run)
     z3 = np.zeros(3)
     b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
     return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
-                           error_model=model, save=save, aids=prep.aids, gate_prob=prep.cfg.gnss.gate_probability,
-                           gate_max_run=prep.cfg.gnss.gate_max_run)
+                           error_model=model, save=LCSave(tuple(save)), aids=prep.aids, gate=gate)
 
 
 def antenna_enu(nav, t_nav, t, lever, pos0):
@@ -475,11 +416,11 @@ class InsRun(NamedTuple):
     fixed: Any
     scores: Optional[OutageScores]
     runtime_s: float
-    densities: Densities
+    densities: RunNoise
     gnss_epochs: Any = None
 
 
-def run_ins(prep: Prepared, d: Optional[Densities] = None) -> InsRun:
+def run_ins(prep: Prepared, d: Optional[RunNoise] = None) -> InsRun:
     """Forward filter + RTS smoother on a prepared recording, scored on its outages if it has any."""
     d = prep.densities if d is None else d
     t0 = time.perf_counter()
@@ -608,8 +549,9 @@ def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress
     return best, info
 
 
-#: ``[tune] params`` name -> (Densities field or "lever_arm", bijector)
-_TUNE_MAP = {"arw": ("arw", "log"), "vrw": ("vrw", "log"), "gyro_bias_instability": ("gyro_markov", "log"),
+#: ``[tune] params`` name -> (ImuNoise or RunNoise field, or "lever_arm"; bijector)
+_TUNE_MAP = {"arw": ("gyro_arw", "log"), "vrw": ("accel_vrw", "log"),
+             "gyro_bias_instability": ("gyro_bias_instability", "log"),
              "pos_sigma_scale": ("pos_sigma_scale", "log"), "lever_arm": ("lever_arm", "real")}
 
 
@@ -626,7 +568,7 @@ class TuneReport(NamedTuple):
     loglik_after: float
     n_evals: int
     wall_time_s: float
-    densities: Densities
+    densities: RunNoise
     lever_rfu: Any
     fitted_on: str = ""
     n_epochs: int = 0
@@ -694,7 +636,8 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     p0 = {}
     for n in names:
         field, _ = _TUNE_MAP[n]
-        p0[n] = lever0 if field == "lever_arm" else jnp.asarray(getattr(d0, field), float)
+        p0[n] = lever0 if field == "lever_arm" else jnp.asarray(
+            getattr(d0.imu if field in ImuNoise._fields else d0, field), float)
     space = Space({n: _TUNE_MAP[n][1] for n in names})
     pos0 = jnp.asarray(np.asarray(prep.alignment.nav0.pos, float))
     ref = jnp.asarray(np.asarray(prep.meas.pos, float))
@@ -702,7 +645,9 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     idx = run_error_model(prep.cfg).idx
 
     def unpack(p):
-        d = d0._replace(**{_TUNE_MAP[n][0]: p[n] for n in names if _TUNE_MAP[n][0] != "lever_arm"})
+        fields = {_TUNE_MAP[n][0]: p[n] for n in names if _TUNE_MAP[n][0] != "lever_arm"}
+        d = d0._replace(imu=d0.imu._replace(**{f: v for f, v in fields.items() if f in ImuNoise._fields}),
+                        **{f: v for f, v in fields.items() if f not in ImuNoise._fields})
         lev = p.get("lever_arm", lever0)
         return d, lev
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from jaxnav.io import write_json
 from jaxnav import filters as jf
-from jaxnav import sim, tune
+from jaxnav import ins, sim, tune
 from jaxnav.geodesy import meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_conj, quat_mul, quat_to_rv
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled
@@ -100,9 +100,12 @@ def cut_timeline(cfg, duration: float):
 
 
 def filter_params(cfg, exp: dict) -> LCParams:
-    """P0 and Qc from the scenario's sigmas (:func:`jaxnav.sim.lc_params`), scaled by the experiment's mismatch."""
-    f = exp["filter"]
-    return sim.lc_params(cfg, n_states=f["n_states"], q_scale=f["q_scale"], r_scale=f["r_scale"])
+    """P0 and Qc from the scenario's sigmas (:func:`jaxnav.ins.lc_params` of :func:`jaxnav.sim.imu_noise`), Qc and R
+    scaled by the experiment's mismatch."""
+    f, ie = exp["filter"], cfg.initial_errors
+    p = ins.lc_params(ins.error_model_for(f["n_states"]), sim.imu_noise(cfg), jnp.asarray(cfg.origin),
+                      att=ie.attitude, vel=ie.velocity, pos_enu=ie.position, R_scale=f["r_scale"])
+    return p._replace(Qc=p.Qc * f["q_scale"])
 
 
 def inflated_states(exp: dict):
@@ -120,8 +123,10 @@ def rules(exp: dict, b=None) -> dict:
 
 
 def s0_measurements(cfg, gnss, t) -> PVMeasurements:
-    """The GPS position/velocity measurements of one S0 run (no lever arm): :func:`jaxnav.sim.gnss_measurements`."""
-    return sim.gnss_measurements(cfg, gnss, t)
+    """The GPS position/velocity measurements of one S0 run (no lever arm; R diagonal from the scenario's sigmas)."""
+    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
+    return ins.gnss_measurements(t, gnss.pos, gnss.vel, np.diag(v3(cfg.gnss.pos_sigma) ** 2),
+                                 np.diag(v3(cfg.gnss.vel_sigma) ** 2), use=gnss.valid)
 
 
 def _rms9(pe, ve, ae):
@@ -161,7 +166,8 @@ class S0Setup:
         meas = s0_measurements(self.cfg, r.gnss, self.t_gnss)
         params = self.params._replace(Qc=self.params.Qc * q_scale, R_scale=self.params.R_scale * r_scale)
         return loosely_coupled(r.nav0, self.t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=self.cfg.dt,
-                               n_states=self.exp["filter"]["n_states"], inflation=inflation, save=save, remat=remat)
+                               error_model=ins.error_model_for(self.exp["filter"]["n_states"]), inflation=inflation,
+                               save=ins.LCSave(tuple(save)), propagation=ins.LCPropagation(remat=remat))
 
     def errors(self, res):
         """(M, 3) position errors ENU (m) and (M, 3) velocity errors ENU (m/s) at the GPS epochs."""

@@ -35,7 +35,10 @@ import numpy as np
 
 from jaxnav.experiments.ins_config import load_ins_config
 from jaxnav.experiments.ins_run import filter_params, gnss_measurements, prepare, run_ins
-from jaxnav.ins import OutageScores, SensorBiases, coarse_alignment, loosely_coupled, mounting_from_groves_deg, sensor_to_body
+from jaxnav.ins import (
+    ERROR_MODEL_15, LCSave, OutageScores, SensorBiases, coarse_alignment, loosely_coupled, mounting_from_groves_deg,
+    sensor_to_body,
+)
 from jaxnav.ins.attitude import quat_to_euler
 from jaxnav.experiments.figures import plot_walk
 from jaxnav.io import imu_increments, read_pos, read_rtklib_imu, write_json
@@ -156,9 +159,9 @@ def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180
         data = load_walk(data)
     if cfg is None:
         cfg = walk_config(pathlib.Path(data.imu.path).resolve().parent.parent.parent)
-    from jaxnav.experiments.ins_run import densities
+    from jaxnav.experiments.ins_run import run_noise
 
-    noise = densities(cfg)
+    noise = run_noise(cfg)
     t0 = float(np.asarray(data.imu.t)[0])
     st = np.asarray(data.imu.t) <= t0 + 1.5
     f_rest = np.asarray(C_bs) @ np.asarray(data.imu.f_b)[st].mean(0)
@@ -193,8 +196,9 @@ def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180
         al = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], data.pos)
         meas, _, _ = gnss_measurements(data.pos, t, lever_rfu=WALK_LEVER_RFU)
         z3 = np.zeros(3)
-        res = loosely_coupled(al.nav0, t, dth, dv, meas, filter_params(noise, al.nav0.pos, 15), dt_imu=dt,
-                              biases0=SensorBiases(np.asarray(al.gyro_bias), z3, z3), n_states=15, save=("nav",))
+        res = loosely_coupled(al.nav0, t, dth, dv, meas, filter_params(noise, al.nav0.pos, ERROR_MODEL_15), dt_imu=dt,
+                              biases0=SensorBiases(np.asarray(al.gyro_bias), z3, z3), error_model=ERROR_MODEL_15,
+                              save=LCSave(("nav",)))
         out["loglik"][yaw] = float(res.loglik)
         # converged device heading minus the velocity course while walking (median over epochs after
         # 20 s): the forward axis points along the walk if this is small

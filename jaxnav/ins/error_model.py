@@ -18,7 +18,8 @@ Process noise (S0 eq. 19), 9 components::
 
 The 15-state subset drops eps_r (and w_b): X15 = [phi, dV, dpos, eps_b, nabla], W15 = [w_g, w_a].
 Each model is an :class:`ErrorModel` record (:data:`ERROR_MODEL_18`, :data:`ERROR_MODEL_15`,
-:data:`ERROR_MODEL_21`, :data:`ERROR_MODEL_15GM`, :func:`error_model_for`) chosen once by its user;
+:data:`ERROR_MODEL_21`, :data:`ERROR_MODEL_15GM`, :func:`error_model_for`) chosen once by its user,
+whose methods build F, G, Qc (from an :class:`jaxnav.ins.ImuNoise`) and a diagonal P0;
 the 15-state one is derived from the 18-state one by :meth:`ErrorModel.drop` (rows and columns
 deleted), as larger models can be reduced.
 
@@ -35,7 +36,7 @@ sensor errors as a datasheet states them::
 
 s_g, s_a are the scale-factor errors (measured = (1 + s) true + bias, dimensionless). The bias
 instability sigma with its correlation time tau and the bias random walk K of a datasheet enter
-the bias driving density as q = 2 sigma^2 / tau + K^2 (:func:`error_model_Qc21`). The gyro Markov
+the bias driving density as q = 2 sigma^2 / tau + K^2 (:meth:`ErrorModel.Qc`). The gyro Markov
 drift eps_r of S0 is not a separate state here (a second first-order process per axis would make
 27 states): the bias state is itself the Gauss-Markov process. :data:`ERROR_MODEL_15GM` is this
 model without the scale factors (15 states, Gauss-Markov / random-walk biases).
@@ -62,13 +63,16 @@ All functions are pure JAX (jit / vmap / grad), single-point shapes (batch with 
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, NamedTuple, Optional
+from typing import Callable, NamedTuple
 
+import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import expm
 
 from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import skew
+from jaxnav.ins.earth import normal_gravity
+from jaxnav.ins.noise import ImuNoise
 
 
 class ErrorStateIndex(NamedTuple):
@@ -109,34 +113,6 @@ def _vec3(x, dtype):
     return jnp.broadcast_to(jnp.asarray(x, dtype), (3,))
 
 
-def _normal_gravity_partials(lat, h, ellipsoid: Ellipsoid):
-    """Partial derivatives of normal gravity (:func:`jaxnav.ins.earth.normal_gravity`) w.r.t. lat and h.
-
-    gamma = g0(L) k(L, h), g0 = (a ge c^2 + b gp s^2) / sqrt(a^2 c^2 + b^2 s^2),
-    k = 1 - 2/a (1 + f + m - 2 f s^2) h + 3 h^2 / a^2 (NIMA TR8350.2 eqs. 4-1, 4-3); with
-    d(s^2)/dL = sin 2L:
-      dg0/dL = sin 2L [(b gp - a ge) / D - N (b^2 - a^2) / (2 D^3)],  dk/dL = 4 f h sin 2L / a,
-      dgamma/dh = g0 [-2/a (1 + f + m - 2 f s^2) + 6 h / a^2]  (~ -2 gamma / R).
-
-    Returns:
-      (dgamma/dlat m/s^2/rad, dgamma/dh 1/s^2).
-    """
-    ge, gp = ellipsoid.normal_gravity_constants()
-    a, b, f = ellipsoid.a, ellipsoid.b, ellipsoid.f
-    m = ellipsoid.omega**2 * a * a * b / ellipsoid.GM
-    s2 = jnp.sin(lat) ** 2
-    c2 = 1.0 - s2
-    sin2 = jnp.sin(2.0 * lat)
-    num = a * ge * c2 + b * gp * s2
-    den = jnp.sqrt(a * a * c2 + b * b * s2)
-    g0 = num / den
-    dg0 = sin2 * ((b * gp - a * ge) / den - num * (b * b - a * a) / (2.0 * den**3))
-    k = 1.0 - 2.0 / a * (1.0 + f + m - 2.0 * f * s2) * h + 3.0 * h * h / (a * a)
-    dk_dlat = 4.0 * f * h * sin2 / a
-    dk_dh = -2.0 / a * (1.0 + f + m - 2.0 * f * s2) + 6.0 * h / (a * a)
-    return dg0 * k + g0 * dk_dlat, g0 * dk_dh
-
-
 def nav_error_F(pos, v_n, f_n, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
     """Navigation-error block (9x9) of the INS error model: rows/cols [phi, dV, dpos] (S0 eq. 18).
 
@@ -146,7 +122,7 @@ def nav_error_F(pos, v_n, f_n, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=
     where dw_ie, dw_en, dg are the first-order changes of the Earth rate, transport rate and normal
     gravity with the velocity and position errors (the exact partials of
     :func:`jaxnav.ins.earth.earth_params`, including dR_M/dL, dR_N/dL and the height/latitude
-    dependence of gravity, dgamma/dh ~ -2 gamma / R).
+    dependence of gravity, dgamma/dh ~ -2 gamma / R, by ``jax.jacfwd`` of the normal gravity).
 
     Args:
       pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
@@ -203,7 +179,7 @@ def nav_error_F(pos, v_n, f_n, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=
         jnp.stack([-ve * dRN / RNh**2, z, -ve / RNh**2]),
         jnp.stack([ve / (RNh * cL * cL) - ve * tL * dRN / RNh**2, z, -ve * tL / RNh**2]),
     ])
-    dg_dlat, dg_dh = _normal_gravity_partials(lat, h, ellipsoid)
+    dg_dlat, dg_dh = jax.jacfwd(normal_gravity, argnums=(0, 1))(lat, h, ellipsoid)
     # g_n = [0, 0, -gamma(lat, h)]
     dg_dp = jnp.stack([jnp.stack([z, z, z]), jnp.stack([z, z, z]), jnp.stack([-dg_dlat, z, -dg_dh])])
 
@@ -228,25 +204,14 @@ def nav_error_F(pos, v_n, f_n, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=
     return jnp.block([[F_aa, F_av, F_ap], [F_va, F_vv, F_vp], [F_pa, F_pv, F_pp]])
 
 
-def error_model_F(pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
-    """Continuous-time system matrix F (18x18) of the 18-state INS error model (S0 eqs. 18-19).
-
-    X_dot = F X + G W with the navigation block of :func:`nav_error_F` and the sensor errors
-    phi_dot += -C_bn (eps_b + eps_r);  dV_dot += C_bn nabla;
-    eps_b_dot = 0;  eps_r_dot = -eps_r / tau;  nabla_dot = 0.
-
-    Args:
-      pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
-      f_n: (3,) specific force in n (= C_bn f_b), m/s^2.  C_bn: (3, 3) body -> nav DCM.
-      tau_markov: scalar or (3,) correlation time of the gyro Markov drift per body axis, s.
-      ellipsoid: static Earth model.  earth_rate_sign: +1, or -1 for reverse navigation.
-    Returns:
-      (18, 18) F; state order :data:`IDX18`.
-    """
+def _F18(pos, v_n, f_n, C_bn, tau, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
+    """F (18, 18) of S0 eqs. (18)-(19): the navigation block of :func:`nav_error_F` and
+    phi_dot += -C_bn (eps_b + eps_r);  dV_dot += C_bn nabla;  eps_b_dot = 0;  eps_r_dot = -eps_r / tau;
+    nabla_dot = 0 (tau: scalar or (3,) gyro Markov correlation times, s)."""
     Fn = nav_error_F(pos, v_n, f_n, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
     dtype = Fn.dtype
     C = jnp.asarray(C_bn, dtype)
-    tau = _vec3(tau_markov, dtype)
+    tau = _vec3(tau, dtype)
     F = jnp.zeros((18, 18), dtype)
     F = F.at[0:9, 0:9].set(Fn)
     F = F.at[IDX18.phi, IDX18.eps_b].set(-C)
@@ -256,16 +221,8 @@ def error_model_F(pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid: Ellipsoid = WGS
     return F
 
 
-def error_model_G(C_bn):
-    """Noise input matrix G (18x9) of the 18-state model for W = [w_g, w_b, w_a] (S0 eq. 19).
-
-    phi_dot gets -C_bn w_g, eps_r_dot gets w_b (body frame, directly), dV_dot gets C_bn w_a.
-
-    Args:
-      C_bn: (3, 3) body -> nav DCM.
-    Returns:
-      (18, 9) G.
-    """
+def _G18(C_bn):
+    """G (18, 9) for W = [w_g, w_b, w_a] (S0 eq. 19): phi_dot gets -C_bn w_g, eps_r_dot w_b, dV_dot C_bn w_a."""
     C = jnp.asarray(C_bn)
     G = jnp.zeros((18, 9), C.dtype)
     G = G.at[IDX18.phi, 0:3].set(-C)
@@ -274,32 +231,15 @@ def error_model_G(C_bn):
     return G
 
 
-def error_model_F15(pos, v_n, f_n, C_bn, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
-    """System matrix F (15x15) of the 15-state model [phi, dV, dpos, eps_b, nabla] (S0 eq. 18 without eps_r).
-
-    :func:`error_model_F` with the eps_r rows and columns deleted (:data:`ERROR_MODEL_15`).
-
-    Args:
-      pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
-      f_n: (3,) specific force in n, m/s^2.  C_bn: (3, 3) body -> nav DCM.
-      ellipsoid: static Earth model.  earth_rate_sign: +1, or -1 for reverse navigation.
-    Returns:
-      (15, 15) F; state order :data:`IDX15`.
-    """
-    return ERROR_MODEL_15.F(pos, v_n, f_n, C_bn, 1.0, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
-
-
-def error_model_G15(C_bn):
-    """Noise input matrix G (15x6) of the 15-state model for W15 = [w_g, w_a].
-
-    :func:`error_model_G` without the eps_r rows and the w_b columns (:data:`ERROR_MODEL_15`).
-
-    Args:
-      C_bn: (3, 3) body -> nav DCM.
-    Returns:
-      (15, 6) G: phi rows get -C_bn w_g, dV rows get C_bn w_a.
-    """
-    return ERROR_MODEL_15.G(C_bn)
+def _Qc18(noise: ImuNoise):
+    """Qc (9, 9) of W = [w_g, w_b, w_a] (S0 eq. 19): diag(ARW^2, 2 sigma^2 / tau, VRW^2) (x3 each), with the
+    gyro bias instability as the Markov drift's sigma and its correlation time as tau."""
+    dtype = jnp.result_type(noise.gyro_arw, noise.accel_vrw, noise.gyro_bias_instability, noise.gyro_bias_tau, float)
+    return jnp.diag(jnp.concatenate([
+        jnp.square(_vec3(noise.gyro_arw, dtype)),
+        markov_psd(_vec3(noise.gyro_bias_instability, dtype), _vec3(noise.gyro_bias_tau, dtype)),
+        jnp.square(_vec3(noise.accel_vrw, dtype)),
+    ]))
 
 
 def markov_psd(sigma, tau):
@@ -315,59 +255,11 @@ def markov_psd(sigma, tau):
     return 2.0 * jnp.square(sigma) / tau
 
 
-def error_model_Qc(gyro_arw, markov_sigma, tau_markov, accel_vrw):
-    """Continuous noise density Qc (9x9) of W = [w_g, w_b, w_a] (S0 eq. 19), diagonal.
-
-    Qc = diag(ARW^2 (x3), 2 sigma^2 / tau (x3), VRW^2 (x3)).
-
-    Args:
-      gyro_arw: scalar or (3,) gyro angle random walk, rad/sqrt(s) (= rad/s/sqrt(Hz)).
-      markov_sigma: scalar or (3,) stationary std of the gyro Markov drift, rad/s.
-      tau_markov: scalar or (3,) its correlation time, s.
-      accel_vrw: scalar or (3,) accelerometer velocity random walk, m/s/sqrt(s).
-    Returns:
-      (9, 9) Qc; units (rad/s)^2 s, (rad/s)^2/s, (m/s^2)^2 s.
-    """
-    dtype = jnp.result_type(gyro_arw, markov_sigma, tau_markov, accel_vrw, float)
-    q = jnp.concatenate([
-        jnp.square(_vec3(gyro_arw, dtype)),
-        markov_psd(_vec3(markov_sigma, dtype), _vec3(tau_markov, dtype)),
-        jnp.square(_vec3(accel_vrw, dtype)),
-    ])
-    return jnp.diag(q)
-
-
-def error_model_Qc15(gyro_arw, accel_vrw):
-    """Continuous noise density Qc (6x6) of W15 = [w_g, w_a]: diag(ARW^2 (x3), VRW^2 (x3)).
-
-    :func:`error_model_Qc` without the w_b rows and columns.
-
-    Args:
-      gyro_arw: scalar or (3,), rad/sqrt(s).  accel_vrw: scalar or (3,), m/s/sqrt(s).
-    Returns:
-      (6, 6) Qc.
-    """
-    return ERROR_MODEL_15.Qc(error_model_Qc(gyro_arw, 0.0, 1.0, accel_vrw))
-
-
-def error_model_F21(pos, v_n, f_n, C_bn, tau, *, Cw=None, Cf=None, ellipsoid: Ellipsoid = WGS84,
-                    earth_rate_sign=1.0):
-    """Continuous-time system matrix F (21x21) of the 21-state model (module docstring, :data:`IDX21`).
-
-    Navigation block of :func:`nav_error_F`; phi_dot += -C_bn eps_b - Cw s_g; dV_dot += C_bn nabla + Cf s_a;
-    eps_b_dot = -eps_b / tau_g; nabla_dot = -nabla / tau_a; s_g_dot = s_a_dot = 0 (plus noise, :func:`error_model_G21`).
-
-    Args:
-      pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
-      f_n: (3,) specific force in n, m/s^2.  C_bn: (3, 3) body -> nav DCM.
-      tau: scalar or (6,) correlation times [gyro bias (3), accelerometer bias (3)], s; ``inf`` makes
-        the bias a random walk (F entry 0).
-      Cw: (3, 3) C_bn diag(w_ib_b) (rad/s; over an interval its time average), the gyro scale-factor
-        coupling; None: zeros.  Cf: (3, 3) C_bn diag(f_b) (m/s^2), the accelerometer one; None: zeros.
-      ellipsoid: static Earth model.  earth_rate_sign: +1, or -1 for reverse navigation.
-    Returns:
-      (21, 21) F.
-    """
+def _F21(pos, v_n, f_n, C_bn, tau, *, Cw=None, Cf=None, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0):
+    """F (21, 21) of the 21-state model (module docstring): the navigation block of :func:`nav_error_F`;
+    phi_dot += -C_bn eps_b - Cw s_g; dV_dot += C_bn nabla + Cf s_a; eps_b_dot = -eps_b / tau_g;
+    nabla_dot = -nabla / tau_a; s_g_dot = s_a_dot = 0 (tau: scalar or (6,) = [tau_g (3), tau_a (3)], s;
+    inf: a random walk; Cw, Cf: (3, 3) C_bn diag(w_ib_b), C_bn diag(f_b), None: zeros)."""
     Fn = nav_error_F(pos, v_n, f_n, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign)
     dtype = Fn.dtype
     C = jnp.asarray(C_bn, dtype)
@@ -384,17 +276,9 @@ def error_model_F21(pos, v_n, f_n, C_bn, tau, *, Cw=None, Cf=None, ellipsoid: El
     return F
 
 
-def error_model_G21(C_bn):
-    """Noise input matrix G (21x18) of the 21-state model for W21 = [w_g, w_a, w_bg, w_ba, w_sg, w_sa].
-
-    phi_dot gets -C_bn w_g, dV_dot gets C_bn w_a; the bias and scale-factor states get their driving
-    noises directly (body frame).
-
-    Args:
-      C_bn: (3, 3) body -> nav DCM.
-    Returns:
-      (21, 18) G.
-    """
+def _G21(C_bn):
+    """G (21, 18) for W21 = [w_g, w_a, w_bg, w_ba, w_sg, w_sa]: phi_dot gets -C_bn w_g, dV_dot C_bn w_a; the
+    bias and scale-factor states their driving noises directly (body frame)."""
     C = jnp.asarray(C_bn)
     I3 = jnp.eye(3, dtype=C.dtype)
     G = jnp.zeros((21, 18), C.dtype)
@@ -404,69 +288,23 @@ def error_model_G21(C_bn):
     return G
 
 
-def error_model_Qc21(gyro_arw, accel_vrw, *, gyro_bias_sigma=0.0, gyro_bias_tau=jnp.inf, accel_bias_sigma=0.0,
-                     accel_bias_tau=jnp.inf, gyro_bias_rw=0.0, accel_bias_rw=0.0, gyro_scale_rw=0.0,
-                     accel_scale_rw=0.0):
-    """Continuous noise density Qc (18x18, diagonal) of W21 from datasheet values (all SI, scalar or (3,)).
-
-    Qc = diag(ARW^2, VRW^2, 2 sg^2 / tau_g + Kg^2, 2 sa^2 / tau_a + Ka^2, rw_sg^2, rw_sa^2) (x3 each):
-    the bias instability sigma with its correlation time is a first-order Gauss-Markov process of
-    that stationary std (:func:`markov_psd`); the bias random walk K adds its density (with tau = inf
-    only K remains). Use the same taus in ``LCParams.tau_markov`` = [tau_g (3), tau_a (3)].
-
-    Args:
-      gyro_arw: angle random walk, rad/sqrt(s).  accel_vrw: velocity random walk, m/s/sqrt(s).
-      gyro_bias_sigma: gyro bias instability (Gauss-Markov std), rad/s; gyro_bias_tau: its correlation time, s.
-      accel_bias_sigma: m/s^2; accel_bias_tau: s.
-      gyro_bias_rw: gyro bias random walk, rad/s/sqrt(s).  accel_bias_rw: m/s^2/sqrt(s).
-      gyro_scale_rw, accel_scale_rw: scale-factor random walk, 1/sqrt(s).
-    Returns:
-      (18, 18) Qc.
-    """
-    dtype = jnp.result_type(gyro_arw, accel_vrw, float)
+def _Qc21(noise: ImuNoise):
+    """Qc (18, 18) of W21: diag(ARW^2, VRW^2, 2 sg^2 / tau_g + Kg^2, 2 sa^2 / tau_a + Ka^2, rw_sg^2, rw_sa^2)
+    (x3 each): the bias instability with its correlation time is a first-order Gauss-Markov process of
+    that stationary sigma (:func:`markov_psd`); the bias random walk K adds its density (tau = inf: only K)."""
+    dtype = jnp.result_type(noise.gyro_arw, noise.accel_vrw, float)
     v = lambda x: _vec3(x, dtype)  # noqa: E731
 
     def gm(sigma, tau):
         tau = v(tau)
         return jnp.where(jnp.isinf(tau), 0.0, 2.0 * jnp.square(v(sigma)) / jnp.where(jnp.isinf(tau), 1.0, tau))
 
-    q = jnp.concatenate([
-        jnp.square(v(gyro_arw)), jnp.square(v(accel_vrw)),
-        gm(gyro_bias_sigma, gyro_bias_tau) + jnp.square(v(gyro_bias_rw)),
-        gm(accel_bias_sigma, accel_bias_tau) + jnp.square(v(accel_bias_rw)),
-        jnp.square(v(gyro_scale_rw)), jnp.square(v(accel_scale_rw)),
-    ])
-    return jnp.diag(q)
-
-
-def error_model_P0(model: "ErrorModel", pos, *, att, vel, pos_enu, gyro_bias, accel_bias, gyro_markov=0.0,
-                   gyro_scale=0.0, accel_scale=0.0, odo_scale=0.0):
-    """Diagonal initial covariance (n, n) of ``model`` from 1-sigma values (SI; scalars or (3,)).
-
-    Args:
-      model: :class:`ErrorModel`.  pos: (3,) [lat rad, lon rad, h m] where the ENU position sigmas
-        are converted to latitude/longitude.
-      att: attitude (phi E, N, U), rad.  vel: ENU velocity, m/s.  pos_enu: ENU position, m.
-      gyro_bias: rad/s.  accel_bias: m/s^2.  gyro_markov: Markov drift (18-state model only), rad/s.
-      gyro_scale, accel_scale: scale-factor errors (21-state model only), dimensionless.
-      odo_scale: odometer scale-factor error (models with ``idx.s_odo`` only), dimensionless.
-    Returns:
-      (n, n) diagonal P0 in the order of ``model.names``.
-    """
-    pos = jnp.asarray(pos)
-    dtype = jnp.result_type(pos, float)
-    v = lambda x: _vec3(x, dtype)  # noqa: E731
-    lat, h = pos[0], pos[2]
-    pe = v(pos_enu)
-    dpos = jnp.stack([pe[1] / (meridian_radius(lat) + h), pe[0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)),
-                      pe[2]])
-    blocks = dict(phi=v(att), dv=v(vel), dpos=dpos, eps_b=v(gyro_bias), eps_r=v(gyro_markov), nabla=v(accel_bias),
-                  s_g=v(gyro_scale), s_a=v(accel_scale), s_odo=jnp.reshape(jnp.asarray(odo_scale, dtype), (1,)))
-    sd = jnp.zeros(model.n, dtype)
-    for name, sl in model.idx._asdict().items():
-        if sl is not None:
-            sd = sd.at[sl].set(blocks[name])
-    return jnp.diag(sd * sd)
+    return jnp.diag(jnp.concatenate([
+        jnp.square(v(noise.gyro_arw)), jnp.square(v(noise.accel_vrw)),
+        gm(noise.gyro_bias_instability, noise.gyro_bias_tau) + jnp.square(v(noise.gyro_bias_rw)),
+        gm(noise.accel_bias_instability, noise.accel_bias_tau) + jnp.square(v(noise.accel_bias_rw)),
+        jnp.square(v(noise.gyro_sf_rw)), jnp.square(v(noise.accel_sf_rw)),
+    ]))
 
 
 def discretize_van_loan(F, G, Qc, dt):
@@ -576,17 +414,18 @@ def _take(A, runs, axis):
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class ErrorModel:
-    """An INS error-state model chosen once: its layout and the builders of F, G and the Qc selection.
+    """An INS error-state model chosen once: its layout and the builders of F, G and Qc.
 
-    Static data plus two pure builders, hashed by identity so that a model can be a ``jax.jit``
-    static argument; the array inputs (position, velocity, specific force, C_bn, tau) are arguments.
+    Static data plus pure builders, hashed by identity so that a model can be a ``jax.jit`` static
+    argument; the array inputs (position, velocity, specific force, C_bn, correlation times, noise
+    densities) are arguments of its methods.
 
     Attributes:
       names: the n state names, in order.  noise_names: the p noise-input names, in order.
       idx: :class:`ErrorStateIndex` of the blocks (None for blocks the model lacks).
-      build_F: (pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid, earth_rate_sign) -> (n, n).
+      build_F: (pos, v_n, f_n, C_bn, tau, *, ellipsoid, earth_rate_sign[, Cw, Cf]) -> (n, n).
       build_G: (C_bn) -> (n, p).
-      noise_keep: slices of the parent model's noise inputs kept (None: all), for :meth:`Qc`.
+      build_Qc: (:class:`jaxnav.ins.ImuNoise`) -> (p, p).
       bias_gm: the bias states are first-order Gauss-Markov processes whose correlation times are
         the ``tau`` argument, (6,) = [gyro (3), accelerometer (3)] (the 21-state family); False:
         random constants, and ``tau`` (3,) is the gyro Markov drift's (18-state model) or unused.
@@ -597,7 +436,7 @@ class ErrorModel:
     idx: ErrorStateIndex
     build_F: Callable
     build_G: Callable
-    noise_keep: Optional[tuple] = None
+    build_Qc: Callable
     bias_gm: bool = False
 
     @property
@@ -620,30 +459,84 @@ class ErrorModel:
         """Number of noise inputs (the size of Qc)."""
         return len(self.noise_names)
 
-    def F(self, pos, v_n, f_n, C_bn, tau_markov, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0,
-          Cw=None, Cf=None):
-        """Continuous system matrix (n, n); arguments as :func:`error_model_F` (tau unused without Markov
-        states) and, for models with scale factors, ``Cw``, ``Cf`` of :func:`error_model_F21`."""
+    def F(self, pos, v_n, f_n, C_bn, tau, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=1.0, Cw=None, Cf=None):
+        """Continuous system matrix F (n, n) of X_dot = F X + G W (module docstring).
+
+        Args:
+          pos: (3,) [lat rad, lon rad, h m], float64.  v_n: (3,) ENU velocity, m/s.
+          f_n: (3,) specific force in n (= C_bn f_b), m/s^2.  C_bn: (3, 3) body -> nav DCM.
+          tau: correlation times, s: scalar or (3,) of the gyro Markov drift (18 states; unused
+            without it), or scalar or (6,) [gyro bias (3), accelerometer bias (3)] for Gauss-Markov
+            biases (``bias_gm``; inf: a random walk).
+          ellipsoid: static Earth model.  earth_rate_sign: +1, or -1 for reverse navigation.
+          Cw, Cf: (3, 3) C_bn diag(w_ib_b) (rad/s) and C_bn diag(f_b) (m/s^2), over an interval their
+            time averages: the scale-factor couplings (models with scale factors; None: zeros).
+        Returns:
+          (n, n) F in the order of ``names``.
+        """
         kw = dict(Cw=Cw, Cf=Cf) if self.scale_factors else {}
-        return self.build_F(pos, v_n, f_n, C_bn, tau_markov, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign,
-                            **kw)
+        return self.build_F(pos, v_n, f_n, C_bn, tau, ellipsoid=ellipsoid, earth_rate_sign=earth_rate_sign, **kw)
 
     def G(self, C_bn):
-        """Noise input matrix (n, p) for C_bn (3, 3)."""
+        """Noise input matrix G (n, p) for C_bn (3, 3), body -> nav DCM."""
         return self.build_G(C_bn)
 
-    def Qc(self, Qc_parent):
-        """This model's (p, p) noise density from the parent model's (the full one it was derived from)."""
-        if self.noise_keep is None:
-            return Qc_parent
-        return _take(_take(Qc_parent, self.noise_keep, 0), self.noise_keep, 1)
+    def Qc(self, noise: ImuNoise):
+        """Continuous noise density Qc (p, p), diagonal, of the model's noise inputs from an :class:`ImuNoise` (SI).
+
+        18 states (S0 eq. 19): ARW^2, 2 sigma^2 / tau of the gyro Markov drift (sigma = the gyro bias
+        instability, tau its correlation time), VRW^2. 15 states: ARW^2, VRW^2. 21 states: ARW^2,
+        VRW^2, the bias driving densities 2 sigma^2 / tau + K^2 (instability sigma, correlation time
+        tau, random walk K) of gyro and accelerometer, the scale-factor random walks squared.
+        """
+        return self.build_Qc(noise)
+
+    def tau(self, noise: ImuNoise):
+        """The ``tau`` argument of :meth:`F` (and ``LCParams.tau_markov``) from an :class:`ImuNoise`, s: the
+        gyro bias correlation time (as given: scalar or (3,)), or (6,) [gyro (3), accelerometer (3)]
+        for Gauss-Markov biases."""
+        if not self.bias_gm:
+            return jnp.asarray(noise.gyro_bias_tau)
+        dtype = jnp.result_type(noise.gyro_bias_tau, noise.accel_bias_tau, float)
+        return jnp.concatenate([_vec3(noise.gyro_bias_tau, dtype), _vec3(noise.accel_bias_tau, dtype)])
+
+    def P0(self, pos, *, att, vel, pos_enu, gyro_bias=0.0, accel_bias=0.0, gyro_markov=0.0, gyro_scale=0.0,
+           accel_scale=0.0, odo_scale=0.0):
+        """Diagonal initial covariance (n, n) from 1-sigma values (SI; scalars or (3,)).
+
+        Args:
+          pos: (3,) [lat rad, lon rad, h m] where the ENU position sigmas are converted to
+            latitude/longitude.
+          att: attitude (phi E, N, U), rad.  vel: ENU velocity, m/s.  pos_enu: ENU position, m.
+          gyro_bias: rad/s.  accel_bias: m/s^2.  gyro_markov: Markov drift (models with ``idx.eps_r``), rad/s.
+          gyro_scale, accel_scale: scale-factor errors (models with scale factors), dimensionless.
+          odo_scale: odometer scale-factor error (models with ``idx.s_odo``), dimensionless.
+        Returns:
+          (n, n) diagonal P0 in the order of ``names``; sigmas of blocks the model lacks are ignored.
+        """
+        pos = jnp.asarray(pos)
+        dtype = jnp.result_type(pos, float)
+        v = lambda x: _vec3(x, dtype)  # noqa: E731
+        lat, h = pos[0], pos[2]
+        pe = v(pos_enu)
+        dpos = jnp.stack([pe[1] / (meridian_radius(lat) + h),
+                          pe[0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)), pe[2]])
+        blocks = dict(phi=v(att), dv=v(vel), dpos=dpos, eps_b=v(gyro_bias), eps_r=v(gyro_markov),
+                      nabla=v(accel_bias), s_g=v(gyro_scale), s_a=v(accel_scale),
+                      s_odo=jnp.reshape(jnp.asarray(odo_scale, dtype), (1,)))
+        sd = jnp.zeros(self.n, dtype)
+        for name, sl in self.idx._asdict().items():
+            if sl is not None:
+                sd = sd.at[sl].set(blocks[name])
+        return jnp.diag(sd * sd)
 
     def drop(self, states, noises, idx: ErrorStateIndex) -> "ErrorModel":
         """The model without some states and noise inputs.
 
         F loses the states' rows (their dynamics) and columns (the kept states then take them as
         zero: a sensor error no longer modelled); G loses the states' rows and the noises'
-        columns. Exact selections of the parent's matrices, no new algebra.
+        columns; Qc the noises' rows and columns. Exact selections of the parent's matrices, no new
+        algebra.
 
         Args:
           states, noises: names to remove.  idx: the layout of the result.
@@ -659,9 +552,12 @@ class ErrorModel:
         def build_G(C_bn):
             return _take(_take(parent.build_G(C_bn), rs, 0), rn, 1)
 
+        def build_Qc(noise):
+            return _take(_take(parent.build_Qc(noise), rn, 0), rn, 1)
+
         return ErrorModel(names=tuple(self.names[i] for i in keep),
                           noise_names=tuple(self.noise_names[i] for i in nkeep), idx=idx, build_F=build_F,
-                          build_G=build_G, noise_keep=rn, bias_gm=self.bias_gm)
+                          build_G=build_G, build_Qc=build_Qc, bias_gm=self.bias_gm)
 
     def with_odometer_scale(self) -> "ErrorModel":
         """The model with one more state appended: the odometer scale-factor error s_odo (dimensionless).
@@ -687,15 +583,15 @@ class ErrorModel:
 
         return ErrorModel(names=self.names + ("s_odo",), noise_names=self.noise_names,
                           idx=self.idx._replace(s_odo=slice(n, n + 1)), build_F=build_F, build_G=build_G,
-                          noise_keep=self.noise_keep, bias_gm=self.bias_gm)
+                          build_Qc=self.build_Qc, bias_gm=self.bias_gm)
 
 
 #: Names of the 9 noise inputs of the 18-state model (S0 eq. 19).
 NOISE_NAMES18 = ("w_gx", "w_gy", "w_gz", "w_bx", "w_by", "w_bz", "w_ax", "w_ay", "w_az")
 
 #: The 18-state model of S0 eqs. (18)-(19).
-ERROR_MODEL_18 = ErrorModel(names=STATE_NAMES18, noise_names=NOISE_NAMES18, idx=IDX18,
-                            build_F=error_model_F, build_G=error_model_G)
+ERROR_MODEL_18 = ErrorModel(names=STATE_NAMES18, noise_names=NOISE_NAMES18, idx=IDX18, build_F=_F18, build_G=_G18,
+                            build_Qc=_Qc18)
 #: The 15-state model: the 18-state one without the gyro Markov drift eps_r and its driving noise w_b.
 ERROR_MODEL_15 = ERROR_MODEL_18.drop(STATE_NAMES18[12:15], NOISE_NAMES18[3:6], IDX15)
 
@@ -703,8 +599,8 @@ ERROR_MODEL_15 = ERROR_MODEL_18.drop(STATE_NAMES18[12:15], NOISE_NAMES18[3:6], I
 NOISE_NAMES21 = ("w_gx", "w_gy", "w_gz", "w_ax", "w_ay", "w_az", "w_bgx", "w_bgy", "w_bgz", "w_bax", "w_bay", "w_baz",
                  "w_sgx", "w_sgy", "w_sgz", "w_sax", "w_say", "w_saz")
 #: The 21-state model: Gauss-Markov / random-walk biases and scale factors (module docstring).
-ERROR_MODEL_21 = ErrorModel(names=STATE_NAMES21, noise_names=NOISE_NAMES21, idx=IDX21, build_F=error_model_F21,
-                            build_G=error_model_G21, bias_gm=True)
+ERROR_MODEL_21 = ErrorModel(names=STATE_NAMES21, noise_names=NOISE_NAMES21, idx=IDX21, build_F=_F21, build_G=_G21,
+                            build_Qc=_Qc21, bias_gm=True)
 #: The 21-state model without the scale factors: 15 states [phi, dV, dpos, eps_b, nabla] with Gauss-Markov /
 #: random-walk biases (tau (6,)), noise [w_g, w_a, w_bg, w_ba] (12).
 ERROR_MODEL_15GM = ERROR_MODEL_21.drop(STATE_NAMES21[15:], NOISE_NAMES21[12:], IDX15)
@@ -725,9 +621,7 @@ def error_model_for(n_states: int) -> ErrorModel:
 
 
 __all__ = [
-    "ERROR_MODEL_15", "ERROR_MODEL_15GM", "ERROR_MODEL_18", "ERROR_MODEL_21", "ErrorModel", "IDX21", "NOISE_NAMES21",
-    "STATE_NAMES21", "error_model_F21", "error_model_G21", "error_model_Qc21", "error_model_P0", "NOISE_NAMES18", "error_model_for",
-    "IDX15", "IDX18", "STATE_NAMES15", "STATE_NAMES18", "ErrorStateIndex", "discretize_series",
-    "discretize_taylor", "discretize_van_loan", "error_model_F", "error_model_F15", "error_model_G", "error_model_G15",
-    "error_model_Qc", "error_model_Qc15", "markov_psd", "nav_error_F",
+    "ERROR_MODEL_15", "ERROR_MODEL_15GM", "ERROR_MODEL_18", "ERROR_MODEL_21", "ErrorModel", "ErrorStateIndex",
+    "IDX15", "IDX18", "IDX21", "NOISE_NAMES18", "NOISE_NAMES21", "STATE_NAMES15", "STATE_NAMES18", "STATE_NAMES21",
+    "discretize_series", "discretize_taylor", "discretize_van_loan", "error_model_for", "markov_psd", "nav_error_F",
 ]

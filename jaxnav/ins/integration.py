@@ -32,7 +32,7 @@ Further measurements come through the general interface of :mod:`jaxnav.ins.meas
 (``aids=``: ZUPT, ZARU, non-holonomic constraint, odometer, heading, or a user's model): the
 filter's epochs are then the GNSS epochs merged with the IMU samples where an aid applies, and
 each epoch stacks the rows of every model into one masked update. GNSS epochs can be gated by
-their normalised innovation squared against a chi-square quantile (``gate_prob=``).
+their normalised innovation squared against a chi-square quantile (``gate=``, :class:`LCGate`).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ from jaxnav.filters import (
 )
 from jaxnav.geodesy import WGS84, Ellipsoid, check_float64
 from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat
-from jaxnav.ins.error_model import ErrorModel, discretize_taylor, discretize_van_loan, error_model_for
+from jaxnav.ins.error_model import ERROR_MODEL_18, ErrorModel, discretize_taylor, discretize_van_loan
 from jaxnav.ins.mechanization import (
     ImuSample,
     MechParams,
@@ -73,6 +73,7 @@ from jaxnav.ins.mechanization import (
     _TwoSpeed,
     mech_step,
 )
+from jaxnav.ins.noise import ImuNoise
 from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows, predict_gnss_pv  # noqa: F401
 
 
@@ -104,11 +105,11 @@ class PVMeasurements(NamedTuple):
 class LCParams(NamedTuple):
     """Tunable array parameters of the integration filter (all leaves reach ``vmap``/``grad``).
 
+    :func:`lc_params` builds them from an :class:`jaxnav.ins.ErrorModel` and an :class:`jaxnav.ins.ImuNoise`.
+
     Attributes:
-      P0: (n, n) initial error covariance (n = 18, 15 or 21, order of the model's names;
-        :func:`jaxnav.ins.error_model_P0` builds a diagonal one).
-      Qc: (p, p) continuous noise density (9 x 9 from :func:`jaxnav.ins.error_model_Qc`, 6 x 6
-        from :func:`jaxnav.ins.error_model_Qc15`, 18 x 18 from :func:`jaxnav.ins.error_model_Qc21`).
+      P0: (n, n) initial error covariance (order of the model's names; :meth:`jaxnav.ins.ErrorModel.P0`).
+      Qc: (p, p) continuous noise density of the model's noise inputs (:meth:`jaxnav.ins.ErrorModel.Qc`).
       tau_markov: scalar or (3,) gyro Markov correlation time, s (unused for 15 states); for models
         with Gauss-Markov biases (21 states, ``ERROR_MODEL_15GM``) scalar or (6,) correlation times
         [gyro bias (3), accelerometer bias (3)], s, ``inf`` for a random walk.
@@ -119,6 +120,77 @@ class LCParams(NamedTuple):
     Qc: Any
     tau_markov: Any = 300.0
     R_scale: Any = 1.0
+
+
+def _floor_sigmas(c, floor):
+    """Covariances (..., 3, 3) with standard deviations raised to ``floor`` (correlations kept)."""
+    d = jnp.sqrt(jnp.clip(jnp.diagonal(c, axis1=-2, axis2=-1), 0, None))
+    s = jnp.maximum(d, floor) / jnp.where(d > 0, d, 1.0)
+    c = c * s[..., :, None] * s[..., None, :]
+    return jnp.where(jnp.eye(3, dtype=bool), jnp.maximum(c, floor**2), c)
+
+
+def gnss_measurements(t, pos, vel, pos_cov, vel_cov, *, use=None, use_vel=None, lever=(0.0, 0.0, 0.0),
+                      pos_sigma_floor=0.0, vel_sigma_floor=0.0) -> PVMeasurements:
+    """:class:`PVMeasurements` of M GNSS fixes: R = blockdiag(position covariance, velocity covariance).
+
+    The standard deviations are floored at ``pos_sigma_floor`` / ``vel_sigma_floor`` with the
+    correlations kept; a NaN velocity covariance counts as 1 (m/s)^2 and a NaN velocity is not used.
+
+    Args:
+      t: (M,) epoch times, s (concrete: they shape the filter's scan).
+      pos: (M, 3) antenna [lat rad, lon rad, h m].  vel: (M, 3) ENU velocity, m/s.
+      pos_cov: (M, 3, 3) or (3, 3) ENU position covariance, m^2.  vel_cov: (M, 3, 3) or (3, 3), (m/s)^2.
+      use: (M,) bool, epochs whose position (and velocity) are used; None: all.
+      use_vel: (M,) bool, epochs whose velocity is used; None: as ``use``.
+      lever: (3,) or (M, 3) antenna minus IMU in the body frame (right, forward, up), m.
+      pos_sigma_floor: m.  vel_sigma_floor: m/s.
+    Returns:
+      :class:`PVMeasurements`.
+    Raises:
+      ValueError: shapes that do not match M.
+    """
+    M = np.shape(t)[0]
+    pos, vel, lever = jnp.asarray(pos, jnp.float64), jnp.asarray(vel, jnp.float64), jnp.asarray(lever, jnp.float64)
+    pc = jnp.broadcast_to(jnp.asarray(pos_cov, jnp.float64), (M, 3, 3)) if jnp.shape(pos_cov)[-2:] == (3, 3) else None
+    vc = jnp.broadcast_to(jnp.asarray(vel_cov, jnp.float64), (M, 3, 3)) if jnp.shape(vel_cov)[-2:] == (3, 3) else None
+    if pos.shape != (M, 3) or vel.shape != (M, 3) or pc is None or vc is None or lever.shape not in ((3,), (M, 3)):
+        raise ValueError(f"gnss_measurements(): pos {pos.shape}, vel {vel.shape}, pos_cov {jnp.shape(pos_cov)}, vel_cov "
+                         f"{jnp.shape(vel_cov)}, lever {lever.shape} do not fit {M} epochs: (M, 3), (M, 3), (M, 3, 3) or "
+                         f"(3, 3), the same, (3,) or (M, 3)")
+    use = jnp.ones(M, bool) if use is None else jnp.asarray(use, bool)
+    use_vel = use if use_vel is None else jnp.asarray(use_vel, bool)
+    R = jnp.zeros((M, 6, 6))
+    R = R.at[:, :3, :3].set(_floor_sigmas(pc, pos_sigma_floor))
+    R = R.at[:, 3:, 3:].set(_floor_sigmas(jnp.where(jnp.isfinite(vc), vc, 1.0), vel_sigma_floor))
+    fin = jnp.isfinite(vel)
+    mask = jnp.concatenate([jnp.broadcast_to(use[:, None], (M, 3)), use_vel[:, None] & fin], axis=1)
+    return PVMeasurements(t=t, pos=pos, vel=jnp.where(fin, vel, 0.0), R=R, mask=mask,
+                          lever=jnp.broadcast_to(lever, (M, 3)))
+
+
+def lc_params(model: ErrorModel, noise: ImuNoise, pos0, *, att, vel, pos_enu, odo_scale=0.0,
+              R_scale=1.0) -> LCParams:
+    """:class:`LCParams` of an error model from the IMU's noise and the initial navigation sigmas.
+
+    P0 (:meth:`ErrorModel.P0`): the navigation sigmas given here; gyro and accelerometer biases from
+    the turn-on sigmas of ``noise``, the gyro Markov drift (18 states) from its bias instability,
+    the scale factors from its scale-factor sigmas. Qc and the correlation times from ``noise``
+    (:meth:`ErrorModel.Qc`, :meth:`ErrorModel.tau`).
+
+    Args:
+      model: :class:`ErrorModel`.  noise: :class:`jaxnav.ins.ImuNoise` (SI).
+      pos0: (3,) [lat rad, lon rad, h m] where the ENU position sigmas are converted.
+      att: attitude sigma (E, N, U), rad, scalar or (3,).  vel: ENU velocity sigma, m/s.
+      pos_enu: ENU position sigma, m.  odo_scale: odometer scale-factor sigma (models with the
+        state), dimensionless.  R_scale: factor on every measurement covariance.
+    Returns:
+      :class:`LCParams`; array leaves, so ``vmap``/``grad`` reach the noise and sigmas.
+    """
+    P0 = model.P0(pos0, att=att, vel=vel, pos_enu=pos_enu, gyro_bias=noise.gyro_bias_initial,
+                  accel_bias=noise.accel_bias_initial, gyro_markov=noise.gyro_bias_instability,
+                  gyro_scale=noise.gyro_sf, accel_scale=noise.accel_sf, odo_scale=odo_scale)
+    return LCParams(P0=P0, Qc=model.Qc(noise), tau_markov=model.tau(noise), R_scale=R_scale)
 
 
 class SensorBiases(NamedTuple):
@@ -183,7 +255,7 @@ class LCResult(NamedTuple):
       epochs: :class:`LCEpochs`.  final_nav: :class:`NavState` at the last IMU sample used.
       final_biases: :class:`SensorBiases`.  loglik: innovation log-likelihood.
       n_nonfinite: NaN/inf measurement components masked.  n_skipped: epochs without any update.
-      status: int32 flags.  imu_nav: per-sample :class:`NavState` every ``save_imu_every`` samples, or None.
+      status: int32 flags.  imu_nav: per-sample :class:`NavState` every ``LCSave.imu_every`` samples, or None.
       n_gated: int32, GNSS epochs rejected by the chi-square gate (0 without gating).
     """
 
@@ -255,6 +327,71 @@ def _apply_correction(nav: NavState, biases: SensorBiases, x, idx):
     return nav, biases
 
 
+class LCGate(NamedTuple):
+    """Chi-square gate of the GNSS epochs (:func:`loosely_coupled`'s ``gate``).
+
+    A GNSS epoch whose NIS (valid components, against the un-inflated prior) exceeds the chi-square
+    quantile of ``prob`` for its number of valid components is rejected: its GNSS components are
+    masked, the epoch's aids kept, it is counted in ``n_gated`` and flagged GNSS_GATED.
+
+    Attributes:
+      prob: probability in (0, 1).
+      max_run: after this many consecutive rejected GNSS epochs the next one is accepted whatever its
+        NIS (re-acquisition: a gate alone locks a filter out for good once it has drifted, e.g. after
+        a poor initial heading or a long outage); int >= 1.
+    """
+
+    prob: float
+    max_run: int = 10
+
+
+class LCDiscretization(NamedTuple):
+    """How each epoch interval's Phi and Qd are computed (:func:`loosely_coupled`'s ``discretization``).
+
+    Attributes:
+      method: "taylor": :func:`~jaxnav.ins.discretize_taylor` with ``order`` terms, flagging
+        DISCRETIZATION_INACCURATE in ``status`` if the series had not converged; "van_loan": the
+        matrix exponential of :func:`~jaxnav.ins.discretize_van_loan`. For S0 (1 s epochs) both agree
+        to ~1e-15; the series is 2.4x faster per run and 3x faster under ``jax.jvp``.
+      order: number of series terms.
+    """
+
+    method: str = "taylor"
+    order: int = 8
+
+
+class LCPropagation(NamedTuple):
+    """How the IMU samples between epochs are integrated (:func:`loosely_coupled`'s ``propagation``).
+
+    Attributes:
+      nav_every: > 1 mechanizes the samples between fixes by the two-speed algorithm of
+        :func:`jaxnav.ins.mechanize` (navigation-frame terms once per ``nav_every`` samples, the
+        body-frame work as array operations; F's time averages from the blocks): ~3x faster per run.
+        1: the per-sample :func:`jaxnav.ins.mech_step` loop.
+      hold_height: as :func:`jaxnav.ins.mechanize`.
+      remat: wrap each epoch in ``jax.checkpoint`` so that reverse-mode gradients store one carry per
+        epoch instead of every IMU sample's intermediates (the forward result is identical).
+    """
+
+    nav_every: int = 1
+    hold_height: bool = False
+    remat: bool = False
+
+
+class LCSave(NamedTuple):
+    """What :func:`loosely_coupled` returns besides the final state (its ``save``).
+
+    Attributes:
+      epochs: per-epoch outputs, a subset of :data:`LC_OUTPUTS` (fields of :class:`LCEpochs`).
+      imu_every: if > 0 also the navigation state every k-th IMU sample (``LCResult.imu_nav``); needs
+        ``nav_every = 1`` and k dividing the samples per epoch interval.
+    """
+
+    epochs: tuple = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "nis", "factors",
+                     "valid")
+    imu_every: int = 0
+
+
 class _Carry(NamedTuple):
     """Carry of the epoch scan."""
 
@@ -318,7 +455,7 @@ def _decay_gm(biases: SensorBiases, T, tau_b):
     return biases._replace(gyro=biases.gyro * jnp.exp(-T / tau_b[:3]), accel=biases.accel * jnp.exp(-T / tau_b[3:]))
 
 
-def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipsoid, hold_height, save_imu_every,
+def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipsoid, hold_height, imu_every,
                        tau_b=None):
     """The IMU samples of one epoch interval, one :func:`mech_step` each, with the sensor-error correction.
 
@@ -328,7 +465,7 @@ def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipso
       tau: (3,) Markov drift correlation times, s.  tau_b: (6,) Gauss-Markov bias correlation times
         (models with ``bias_gm``), else None.
     Returns:
-      (:class:`_Propagated`, NavState every ``save_imu_every``-th sample or None).
+      (:class:`_Propagated`, NavState every ``imu_every``-th sample or None).
     """
     dtype = mech.nav.v_n.dtype
     mparams = MechParams(earth_rate_sign=1.0)
@@ -344,12 +481,12 @@ def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipso
         sums = _Sums(sums.pos + nav.pos * dt, sums.v + nav.v_n * dt, sums.f + C @ dvc, sums.C + C * dt,
                      sums.Cw + C * dth[None, :] if scale else None, sums.Cf + C * dvc[None, :] if scale else None)
         new = (new_mech, biases._replace(markov=biases.markov * jnp.exp(-dt / tau)), sums, T + dt, dth / dt)
-        return _where_tree(use, new, c), (nav if save_imu_every else None)
+        return _where_tree(use, new, c), (nav if imu_every else None)
 
     init = (mech, biases, _zero_sums(dtype, scale), jnp.zeros((), dtype), jnp.zeros(3, dtype))
     (mech, biases, sums, T, w_last), navs = jax.lax.scan(step, init, rows)
-    if save_imu_every:
-        navs = jax.tree_util.tree_map(lambda a: a[save_imu_every - 1::save_imu_every], navs)
+    if imu_every:
+        navs = jax.tree_util.tree_map(lambda a: a[imu_every - 1::imu_every], navs)
     return _Propagated(mech, _decay_gm(biases, T, tau_b), sums, T, w_last, None), navs
 
 
@@ -411,7 +548,7 @@ def _propagate_blocks(mech: MechState, biases: SensorBiases, G_prev, rows, tau, 
     return _Propagated(new_mech, new_biases, sums, T, dth[last] / dt[last], two.G)
 
 
-def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, method, order):
+def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, how: "LCDiscretization"):
     """Phi and Qd of one epoch interval (S0 eqs. (1), (8)) from F at the interval's time averages.
 
     Returns:
@@ -422,10 +559,10 @@ def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, method, o
     avg = lambda a: None if a is None else a / Tsafe  # noqa: E731
     F = model.F(avg(s.pos), avg(s.v), avg(s.f), avg(s.C), tau, ellipsoid=ellipsoid, Cw=avg(s.Cw), Cf=avg(s.Cf))
     G = model.G(quat_to_dcm(p.mech.nav.q_bn))
-    if method == "van_loan":
+    if how.method == "van_loan":
         Phi, Qd = discretize_van_loan(F, G, Qc, p.T)
         return Phi, Qd, jnp.zeros((), jnp.int32)
-    Phi, Qd, err = discretize_taylor(F, G, Qc, p.T, order=order)
+    Phi, Qd, err = discretize_taylor(F, G, Qc, p.T, order=how.order)
     return Phi, Qd, jnp.where(err > 1e-10, _status.DISCRETIZATION_INACCURATE, 0).astype(jnp.int32)
 
 
@@ -451,14 +588,22 @@ def _mean_rate(rows, still, biases: SensorBiases):
     return jnp.where(T > 0, wm, 0.0), T
 
 
-def _gate(rows: MeasRows, Phi, Qd, P, thresholds):
+def _gate(rows: MeasRows, Phi, Qd, P, gate_run, thresholds, max_run: int):
     """Chi-square gate of one epoch's GNSS rows against the prior of the feedback filter (x = 0).
 
     S = (H Phi) P (H Phi)^T + H Qd H^T + R over the valid components; NIS = z^T S^-1 z is compared
-    with ``thresholds[dof]`` (dof = number of valid components, thresholds[0] unused).
+    with ``thresholds[dof]`` (dof = number of valid components, thresholds[0] unused). After
+    ``max_run`` consecutive rejected GNSS epochs the next one is accepted whatever its NIS, so a
+    filter that drifted away (bad start, long outage) is pulled back instead of rejecting every
+    later fix.
 
+    Args:
+      rows: the epoch's GNSS :class:`MeasRows` (6 rows).  Phi, Qd, P: (n, n).
+      gate_run: int32, consecutive rejected GNSS epochs before this one.
+      thresholds: (7,) chi-square quantiles by dof.  max_run: static int.
     Returns:
-      (gated bool, nis scalar (0 where no valid component)).
+      (rows with the rejected components masked, gated bool, nis scalar (0 where no valid
+      component), gate_run after this epoch).
     """
     valid = rows.mask & jnp.isfinite(rows.z)
     HPhi = rows.H @ Phi
@@ -468,8 +613,10 @@ def _gate(rows: MeasRows, Phi, Qd, P, thresholds):
     w = whiten(L, jnp.where(valid, rows.z, 0.0))
     nis = jnp.sum(w * w)
     dof = jnp.sum(valid)
-    gated = (dof > 0) & ok & (nis > thresholds[dof])
-    return gated, jnp.where(dof > 0, nis, 0.0)
+    gated = (dof > 0) & ok & (nis > thresholds[dof]) & (gate_run < max_run)
+    gate_run = jnp.where(gated, gate_run + 1, jnp.where(jnp.any(valid), 0, gate_run))
+    rows = rows._replace(mask=rows.mask & ~(gated & jnp.isfinite(rows.z)))
+    return rows, gated, jnp.where(dof > 0, nis, 0.0), gate_run
 
 
 def _stack(parts):
@@ -500,14 +647,47 @@ class _AidEpochs(NamedTuple):
     still: Any
 
 
-@partial(jax.jit, static_argnames=("model", "save", "ellipsoid", "hold_height", "check_finite",
-                                   "save_imu_every", "remat", "discretization", "taylor_order", "nav_every",
-                                   "aid_models", "gate_max_run"))
-def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last, meas, params, inflation,
-             estimator, model, save, ellipsoid, hold_height, check_finite, save_imu_every, remat=False,
-             discretization="taylor", taylor_order=8, nav_every=1, aid_models=(), aid_epochs=None, aid_params=(),
-             gate_thresholds=None, gate_max_run=10):
-    dtype = nav0.v_n.dtype
+class _CoreInputs(NamedTuple):
+    """The arrays of one run, on the filter's epochs (M epochs, K IMU samples per interval at most)."""
+
+    nav0: NavState
+    biases0: SensorBiases
+    rows: tuple  # (dtheta (M, K, 3), dv (M, K, 3), dt (M, K), use (M, K) bool): raw IMU samples per interval
+    t_last: Any  # (M,) end time of the last IMU sample before each epoch
+    meas: PVMeasurements
+    aid_epochs: Optional[_AidEpochs]
+    aid_params: tuple
+    gate_thresholds: Any  # (7,) chi-square quantiles by dof, or None without gating
+
+
+class _CoreOptions(NamedTuple):
+    """The static options of one run (a ``jax.jit`` static argument)."""
+
+    model: ErrorModel
+    save: LCSave
+    propagation: LCPropagation
+    discretization: LCDiscretization
+    gate_max_run: int
+    aid_models: tuple
+    ellipsoid: Ellipsoid
+    check_finite: bool
+
+
+def _propagate(carry: _Carry, rows, tau, tau_b, opts: _CoreOptions):
+    """The epoch interval's IMU samples: per sample, or by blocks with ``nav_every > 1``."""
+    pr = opts.propagation
+    if pr.nav_every > 1:
+        return _propagate_blocks(carry.mech, carry.biases, carry.G_prev, rows, tau, pr.nav_every, opts.ellipsoid,
+                                 pr.hold_height, tau_b), None
+    return _propagate_samples(carry.mech, carry.biases, rows, tau, opts.ellipsoid, pr.hold_height,
+                              opts.save.imu_every, tau_b)
+
+
+@partial(jax.jit, static_argnames=("opts",))
+def _lc_core(inputs: _CoreInputs, params: LCParams, inflation, estimator, opts: _CoreOptions) -> LCResult:
+    """The epoch scan of :func:`loosely_coupled`: propagate, discretise, measure (gate), filter step, feed back."""
+    model, save = opts.model, opts.save
+    dtype = inputs.nav0.v_n.dtype
     tau_all = jnp.broadcast_to(jnp.asarray(params.tau_markov, dtype), (model.tau_size,))
     tau = jnp.full(3, jnp.inf, dtype) if model.bias_gm else tau_all  # the Markov drift's (none with GM biases)
     tau_b = tau_all if model.bias_gm else None
@@ -515,74 +695,53 @@ def _lc_core(nav0, biases0, dtheta, dv, dt_imu, t_imu, seg_idx, seg_use, t_last,
     fparams = FilterParams(model=LinearGaussian(None, None, None, None, None),
                            inflation=NoInflation() if inflation is None else inflation,
                            estimator=NoEstimator() if estimator is None else estimator)
-    gate = gate_thresholds is not None
-    m_total = 6 + sum(am.size for am in aid_models)
+    gate = inputs.gate_thresholds is not None
+    z0, z3 = jnp.zeros((), dtype), jnp.zeros(3, dtype)
 
-    def outer(carry: _Carry, inp):
+    def epoch(carry: _Carry, inp):
         rows, t_meas, t_nav, m, ae = inp
-        if nav_every > 1:
-            p = _propagate_blocks(carry.mech, carry.biases, carry.G_prev, rows, tau, nav_every, ellipsoid, hold_height,
-                                  tau_b)
-            navs = None
-        else:
-            p, navs = _propagate_samples(carry.mech, carry.biases, rows, tau, ellipsoid, hold_height, save_imu_every,
-                                         tau_b)
-        Phi, Qd, flag = _discretise(model, p, tau_all, Qc, ellipsoid, discretization, taylor_order)
-        z0 = jnp.zeros((), dtype)
-        if ae is not None and ae.still is not None:
-            w_mean, T_mean = _mean_rate(rows, ae.still, carry.biases)
-        else:
-            w_mean, T_mean = jnp.zeros(3, dtype), z0
+        p, navs = _propagate(carry, rows, tau, tau_b, opts)
+        Phi, Qd, flag = _discretise(model, p, tau_all, Qc, opts.ellipsoid, opts.discretization)
+        w_mean, T_mean = (z3, z0) if ae is None or ae.still is None else _mean_rate(rows, ae.still, carry.biases)
         ctx = MeasContext(nav=p.mech.nav, w_ib_b=p.w_last, w_mean_b=w_mean, T_mean=T_mean, dtx=t_meas - t_nav,
                           biases=p.biases)
-        gnss = _measure(ctx, m, R_scale, model.n, ellipsoid)
-        gated, gnss_nis = jnp.zeros((), bool), z0
+        gnss = _measure(ctx, m, R_scale, model.n, opts.ellipsoid)
+        gated, gnss_nis, gate_run = jnp.zeros((), bool), z0, carry.gate_run
         if gate:
-            gated, gnss_nis = _gate(gnss, Phi, Qd, carry.kf.P, gate_thresholds)
-            # re-acquisition: after gate_max_run consecutive rejected GNSS epochs the next one is taken,
-            # so a filter that drifted away (bad start, long outage) is pulled back instead of
-            # rejecting every later fix
-            gated = gated & (carry.gate_run < gate_max_run)
-            has_gnss = jnp.any(gnss.mask & jnp.isfinite(gnss.z))
-            gate_run = jnp.where(gated, carry.gate_run + 1, jnp.where(has_gnss, 0, carry.gate_run))
-            gnss = gnss._replace(mask=gnss.mask & ~(gated & jnp.isfinite(gnss.z)))
+            gnss, gated, gnss_nis, gate_run = _gate(gnss, Phi, Qd, carry.kf.P, carry.gate_run,
+                                                    inputs.gate_thresholds, opts.gate_max_run)
             flag = flag | jnp.where(gated, _status.GNSS_GATED, 0).astype(jnp.int32)
         parts = [gnss]
-        for i, am in enumerate(aid_models):
-            data_i = None if ae.data[i] is None else ae.data[i]
-            r = am.fn(ctx, data_i, aid_params[i], model.idx, model.n, ellipsoid)
+        for i, am in enumerate(opts.aid_models):
+            r = am.fn(ctx, ae.data[i], inputs.aid_params[i], model.idx, model.n, opts.ellipsoid)
             parts.append(r._replace(mask=r.mask & ae.active[i]))
         z, H, R, mask = _stack(parts)
         # x is zero after every feedback; the literal zero lets XLA drop the products F x and H x
         kf_prior = carry.kf._replace(x=jnp.zeros(model.n, dtype))
         kf, info = filter_step(kf_prior, StepInput(z=z, mask=mask, F=Phi, H=H, Q=Qd, R=R), fparams,
-                               save=_STEP_OUTPUTS, check_finite=check_finite)
-        new = _feedback(p, kf, model.idx, flag)
-        new = new._replace(n_gated=carry.n_gated + gated.astype(jnp.int32),
-                           gate_run=gate_run if gate else carry.gate_run)
+                               save=_STEP_OUTPUTS, check_finite=opts.check_finite)
+        new = _feedback(p, kf, model.idx, flag)._replace(n_gated=carry.n_gated + gated.astype(jnp.int32),
+                                                         gate_run=gate_run)
         allv = dict(nav=new.mech.nav, biases=new.biases, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi,
                     corrections=kf.x, innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
                     factors=info.factors, noise=info.noise, valid=info.valid, gated=gated,
                     gnss_nis=gnss_nis if gate else None)
-        return new, (LCEpochs(t=t_meas, t_nav=t_nav, **{k: allv[k] for k in save}), navs)
+        return new, (LCEpochs(t=t_meas, t_nav=t_nav, **{k: allv[k] for k in save.epochs}), navs)
 
-    z3 = jnp.zeros(3, dtype)
-    mech0 = MechState(nav=nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3, status=jnp.zeros((), jnp.int32))
+    mech0 = MechState(nav=inputs.nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3, status=jnp.zeros((), jnp.int32))
+    m_total = 6 + sum(am.size for am in opts.aid_models)
     kf0 = init_state(jnp.zeros(model.n, dtype), params.P0, m_total, inflation=inflation, estimator=estimator)
-    G0 = _two_speed_start(nav0, z3, 1.0, ellipsoid).G if nav_every > 1 else None
-    if remat:
+    G0 = _two_speed_start(inputs.nav0, z3, 1.0, opts.ellipsoid).G if opts.propagation.nav_every > 1 else None
+    if opts.propagation.remat:
         # reverse mode keeps only the per-epoch carries and recomputes each epoch's IMU samples
         # on the way back: tape memory O(epochs) instead of O(IMU samples)
-        outer = jax.checkpoint(outer)
-    # gather the IMU samples of every epoch interval once: (M, K, 3), padded samples get dt = 1
-    # and are skipped by the ``use`` mask (no dynamic indexing inside the scan)
-    dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (dtheta.shape[0],))
-    rows = (dtheta[seg_idx], dv[seg_idx], jnp.where(seg_use, dt_all[seg_idx], 1.0), seg_use)
-    carry0 = _Carry(mech0, biases0, kf0, G0, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
-    final, (ep, navs) = jax.lax.scan(outer, carry0, (rows, meas.t, t_last, meas, aid_epochs))
+        epoch = jax.checkpoint(epoch)
+    carry0 = _Carry(mech0, inputs.biases0, kf0, G0, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
+    xs = (inputs.rows, inputs.meas.t, inputs.t_last, inputs.meas, inputs.aid_epochs)
+    final, (ep, navs) = jax.lax.scan(epoch, carry0, xs)
     return LCResult(epochs=ep, final_nav=final.mech.nav, final_biases=final.biases, loglik=final.kf.loglik,
                     n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped,
-                    status=final.kf.status | final.mech.status, imu_nav=navs if save_imu_every else None,
+                    status=final.kf.status | final.mech.status, imu_nav=navs if save.imu_every else None,
                     n_gated=final.n_gated)
 
 
@@ -659,80 +818,31 @@ def _merge_epochs(t_imu, meas: PVMeasurements, active):
     return merged, row, sample
 
 
-def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, params: LCParams, *,
-                    dt_imu=None, biases0: Optional[SensorBiases] = None, n_states: int = 18,
-                    error_model: Optional[ErrorModel] = None, aids: Sequence[Aid] = (),
-                    gate_prob: Optional[float] = None, gate_max_run: int = 10, inflation=None,
-                    estimator=None, save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections",
-                                          "innovations", "nis", "factors", "valid"),
-                    ellipsoid: Ellipsoid = WGS84, hold_height: bool = False, check_finite: bool = True,
-                    max_sigma: float = 1e3, save_imu_every: int = 0, remat: bool = False,
-                    discretization: str = "taylor", taylor_order: int = 8, nav_every: int = 1) -> LCResult:
-    """Loosely coupled INS/GNSS filter with feedback correction (S0 experiment, eqs. (4)-(19)).
-
-    Args:
-      nav0: initial :class:`NavState` at ``t_imu[0] - dt_imu[0]``.
-      t_imu: (N,) end time of each IMU sample, s (concrete: it shapes the nested scan).
-      dtheta: (N, 3) angular increments, rad.  dv: (N, 3) velocity increments, m/s (body frame).
-      meas: :class:`PVMeasurements` (times concrete); components with a standard deviation above
-        ``max_sigma`` (m or m/s) or NaN are masked and counted.
-      params: :class:`LCParams` (array leaves: P0, Qc, tau, R scale).
-      dt_imu: scalar or (N,) sample intervals (default: from ``t_imu``, the first copied).
-      biases0: initial :class:`SensorBiases` (default zeros; scale factors default to zeros for
-        models that have them).
-      n_states: static 18 (S0), 15 (no Markov drift) or 21 (Gauss-Markov / random-walk biases and
-        scale factors, :data:`jaxnav.ins.ERROR_MODEL_21`).
-      error_model: static :class:`jaxnav.ins.ErrorModel` (overrides ``n_states``; e.g.
-        :data:`jaxnav.ins.ERROR_MODEL_15GM`).
-      aids: :class:`jaxnav.ins.measurements.Aid` s (ZUPT, ZARU, NHC, odometer, heading, or one's
-        own :class:`~jaxnav.ins.measurements.MeasurementModel`); their ``active`` masks are
-        concrete (they set the epochs), their data and parameters may be traced. The filter's
-        epochs become the GNSS epochs merged with the IMU samples where an aid applies (after
-        thinning to its ``rate_hz``); ``result.epochs.gnss_row`` maps them back to ``meas``.
-        An aid active at the sample of a GNSS epoch is applied in that epoch's update.
-      gate_prob: None (default) or a probability in (0, 1): GNSS epochs whose NIS (valid
-        components, against the un-inflated prior) exceeds the chi-square quantile of that
-        probability for their number of valid components are rejected (their GNSS components
-        masked, the epoch's aids kept), counted in ``n_gated`` and flagged GNSS_GATED.
-      gate_max_run: static; after this many consecutive rejected GNSS epochs the next GNSS epoch is
-        accepted whatever its NIS (re-acquisition: a gate alone locks a filter out for good once it has
-        drifted, e.g. after a poor initial heading or a long outage). Default 10.
-      inflation, estimator: plug-ins of :mod:`jaxnav.filters` (classic when None).
-      save: static per-epoch outputs (subset of ``LC_OUTPUTS``).
-      ellipsoid, hold_height: static, as :func:`jaxnav.ins.mechanize`.
-      check_finite: static, as :func:`jaxnav.filters.kalman_filter`.
-      save_imu_every: static; if > 0 also return the navigation state every k-th IMU sample.
-      remat: static; wrap each GNSS epoch in ``jax.checkpoint`` so that reverse-mode gradients
-        (``jax.grad`` w.r.t. b, rho, noise scales) store one carry per epoch instead of every
-        IMU sample's intermediates (the forward result is identical).
-      discretization: static; "taylor" (default): Phi and Qd per epoch by
-        :func:`~jaxnav.ins.discretize_taylor` with ``taylor_order`` terms, flagging
-        DISCRETIZATION_INACCURATE in ``status`` if the series had not converged; "van_loan": the
-        matrix exponential of :func:`~jaxnav.ins.discretize_van_loan`. For S0 (1 s epochs) both
-        agree to ~1e-15; the series is 2.4x faster per run and 3x faster under ``jax.jvp``.
-      taylor_order: static number of series terms (default 8).
-      nav_every: static; > 1 mechanizes the samples between fixes by the two-speed algorithm of
-        :func:`jaxnav.ins.mechanize` (navigation-frame terms once per ``nav_every`` samples,
-        the body-frame work as array operations), and takes the time averages that F needs from
-        the blocks (mid-block position, mean velocity, block sums of f_n and C_bn). 1 (default):
-        the per-sample :func:`jaxnav.ins.mech_step` loop. Not combined with ``save_imu_every``.
-    Returns:
-      :class:`LCResult`.
-    Raises:
-      ValueError: shapes, non-increasing times, IMU/measurement spans that do not overlap, aid
-        masks of the wrong length, more than one mean-rate (ZARU) aid, a gate probability outside (0, 1).
-    """
-    model = error_model_for(n_states) if error_model is None else error_model  # raises ValueError for other sizes
-    if not isinstance(model, ErrorModel):
-        raise ValueError(f"error_model must be an ErrorModel, got {type(model).__name__}")
-    if discretization not in ("taylor", "van_loan"):
-        raise ValueError(f"discretization must be 'taylor' or 'van_loan', got {discretization!r}")
-    unknown = [s for s in save if s not in LC_OUTPUTS]
+def _check_options(model, gate, save: LCSave, propagation: LCPropagation, discretization: LCDiscretization):
+    """ValueError for options of the wrong type or out of range."""
+    for name, v, cls in (("error_model", model, ErrorModel), ("save", save, LCSave),
+                         ("propagation", propagation, LCPropagation), ("discretization", discretization, LCDiscretization)):
+        if not isinstance(v, cls):
+            raise ValueError(f"{name} must be an {cls.__name__}, got {type(v).__name__}")
+    if gate is not None and not isinstance(gate, LCGate):
+        raise ValueError(f"gate must be an LCGate or None, got {type(gate).__name__}")
+    if discretization.method not in ("taylor", "van_loan"):
+        raise ValueError(f"discretization must be 'taylor' or 'van_loan', got {discretization.method!r}")
+    unknown = [s for s in save.epochs if s not in LC_OUTPUTS]
     if unknown:
         raise ValueError(f"unknown outputs {unknown}; choose from {LC_OUTPUTS}")
-    if "gnss_nis" in save and gate_prob is None:
-        raise ValueError("the output 'gnss_nis' needs gate_prob (it is the gate's statistic)")
-    N = np.shape(t_imu)[0]
+    if "gnss_nis" in save.epochs and gate is None:
+        raise ValueError("the output 'gnss_nis' needs a gate (it is the gate's statistic)")
+    if gate is not None and (not isinstance(gate.max_run, (int, np.integer)) or gate.max_run < 1):
+        raise ValueError(f"gate max_run={gate.max_run!r} must be an integer >= 1")
+    if not isinstance(propagation.nav_every, (int, np.integer)) or propagation.nav_every < 1:
+        raise ValueError(f"nav_every={propagation.nav_every!r} must be an integer >= 1")
+    if propagation.nav_every > 1 and save.imu_every:
+        raise ValueError("save imu_every needs the per-sample loop: use nav_every=1")
+
+
+def _check_shapes(model: ErrorModel, N: int, dtheta, dv, meas: PVMeasurements, params: LCParams):
+    """ValueError naming the shapes when the IMU, measurement or parameter arrays do not fit."""
     if jnp.shape(dtheta) != (N, 3) or jnp.shape(dv) != (N, 3):
         raise ValueError(f"dtheta {jnp.shape(dtheta)} and dv {jnp.shape(dv)} must be ({N}, 3) to match t_imu")
     M = np.shape(meas.t)[0]
@@ -749,6 +859,100 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     if jnp.ndim(params.tau_markov) > 0 and jnp.shape(params.tau_markov)[0] != model.tau_size:
         raise ValueError(f"params.tau_markov has shape {jnp.shape(params.tau_markov)}; the model with Gauss-Markov "
                          f"biases needs ({model.tau_size},) = [gyro bias taus (3), accelerometer bias taus (3)]")
+
+
+def _thin_aids(aids, N: int, dt_imu):
+    """Host side: each aid's ``active`` mask (N,) as given and thinned to its ``rate_hz``; index of the mean-rate aid."""
+    dtm = float(np.median(np.broadcast_to(np.asarray(dt_imu, float), (N,))))
+    raw, thinned = [], []
+    for i, a in enumerate(aids):
+        if not isinstance(a, Aid):
+            raise ValueError(f"aids must be Aid records (jaxnav.ins.measurements), got {type(a).__name__}")
+        act = np.ones(N, bool) if a.active is None else np.asarray(a.active)
+        if act.shape != (N,) or act.dtype != bool:
+            raise ValueError(f"aids[{i}] ({a.model.name}): active must be a ({N},) bool array, got "
+                             f"{act.dtype} {act.shape}")
+        raw.append(act)
+        if a.rate_hz is not None:
+            k = max(1, int(round(1.0 / (a.rate_hz * dtm))))
+            act = act & ((np.arange(N) + 1) % k == 0)
+        thinned.append(act)
+    mean_aids = [i for i, a in enumerate(aids) if a.model.needs_mean_rate]
+    if len(mean_aids) > 1:
+        raise ValueError("at most one aid may use the interval's mean angular rate (ZARU)")
+    return raw, thinned, (mean_aids[0] if mean_aids else None)
+
+
+def _aid_epochs(aids, N: int, raw, thinned, mean_aid, sample, seg: Segments) -> _AidEpochs:
+    """The aids' data, active flags and mean-rate rows on the filter's epochs (``sample``: their IMU sample)."""
+    for i, a in enumerate(aids):
+        for leaf in jax.tree_util.tree_leaves(a.data):
+            if jnp.shape(leaf)[:1] != (N,):
+                raise ValueError(f"aids[{i}] ({a.model.name}): data leaves must have {N} rows (one per "
+                                 f"IMU sample), got {jnp.shape(leaf)}")
+    data = tuple(None if a.data is None else jax.tree_util.tree_map(lambda x: jnp.asarray(x)[sample], a.data)
+                 for a in aids)
+    active = jnp.asarray(np.stack([t[sample] for t in thinned], axis=-1))
+    still = None if mean_aid is None else jnp.asarray(raw[mean_aid][seg.idx] & seg.use)
+    return _AidEpochs(data=data, active=active, still=still)
+
+
+def _initial_biases(model: ErrorModel, biases0: Optional[SensorBiases], dtype) -> SensorBiases:
+    """``biases0`` (default zeros) with exactly the optional fields the model has (zeros where not given)."""
+    z3 = jnp.zeros(3, dtype)
+    b = SensorBiases(z3, z3, z3) if biases0 is None else biases0
+    if model.scale_factors:
+        b = b._replace(gyro_scale=z3 if b.gyro_scale is None else b.gyro_scale,
+                       accel_scale=z3 if b.accel_scale is None else b.accel_scale)
+    else:
+        b = b._replace(gyro_scale=None, accel_scale=None)
+    if model.idx.s_odo is None:
+        return b._replace(odo_scale=None)
+    return b._replace(odo_scale=jnp.zeros(1, dtype) if b.odo_scale is None
+                      else jnp.reshape(jnp.asarray(b.odo_scale, dtype), (1,)))
+
+
+def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, params: LCParams, *,
+                    dt_imu=None, biases0: Optional[SensorBiases] = None, error_model: ErrorModel = ERROR_MODEL_18,
+                    aids: Sequence[Aid] = (), gate: Optional[LCGate] = None, inflation=None, estimator=None,
+                    save: LCSave = LCSave(), propagation: LCPropagation = LCPropagation(),
+                    discretization: LCDiscretization = LCDiscretization(), ellipsoid: Ellipsoid = WGS84,
+                    check_finite: bool = True, max_sigma: float = 1e3) -> LCResult:
+    """Loosely coupled INS/GNSS filter with feedback correction (S0 experiment, eqs. (4)-(19)).
+
+    Args:
+      nav0: initial :class:`NavState` at ``t_imu[0] - dt_imu[0]``.
+      t_imu: (N,) end time of each IMU sample, s (concrete: it shapes the nested scan).
+      dtheta: (N, 3) angular increments, rad.  dv: (N, 3) velocity increments, m/s (body frame).
+      meas: :class:`PVMeasurements` (times concrete); components with a standard deviation above
+        ``max_sigma`` (m or m/s) or NaN are masked and counted.
+      params: :class:`LCParams` (array leaves: P0, Qc, tau, R scale).
+      dt_imu: scalar or (N,) sample intervals (default: from ``t_imu``, the first copied).
+      biases0: initial :class:`SensorBiases` (default zeros; scale factors default to zeros for
+        models that have them).
+      error_model: static :class:`jaxnav.ins.ErrorModel` (default S0's 18 states;
+        :func:`jaxnav.ins.error_model_for` gives one by its number of states).
+      aids: :class:`jaxnav.ins.measurements.Aid` s (ZUPT, ZARU, NHC, odometer, heading, or one's
+        own :class:`~jaxnav.ins.measurements.MeasurementModel`); their ``active`` masks are
+        concrete (they set the epochs), their data and parameters may be traced. The filter's
+        epochs become the GNSS epochs merged with the IMU samples where an aid applies (after
+        thinning to its ``rate_hz``); ``result.epochs.gnss_row`` maps them back to ``meas``.
+        An aid active at the sample of a GNSS epoch is applied in that epoch's update.
+      gate: static :class:`LCGate`, or None (default): no gating.
+      inflation, estimator: plug-ins of :mod:`jaxnav.filters` (classic when None).
+      save: static :class:`LCSave`.  propagation: static :class:`LCPropagation`.
+      discretization: static :class:`LCDiscretization`.
+      ellipsoid: static Earth model.  check_finite: static, as :func:`jaxnav.filters.kalman_filter`.
+    Returns:
+      :class:`LCResult`.
+    Raises:
+      ValueError: shapes, non-increasing times, IMU/measurement spans that do not overlap, aid
+        masks of the wrong length, more than one mean-rate (ZARU) aid, options out of range.
+    """
+    model = error_model
+    _check_options(model, gate, save, propagation, discretization)
+    N = np.shape(t_imu)[0]
+    _check_shapes(model, N, dtheta, dv, meas, params)
     check_float64(nav0.pos, meas.pos, what="absolute positions")
     if isinstance(t_imu, jax.core.Tracer) or isinstance(meas.t, jax.core.Tracer):
         raise ValueError("t_imu and meas.t must be concrete arrays (they set the scan's shapes); close over "
@@ -758,79 +962,36 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
         d = np.diff(t_imu)
         dt_imu = np.concatenate([d[:1], d])
     sig = jnp.sqrt(jnp.diagonal(meas.R, axis1=1, axis2=2))
-    mask = jnp.asarray(meas.mask, bool) & (sig <= max_sigma)
-    meas = meas._replace(mask=mask, t=np.asarray(meas.t, float))
+    meas = meas._replace(mask=jnp.asarray(meas.mask, bool) & (sig <= max_sigma), t=np.asarray(meas.t, float))
     aids = tuple(aids)
-    for a in aids:
-        if not isinstance(a, Aid):
-            raise ValueError(f"aids must be Aid records (jaxnav.ins.measurements), got {type(a).__name__}")
-    gnss_row = np.arange(M)
-    aid_epochs = None
+    gnss_row, aid_epochs = np.arange(np.shape(meas.t)[0]), None
     if aids:
-        dtm = float(np.median(np.broadcast_to(np.asarray(dt_imu, float), (N,))))
-        raw, thinned = [], []
-        for i, a in enumerate(aids):
-            act = np.ones(N, bool) if a.active is None else np.asarray(a.active)
-            if act.shape != (N,) or act.dtype != bool:
-                raise ValueError(f"aids[{i}] ({a.model.name}): active must be a ({N},) bool array, got "
-                                 f"{act.dtype} {act.shape}")
-            raw.append(act)
-            if a.rate_hz is not None:
-                k = max(1, int(round(1.0 / (a.rate_hz * dtm))))
-                act = act & ((np.arange(N) + 1) % k == 0)
-            thinned.append(act)
+        raw, thinned, mean_aid = _thin_aids(aids, N, dt_imu)
         meas, gnss_row, sample = _merge_epochs(t_imu, meas, np.stack(thinned))
-        M = gnss_row.size
-        mean_aids = [i for i, a in enumerate(aids) if a.model.needs_mean_rate]
-        if len(mean_aids) > 1:
-            raise ValueError("at most one aid may use the interval's mean angular rate (ZARU)")
-    seg = segment_imu(t_imu, np.asarray(meas.t, float), dt_imu)
+    seg = segment_imu(t_imu, meas.t, dt_imu)
     if aids:
-        for i, a in enumerate(aids):
-            if a.data is not None:
-                for leaf in jax.tree_util.tree_leaves(a.data):
-                    if jnp.shape(leaf)[:1] != (N,):
-                        raise ValueError(f"aids[{i}] ({a.model.name}): data leaves must have {N} rows (one per "
-                                         f"IMU sample), got {jnp.shape(leaf)}")
-        data = tuple(None if a.data is None else jax.tree_util.tree_map(lambda x: jnp.asarray(x)[sample], a.data)
-                     for a in aids)
-        active = jnp.asarray(np.stack([t[sample] for t in thinned], axis=-1))
-        still = jnp.asarray(raw[mean_aids[0]][seg.idx] & seg.use) if mean_aids else None
-        aid_epochs = _AidEpochs(data=data, active=active, still=still)
+        aid_epochs = _aid_epochs(aids, N, raw, thinned, mean_aid, sample, seg)
+    if save.imu_every and seg.K % save.imu_every:
+        raise ValueError(f"save imu_every={save.imu_every} must divide the samples per epoch interval ({seg.K})")
     thresholds = None
-    if not isinstance(gate_max_run, (int, np.integer)) or gate_max_run < 1:
-        raise ValueError(f"gate_max_run={gate_max_run!r} must be an integer >= 1")
-    if gate_prob is not None:
-        thresholds = jnp.asarray([np.inf] + [chi2_quantile(float(gate_prob), k) for k in range(1, 7)])
-    meas = meas._replace(t=jnp.asarray(meas.t, jnp.float64))
-    z3 = jnp.zeros(3, jnp.asarray(nav0.v_n).dtype)
-    biases0 = SensorBiases(z3, z3, z3) if biases0 is None else biases0
-    if model.scale_factors:
-        biases0 = biases0._replace(gyro_scale=z3 if biases0.gyro_scale is None else biases0.gyro_scale,
-                                   accel_scale=z3 if biases0.accel_scale is None else biases0.accel_scale)
-    else:
-        biases0 = biases0._replace(gyro_scale=None, accel_scale=None)
-    if model.idx.s_odo is not None:
-        biases0 = biases0._replace(odo_scale=jnp.zeros(1, z3.dtype) if biases0.odo_scale is None
-                                   else jnp.reshape(jnp.asarray(biases0.odo_scale, z3.dtype), (1,)))
-    else:
-        biases0 = biases0._replace(odo_scale=None)
-    if not isinstance(nav_every, (int, np.integer)) or nav_every < 1:
-        raise ValueError(f"nav_every={nav_every!r} must be an integer >= 1")
-    if nav_every > 1 and save_imu_every:
-        raise ValueError("save_imu_every needs the per-sample loop: use nav_every=1")
-    if save_imu_every and seg.K % save_imu_every:
-        raise ValueError(f"save_imu_every={save_imu_every} must divide the samples per epoch interval ({seg.K})")
-    res = _lc_core(nav0, biases0, jnp.asarray(dtheta), jnp.asarray(dv), dt_imu, t_imu, seg.idx, seg.use,
-                   seg.t_last, meas, params, inflation, estimator, model, tuple(save), ellipsoid,
-                   hold_height, check_finite, int(save_imu_every), bool(remat), discretization, int(taylor_order),
-                   int(nav_every), tuple(a.model for a in aids), aid_epochs, tuple(a.params for a in aids),
-                   thresholds, int(gate_max_run))
+    if gate is not None:
+        thresholds = jnp.asarray([np.inf] + [chi2_quantile(float(gate.prob), k) for k in range(1, 7)])
+    dtype = jnp.asarray(nav0.v_n).dtype
+    dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (N,))
+    # the IMU samples of every epoch interval, (M, K, ...); padded samples get dt = 1 and are skipped by ``use``
+    rows = (jnp.asarray(dtheta)[seg.idx], jnp.asarray(dv)[seg.idx], jnp.where(seg.use, dt_all[seg.idx], 1.0), seg.use)
+    inputs = _CoreInputs(nav0=nav0, biases0=_initial_biases(model, biases0, dtype), rows=rows, t_last=seg.t_last,
+                         meas=meas._replace(t=jnp.asarray(meas.t, jnp.float64)), aid_epochs=aid_epochs,
+                         aid_params=tuple(a.params for a in aids), gate_thresholds=thresholds)
+    opts = _CoreOptions(model=model, save=save._replace(epochs=tuple(save.epochs), imu_every=int(save.imu_every)),
+                        propagation=propagation, discretization=discretization,
+                        gate_max_run=10 if gate is None else int(gate.max_run),
+                        aid_models=tuple(a.model for a in aids), ellipsoid=ellipsoid, check_finite=check_finite)
+    res = _lc_core(inputs, params, inflation, estimator, opts)
     return res._replace(epochs=res.epochs._replace(gnss_row=gnss_row))
 
 
-def smooth(result: LCResult, *, n_states: int = 18,
-           error_model: Optional[ErrorModel] = None) -> tuple[NavState, SensorBiases, Any]:
+def smooth(result: LCResult, *, error_model: ErrorModel = ERROR_MODEL_18) -> tuple[NavState, SensorBiases, Any]:
     """RTS smoothing of a feedback filter over its saved epoch moments, applied to the navigation solution.
 
     Take each epoch's post-feedback state as the reference. There the filtered error mean is
@@ -842,8 +1003,7 @@ def smooth(result: LCResult, *, n_states: int = 18,
 
     Args:
       result: :class:`LCResult` saved with "nav", "biases", "covs", "pred_covs", "Phi", "corrections".
-      n_states: the run's model size (15, 18, 21).  error_model: the run's :class:`ErrorModel` if it
-        was given to :func:`loosely_coupled` (overrides ``n_states``).
+      error_model: the run's :class:`ErrorModel` (as given to :func:`loosely_coupled`).
     Returns:
       (smoothed :class:`NavState` (M, ...), smoothed :class:`SensorBiases`, smoothed covariances (M, n, n)).
     """
@@ -852,9 +1012,9 @@ def smooth(result: LCResult, *, n_states: int = 18,
         if getattr(ep, name) is None:
             raise ValueError(f"smooth() needs the per-epoch output '{name}' (add it to save=)")
     M, n = ep.covs.shape[:2]
-    model = error_model_for(n_states) if error_model is None else error_model
+    model = error_model
     if n != model.n:
-        raise ValueError(f"the result has {n} states; pass n_states={n} (or its error_model)")
+        raise ValueError(f"the result has {n} states; the error model has {model.n}: pass the run's error_model")
     zeros = jnp.zeros((M, n), ep.covs.dtype)
     filt = KalmanResult(means=zeros, covs=ep.covs, pred_means=-ep.corrections, pred_covs=ep.pred_covs)
     sm = rts_smoother(LinearGaussian(F=ep.Phi, H=None, Q=None, R=None), filt)

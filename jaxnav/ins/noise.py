@@ -62,6 +62,10 @@ class ImuNoise(NamedTuple):
       gyro_bias_initial: turn-on (run-to-run) gyro bias sigma, rad/s (initial bias uncertainty).
       accel_bias_initial: turn-on accelerometer bias sigma, m/s^2.
       gyro_sf: gyro scale-factor sigma, dimensionless (1e-6 = 1 ppm).  accel_sf: the same.
+      gyro_sf_rw, accel_sf_rw: scale-factor random walk densities, 1/sqrt(s).
+
+    The simulator (:class:`jaxnav.sim.ScenarioConfig`), the error models (:meth:`jaxnav.ins.ErrorModel.Qc`,
+    :func:`jaxnav.ins.lc_params`) and the ``jaxnav ins`` configs all take this record.
     """
 
     gyro_arw: Any
@@ -76,6 +80,8 @@ class ImuNoise(NamedTuple):
     accel_bias_initial: Any = 0.0
     gyro_sf: Any = 0.0
     accel_sf: Any = 0.0
+    gyro_sf_rw: Any = 0.0
+    accel_sf_rw: Any = 0.0
 
 
 #: preset names, best last
@@ -86,13 +92,14 @@ def imu_noise_from_datasheet(*, arw_deg_per_sqrt_h, vrw_mps_per_sqrt_h, gyro_bia
                              gyro_bias_tau_s=3600.0, accel_bias_instability_mg=0.0, accel_bias_tau_s=3600.0,
                              gyro_bias_rw_deg_per_h_per_sqrt_h=0.0, accel_bias_rw_mps2_per_sqrt_h=0.0,
                              gyro_bias_initial_deg_per_h=0.0, accel_bias_initial_mg=0.0, gyro_sf_ppm=0.0,
-                             accel_sf_ppm=0.0) -> ImuNoise:
+                             accel_sf_ppm=0.0, gyro_sf_rw_ppm_per_sqrt_h=0.0,
+                             accel_sf_rw_ppm_per_sqrt_h=0.0) -> ImuNoise:
     """:class:`ImuNoise` from datasheet units (the edge: configs, CLI).
 
     Args (keyword only; edge units in the names): ARW deg/sqrt(h); VRW m/s/sqrt(h); gyro bias
     instability deg/h and its correlation time s; accelerometer bias instability mg and its time s;
     gyro bias random walk deg/h/sqrt(h); accelerometer bias random walk m/s^2/sqrt(h); turn-on
-    biases deg/h and mg; scale factors ppm.
+    biases deg/h and mg; scale factors ppm; scale-factor random walks ppm/sqrt(h).
     Returns:
       :class:`ImuNoise` in SI.
     Raises:
@@ -104,7 +111,8 @@ def imu_noise_from_datasheet(*, arw_deg_per_sqrt_h, vrw_mps_per_sqrt_h, gyro_bia
                 gyro_bias_rw_deg_per_h_per_sqrt_h=gyro_bias_rw_deg_per_h_per_sqrt_h,
                 accel_bias_rw_mps2_per_sqrt_h=accel_bias_rw_mps2_per_sqrt_h,
                 gyro_bias_initial_deg_per_h=gyro_bias_initial_deg_per_h, accel_bias_initial_mg=accel_bias_initial_mg,
-                gyro_sf_ppm=gyro_sf_ppm, accel_sf_ppm=accel_sf_ppm)
+                gyro_sf_ppm=gyro_sf_ppm, accel_sf_ppm=accel_sf_ppm, gyro_sf_rw_ppm_per_sqrt_h=gyro_sf_rw_ppm_per_sqrt_h,
+                accel_sf_rw_ppm_per_sqrt_h=accel_sf_rw_ppm_per_sqrt_h)
     for k, v in vals.items():
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ValueError(f"{k} must be a finite number >= 0, got {v!r}")
@@ -124,6 +132,8 @@ def imu_noise_from_datasheet(*, arw_deg_per_sqrt_h, vrw_mps_per_sqrt_h, gyro_bia
         accel_bias_initial=units.mg_to_mps2(float(accel_bias_initial_mg)),
         gyro_sf=units.ppm_to_ratio(float(gyro_sf_ppm)),
         accel_sf=units.ppm_to_ratio(float(accel_sf_ppm)),
+        gyro_sf_rw=units.ppm_to_ratio(float(gyro_sf_rw_ppm_per_sqrt_h)) / units.SQRT_HOUR,
+        accel_sf_rw=units.ppm_to_ratio(float(accel_sf_rw_ppm_per_sqrt_h)) / units.SQRT_HOUR,
     )
 
 
@@ -143,6 +153,8 @@ def imu_noise_to_datasheet(noise: ImuNoise) -> dict:
         "accel_bias_initial_mg": f(units.mps2_to_mg(noise.accel_bias_initial)),
         "gyro_sf_ppm": f(units.ratio_to_ppm(noise.gyro_sf)),
         "accel_sf_ppm": f(units.ratio_to_ppm(noise.accel_sf)),
+        "gyro_sf_rw_ppm_per_sqrt_h": f(units.ratio_to_ppm(noise.gyro_sf_rw * units.SQRT_HOUR)),
+        "accel_sf_rw_ppm_per_sqrt_h": f(units.ratio_to_ppm(noise.accel_sf_rw * units.SQRT_HOUR)),
     }
 
 

@@ -11,7 +11,10 @@ Typical use::
     truth = jaxnav.sim.make_trajectory(cfg)             # deterministic, once
     run = jaxnav.sim.simulate(cfg, key, trajectory=truth)
     dv = jax.jit(jax.vmap(lambda k: jaxnav.sim.simulate(cfg, k, trajectory=truth).imu.dv))(keys)
-    res = jaxnav.ins.loosely_coupled(*jaxnav.sim.lc_inputs(cfg, run), jaxnav.sim.lc_params(cfg), dt_imu=cfg.dt)
+    ie = cfg.initial_errors
+    params = jaxnav.ins.lc_params(jaxnav.ins.ERROR_MODEL_18, jaxnav.sim.imu_noise(cfg), cfg.origin,
+                                  att=ie.attitude, vel=ie.velocity, pos_enu=ie.position)
+    res = jaxnav.ins.loosely_coupled(*jaxnav.sim.lc_inputs(cfg, run), params, dt_imu=cfg.dt)
 """
 
 from jaxnav.sim import allan
@@ -30,7 +33,7 @@ from jaxnav.sim._cadastral import (
     simulate_cadastral,
     survey_truth,
 )
-from jaxnav.sim._filter_inputs import LCInputs, gnss_measurements, lc_inputs, lc_params
+from jaxnav.sim._filter_inputs import LCInputs, imu_noise, lc_inputs
 from jaxnav.sim._gnss import GnssConfig, GnssData, GnssEpochs, gnss_epochs, simulate_gnss
 from jaxnav.sim._imu import (
     SensorDraw,
@@ -83,7 +86,7 @@ from jaxnav.sim._trajectory import (
 from jaxnav.sim.allan import allan_deviation, allan_variance
 
 __all__ = [
-    "LCInputs", "gnss_measurements", "lc_inputs", "lc_params",
+    "LCInputs", "imu_noise", "lc_inputs",
     "RtkPointsConfig", "RtkPointsSim", "simulate_rtk_points", "true_height_anomaly",
     "CVScenario", "GnssConfig", "GnssData", "GnssEpochs", "ImuData", "InitialErrorConfig",
     "InitialErrorDraw", "Kinematics", "SEGMENT_KINDS", "ScenarioConfig", "ScenarioError", "Segment",

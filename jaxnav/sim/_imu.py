@@ -22,6 +22,11 @@ from jaxnav.sim._trajectory import _vec3
 class SensorErrorModel:
     """Error model of one sensor triad (SI; every entry per axis, scalars broadcast to 3).
 
+    The noise terms are those of :class:`jaxnav.ins.ImuNoise`, per triad: ``bias_sigma`` is its turn-on
+    bias, ``markov_sigma`` / ``markov_tau`` its bias instability and correlation time, ``white`` its
+    ARW / VRW, ``scale_sigma`` its scale-factor sigma; :func:`jaxnav.sim.imu_noise` gives a scenario's
+    gyro and accelerometer as that record.
+
     Attributes:
       bias_sigma: std of the random constant bias, drawn per run from N(0, sigma^2)
         (rad/s for a gyro, m/s^2 for an accelerometer).

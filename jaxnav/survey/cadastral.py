@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled, smooth
+from jaxnav.ins.integration import LCParams, LCSave, PVMeasurements, loosely_coupled, smooth
 from jaxnav.ins.error_model import IDX18
 from jaxnav.ins.mechanization import ImuSample, MechParams, MechState, NavState, mech_step
 from jaxnav.survey._preprocess import PreprocessParams, preprocess_imu
@@ -65,7 +65,7 @@ class CadastralParams(NamedTuple):
 
     Attributes:
       P0: (18, 18) initial error covariance of the class-1 filter (order of :data:`jaxnav.ins.IDX18`).
-      Qc: (9, 9) continuous noise density (:func:`jaxnav.ins.error_model_Qc`).
+      Qc: (9, 9) continuous noise density (:meth:`jaxnav.ins.ErrorModel.Qc` of the 18-state model).
       tau_markov: scalar or (3,) gyro Markov correlation time, s.
       zupt_sigma: zero-velocity observation std, m/s.
       pre: :class:`jaxnav.survey.PreprocessParams`.
@@ -420,9 +420,9 @@ def process_survey(plan: SurveyPlan, nav0: NavState, dtheta, dv, known_pos, para
     # class 1: forward filter with the static observations + RTS smoothing
     meas = stop_measurements(plan, known_pos, params.zupt_sigma, nav0.pos)
     lcp = LCParams(P0=params.P0, Qc=params.Qc, tau_markov=params.tau_markov)
-    res = loosely_coupled(nav0, plan.t_imu, dth_p, dv_p, meas, lcp, dt_imu=dt, n_states=18,
-                          save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections"))
-    nav_s, bias_s, covs_s = smooth(res, n_states=18)
+    res = loosely_coupled(nav0, plan.t_imu, dth_p, dv_p, meas, lcp, dt_imu=dt,
+                          save=LCSave(("nav", "biases", "covs", "pred_covs", "Phi", "corrections")))
+    nav_s, bias_s, covs_s = smooth(res)
     # compensation of the raw (preprocessed) data with the smoothed sensor errors
     se = np.asarray(plan.sample_epoch)
     g_err = (bias_s.gyro + bias_s.markov)[se]
@@ -526,7 +526,7 @@ def cadastral_params(*, gyro_bias, gyro_markov, gyro_tau, gyro_arw, accel_bias, 
 
     P0 = diag(attitude^2, velocity^2, position^2 (as lat/lon/h at the filter's scale: metres are
     converted with a 6.4e6 m Earth radius), gyro bias^2, gyro Markov^2, accel bias^2);
-    Qc = :func:`jaxnav.ins.error_model_Qc` (ARW, Markov driving noise, VRW).
+    Qc of :data:`jaxnav.ins.ERROR_MODEL_18` (ARW, Markov driving noise, VRW; :meth:`jaxnav.ins.ErrorModel.Qc`).
 
     Args:
       gyro_bias, gyro_markov: rad/s.  gyro_tau: s.  gyro_arw: rad/sqrt(s).
@@ -538,7 +538,7 @@ def cadastral_params(*, gyro_bias, gyro_markov, gyro_tau, gyro_arw, accel_bias, 
       A Markov std of zero is floored at 1 % of the bias std (and 1e-10 rad/s) so the predicted
       covariances stay positive definite for the RTS smoother.
     """
-    from jaxnav.ins.error_model import error_model_Qc
+    from jaxnav.ins import ERROR_MODEL_18, ImuNoise
 
     v3 = lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float64), (3,))  # noqa: E731
     gm = jnp.maximum(v3(gyro_markov), jnp.maximum(0.01 * v3(gyro_bias), 1e-10))
@@ -547,6 +547,7 @@ def cadastral_params(*, gyro_bias, gyro_markov, gyro_tau, gyro_arw, accel_bias, 
                                    jnp.array([(position_sigma / r) ** 2, (position_sigma / r) ** 2, position_sigma ** 2]),
                                    jnp.maximum(v3(gyro_bias), 1e-10) ** 2, gm ** 2,
                                    jnp.maximum(v3(accel_bias), 1e-8) ** 2]))
-    Qc = error_model_Qc(v3(gyro_arw), gm, v3(gyro_tau), v3(accel_vrw))
+    Qc = ERROR_MODEL_18.Qc(ImuNoise(gyro_arw=v3(gyro_arw), accel_vrw=v3(accel_vrw), gyro_bias_instability=gm,
+                                    gyro_bias_tau=v3(gyro_tau)))
     return CadastralParams(P0=P0, Qc=Qc, tau_markov=v3(gyro_tau), zupt_sigma=jnp.asarray(zupt_sigma, jnp.float64),
                            pre=pre)

@@ -9,7 +9,7 @@ function of array leaves:
 * bijectors (:func:`unit` for b, :func:`positive`/:func:`log` for scales) and a :class:`Space`
   of named parameters with a trainable mask;
 * :func:`minimize`: an optax loop inside one jitted ``lax.scan``, gradients in forward mode for
-  a few scalars (no tape) or reverse mode (with ``remat=True`` of the INS/GNSS run);
+  a few scalars (no tape) or reverse mode (with ``LCPropagation(remat=True)`` of the INS/GNSS run);
 * :func:`minimize_lbfgs`: L-BFGS with a strong-Wolfe line search advanced one loss evaluation
   per scan step, so an expensive loss is compiled once (``optax.lbfgs`` compiles it three times);
 * :func:`sweep`: ``vmap`` over a parameter :func:`grid` x Monte Carlo keys, chunked with a

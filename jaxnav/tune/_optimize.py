@@ -85,7 +85,7 @@ def value_and_grad(f: Callable, mode: str = "auto"):
     ``jax.jvp``): no tape, memory of a forward run, cost about (1 + d/2) forward runs for d
     parameters; it is the better choice for the few scalars of a filter (b, rho, noise scales)
     through a long INS/GNSS run. Reverse mode costs a few forward runs for any d and needs the
-    tape (bounded with ``jax.checkpoint``, see ``remat=`` of :func:`jaxnav.ins.loosely_coupled`).
+    tape (bounded with ``jax.checkpoint``, see ``LCPropagation.remat`` of :func:`jaxnav.ins.loosely_coupled`).
 
     Args:
       f: u (dict of arrays) -> scalar.

@@ -199,13 +199,13 @@ def car():
     truth = sim.make_trajectory(cfg)
     r = sim.simulate(cfg, jax.random.PRNGKey(3), trajectory=truth)
     g, a = cfg.gyro, cfg.accel
-    P0 = ins.error_model_P0(ins.ERROR_MODEL_15, truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
+    P0 = ins.ERROR_MODEL_15.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
                             pos_enu=1.0, gyro_bias=_v3(g.bias_sigma), accel_bias=_v3(a.bias_sigma))
-    params = LCParams(P0=P0, Qc=ins.error_model_Qc15(_v3(g.white), _v3(a.white)), tau_markov=300.0)
+    params = LCParams(P0=P0, Qc=ins.ERROR_MODEL_15.Qc(sim.imu_noise(cfg)), tau_markov=300.0)
     meas = _gnss_meas(r.gnss)
     t_imu = np.asarray(truth.t[1:])
-    base = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
-                           save=("nav",))
+    base = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
+                           save=ins.LCSave(("nav",)))
     return cfg, truth, r, params, meas, t_imu, base
 
 
@@ -213,8 +213,8 @@ def test_nhc_cuts_the_car_outage_drift_several_fold(car):
     """Two 60 s GNSS outages on a car with a MEMS-grade IMU (30 deg/h, 3 mg): GNSS-only drifts 26 m and 8 m
     (max horizontal); with the non-holonomic constraint at 2 Hz, 4.0 m and 0.7 m (measured)."""
     cfg, truth, r, params, meas, t_imu, base = car
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
-                          aids=(ins.nhc(sigma=0.1, rate_hz=2.0),), save=("nav", "valid"))
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
+                          aids=(ins.nhc(sigma=0.1, rate_hz=2.0),), save=ins.LCSave(("nav", "valid")))
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     t0, e0 = _horizontal_error(base, truth)
     t1, e1 = _horizontal_error(res, truth)
@@ -246,10 +246,10 @@ def test_chi2_gate_rejects_injected_gnss_outliers_and_counts_them(car):
     idx = np.array([20, 45, 70, 95, 170, 190, 290, 310])  # outside the outages
     bad = _inject_outliers(meas, idx, 15.0)
     run = lambda m, **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, m, params,  # noqa: E731
-                                          dt_imu=cfg.dt, n_states=15, save=("nav",), **kw)
+                                          dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, save=ins.LCSave(("nav",)), **kw)
     ungated = run(bad)
-    gated = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, bad, params, dt_imu=cfg.dt, n_states=15,
-                            gate_prob=0.9999, save=("nav", "gated", "gnss_nis"))
+    gated = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, bad, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
+                            gate=ins.LCGate(0.9999), save=ins.LCSave(("nav", "gated", "gnss_nis")))
     g = np.asarray(gated.epochs.gated)
     assert np.all(g[idx])  # every outlier rejected
     assert int(gated.n_gated) == int(g.sum()) and g.sum() <= len(idx) + 2  # few false alarms at p = 1e-4
@@ -264,7 +264,7 @@ def test_chi2_gate_rejects_injected_gnss_outliers_and_counts_them(car):
     rms = lambda e: float(np.sqrt(np.mean(e[ok] ** 2)))  # noqa: E731
     assert rms(e_gate) < 1.1 * rms(e_clean) and rms(e_bad) > 1.3 * rms(e_gate), (rms(e_clean), rms(e_bad), rms(e_gate))
     with pytest.raises(ValueError, match="gate probability"):
-        run(bad, gate_prob=1.5)
+        run(bad, gate=ins.LCGate(1.5))
 
 
 def test_21_state_model_recovers_an_injected_gyro_scale_factor(car):
@@ -277,28 +277,28 @@ def test_21_state_model_recovers_an_injected_gyro_scale_factor(car):
     dth = r.imu.dtheta * (1.0 + s_true)  # measured = (1 + s) true + bias ... (bias scaled: 0.5 % of 30 deg/h)
     g, a = cfg.gyro, cfg.accel
     bias_sd = jnp.concatenate([jnp.asarray(_v3(g.bias_sigma)), jnp.asarray(_v3(a.bias_sigma))])
-    P0 = ins.error_model_P0(ins.ERROR_MODEL_21, truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
+    P0 = ins.ERROR_MODEL_21.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
                             pos_enu=1.0, gyro_bias=bias_sd[:3], accel_bias=bias_sd[3:], gyro_scale=2e-2,
                             accel_scale=1e-3)
-    Qc = ins.error_model_Qc21(_v3(g.white), _v3(a.white))  # random-constant biases and scale factors
+    Qc = ins.ERROR_MODEL_21.Qc(ins.ImuNoise(gyro_arw=_v3(g.white), accel_vrw=_v3(a.white)))  # random-constant biases, scale factors
     p21 = LCParams(P0=P0, Qc=Qc, tau_markov=jnp.full(6, jnp.inf))
-    res = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, n_states=21,
-                          save=("nav", "biases", "covs", "pred_covs", "Phi", "corrections"))
+    res = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_21,
+                          save=ins.LCSave(("nav", "biases", "covs", "pred_covs", "Phi", "corrections")))
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     est = np.asarray(res.final_biases.gyro_scale)
     sd = np.sqrt(np.asarray(res.epochs.covs[-1]).diagonal()[18 - 3:18])
     assert abs(est[2] - s_true[2]) < 3 * sd[2] and sd[2] < 0.25 * s_true[2], (est, sd)
     assert abs(est[2] - s_true[2]) < 0.35 * s_true[2], (est, sd)
-    r15 = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15, save=("nav",))
+    r15 = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, save=ins.LCSave(("nav",)))
     # the innovations are better explained with the scale factor modelled than absorbed by the 15-state biases
     assert float(res.loglik) > float(r15.loglik) + 10.0, (float(res.loglik), float(r15.loglik))
     # the two-speed mechanization inside the filter carries the scale-factor sums too (measured: 0.45 mm)
-    r10 = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, n_states=21, nav_every=10,
-                          save=("nav",))
+    r10 = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_21, propagation=ins.LCPropagation(nav_every=10),
+                          save=ins.LCSave(("nav",)))
     np.testing.assert_allclose(np.asarray(r10.final_biases.gyro_scale), est, atol=1e-6)
     assert np.abs(np.asarray(r10.epochs.nav.pos) - np.asarray(res.epochs.nav.pos))[:, :2].max() * 6.4e6 < 5e-3
     # smoothing works on the 21 states (scale factors fed back too)
-    nav_s, b_s, P_s = ins.smooth(res, n_states=21)
+    nav_s, b_s, P_s = ins.smooth(res, error_model=ins.ERROR_MODEL_21)
     assert P_s.shape[1:] == (21, 21) and np.all(np.isfinite(np.asarray(b_s.gyro_scale)))
 
 
@@ -364,9 +364,9 @@ def test_zupt_and_zaru_cut_the_drift_of_a_stop_and_go_walk():
     v = np.linalg.norm(np.asarray(truth.v_n), axis=1)
     still = (v[1:] < 1e-9) & (v[:-1] < 1e-9)  # per IMU sample: at rest over the whole interval
     g, a = cfg.gyro, cfg.accel
-    P0 = ins.error_model_P0(ins.ERROR_MODEL_15, truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
+    P0 = ins.ERROR_MODEL_15.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
                             pos_enu=2.0, gyro_bias=_v3(g.bias_sigma), accel_bias=_v3(a.bias_sigma))
-    params = LCParams(P0=P0, Qc=ins.error_model_Qc15(_v3(g.white), _v3(a.white)), tau_markov=300.0)
+    params = LCParams(P0=P0, Qc=ins.ERROR_MODEL_15.Qc(sim.imu_noise(cfg)), tau_markov=300.0)
     gn = r.gnss
     M = gn.t.shape[0]
     meas = PVMeasurements(t=np.asarray(gn.t), pos=gn.pos, vel=gn.vel,
@@ -374,7 +374,7 @@ def test_zupt_and_zaru_cut_the_drift_of_a_stop_and_go_walk():
                           mask=jnp.broadcast_to(gn.valid[:, None], (M, 6)), lever=jnp.zeros((M, 3)))
     t_imu = np.asarray(truth.t[1:])
     run = lambda aids: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
-                                       dt_imu=cfg.dt, n_states=15, aids=aids, save=("nav",))
+                                       dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, aids=aids, save=ins.LCSave(("nav",)))
     base = run(())
     aided = run((ins.zupt(still, sigma=0.02, rate_hz=5.0), ins.zaru(still, density=1e-3, rate_hz=5.0)))
     assert int(aided.status) & ~_status.INFO_FLAGS == 0
@@ -405,8 +405,8 @@ def test_odometer_and_heading_close_the_loop_on_the_car(car):
     hdg = np.arctan2(u[:, 0], u[:, 1]) + np.radians(0.5) * rng.standard_normal(N)
     hdg = np.where((k + 1) % 50 == 0, hdg, np.nan)
     aids = (ins.odometer(speed, sigma=0.05), ins.heading(hdg, sigma=np.radians(0.5)), ins.nhc(sigma=0.1))
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
-                          aids=aids, save=("nav", "valid"))
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
+                          aids=aids, save=ins.LCSave(("nav", "valid")))
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     m0 = _outage_max(*_horizontal_error(base, truth))
     m1 = _outage_max(*_horizontal_error(res, truth))
@@ -433,8 +433,8 @@ def test_aid_parameters_are_array_leaves_under_grad(car):
     def loglik(log_sigma):
         aid = ins.nhc(sigma=0.1, rate_hz=2.0)
         aid = aid._replace(params=aid.params._replace(sigma=jnp.exp(log_sigma)))
-        return loosely_coupled(r.nav0, t_i, dth, dvv, m, params, dt_imu=cfg.dt, n_states=15, aids=(aid,),
-                               save=("valid",)).loglik
+        return loosely_coupled(r.nav0, t_i, dth, dvv, m, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, aids=(aid,),
+                               save=ins.LCSave(("valid",))).loglik
 
     x = jnp.log(jnp.array([0.1, 0.2]))
     g = np.asarray(jax.jit(jax.jacfwd(loglik))(x))
@@ -450,23 +450,23 @@ def test_inactive_aids_leave_the_gnss_filter_unchanged_and_bad_aid_input_is_name
     the update) and no epochs: the result equals the GNSS-only filter to rounding."""
     cfg, truth, r, params, meas, t_imu, base = car
     N = t_imu.size
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
-                          aids=(ins.zupt(np.zeros(N, bool)),), save=("nav",))
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
+                          aids=(ins.zupt(np.zeros(N, bool)),), save=ins.LCSave(("nav",)))
     assert res.epochs.t.shape == base.epochs.t.shape
     d = np.abs(np.asarray(res.epochs.nav.pos) - np.asarray(base.epochs.nav.pos))[:, :2].max() * 6.4e6
     assert d < 1e-6, d  # metres
     np.testing.assert_allclose(float(res.loglik), float(base.loglik), rtol=1e-10)
     run = lambda **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
-                                       dt_imu=cfg.dt, n_states=15, **kw)
+                                       dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, **kw)
     with pytest.raises(ValueError, match="data leaves must have"):
         run(aids=(ins.odometer(np.ones(N + 1), active=np.ones(N, bool)),))
-    with pytest.raises(ValueError, match="'gnss_nis' needs gate_prob"):
-        run(save=("nav", "gnss_nis"))
+    with pytest.raises(ValueError, match="'gnss_nis' needs a gate"):
+        run(save=ins.LCSave(("nav", "gnss_nis")))
     with pytest.raises(ValueError, match="at most one aid"):
         run(aids=(ins.zaru(np.ones(N, bool)), ins.zaru(np.ones(N, bool))))
     with pytest.raises(ValueError, match="tau_markov has shape"):
         loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas,
-                        LCParams(P0=jnp.eye(21), Qc=jnp.eye(18), tau_markov=jnp.ones(3)), n_states=21)
+                        LCParams(P0=jnp.eye(21), Qc=jnp.eye(18), tau_markov=jnp.ones(3)), error_model=ins.ERROR_MODEL_21)
     with pytest.raises(ValueError, match="aids must be Aid"):
         run(aids=(ins.NavState,))
 
@@ -507,17 +507,17 @@ def test_odometer_scale_factor_state_recovered_and_outage_drift_cut(car):
     speed = np.where(ok, 1.02 * np.linalg.norm(v, axis=1) + 0.05 * rng.standard_normal(N), np.nan)
     model = ins.ERROR_MODEL_15.with_odometer_scale()
     assert model.n == 16 and model.names[-1] == "s_odo" and model.p == ins.ERROR_MODEL_15.p
-    P0 = ins.error_model_P0(model, truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1, pos_enu=1.0,
+    P0 = model.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1, pos_enu=1.0,
                             gyro_bias=_v3(cfg.gyro.bias_sigma), accel_bias=_v3(cfg.accel.bias_sigma), odo_scale=0.05)
     aids = (ins.odometer(speed, sigma=0.05), ins.nhc(sigma=0.1))
     res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params._replace(P0=P0), dt_imu=cfg.dt,
-                          error_model=model, aids=aids, save=("nav", "biases", "covs"))
+                          error_model=model, aids=aids, save=ins.LCSave(("nav", "biases", "covs")))
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     k = float(res.final_biases.odo_scale[0])
     sig = float(np.sqrt(res.epochs.covs[-1, 15, 15]))
     assert abs(k - 0.02) < 0.005 and abs(k - 0.02) < 3 * sig, (k, sig)
-    fixed = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, n_states=15,
-                            aids=aids, save=("nav",))
+    fixed = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
+                            aids=aids, save=ins.LCSave(("nav",)))
     m0 = _outage_max(*_horizontal_error(base, truth))
     m1 = _outage_max(*_horizontal_error(res, truth))
     m2 = _outage_max(*_horizontal_error(fixed, truth))

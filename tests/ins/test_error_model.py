@@ -12,11 +12,26 @@ import pytest
 from scipy.linalg import solve_discrete_lyapunov
 
 from jaxnav import units
+from jaxnav.ins import ImuNoise
 from jaxnav.ins import error_model as em
 from jaxnav.ins.attitude import euler_to_dcm, rv_to_dcm, skew
 from jaxnav.ins.earth import earth_params, position_rate
 
 TAU = jnp.array([300.0, 500.0, 1000.0])  # s, per-axis Markov correlation times
+
+
+def qc18(arw, sigma, tau, vrw):
+    """Qc of the 18-state model: gyro ARW, Markov drift sigma and tau, accelerometer VRW."""
+    return em.ERROR_MODEL_18.Qc(ImuNoise(gyro_arw=arw, accel_vrw=vrw, gyro_bias_instability=sigma, gyro_bias_tau=tau))
+
+
+def qc21(arw, vrw, *, gyro_bias_sigma=0.0, gyro_bias_tau=jnp.inf, accel_bias_sigma=0.0, accel_bias_tau=jnp.inf,
+         gyro_bias_rw=0.0, accel_bias_rw=0.0, accel_scale_rw=0.0):
+    """Qc of the 21-state model from datasheet values (SI)."""
+    return em.ERROR_MODEL_21.Qc(ImuNoise(
+        gyro_arw=arw, accel_vrw=vrw, gyro_bias_instability=gyro_bias_sigma, gyro_bias_tau=gyro_bias_tau,
+        accel_bias_instability=accel_bias_sigma, accel_bias_tau=accel_bias_tau, gyro_bias_rw=gyro_bias_rw,
+        accel_bias_rw=accel_bias_rw, accel_sf_rw=accel_scale_rw))
 NAV_BLOCKS = {"phi": em.IDX18.phi, "dv": em.IDX18.dv, "dpos": em.IDX18.dpos}
 ALL_BLOCKS = dict(NAV_BLOCKS, eps_b=em.IDX18.eps_b, eps_r=em.IDX18.eps_r, nabla=em.IDX18.nabla)
 
@@ -79,8 +94,8 @@ def jac():
         x0, w0 = jnp.zeros(18), jnp.zeros(9)
         Jx = jax.jacfwd(_error_dynamics, argnums=0)(x0, w0, C, v, pos, w_ib, f_b, sign)
         Jw = jax.jacfwd(_error_dynamics, argnums=1)(x0, w0, C, v, pos, w_ib, f_b, sign)
-        F = em.error_model_F(pos, v, C @ f_b, C, TAU, earth_rate_sign=sign)
-        G = em.error_model_G(C)
+        F = em.ERROR_MODEL_18.F(pos, v, C @ f_b, C, TAU, earth_rate_sign=sign)
+        G = em.ERROR_MODEL_18.G(C)
         return F, G, Jx, Jw
 
     return jax.tree_util.tree_map(np.asarray, both(pos, v, C, w_ib, f_b, SIGNS))
@@ -130,8 +145,8 @@ def test_G_equals_noise_jacobian(jac):
 
 def test_sensor_and_markov_rows():
     pos, v, C, _, f_b = _points()
-    F = em.error_model_F(pos[0], v[0], C[0] @ f_b[0], C[0], TAU)
-    G = em.error_model_G(C[0])
+    F = em.ERROR_MODEL_18.F(pos[0], v[0], C[0] @ f_b[0], C[0], TAU)
+    G = em.ERROR_MODEL_18.G(C[0])
     np.testing.assert_array_equal(F[9:12], 0.0)
     np.testing.assert_array_equal(F[15:18], 0.0)
     np.testing.assert_allclose(F[12:15], np.hstack([np.zeros((3, 12)), np.diag(-1.0 / TAU), np.zeros((3, 3))]))
@@ -144,9 +159,9 @@ def test_sensor_and_markov_rows():
 @pytest.fixture(scope="module")
 def model():
     pos, v, C, _, f_b = _points()
-    F = em.error_model_F(pos[0], v[0], C[0] @ f_b[0], C[0], TAU)
-    G = em.error_model_G(C[0])
-    Qc = em.error_model_Qc(0.01 * units.DEG_PER_SQRT_HOUR, 0.1 * units.DEG_PER_HOUR, TAU,
+    F = em.ERROR_MODEL_18.F(pos[0], v[0], C[0] @ f_b[0], C[0], TAU)
+    G = em.ERROR_MODEL_18.G(C[0])
+    Qc = qc18(0.01 * units.DEG_PER_SQRT_HOUR, 0.1 * units.DEG_PER_HOUR, TAU,
                            jnp.array([1e-3, 2e-3, 3e-3]))
     return F, G, Qc
 
@@ -238,13 +253,15 @@ def test_taylor_error_estimate_tracks_the_truncation_error(model):
 def test_15_state_is_18_state_without_markov():
     pos, v, C, _, f_b = _points()
     keep = np.r_[0:12, 15:18]
-    F18 = em.error_model_F(pos[1], v[1], C[1] @ f_b[1], C[1], TAU)
-    F15 = em.error_model_F15(pos[1], v[1], C[1] @ f_b[1], C[1])
+    F18 = em.ERROR_MODEL_18.F(pos[1], v[1], C[1] @ f_b[1], C[1], TAU)
+    F15 = em.ERROR_MODEL_15.F(pos[1], v[1], C[1] @ f_b[1], C[1], TAU)
     np.testing.assert_array_equal(F15, F18[np.ix_(keep, keep)])
-    G18, G15 = em.error_model_G(C[1]), em.error_model_G15(C[1])
+    G18, G15 = em.ERROR_MODEL_18.G(C[1]), em.ERROR_MODEL_15.G(C[1])
     np.testing.assert_array_equal(G15, G18[np.ix_(keep, np.r_[0:3, 6:9])])
-    Qc18 = em.error_model_Qc(1e-4, 2e-6, TAU, 3e-3)
-    np.testing.assert_array_equal(em.error_model_Qc15(1e-4, 3e-3), Qc18[np.ix_(np.r_[0:3, 6:9], np.r_[0:3, 6:9])])
+    Qc18 = qc18(1e-4, 2e-6, TAU, 3e-3)
+    Qc15 = em.ERROR_MODEL_15.Qc(ImuNoise(gyro_arw=1e-4, accel_vrw=3e-3, gyro_bias_instability=2e-6, gyro_bias_tau=TAU))
+    np.testing.assert_array_equal(Qc15, Qc18[np.ix_(np.r_[0:3, 6:9], np.r_[0:3, 6:9])])
+    np.testing.assert_array_equal(Qc15, np.diag([1e-8] * 3 + [9e-6] * 3))
     assert em.STATE_NAMES15 == tuple(np.array(em.STATE_NAMES18)[keep])
 
 
@@ -262,11 +279,11 @@ def test_error_model_records():
     assert m15 is em.ERROR_MODEL_15 and m18 is em.ERROR_MODEL_18
     np.testing.assert_array_equal(m15.F(pos[1], v[1], f_n, C[1], TAU, earth_rate_sign=-1.0), F)
     np.testing.assert_array_equal(m15.G(C[1]), G)
-    np.testing.assert_array_equal(m18.F(pos[1], v[1], f_n, C[1], TAU), em.error_model_F(pos[1], v[1], f_n, C[1], TAU))
+    np.testing.assert_array_equal(m18.F(pos[1], v[1], f_n, C[1], TAU), em.ERROR_MODEL_18.F(pos[1], v[1], f_n, C[1], TAU))
     assert (m15.n, m15.p, m18.n, m18.p) == (15, 6, 18, 9)
     assert m15.idx == em.IDX15 and m18.idx == em.IDX18 and m15.names == em.STATE_NAMES15
-    Qc18 = em.error_model_Qc(1e-4, 2e-6, TAU, 3e-3)
-    np.testing.assert_array_equal(m15.Qc(Qc18), em.error_model_Qc15(1e-4, 3e-3))
+    noise = ImuNoise(gyro_arw=1e-4, accel_vrw=3e-3, gyro_bias_instability=2e-6, gyro_bias_tau=TAU)
+    np.testing.assert_array_equal(m15.Qc(noise), m18.Qc(noise)[np.ix_(np.r_[0:3, 6:9], np.r_[0:3, 6:9])])
     # a record is a static argument of jit (hashed by identity)
     f = jax.jit(lambda m, c: m.G(c), static_argnums=0)
     np.testing.assert_array_equal(f(m15, C[1]), G)
@@ -278,7 +295,7 @@ def test_error_model_records():
 def test_markov_decay_and_stationary_variance(model):
     F, G, _ = model
     sigma = jnp.array([1.0, 2.0, 3.0]) * units.DEG_PER_HOUR
-    Qc = em.error_model_Qc(0.0, sigma, TAU, 0.0)
+    Qc = qc18(0.0, sigma, TAU, 0.0)
     dt, n = 1.0, 2000
     Phi, Qd = em.discretize_van_loan(F, G, Qc, dt)
     x0 = jnp.zeros(18).at[12:15].set(sigma)
@@ -294,12 +311,12 @@ def test_markov_decay_and_stationary_variance(model):
 def test_vmap_equals_loop_and_jit_equals_eager():
     pos, v, C, _, f_b = _points()
     f_n = jnp.einsum("kij,kj->ki", C, f_b)
-    fn = jax.jit(jax.vmap(em.error_model_F, in_axes=(0, 0, 0, 0, None)))
+    fn = jax.jit(jax.vmap(em.ERROR_MODEL_18.F, in_axes=(0, 0, 0, 0, None)))
     batched = fn(pos, v, f_n, C, TAU)
-    looped = np.stack([em.error_model_F(pos[k], v[k], f_n[k], C[k], TAU) for k in range(4)])
+    looped = np.stack([em.ERROR_MODEL_18.F(pos[k], v[k], f_n[k], C[k], TAU) for k in range(4)])
     np.testing.assert_allclose(batched, looped, rtol=1e-14, atol=1e-30)
-    F, G = looped[0], em.error_model_G(C[0])
-    Qc = em.error_model_Qc(1e-4, 1e-6, TAU, 1e-3)
+    F, G = looped[0], em.ERROR_MODEL_18.G(C[0])
+    Qc = qc18(1e-4, 1e-6, TAU, 1e-3)
     for disc in (em.discretize_van_loan, em.discretize_series):
         eager = disc(F, G, Qc, 0.5)
         jitted = jax.jit(disc)(F, G, Qc, 0.5)
@@ -311,7 +328,7 @@ def test_grad_of_qd_wrt_noise_parameters(model):
     F, G, _ = model
 
     def loss(logs):
-        Qc = em.error_model_Qc(jnp.exp(logs[0]), jnp.exp(logs[1]), TAU, jnp.exp(logs[2]))
+        Qc = qc18(jnp.exp(logs[0]), jnp.exp(logs[1]), TAU, jnp.exp(logs[2]))
         _, Qd = em.discretize_van_loan(F, G, Qc, 1.0)
         return jnp.log(Qd[0, 0]) + jnp.log(Qd[4, 4]) + jnp.log(Qd[13, 13])
 
@@ -325,7 +342,7 @@ def test_grad_of_qd_wrt_noise_parameters(model):
 def test_float32_position_raises():
     pos, v, C, _, f_b = _points()
     with pytest.raises(ValueError, match="enable_x64"):
-        em.error_model_F(pos[0].astype(jnp.float32), v[0], f_b[0], C[0], TAU)
+        em.ERROR_MODEL_18.F(pos[0].astype(jnp.float32), v[0], f_b[0], C[0], TAU)
 
 
 # ----------------------------------------------------------------------------- 6. 21-state model (issue 18)
@@ -373,12 +390,15 @@ def test_F21_and_G21_equal_jacobians_of_nonlinear_navigation_with_scale_factors(
 
 def test_15gm_is_21_without_scale_factors():
     pos, v, C, w_ib, f_b = _points()
-    F21 = em.error_model_F21(pos[2], v[2], C[2] @ f_b[2], C[2], TAU6, Cw=C[2] * w_ib[2], Cf=C[2] * f_b[2])
+    F21 = em.ERROR_MODEL_21.F(pos[2], v[2], C[2] @ f_b[2], C[2], TAU6, Cw=C[2] * w_ib[2], Cf=C[2] * f_b[2])
     F15 = em.ERROR_MODEL_15GM.F(pos[2], v[2], C[2] @ f_b[2], C[2], TAU6)
     np.testing.assert_array_equal(F15, F21[:15, :15])
-    np.testing.assert_array_equal(em.ERROR_MODEL_15GM.G(C[2]), em.error_model_G21(C[2])[:15, :12])
-    Qc = em.error_model_Qc21(1e-4, 1e-3, gyro_bias_sigma=1e-5, gyro_bias_tau=3600.0, accel_bias_rw=1e-5)
-    assert em.ERROR_MODEL_15GM.Qc(Qc).shape == (12, 12) and em.ERROR_MODEL_15GM.idx == em.IDX15
+    np.testing.assert_array_equal(em.ERROR_MODEL_15GM.G(C[2]), em.ERROR_MODEL_21.G(C[2])[:15, :12])
+    noise = ImuNoise(gyro_arw=1e-4, accel_vrw=1e-3, gyro_bias_instability=1e-5, gyro_bias_tau=3600.0,
+                     accel_bias_rw=1e-5, gyro_sf_rw=1e-7)
+    np.testing.assert_array_equal(em.ERROR_MODEL_15GM.Qc(noise), em.ERROR_MODEL_21.Qc(noise)[:12, :12])
+    assert em.ERROR_MODEL_15GM.idx == em.IDX15
+    np.testing.assert_array_equal(em.ERROR_MODEL_15GM.tau(noise), [3600.0] * 6)
 
 
 def test_qc21_from_datasheet_values():
@@ -386,7 +406,7 @@ def test_qc21_from_datasheet_values():
     arw, vrw = 0.1 * units.DEG_PER_SQRT_HOUR, 0.05  # rad/sqrt(s), m/s/sqrt(s)
     bi, tau = 5.0 * units.DEG_PER_HOUR, 1800.0
     rw = 1e-6  # rad/s/sqrt(s)
-    Q = np.diag(np.asarray(em.error_model_Qc21(arw, vrw, gyro_bias_sigma=bi, gyro_bias_tau=tau, gyro_bias_rw=rw,
+    Q = np.diag(np.asarray(qc21(arw, vrw, gyro_bias_sigma=bi, gyro_bias_tau=tau, gyro_bias_rw=rw,
                                                accel_bias_sigma=1e-3, accel_bias_tau=jnp.inf, accel_scale_rw=1e-7)))
     np.testing.assert_allclose(Q[0:3], arw**2)
     np.testing.assert_allclose(Q[3:6], vrw**2)
@@ -396,9 +416,9 @@ def test_qc21_from_datasheet_values():
     np.testing.assert_allclose(Q[15:18], 1e-14)
     # stationary std of the Gauss-Markov bias in the discretised model equals the datasheet sigma
     pos, v, C, w_ib, f_b = _points()
-    Qc = em.error_model_Qc21(0.0, 0.0, gyro_bias_sigma=bi, gyro_bias_tau=tau)
-    F = em.error_model_F21(pos[0], v[0], C[0] @ f_b[0], C[0], jnp.full(6, tau))
-    Phi, Qd = em.discretize_van_loan(F, em.error_model_G21(C[0]), Qc, 1.0)
+    Qc = qc21(0.0, 0.0, gyro_bias_sigma=bi, gyro_bias_tau=tau)
+    F = em.ERROR_MODEL_21.F(pos[0], v[0], C[0] @ f_b[0], C[0], jnp.full(6, tau))
+    Phi, Qd = em.discretize_van_loan(F, em.ERROR_MODEL_21.G(C[0]), Qc, 1.0)
     r = em.IDX21.eps_b
     P = solve_discrete_lyapunov(np.asarray(Phi[r, r]), np.asarray(Qd[r, r]))
     np.testing.assert_allclose(np.diag(P), bi**2, rtol=1e-9)
@@ -406,13 +426,13 @@ def test_qc21_from_datasheet_values():
 
 def test_P0_helper_places_each_block():
     pos = jnp.array([0.7, 0.2, 100.0])
-    P = np.asarray(em.error_model_P0(em.ERROR_MODEL_21, pos, att=1e-3, vel=0.1, pos_enu=[1.0, 2.0, 3.0], gyro_bias=1e-4,
-                                     accel_bias=1e-2, gyro_scale=1e-3, accel_scale=2e-3))
+    P = np.asarray(em.ERROR_MODEL_21.P0(pos, att=1e-3, vel=0.1, pos_enu=[1.0, 2.0, 3.0], gyro_bias=1e-4,
+                                        accel_bias=1e-2, gyro_scale=1e-3, accel_scale=2e-3))
     sd = np.sqrt(np.diag(P))
     np.testing.assert_allclose(sd[[0, 3, 8, 9, 12, 15, 18]], [1e-3, 0.1, 3.0, 1e-4, 1e-2, 1e-3, 2e-3])
     np.testing.assert_allclose(sd[7] * 6.39e6 * np.cos(0.7), 1.0, rtol=5e-3)  # lon from east metres
-    assert em.error_model_P0(em.ERROR_MODEL_18, pos, att=0, vel=0, pos_enu=0, gyro_bias=0, accel_bias=0,
-                             gyro_markov=1e-6)[13, 13] == 1e-12
+    assert em.ERROR_MODEL_18.P0(pos, att=0, vel=0, pos_enu=0, gyro_bias=0, accel_bias=0,
+                                gyro_markov=1e-6)[13, 13] == 1e-12
 
 
 def test_F21_predicts_the_mechanization_error_growth():
@@ -440,7 +460,7 @@ def test_F21_predicts_the_mechanization_error_growth():
     avg = lambda a: jnp.mean(a, axis=0)  # noqa: E731
     F = em.ERROR_MODEL_21.F(avg(ref.nav.pos), avg(ref.nav.v_n), avg(C @ f), avg(C), jnp.inf,
                             Cw=avg(C * (w * 1.0)[None, None, :]), Cf=avg(C * f[None, None, :]))
-    Phi, _, _ = em.discretize_taylor(F, em.error_model_G21(C0), jnp.zeros((18, 18)), K * dt)
+    Phi, _, _ = em.discretize_taylor(F, em.ERROR_MODEL_21.G(C0), jnp.zeros((18, 18)), K * dt)
     pred = (Phi @ x)[:9]
     last = lambda a: a[-1]  # noqa: E731
     got = _chart(quat_to_dcm(last(res.nav.q_bn)), last(C), last(res.nav.v_n), last(ref.nav.v_n),
@@ -467,7 +487,7 @@ def test_odometer_scale_state_appended_without_dynamics():
     assert np.array_equal(F1[:21, :21], F0) and not np.any(F1[21]) and not np.any(F1[:, 21])
     G1 = m.G(C)
     assert np.array_equal(G1[:21], ins.ERROR_MODEL_21.G(C)) and not np.any(G1[21])
-    P0 = ins.error_model_P0(m, pos, att=0.01, vel=0.1, pos_enu=1.0, gyro_bias=1e-4, accel_bias=0.01, odo_scale=0.02)
+    P0 = m.P0(pos, att=0.01, vel=0.1, pos_enu=1.0, gyro_bias=1e-4, accel_bias=0.01, odo_scale=0.02)
     assert float(P0[21, 21]) == pytest.approx(4e-4)
     with pytest.raises(ValueError, match="already has"):
         m.with_odometer_scale()

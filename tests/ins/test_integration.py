@@ -95,10 +95,7 @@ def _params(cfg, n_states=18):
     if n_states == 18:
         p0.append(v3(g.markov_sigma) ** 2)
     p0.append(v3(a.bias_sigma) ** 2)
-    if n_states == 18:
-        Qc = ins.error_model_Qc(v3(g.white), v3(g.markov_sigma), v3(g.markov_tau), v3(a.white))
-    else:
-        Qc = ins.error_model_Qc15(v3(g.white), v3(a.white))
+    Qc = ins.error_model_for(n_states).Qc(sim.imu_noise(cfg))
     return LCParams(P0=jnp.diag(jnp.asarray(np.concatenate(p0))), Qc=Qc, tau_markov=jnp.asarray(v3(g.markov_tau)))
 
 
@@ -227,7 +224,7 @@ def test_filter_family_plugins_and_15_states(outage_run, kind):
         n = 15
         params = _params(cfg, 15)
     res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, _meas(cfg, r.gnss), params, dt_imu=cfg.dt,
-                          n_states=n, save=("nav", "covs", "factors", "nis"), **kw)
+                          error_model=ins.error_model_for(n), save=ins.LCSave(("nav", "covs", "factors", "nis")), **kw)
     assert int(res.status) & ~1 == 0 and res.epochs.covs.shape[1:] == (n, n)
     f = np.asarray(res.epochs.factors)
     if kind == "attenuated":
@@ -251,7 +248,7 @@ def test_bad_measurements_are_skipped_and_counted_and_time_ranges_checked(outage
     pos[20, 0] = np.nan  # a NaN latitude: the north component is masked and counted
     R[30, 3, 3] = 1e12  # a huge velocity sigma: that component is masked
     res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas._replace(pos=pos, R=R), params,
-                          dt_imu=cfg.dt, save=("nav", "valid"))
+                          dt_imu=cfg.dt, save=ins.LCSave(("nav", "valid")))
     assert int(res.n_nonfinite) == int(base.n_nonfinite) + 1  # the north component; E and U stay valid
     v = np.asarray(res.epochs.valid)
     assert v[20] == 5 and v[30] == 5  # NaN lat masks 1 of 6 (lat), huge sigma masks 1 of 6
@@ -273,20 +270,20 @@ def test_taylor_discretization_equals_van_loan_and_flags_truncation(outage_run):
     cfg, truth, r, params, t_imu, base = outage_run
     meas = _meas(cfg, r.gnss)
     run = lambda **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
-                                       dt_imu=cfg.dt, save=("nav", "covs"), **kw)
-    vl = run(discretization="van_loan")
+                                       dt_imu=cfg.dt, save=ins.LCSave(("nav", "covs")), **kw)
+    vl = run(discretization=ins.LCDiscretization("van_loan"))
     dlat = np.abs(np.asarray(vl.epochs.nav.pos) - np.asarray(base.epochs.nav.pos))[:, :2].max() * 6.4e6
     assert dlat < 1e-6  # m
     np.testing.assert_allclose(np.asarray(base.epochs.covs), np.asarray(vl.epochs.covs), rtol=1e-8, atol=1e-20)
     assert not int(base.status) & _status.DISCRETIZATION_INACCURATE
-    assert int(run(taylor_order=1).status) & _status.DISCRETIZATION_INACCURATE
+    assert int(run(discretization=ins.LCDiscretization(order=1)).status) & _status.DISCRETIZATION_INACCURATE
     with pytest.raises(ValueError, match="discretization must be"):
-        run(discretization="expm")
+        run(discretization=ins.LCDiscretization("expm"))
 
 
 def test_two_speed_mechanization_inside_the_filter(outage_run):
     """nav_every > 1: the samples between fixes by the two-speed mechanization, F's averages from
-    the blocks. Measured on this 300 s run with a 60 s outage (50 Hz IMU): nav_every=10 (0.2 s)
+    the blocks. Measured on this 300 s run with a 60 s outage (50 Hz IMU): propagation=ins.LCPropagation(nav_every=10) (0.2 s)
     stays within 0.10 mm of the per-sample loop (covariances 4e-6 relative), 7 (blocks that do
     not divide the 50 samples of an epoch, the last one short) within 0.07 mm (50, i.e. 1 s: 0.8 mm,
     not run here); the error against the truth is the same (1.2009 m RMS, 5.976 m in the outage)."""
@@ -294,7 +291,7 @@ def test_two_speed_mechanization_inside_the_filter(outage_run):
     meas = _meas(cfg, r.gnss)
     gidx = np.asarray(r.gnss.index)
     for K, tol in ((10, 5e-4), (7, 5e-4)):
-        res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, nav_every=K)
+        res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, propagation=ins.LCPropagation(nav_every=K))
         assert int(res.status) == 0, K
         assert _pos_err_m(res.epochs.nav.pos, base.epochs.nav.pos).max() < tol, K
         scale = float(jnp.max(jnp.abs(base.epochs.covs)))
@@ -302,10 +299,11 @@ def test_two_speed_mechanization_inside_the_filter(outage_run):
         err = _pos_err_m(res.epochs.nav.pos, truth.pos[gidx])
         err0 = _pos_err_m(base.epochs.nav.pos, truth.pos[gidx])
         assert abs(np.sqrt(np.mean(err**2)) - np.sqrt(np.mean(err0**2))) < 1e-3, K
-    with pytest.raises(ValueError, match="save_imu_every needs the per-sample loop"):
-        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, nav_every=10, save_imu_every=5)
+    with pytest.raises(ValueError, match="imu_every needs the per-sample loop"):
+        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, propagation=ins.LCPropagation(nav_every=10),
+                        save=ins.LCSave(imu_every=5))
     with pytest.raises(ValueError, match="nav_every=0 must be an integer"):
-        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, nav_every=0)
+        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, propagation=ins.LCPropagation(nav_every=0))
 
 
 def test_epochs_between_imu_samples_are_handled_by_time(outage_run):
@@ -322,12 +320,12 @@ def test_epochs_between_imu_samples_are_handled_by_time(outage_run):
     dpos = jnp.stack([v[:, 1] / RM, v[:, 0] / (RN * jnp.cos(lat)), v[:, 2]], -1) * shift
     m2 = meas._replace(t=np.asarray(meas.t) + shift, pos=meas.pos + dpos)
     m2 = jax.tree_util.tree_map(lambda a: a[:-1], m2)  # the last shifted fix is past the IMU data
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, m2, params, dt_imu=dt, save=("nav",))
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, m2, params, dt_imu=dt, save=ins.LCSave(("nav",)))
     d = _pos_err_m(res.epochs.nav.pos, base.epochs.nav.pos[:-1])
     assert d.max() < 0.05  # metres, against metre-level fixes: the epoch time is honoured
     # ignoring the time offset (matching by index) is visibly worse
     m3 = jax.tree_util.tree_map(lambda a: a[:-1], meas._replace(pos=meas.pos + dpos))
-    res3 = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, m3, params, dt_imu=dt, save=("nav",))
+    res3 = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, m3, params, dt_imu=dt, save=ins.LCSave(("nav",)))
     assert _pos_err_m(res3.epochs.nav.pos, base.epochs.nav.pos[:-1]).max() > 5 * d.max()
 
 
@@ -347,7 +345,7 @@ def test_zupt_and_known_position_pseudo_measurements(outage_run):
     meas = PVMeasurements(t=np.asarray(r.gnss.t), pos=pos_true, vel=vel_true, R=R, mask=mask,
                           lever=np.zeros((M, 3)))
     res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt,
-                          save=("nav", "valid", "covs"))
+                          save=ins.LCSave(("nav", "valid", "covs")))
     v = np.asarray(res.epochs.valid)
     assert v[0] == 4 and v[1] == 3  # height + 3 velocities, then velocities only
     dv = np.asarray(res.epochs.nav.v_n) - vel_true

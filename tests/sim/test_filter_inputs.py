@@ -1,4 +1,5 @@
-"""jaxnav.sim.lc_inputs / lc_params / gnss_measurements: a simulated run filtered with public helpers."""
+"""jaxnav.sim.imu_noise / lc_inputs with jaxnav.ins.lc_params / gnss_measurements: a simulated run filtered with
+public helpers."""
 
 import dataclasses
 
@@ -18,11 +19,16 @@ def short_run():
     return cfg, run
 
 
+def _params(cfg, model=ins.ERROR_MODEL_18):
+    ie = cfg.initial_errors
+    return ins.lc_params(model, sim.imu_noise(cfg), cfg.origin, att=ie.attitude, vel=ie.velocity, pos_enu=ie.position)
+
+
 def test_lc_params_follow_the_scenario_sigmas(short_run):
     cfg, _ = short_run
-    p = sim.lc_params(cfg)
+    p = _params(cfg)
     sd = np.sqrt(np.diag(np.asarray(p.P0)))
-    ie = cfg.initial_errors
+    ie, g, a = cfg.initial_errors, cfg.gyro, cfg.accel
     np.testing.assert_allclose(sd[0:3], np.broadcast_to(ie.attitude, 3), rtol=1e-12)
     np.testing.assert_allclose(sd[3:6], np.broadcast_to(ie.velocity, 3), rtol=1e-12)
     lat, h = float(cfg.origin[0]), float(cfg.origin[2])
@@ -30,29 +36,41 @@ def test_lc_params_follow_the_scenario_sigmas(short_run):
     RN = float(geodesy.prime_vertical_radius(lat)) + h
     pe = np.broadcast_to(ie.position, 3)
     np.testing.assert_allclose(sd[6:9] * [RM, RN * np.cos(lat), 1.0], [pe[1], pe[0], pe[2]], rtol=1e-12)
-    assert p.P0.shape == (18, 18) and sim.lc_params(cfg, n_states=15).P0.shape == (15, 15)
-    np.testing.assert_allclose(np.asarray(sim.lc_params(cfg, q_scale=2.0).Qc), 2.0 * np.asarray(p.Qc))
-    with pytest.raises(ValueError, match="n_states must be 15 or 18, got 21"):
-        sim.lc_params(cfg, n_states=21)
+    np.testing.assert_allclose(sd[9:18], np.concatenate([g.bias_sigma, g.markov_sigma, a.bias_sigma]), rtol=1e-12)
+    np.testing.assert_allclose(np.diag(np.asarray(p.Qc)),
+                               np.concatenate([np.square(g.white), 2 * np.square(g.markov_sigma) / g.markov_tau,
+                                               np.square(a.white)]), rtol=1e-12)
+    np.testing.assert_array_equal(p.tau_markov, g.markov_tau)
+    assert _params(cfg, ins.ERROR_MODEL_15).P0.shape == (15, 15) and _params(cfg, ins.ERROR_MODEL_21).Qc.shape == (18, 18)
 
 
-def test_gnss_measurements_mask_outages_and_check_the_lever(short_run):
+def test_gnss_measurements_mask_outages_floor_sigmas_and_check_shapes(short_run):
     cfg, run = short_run
-    m = sim.gnss_measurements(cfg, run.gnss)
+    m = sim.lc_inputs(cfg, run).meas
     t = np.asarray(m.t)
     out = (t >= 40.0) & (t < 55.0)
     assert out.any() and not np.asarray(m.mask)[out].any() and np.asarray(m.mask)[~out].all()
     np.testing.assert_allclose(np.sqrt(np.asarray(m.R)[0].diagonal()),
                                np.concatenate([np.broadcast_to(cfg.gnss.pos_sigma, 3),
                                                np.broadcast_to(cfg.gnss.vel_sigma, 3)]))
-    with pytest.raises(ValueError, match=r"lever must have shape \(3,\), got \(2,\)"):
-        sim.gnss_measurements(cfg, run.gnss, lever=[0.1, 0.2])
+    g = run.gnss
+    c = np.array([[4e-4, 1e-4, 0.0], [1e-4, 1e-2, 0.0], [0.0, 0.0, 9e-2]])  # sigmas 0.02, 0.1, 0.3 m
+    vel = np.asarray(g.vel).copy()
+    vel[3, 1] = np.nan
+    f = ins.gnss_measurements(t, g.pos, vel, c, np.full((3, 3), np.nan), pos_sigma_floor=0.05, vel_sigma_floor=2.0)
+    R = np.asarray(f.R)[0]
+    np.testing.assert_allclose(np.sqrt(R.diagonal()), [0.05, 0.1, 0.3, 2.0, 2.0, 2.0], rtol=1e-12)
+    np.testing.assert_allclose(R[0, 1] / np.sqrt(R[0, 0] * R[1, 1]), 0.05, rtol=1e-12)  # correlation kept
+    np.testing.assert_array_equal(np.asarray(f.mask)[3], [True, True, True, True, False, True])  # the NaN component
+    assert float(f.vel[3, 1]) == 0.0
+    with pytest.raises(ValueError, match=r"lever \(2,\)"):
+        ins.gnss_measurements(t, g.pos, g.vel, c, c, lever=[0.1, 0.2])
 
 
 def test_public_helpers_filter_a_run_within_its_sigmas(short_run):
     """The filter fed by the helpers keeps the position error inside 4 sigma at the end."""
     cfg, run = short_run
-    res = ins.loosely_coupled(*sim.lc_inputs(cfg, run), sim.lc_params(cfg), dt_imu=cfg.dt)
+    res = ins.loosely_coupled(*sim.lc_inputs(cfg, run), _params(cfg), dt_imu=cfg.dt)
     idx = np.asarray(run.gnss.index)
     d = np.asarray(res.epochs.nav.pos[-1] - run.truth.pos[idx[-1]])
     lat = float(run.truth.pos[idx[-1], 0])
