@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out/demo
 
-.PHONY: demo test bench docs clean
+.PHONY: demo test lint bench docs clean
 
 $(VENV)/.base:
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,11 @@ demo: $(VENV)/.base
 # workers idle until CI's 90 minutes ran out.
 test: $(VENV)/.test
 	$(PY) -m pytest -q -n 2 --dist loadscope --no-loadscope-reorder --max-worker-restart=0
+
+# ruff, configured in pyproject.toml: the linter's rules and the formatter's check.
+lint: $(VENV)/.test
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
 
 bench: $(BVENV)/.bench
 	$(BVENV)/bin/python benchmarks/bench_filters.py

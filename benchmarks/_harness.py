@@ -36,10 +36,12 @@ def cpu_model() -> str:
 def git_revision() -> str:
     """Short HEAD of the repository, flagged when jaxnav/ has uncommitted changes."""
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                             timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jaxnav"], cwd=ROOT, capture_output=True,
-                               text=True, timeout=10).stdout.strip()
+        rev = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--", "jaxnav"], cwd=ROOT, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
         return (rev or "unknown") + (" + uncommitted changes in jaxnav/" if dirty else "")
     except Exception:
         return "unknown"
@@ -72,6 +74,7 @@ def write_section(path, report: str, begin: str, end: str) -> None:
 # timing: compile separate from run, block_until_ready, min and median of repeats
 # --------------------------------------------------------------------------------------
 
+
 class Timing:
     """Compile time and run times of one jitted call (seconds)."""
 
@@ -85,6 +88,7 @@ class Timing:
     @property
     def median(self):
         import statistics
+
         return statistics.median(self.runs)
 
 
@@ -145,7 +149,7 @@ def device_banner():
 
     la = loadavg()
     rows = [
-        ("date", _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")),
+        ("date", _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")),
         ("machine", f"{cpu_model()}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"),
         ("load average (1/5/15 min) at start", f"{la[0]:.2f} / {la[1]:.2f} / {la[2]:.2f}"),
         ("JAX devices", ", ".join(str(d) for d in jax.devices()) + f" (x64 {jax.config.jax_enable_x64})"),

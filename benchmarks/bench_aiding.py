@@ -23,7 +23,6 @@ import sys
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
@@ -92,19 +91,41 @@ def _setup(duration):
     gn = r.gnss
     M = gn.t.shape[0]
     R = np.diag([1.0] * 3 + [0.05**2] * 3)
-    meas = PVMeasurements(t=np.asarray(gn.t), pos=np.asarray(gn.pos), vel=np.asarray(gn.vel),
-                          R=np.broadcast_to(R, (M, 6, 6)), mask=np.broadcast_to(np.asarray(gn.valid)[:, None], (M, 6)),
-                          lever=np.zeros((M, 3)))
+    meas = PVMeasurements(
+        t=np.asarray(gn.t),
+        pos=np.asarray(gn.pos),
+        vel=np.asarray(gn.vel),
+        R=np.broadcast_to(R, (M, 6, 6)),
+        mask=np.broadcast_to(np.asarray(gn.valid)[:, None], (M, 6)),
+        lever=np.zeros((M, 3)),
+    )
     v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
     g, a = cfg.gyro, cfg.accel
-    kw = dict(att=v3(cfg.initial_errors.attitude), vel=0.1, pos_enu=1.0, gyro_bias=v3(g.bias_sigma),
-              accel_bias=v3(a.bias_sigma))
-    p15 = LCParams(P0=ins.ERROR_MODEL_15.P0(truth.pos[0], **kw),
-                   Qc=ins.ERROR_MODEL_15.Qc(ins.ImuNoise(gyro_arw=v3(g.white), accel_vrw=v3(a.white))), tau_markov=300.0)
-    noise21 = ins.ImuNoise(gyro_arw=v3(g.white), accel_vrw=v3(a.white), gyro_bias_instability=v3(g.bias_sigma) * 0.1,
-                           gyro_bias_tau=3600.0, accel_bias_instability=v3(a.bias_sigma) * 0.1, accel_bias_tau=3600.0)
-    p21 = LCParams(P0=ins.ERROR_MODEL_21.P0(truth.pos[0], gyro_scale=1e-2, accel_scale=1e-3, **kw),
-                   Qc=ins.ERROR_MODEL_21.Qc(noise21), tau_markov=np.full(6, 3600.0))
+    kw = dict(
+        att=v3(cfg.initial_errors.attitude),
+        vel=0.1,
+        pos_enu=1.0,
+        gyro_bias=v3(g.bias_sigma),
+        accel_bias=v3(a.bias_sigma),
+    )
+    p15 = LCParams(
+        P0=ins.ERROR_MODEL_15.P0(truth.pos[0], **kw),
+        Qc=ins.ERROR_MODEL_15.Qc(ins.ImuNoise(gyro_arw=v3(g.white), accel_vrw=v3(a.white))),
+        tau_markov=300.0,
+    )
+    noise21 = ins.ImuNoise(
+        gyro_arw=v3(g.white),
+        accel_vrw=v3(a.white),
+        gyro_bias_instability=v3(g.bias_sigma) * 0.1,
+        gyro_bias_tau=3600.0,
+        accel_bias_instability=v3(a.bias_sigma) * 0.1,
+        accel_bias_tau=3600.0,
+    )
+    p21 = LCParams(
+        P0=ins.ERROR_MODEL_21.P0(truth.pos[0], gyro_scale=1e-2, accel_scale=1e-3, **kw),
+        Qc=ins.ERROR_MODEL_21.Qc(noise21),
+        tau_markov=np.full(6, 3600.0),
+    )
     return cfg, truth, r, meas, p15, p21
 
 
@@ -123,8 +144,11 @@ def main(argv=None):
     t_imu = np.asarray(truth.t[1:])
     dth, dv = np.asarray(r.imu.dtheta), np.asarray(r.imu.dv)
     nav0 = jax.tree_util.tree_map(np.asarray, r.nav0)
-    print(f"data: {duration:.0f} s, {t_imu.size} IMU samples, {meas.t.size} GNSS epochs; simulated in "
-          f"{time.perf_counter() - t0:.1f} s", flush=True)
+    print(
+        f"data: {duration:.0f} s, {t_imu.size} IMU samples, {meas.t.size} GNSS epochs; simulated in "
+        f"{time.perf_counter() - t0:.1f} s",
+        flush=True,
+    )
     rows = [
         ("15 states, GNSS only", 15, p15, (), None, 1),
         ("21 states, GNSS only", 21, p21, (), None, 1),
@@ -135,11 +159,23 @@ def main(argv=None):
     ]
     out = []
     for name, n, params, aids, gate, ne in rows:
+
         def call():
             model = ins.error_model_for(n)
-            res = ins.loosely_coupled(nav0, t_imu, dth, dv, meas, params, dt_imu=cfg.dt, error_model=model, aids=aids,
-                                      gate=None if gate is None else ins.LCGate(gate),
-                                      propagation=ins.LCPropagation(nav_every=ne), save=SAVE)
+            res = ins.loosely_coupled(
+                nav0,
+                t_imu,
+                dth,
+                dv,
+                meas,
+                params,
+                dt_imu=cfg.dt,
+                error_model=model,
+                aids=aids,
+                gate=None if gate is None else ins.LCGate(gate),
+                propagation=ins.LCPropagation(nav_every=ne),
+                save=SAVE,
+            )
             nav_s, _, _ = ins.smooth(res, error_model=model)
             return np.asarray(nav_s.pos), res
 
@@ -153,11 +189,15 @@ def main(argv=None):
             times.append(time.perf_counter() - t1)
         tmin, tmed = min(times), float(np.median(times))
         out.append((name, first - tmin, tmin, tmed, pos.shape[0], int(res.n_gated)))
-        print(f"| {name} | {first - tmin:.1f} s | {tmin:.2f} s ({tmed:.2f}) | {pos.shape[0]} | {int(res.n_gated)} |",
-              flush=True)
+        print(
+            f"| {name} | {first - tmin:.1f} s | {tmin:.2f} s ({tmed:.2f}) | {pos.shape[0]} | {int(res.n_gated)} |",
+            flush=True,
+        )
     print()
-    print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {platform.processor() or platform.machine()}, "
-          f"Python {platform.python_version()}, jax {jax.__version__}, load {os.getloadavg()}")
+    print(
+        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {platform.processor() or platform.machine()}, "
+        f"Python {platform.python_version()}, jax {jax.__version__}, load {os.getloadavg()}"
+    )
     print("| run (forward + RTS) | compile | run min (median) | filter epochs | gated |")
     print("|---|---|---|---|---|")
     for name, c, tmin, tmed, ne_, ng in out:

@@ -31,7 +31,7 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from _harness import cpu_model, git_revision, loadavg, write_section  # noqa: E402
+from _harness import cpu_model, git_revision, write_section  # noqa: E402
 from _harness import package_version as _version  # noqa: E402
 
 BEGIN, END = "<!-- BEGIN bench_distributed -->", "<!-- END bench_distributed -->"
@@ -61,15 +61,16 @@ def worker(a):
     fading = rules(exp)["fading"]
 
     def one(p, key):  # the summary of jaxnav demo's s0_run
-        res = S.run(key, jf.switch(p["rule"], [jf.attenuated(p["b"], states=states), fading]),
-                    save=("nav", "covs", "factors"))
+        res = S.run(
+            key, jf.switch(p["rule"], [jf.attenuated(p["b"], states=states), fading]), save=("nav", "covs", "factors")
+        )
         pe, ve = S.errors(res)
         cov = res.epochs.covs
-        sig_p = jnp.sqrt(jnp.stack([cov[:, 7, 7] * (S.RN * jnp.cos(S.lat)) ** 2, cov[:, 6, 6] * S.RM**2,
-                                    cov[:, 8, 8]], -1))
+        sig_p = jnp.sqrt(
+            jnp.stack([cov[:, 7, 7] * (S.RN * jnp.cos(S.lat)) ** 2, cov[:, 6, 6] * S.RM**2, cov[:, 8, 8]], -1)
+        )
         sig_v = jnp.sqrt(jnp.stack([cov[:, 3, 3], cov[:, 4, 4], cov[:, 5, 5]], -1))
-        return dict(rms=S.rms_of(res), pos_err=pe, vel_err=ve, sig_pos=sig_p, sig_vel=sig_v,
-                    factors=res.epochs.factors)
+        return dict(rms=S.rms_of(res), pos_err=pe, vel_err=ve, sig_pos=sig_p, sig_vel=sig_v, factors=res.epochs.factors)
 
     grid = {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])}
     keys = jax.random.split(jax.random.PRNGKey(2019), a.seeds)
@@ -85,11 +86,22 @@ def worker(a):
     fixed = sum(v[0, 0].nbytes for v in r.values.values()) - per_run_epochs
     per_epoch = per_run_epochs // M
     if tune.is_writer():
-        print(json.dumps(dict(processes=a.processes, devices=r.n_devices, compile_s=first.compile_time_s,
-                              run_s=float(np.median(times)), runs=runs, epochs=M, bytes_fixed=int(fixed),
-                              bytes_per_epoch=int(per_epoch),
-                              mean_pos_rms_m=[float(r.values["rms"][i, :, :3].mean()) for i in range(3)])),
-              flush=True)
+        print(
+            json.dumps(
+                dict(
+                    processes=a.processes,
+                    devices=r.n_devices,
+                    compile_s=first.compile_time_s,
+                    run_s=float(np.median(times)),
+                    runs=runs,
+                    epochs=M,
+                    bytes_fixed=int(fixed),
+                    bytes_per_epoch=int(per_epoch),
+                    mean_pos_rms_m=[float(r.values["rms"][i, :, :3].mean()) for i in range(3)],
+                )
+            ),
+            flush=True,
+        )
 
 
 def _free_port() -> int:
@@ -102,10 +114,27 @@ def layout(a, processes, devices):
     """Run one layout in fresh processes; returns process 0's JSON."""
     env = dict(os.environ, JAX_PLATFORMS="cpu", XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
     port = str(_free_port())
-    cmd = [sys.executable, __file__, "--worker", "--processes", str(processes), "--port", port, "--seeds",
-           str(a.seeds), "--duration", str(a.duration), "--repeats", str(a.repeats)]
-    procs = [subprocess.Popen(cmd + ["--process-id", str(i)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                              text=True) for i in range(processes)]
+    cmd = [
+        sys.executable,
+        __file__,
+        "--worker",
+        "--processes",
+        str(processes),
+        "--port",
+        port,
+        "--seeds",
+        str(a.seeds),
+        "--duration",
+        str(a.duration),
+        "--repeats",
+        str(a.repeats),
+    ]
+    procs = [
+        subprocess.Popen(
+            cmd + ["--process-id", str(i)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        for i in range(processes)
+    ]
     outs = [p.communicate(timeout=a.timeout) for p in procs]
     for p, (_, err) in zip(procs, outs):
         if p.returncode != 0:
@@ -121,18 +150,19 @@ def estimate(base, rows, runs_total=3000, epochs_full=2000, hosts=(1, 4, 16, 64,
     vol = runs_total * out_run  # every host receives every run's outputs (all-gather)
     bw = gbit * 1e9 / 8
     comp = base["compile_s"]
-    lines = [f"- measured here: {c1:.2f} s per filter run of 2000 s on one CPU device (the 1 x 1 row, "
-             f"{base['run_s'] / base['runs']:.3f} s per {base['epochs']} s run, scaled by {scale:.2f}: the run is "
-             f"one `lax.scan`, its cost proportional to its length); compile {comp:.0f} s, paid once per process, "
-             f"in parallel on all hosts;",
-             f"- output per filter run (what the all-gather moves): {base['bytes_fixed']} B + "
-             f"{base['bytes_per_epoch']} B per GPS epoch = {out_run / 1e3:.0f} kB for 2000 epochs; "
-             f"{runs_total} runs = {vol / 1e9:.2f} GB received by every host (input: 24 B per run); the table assumes "
-             f"hosts like this one (one CPU device each) and a {gbit:g} Gbit/s network;",
-             "",
-             f"| hosts N (1 device each) | compute {runs_total} runs | all-gather at {gbit:g} Gbit/s | "
-             f"compile | total |",
-             "|---|---|---|---|---|"]
+    lines = [
+        f"- measured here: {c1:.2f} s per filter run of 2000 s on one CPU device (the 1 x 1 row, "
+        f"{base['run_s'] / base['runs']:.3f} s per {base['epochs']} s run, scaled by {scale:.2f}: the run is "
+        f"one `lax.scan`, its cost proportional to its length); compile {comp:.0f} s, paid once per process, "
+        f"in parallel on all hosts;",
+        f"- output per filter run (what the all-gather moves): {base['bytes_fixed']} B + "
+        f"{base['bytes_per_epoch']} B per GPS epoch = {out_run / 1e3:.0f} kB for 2000 epochs; "
+        f"{runs_total} runs = {vol / 1e9:.2f} GB received by every host (input: 24 B per run); the table assumes "
+        f"hosts like this one (one CPU device each) and a {gbit:g} Gbit/s network;",
+        "",
+        f"| hosts N (1 device each) | compute {runs_total} runs | all-gather at {gbit:g} Gbit/s | compile | total |",
+        "|---|---|---|---|---|",
+    ]
     for n in hosts:
         compute = runs_total * c1 / n
         comm = 0.0 if n == 1 else vol * (n - 1) / n / bw
@@ -161,14 +191,17 @@ def main(argv=None):
         r = layout(a, n, d)
         r["load"] = (l0, os.getloadavg()[0])
         rows.append(r)
-        print(f"{n} process(es) x {d} device(s): compile {r['compile_s']:.1f} s, run {r['run_s']:.2f} s for "
-              f"{r['runs']} runs; load {r['load'][0]:.1f} -> {r['load'][1]:.1f}", flush=True)
+        print(
+            f"{n} process(es) x {d} device(s): compile {r['compile_s']:.1f} s, run {r['run_s']:.2f} s for "
+            f"{r['runs']} runs; load {r['load'][0]:.1f} -> {r['load'][1]:.1f}",
+            flush=True,
+        )
     base = rows[0]
     for r in rows[1:]:
         same = max(abs(x - y) for x, y in zip(r["mean_pos_rms_m"], base["mean_pos_rms_m"]))
         assert same <= 1e-9 * max(base["mean_pos_rms_m"]), (r, base)
     wall = time.perf_counter() - t_all
-    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "## Several processes and hosts (`benchmarks/bench_distributed.py`)",
         "",
@@ -180,12 +213,16 @@ def main(argv=None):
         "",
         "| layout | devices | compile | run | runs per second | speed-up vs 1 x 1 | load average (1 min) before -> after |",
         "|---|---|---|---|---|---|---|",
-        *[f"| {r['processes']} process(es) x {r['devices'] // r['processes']} device(s) | {r['devices']} | "
-          f"{r['compile_s']:.1f} s | {r['run_s']:.2f} s | {r['runs'] / r['run_s']:.2f} | "
-          f"{base['run_s'] / r['run_s']:.2f} | {r['load'][0]:.1f} -> {r['load'][1]:.1f} |" for r in rows],
+        *[
+            f"| {r['processes']} process(es) x {r['devices'] // r['processes']} device(s) | {r['devices']} | "
+            f"{r['compile_s']:.1f} s | {r['run_s']:.2f} s | {r['runs'] / r['run_s']:.2f} | "
+            f"{base['run_s'] / r['run_s']:.2f} | {r['load'][0]:.1f} -> {r['load'][1]:.1f} |"
+            for r in rows
+        ],
         "",
         "Mean position RMS (classic / attenuated / fading) equal in all layouts: "
-        + " / ".join(f"{v:.4f}" for v in base["mean_pos_rms_m"]) + " m.",
+        + " / ".join(f"{v:.4f}" for v in base["mean_pos_rms_m"])
+        + " m.",
         "",
         "Estimate: 1000 Monte Carlo seeds of the full S0 study (3 filters x 2000 s = 3000 filter runs) on N hosts, "
         "from the 1 x 1 row:",

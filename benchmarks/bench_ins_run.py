@@ -27,17 +27,16 @@ import datetime as _dt
 import statistics
 import time
 from pathlib import Path
+from types import SimpleNamespace  # noqa: E402
 
+import jax
 import numpy as np
 from _harness import cpu_model, git_revision, loadavg, write_section
 from _harness import package_version as _version
 from bench_insgnss import PyinsCase, enu_err, make_setup, pyins_pos_after_fix, rms, simulate_seeds, take
 
-import jax
-
 from jaxnav.experiments import S0Setup, s0_measurements  # noqa: E402
 from jaxnav.ins import LCPropagation, LCSave, loosely_coupled, smooth  # noqa: E402
-from types import SimpleNamespace  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 BEGIN = "<!-- BEGIN bench_ins_run results -->"
@@ -73,8 +72,17 @@ def main(argv=None):
     N, M = S.t_imu.size, S.t_gnss.size
 
     def fwd(nav_every=1, save=SAVE):
-        return loosely_coupled(nav0, S.t_imu, dth, dv, meas, S.params, dt_imu=S.cfg.dt, save=LCSave(tuple(save)),
-                               propagation=LCPropagation(nav_every=nav_every))
+        return loosely_coupled(
+            nav0,
+            S.t_imu,
+            dth,
+            dv,
+            meas,
+            S.params,
+            dt_imu=S.cfg.dt,
+            save=LCSave(tuple(save)),
+            propagation=LCPropagation(nav_every=nav_every),
+        )
 
     def fwd_rts(nav_every=1):
         res = fwd(nav_every)
@@ -82,9 +90,11 @@ def main(argv=None):
         return res.epochs.nav, nav
 
     rows = []
-    for name, fn, reps in (("jaxnav fwd+RTS", lambda: fwd_rts(1), args.repeats),
-                           ("jaxnav fwd+RTS two-speed (nav_every=10)", lambda: fwd_rts(10), args.repeats),
-                           ("jaxnav forward", lambda: fwd(1, ("nav",)).epochs.nav, args.repeats)):
+    for name, fn, reps in (
+        ("jaxnav fwd+RTS", lambda: fwd_rts(1), args.repeats),
+        ("jaxnav fwd+RTS two-speed (nav_every=10)", lambda: fwd_rts(10), args.repeats),
+        ("jaxnav forward", lambda: fwd(1, ("nav",)).epochs.nav, args.repeats),
+    ):
         out, first, tmin, tmed = timed(fn, reps)
         rows.append((name, first, tmin, tmed, out))
         print(f"{name}: first {first:.2f} s, min {tmin:.3f} s, median {tmed:.3f} s", flush=True)
@@ -101,14 +111,19 @@ def main(argv=None):
     ppos, idx = pyins_pos_after_fix(S, out_p)
     err["pyins forward"] = rms(enu_err(S, ppos, np.asarray(S.truth.pos)[idx])[:-1])
     load1 = loadavg()
-    lines = [f"## A full INS/GNSS run: forward + RTS over {args.duration:.0f} s of 100 Hz data "
-             "(`benchmarks/bench_ins_run.py`)", "",
-             f"{_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {git_revision()}, {cpu_model()}, "
-             f"load average {load0[0]:.1f} -> {load1[0]:.1f} (1 min); jax {_version('jax')}, python-ins {_version('python-ins')}. "
-             f"N = {N} IMU increments, M = {M} GPS fixes (1 Hz position + velocity), 18 states, float64, one seed. "
-             "Times: min / median of the timed calls after the first; 'first' includes tracing and compilation "
-             "(numba compile for pyins).", "",
-             "| run | first call, s | min, s | median, s | min vs pyins forward |", "|---|---:|---:|---:|---:|"]
+    lines = [
+        f"## A full INS/GNSS run: forward + RTS over {args.duration:.0f} s of 100 Hz data "
+        "(`benchmarks/bench_ins_run.py`)",
+        "",
+        f"{_dt.datetime.now(_dt.UTC):%Y-%m-%d %H:%M} UTC, commit {git_revision()}, {cpu_model()}, "
+        f"load average {load0[0]:.1f} -> {load1[0]:.1f} (1 min); jax {_version('jax')}, python-ins {_version('python-ins')}. "
+        f"N = {N} IMU increments, M = {M} GPS fixes (1 Hz position + velocity), 18 states, float64, one seed. "
+        "Times: min / median of the timed calls after the first; 'first' includes tracing and compilation "
+        "(numba compile for pyins).",
+        "",
+        "| run | first call, s | min, s | median, s | min vs pyins forward |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for name, first, tmin, tmed, _ in rows:
         lines.append(f"| {name} | {first:.2f} | {tmin:.3f} | {tmed:.3f} | {tmin / tmin_p:.3f}x |")
     lines.append(f"| pyins forward (`run_feedback_filter`) | {first_p:.2f} | {tmin_p:.3f} | {tmed_p:.3f} | 1x |")

@@ -60,7 +60,7 @@ FILES = ["LHAS.tenv3", "bjfsCleanUnf.neu", "MRHK_GOM20_neu_cm.col", "UH01_GOM20_
 
 def part_real():
     rows, times = [], []
-    for i, name in enumerate(FILES):
+    for _i, name in enumerate(FILES):
         s = io.read_daily(DATA / name)
         t0 = time.perf_counter()
         fit = mon.fit_station(s, random_walk=False)
@@ -77,22 +77,42 @@ def part_real():
             v = g.valid[:, c]
             h = run_hector(g.t[v], g.y[v, c])
             t_h += h["wall_s"]
-            rows.append(dict(
-                station=s.station, component=comp, days=int(v.sum()), span_yr=(g.n_days - 1) / 365.25,
-                jaxnav_rate=float(fit.velocity[c] / MM_PER_YEAR), hector_rate=h["trend"],
-                jaxnav_sigma=float(fit.velocity_sigma[c] / MM_PER_YEAR), hector_sigma=h["trend_sigma"],
-                white_only_sigma=float(fit.velocity_sigma_white[c] / MM_PER_YEAR),
-                jaxnav_white=float(fit.white_sigma[c] / MM), hector_white=h["NoiseModel"]["White"]["sigma"],
-                jaxnav_flicker=float(fit.powerlaw_amplitude[c] * YEAR**0.25 / MM),
-                hector_flicker=h["NoiseModel"]["FlickerGGM"]["sigma"],
-                rw_model_rate=float(fit_rw.velocity[c] / MM_PER_YEAR),
-                rw_model_sigma=float(fit_rw.velocity_sigma[c] / MM_PER_YEAR),
-                rw_mm_sqrt_yr=float(fit_rw.random_walk[c] * np.sqrt(YEAR) / MM),
-                outliers=sum(1 for d in fit.screening.records if d["component"] == comp)))
-        times.append(dict(station=s.station, jaxnav_first_s=t_first, jaxnav_s=t_j, jaxnav_rw_s=t_rw, hector_s=t_h,
-                          warnings=fit.warnings + fit_rw.warnings))
-        print(f"{s.station}: jaxnav {t_j:.1f} s (first call {t_first:.1f} s), with random walk {t_rw:.1f} s, "
-              f"Hector {t_h:.1f} s", flush=True)
+            rows.append(
+                dict(
+                    station=s.station,
+                    component=comp,
+                    days=int(v.sum()),
+                    span_yr=(g.n_days - 1) / 365.25,
+                    jaxnav_rate=float(fit.velocity[c] / MM_PER_YEAR),
+                    hector_rate=h["trend"],
+                    jaxnav_sigma=float(fit.velocity_sigma[c] / MM_PER_YEAR),
+                    hector_sigma=h["trend_sigma"],
+                    white_only_sigma=float(fit.velocity_sigma_white[c] / MM_PER_YEAR),
+                    jaxnav_white=float(fit.white_sigma[c] / MM),
+                    hector_white=h["NoiseModel"]["White"]["sigma"],
+                    jaxnav_flicker=float(fit.powerlaw_amplitude[c] * YEAR**0.25 / MM),
+                    hector_flicker=h["NoiseModel"]["FlickerGGM"]["sigma"],
+                    rw_model_rate=float(fit_rw.velocity[c] / MM_PER_YEAR),
+                    rw_model_sigma=float(fit_rw.velocity_sigma[c] / MM_PER_YEAR),
+                    rw_mm_sqrt_yr=float(fit_rw.random_walk[c] * np.sqrt(YEAR) / MM),
+                    outliers=sum(1 for d in fit.screening.records if d["component"] == comp),
+                )
+            )
+        times.append(
+            dict(
+                station=s.station,
+                jaxnav_first_s=t_first,
+                jaxnav_s=t_j,
+                jaxnav_rw_s=t_rw,
+                hector_s=t_h,
+                warnings=fit.warnings + fit_rw.warnings,
+            )
+        )
+        print(
+            f"{s.station}: jaxnav {t_j:.1f} s (first call {t_first:.1f} s), with random walk {t_rw:.1f} s, "
+            f"Hector {t_h:.1f} s",
+            flush=True,
+        )
     return dict(rows=rows, times=times)
 
 
@@ -107,18 +127,30 @@ def part_kappa(name="MRHK_GOM20_neu_cm.col"):
         v = g.valid[:, c]
         h = run_hector(g.t[v], g.y[v, c], noise="GGM White")
         k = float(fit.kappa[c])
-        rows.append(dict(station=s.station, component=comp, jaxnav_rate=float(fit.velocity[c] / MM_PER_YEAR),
-                         hector_rate=h["trend"], jaxnav_sigma=float(fit.velocity_sigma[c] / MM_PER_YEAR),
-                         hector_sigma=h["trend_sigma"], jaxnav_kappa=k, hector_kappa=h["NoiseModel"]["GGM"]["kappa"],
-                         jaxnav_amp=float(fit.powerlaw_amplitude[c] * YEAR ** (-k / 4) / MM),
-                         hector_amp=h["NoiseModel"]["GGM"]["sigma"], hector_s=h["wall_s"]))
+        rows.append(
+            dict(
+                station=s.station,
+                component=comp,
+                jaxnav_rate=float(fit.velocity[c] / MM_PER_YEAR),
+                hector_rate=h["trend"],
+                jaxnav_sigma=float(fit.velocity_sigma[c] / MM_PER_YEAR),
+                hector_sigma=h["trend_sigma"],
+                jaxnav_kappa=k,
+                hector_kappa=h["NoiseModel"]["GGM"]["kappa"],
+                jaxnav_amp=float(fit.powerlaw_amplitude[c] * YEAR ** (-k / 4) / MM),
+                hector_amp=h["NoiseModel"]["GGM"]["sigma"],
+                hector_s=h["wall_s"],
+            )
+        )
     return dict(rows=rows, wall_s=wall)
 
 
 def _simulate(key, B, n, gap=0.1):
-    sim = jax.vmap(lambda k: mon.simulate_powerlaw_series(k, n, rate=3 * MM_PER_YEAR, sigma_white=2 * MM,
-                                                          amplitude=6 * MM / YEAR**0.25, kappa=-1.0,
-                                                          gap_fraction=gap))
+    sim = jax.vmap(
+        lambda k: mon.simulate_powerlaw_series(
+            k, n, rate=3 * MM_PER_YEAR, sigma_white=2 * MM, amplitude=6 * MM / YEAR**0.25, kappa=-1.0, gap_fraction=gap
+        )
+    )
     y, t = sim(jax.random.split(key, B))
     return np.asarray(y), np.asarray(t[0])
 
@@ -144,12 +176,21 @@ def part_mc(B=500, n=3653):
         sdw.append(np.sqrt(res[0] / (v.sum() - A.shape[1]) * np.linalg.inv(A.T @ A)[1, 1]) / YEAR)
     zw = (est - rate) / np.array(sdw)
     amp = np.asarray(mon._trajectory.powerlaw_amplitude(fit.theta)) * YEAR**0.25 / MM
-    return dict(B=B, n_days=n, wall_s=wall, coverage=float(np.mean(np.abs(z) <= 1.96)), z_std=float(np.std(z)),
-                z_mean=float(np.mean(z)), coverage_white=float(np.mean(np.abs(zw) <= 1.96)),
-                zw_std=float(np.std(zw)), mean_sigma=float(np.mean(sd) / MM_PER_YEAR),
-                rms_error=float(np.sqrt(np.mean((est - rate) ** 2)) / MM_PER_YEAR),
-                flicker_median=float(np.median(amp)), white_median=float(np.median(np.exp(fit.theta[:, 0])) / MM),
-                at_bound=int(np.sum(np.asarray(fit.at_lower | fit.at_upper)[:, :2])))
+    return dict(
+        B=B,
+        n_days=n,
+        wall_s=wall,
+        coverage=float(np.mean(np.abs(z) <= 1.96)),
+        z_std=float(np.std(z)),
+        z_mean=float(np.mean(z)),
+        coverage_white=float(np.mean(np.abs(zw) <= 1.96)),
+        zw_std=float(np.std(zw)),
+        mean_sigma=float(np.mean(sd) / MM_PER_YEAR),
+        rms_error=float(np.sqrt(np.mean((est - rate) ** 2)) / MM_PER_YEAR),
+        flicker_median=float(np.median(amp)),
+        white_median=float(np.median(np.exp(fit.theta[:, 0])) / MM),
+        at_bound=int(np.sum(np.asarray(fit.at_lower | fit.at_upper)[:, :2])),
+    )
 
 
 def part_batch(stations=1000, n=3653, chunk=250, hector_sample=0):
@@ -159,18 +200,26 @@ def part_batch(stations=1000, n=3653, chunk=250, hector_sample=0):
     D = mon.design_matrix(t)
     spec = mon.noise_spec(n)
     t0 = time.perf_counter()
-    fit = mon.fit_series_batch(np.nan_to_num(y), valid, D.A, spec, np.full(B, 4 * MM), random_walk=False,
-                               chunk=chunk)
+    fit = mon.fit_series_batch(np.nan_to_num(y), valid, D.A, spec, np.full(B, 4 * MM), random_walk=False, chunk=chunk)
     jax.block_until_ready(fit)
     wall = time.perf_counter() - t0
     hector = []
     for i in range(hector_sample):  # estimatetrend on the first stations' three components, in its own process
-        v = valid[3 * i:3 * i + 3]
+        v = valid[3 * i : 3 * i + 3]
         hector.append(sum(run_hector(t[v[c]] + 10 * YEAR, y[3 * i + c, v[c]])["wall_s"] for c in range(3)))
         print(f"Hector station {i + 1}/{hector_sample}: {hector[-1]:.1f} s (load {os.getloadavg()[0]:.1f})", flush=True)
-    return dict(stations=stations, series=B, n_days=n, chunk=chunk, wall_s=wall, hector_station_s=hector,
-                per_station_s=wall / stations, grad_ok=float(np.mean(np.asarray(fit.grad_norm) < 1e-3)),
-                peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, load=os.getloadavg())
+    return dict(
+        stations=stations,
+        series=B,
+        n_days=n,
+        chunk=chunk,
+        wall_s=wall,
+        hector_station_s=hector,
+        per_station_s=wall / stations,
+        grad_ok=float(np.mean(np.asarray(fit.grad_norm) < 1e-3)),
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        load=os.getloadavg(),
+    )
 
 
 def part_network(out, from_json=None):
@@ -180,8 +229,7 @@ def part_network(out, from_json=None):
     from jaxnav.experiments.velocities import run_monitor_velocities
 
     t0 = time.perf_counter()
-    res = run_monitor_velocities([DATA / f for f in FILES], out, detect=5,
-                                 command="bench_monitoring.py --part network")
+    res = run_monitor_velocities([DATA / f for f in FILES], out, detect=5, command="bench_monitoring.py --part network")
     res["bench_wall_s"] = time.perf_counter() - t0
     return res
 
@@ -192,20 +240,28 @@ def network_report(res):
     for name, st in res["stations"].items():
         for d in st["steps"]:
             sz, sg = d["size_mm"], d["sigma_mm"]
-            L.append(f"| {name} | {d['date']} | {d['source']} | "
-                     + " | ".join(f"{sz[c]:+.1f} +- {sg[c]:.1f}" for c in mon.COMPONENTS)
-                     + f" | {'-' if d['gain_2lnL'] is None else format(d['gain_2lnL'], '.0f')} |")
+            L.append(
+                f"| {name} | {d['date']} | {d['source']} | "
+                + " | ".join(f"{sz[c]:+.1f} +- {sg[c]:.1f}" for c in mon.COMPONENTS)
+                + f" | {'-' if d['gain_2lnL'] is None else format(d['gain_2lnL'], '.0f')} |"
+            )
         if not st["steps"]:
             L.append(f"| {name} | none | | | | | |")
-    L += ["", "| station | comp | model rate +- sigma | MIDAS rate +- sigma | difference / combined sigma | "
-              "residual trend | MIDAS pairs kept |", "|---|---|---|---|---|---|---|"]
+    L += [
+        "",
+        "| station | comp | model rate +- sigma | MIDAS rate +- sigma | difference / combined sigma | "
+        "residual trend | MIDAS pairs kept |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for name, st in res["stations"].items():
         for c in mon.COMPONENTS:
             v, s = st["velocity_mm_per_yr"][c], st["velocity_sigma_mm_per_yr"][c]
             m, ms = st["midas_velocity_mm_per_yr"][c], st["midas_velocity_sigma_mm_per_yr"][c]
-            L.append(f"| {name} | {c} | {v:+.2f} +- {s:.2f} | {m:+.2f} +- {ms:.2f} | "
-                     f"{(m - v) / np.hypot(s, ms):+.2f} | {st['residual_trend_mm_per_yr'][c]:+.2f} | "
-                     f"{st['midas_pairs'][c]} |")
+            L.append(
+                f"| {name} | {c} | {v:+.2f} +- {s:.2f} | {m:+.2f} +- {ms:.2f} | "
+                f"{(m - v) / np.hypot(s, ms):+.2f} | {st['residual_trend_mm_per_yr'][c]:+.2f} | "
+                f"{st['midas_pairs'][c]} |"
+            )
     L.append("")
     for name, st in res["stations"].items():
         for w in st["warnings"]:
@@ -218,51 +274,72 @@ def network_report(res):
 def report(res):
     L = [f"machine: {cpu_model()}, jax {jax.__version__}, hector-ts {package_version('hector-ts')}"]
     if "real" in res:
-        L += ["", "| station | comp | days | rate jaxnav | rate Hector | sigma jaxnav | sigma Hector | ratio | "
-                  "white-only sigma | white jaxnav / Hector (mm) | flicker jaxnav / Hector (mm/yr^0.25) | "
-                  "with RW: rate +- sigma, RW (mm/sqrt yr) | outliers |",
-              "|" + "---|" * 13]
+        L += [
+            "",
+            "| station | comp | days | rate jaxnav | rate Hector | sigma jaxnav | sigma Hector | ratio | "
+            "white-only sigma | white jaxnav / Hector (mm) | flicker jaxnav / Hector (mm/yr^0.25) | "
+            "with RW: rate +- sigma, RW (mm/sqrt yr) | outliers |",
+            "|" + "---|" * 13,
+        ]
         for r in res["real"]["rows"]:
-            L.append(f"| {r['station']} | {r['component']} | {r['days']} | {r['jaxnav_rate']:.3f} | "
-                     f"{r['hector_rate']:.3f} | {r['jaxnav_sigma']:.3f} | {r['hector_sigma']:.3f} | "
-                     f"{r['jaxnav_sigma'] / r['hector_sigma']:.3f} | {r['white_only_sigma']:.3f} | "
-                     f"{r['jaxnav_white']:.2f} / {r['hector_white']:.2f} | {r['jaxnav_flicker']:.2f} / "
-                     f"{r['hector_flicker']:.2f} | {r['rw_model_rate']:.2f} +- {r['rw_model_sigma']:.2f}, "
-                     f"{r['rw_mm_sqrt_yr']:.2f} | {r['outliers']} |")
+            L.append(
+                f"| {r['station']} | {r['component']} | {r['days']} | {r['jaxnav_rate']:.3f} | "
+                f"{r['hector_rate']:.3f} | {r['jaxnav_sigma']:.3f} | {r['hector_sigma']:.3f} | "
+                f"{r['jaxnav_sigma'] / r['hector_sigma']:.3f} | {r['white_only_sigma']:.3f} | "
+                f"{r['jaxnav_white']:.2f} / {r['hector_white']:.2f} | {r['jaxnav_flicker']:.2f} / "
+                f"{r['hector_flicker']:.2f} | {r['rw_model_rate']:.2f} +- {r['rw_model_sigma']:.2f}, "
+                f"{r['rw_mm_sqrt_yr']:.2f} | {r['outliers']} |"
+            )
         L += ["", "| station | jaxnav s (first call) | jaxnav with RW s | Hector s (3 runs) |", "|---|---|---|---|"]
         for t in res["real"]["times"]:
-            L.append(f"| {t['station']} | {t['jaxnav_s']:.1f} ({t['jaxnav_first_s']:.1f}) | {t['jaxnav_rw_s']:.1f} | "
-                     f"{t['hector_s']:.1f} |")
+            L.append(
+                f"| {t['station']} | {t['jaxnav_s']:.1f} ({t['jaxnav_first_s']:.1f}) | {t['jaxnav_rw_s']:.1f} | "
+                f"{t['hector_s']:.1f} |"
+            )
         d = np.array([abs(r["jaxnav_rate"] - r["hector_rate"]) for r in res["real"]["rows"]])
         q = np.array([r["jaxnav_sigma"] / r["hector_sigma"] for r in res["real"]["rows"]])
         L.append(f"\nmax |rate difference| {d.max():.4f} mm/yr; sigma ratio {q.min():.3f} .. {q.max():.3f}")
     if "kappa" in res:
-        L += ["", "| station | comp | rate jaxnav / Hector | sigma jaxnav / Hector | kappa jaxnav / Hector | "
-                  "amplitude jaxnav / Hector (mm/yr^(-kappa/4)) |", "|---|---|---|---|---|---|"]
+        L += [
+            "",
+            "| station | comp | rate jaxnav / Hector | sigma jaxnav / Hector | kappa jaxnav / Hector | "
+            "amplitude jaxnav / Hector (mm/yr^(-kappa/4)) |",
+            "|---|---|---|---|---|---|",
+        ]
         for r in res["kappa"]["rows"]:
-            L.append(f"| {r['station']} | {r['component']} | {r['jaxnav_rate']:.3f} / {r['hector_rate']:.3f} | "
-                     f"{r['jaxnav_sigma']:.3f} / {r['hector_sigma']:.3f} | {r['jaxnav_kappa']:.3f} / "
-                     f"{r['hector_kappa']:.3f} | {r['jaxnav_amp']:.2f} / {r['hector_amp']:.2f} |")
-        L.append(f"jaxnav with kappa estimated: {res['kappa']['wall_s']:.0f} s for the station (tabulating the GGM "
-                 f"covariance for 19 values of d and compiling included)")
+            L.append(
+                f"| {r['station']} | {r['component']} | {r['jaxnav_rate']:.3f} / {r['hector_rate']:.3f} | "
+                f"{r['jaxnav_sigma']:.3f} / {r['hector_sigma']:.3f} | {r['jaxnav_kappa']:.3f} / "
+                f"{r['hector_kappa']:.3f} | {r['jaxnav_amp']:.2f} / {r['hector_amp']:.2f} |"
+            )
+        L.append(
+            f"jaxnav with kappa estimated: {res['kappa']['wall_s']:.0f} s for the station (tabulating the GGM "
+            f"covariance for 19 values of d and compiling included)"
+        )
     if "mc" in res:
         m = res["mc"]
-        L.append(f"\ncoverage: {m['B']} series x {m['n_days']} days: 95 % interval covers the truth in "
-                 f"{100 * m['coverage']:.1f} % (white-noise sigmas: {100 * m['coverage_white']:.1f} %), std of "
-                 f"standardised errors {m['z_std']:.3f} (white: {m['zw_std']:.2f}), mean {m['z_mean']:+.3f}; "
-                 f"mean sigma {m['mean_sigma']:.3f} mm/yr vs RMS error {m['rms_error']:.3f} mm/yr; median "
-                 f"white {m['white_median']:.2f} mm, flicker {m['flicker_median']:.2f} mm/yr^0.25; "
-                 f"{m['at_bound']} estimates at a bound; {m['wall_s']:.0f} s")
+        L.append(
+            f"\ncoverage: {m['B']} series x {m['n_days']} days: 95 % interval covers the truth in "
+            f"{100 * m['coverage']:.1f} % (white-noise sigmas: {100 * m['coverage_white']:.1f} %), std of "
+            f"standardised errors {m['z_std']:.3f} (white: {m['zw_std']:.2f}), mean {m['z_mean']:+.3f}; "
+            f"mean sigma {m['mean_sigma']:.3f} mm/yr vs RMS error {m['rms_error']:.3f} mm/yr; median "
+            f"white {m['white_median']:.2f} mm, flicker {m['flicker_median']:.2f} mm/yr^0.25; "
+            f"{m['at_bound']} estimates at a bound; {m['wall_s']:.0f} s"
+        )
     if "batch" in res:
         b = res["batch"]
-        L.append(f"\nbatch: {b['stations']} stations x 3 components ({b['series']} series) x {b['n_days']} days, "
-                 f"chunks of {b['chunk']}: {b['wall_s']:.0f} s with compilation ({b['per_station_s']:.2f} s per "
-                 f"station); {100 * b['grad_ok']:.1f} % with gradient < 1e-3; peak resident memory "
-                 f"{b['peak_rss_mb']:.0f} MB; load average at the end {b['load'][0]:.1f}")
+        L.append(
+            f"\nbatch: {b['stations']} stations x 3 components ({b['series']} series) x {b['n_days']} days, "
+            f"chunks of {b['chunk']}: {b['wall_s']:.0f} s with compilation ({b['per_station_s']:.2f} s per "
+            f"station); {100 * b['grad_ok']:.1f} % with gradient < 1e-3; peak resident memory "
+            f"{b['peak_rss_mb']:.0f} MB; load average at the end {b['load'][0]:.1f}"
+        )
         if b["hector_station_s"]:
             h = np.array(b["hector_station_s"])
-            L.append(f"Hector estimatetrend, 3 components of {h.size} of these stations: {h.mean():.1f} s per station "
-                     f"({h.min():.1f}-{h.max():.1f}); {b['stations']} stations in turn: {h.mean() * b['stations']:.0f} s")
+            L.append(
+                f"Hector estimatetrend, 3 components of {h.size} of these stations: {h.mean():.1f} s per station "
+                f"({h.min():.1f}-{h.max():.1f}); {b['stations']} stations in turn: {h.mean() * b['stations']:.0f} s"
+            )
     return "\n".join(L)
 
 

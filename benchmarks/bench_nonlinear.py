@@ -57,8 +57,9 @@ def f_np(x):
 def F_np(x):
     _, _, v, th, _ = x
     c, s = np.cos(th), np.sin(th)
-    return np.array([[1.0, 0, c, -v * s, 0], [0, 1.0, s, v * c, 0], [0, 0, 1.0, 0, 0], [0, 0, 0, 1.0, 1.0],
-                     [0, 0, 0, 0, 1.0]])
+    return np.array(
+        [[1.0, 0, c, -v * s, 0], [0, 1.0, s, v * c, 0], [0, 0, 1.0, 0, 0], [0, 0, 0, 1.0, 1.0], [0, 0, 0, 0, 1.0]]
+    )
 
 
 ST = np.asarray(STATION)
@@ -79,6 +80,7 @@ def H_np(x):
 def filterpy_ekf(zs):
     """filterpy's ExtendedKalmanFilter over zs (T, 2) with the nonlinear prediction; means (T, 5)."""
     from filterpy.kalman import ExtendedKalmanFilter
+
     ek = ExtendedKalmanFilter(5, 2)
     Qn = np.asarray(Q)
     ek.x, ek.P, ek.Q, ek.R = np.asarray(X0).copy(), np.asarray(P0).copy(), Qn, np.asarray(R)
@@ -94,8 +96,10 @@ def filterpy_ekf(zs):
 def filterpy_ukf(zs, alpha):
     """filterpy's UnscentedKalmanFilter (MerweScaledSigmaPoints alpha, 2, 0) over zs (T, 2); means (T, 5)."""
     from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
-    uk = UnscentedKalmanFilter(5, 2, 1.0, hx=h_np, fx=lambda x, dt: f_np(x),
-                               points=MerweScaledSigmaPoints(5, alpha=alpha, beta=2.0, kappa=0.0))
+
+    uk = UnscentedKalmanFilter(
+        5, 2, 1.0, hx=h_np, fx=lambda x, dt: f_np(x), points=MerweScaledSigmaPoints(5, alpha=alpha, beta=2.0, kappa=0.0)
+    )
     uk.x, uk.P, uk.Q, uk.R = np.asarray(X0).copy(), np.asarray(P0).copy(), np.asarray(Q), np.asarray(R)
     out = np.empty((len(zs), 5))
     for t, z in enumerate(zs):
@@ -119,6 +123,7 @@ def simulate(key, T):
         kq, kr = jax.random.split(k)
         x = f(x) + jax.random.multivariate_normal(kq, jnp.zeros(5), Q)
         return x, h(x) + jax.random.multivariate_normal(kr, jnp.zeros(2), R)
+
     return jax.lax.scan(step, X0, jax.random.split(key, T))[1]
 
 
@@ -149,8 +154,13 @@ def main():
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--write", action="store_true")
     a = ap.parse_args()
-    from dynamax.nonlinear_gaussian_ssm import (ParamsNLGSSM, UKFHyperParams, extended_kalman_filter,
-                                                unscented_kalman_filter)
+    from dynamax.nonlinear_gaussian_ssm import (
+        ParamsNLGSSM,
+        UKFHyperParams,
+        extended_kalman_filter,
+        unscented_kalman_filter,
+    )
+
     load0 = os.getloadavg()
     model = jf.NonlinearGaussian(f, h, Q, R)
     zs = simulate(jax.random.PRNGKey(0), a.T)
@@ -169,8 +179,9 @@ def main():
         p = ParamsNLGSSM(m0, S0, f, Q, h, R)
         if kind == "EKF":
             return extended_kalman_filter(p, z, output_fields=["filtered_means"]).filtered_means
-        return unscented_kalman_filter(p, z, UKFHyperParams(alpha=alpha, beta=2.0, kappa=0.0),
-                                       output_fields=["filtered_means"]).filtered_means
+        return unscented_kalman_filter(
+            p, z, UKFHyperParams(alpha=alpha, beta=2.0, kappa=0.0), output_fields=["filtered_means"]
+        ).filtered_means
 
     rows, fp_rows = [], []
     zs_np = np.asarray(zs)
@@ -183,8 +194,9 @@ def main():
         theirs = jax.jit(lambda z, kind=kind, m0=m0, S0=S0: dyn(kind, z, m0, S0))
         o1, c1, t1, d1, c2, t2 = timed_pair(lambda z: ours[kind](z).means, theirs, zs, repeats=a.repeats)
         cpu1 = timed_pair.cpu
-        ob, c3, t3, db, c4, t4 = timed_pair(jax.jit(jax.vmap(lambda z: ours[kind](z).means)), jax.jit(jax.vmap(theirs)),
-                                            zb, repeats=a.repeats)
+        ob, c3, t3, db, c4, t4 = timed_pair(
+            jax.jit(jax.vmap(lambda z: ours[kind](z).means)), jax.jit(jax.vmap(theirs)), zb, repeats=a.repeats
+        )
         cpub = timed_pair.cpu
         diff = float(jnp.max(jnp.abs(o1 - d1)))
         diffb = float(jnp.max(jnp.abs(ob - db)))
@@ -193,6 +205,7 @@ def main():
     load1 = os.getloadavg()
     import dynamax
     import filterpy
+
     fp_time = {kind: tf for kind, tf, _ in fp_rows}
     fp_diff = {kind: d for kind, _, d in fp_rows}
     lines = [
@@ -215,11 +228,14 @@ def main():
         single = case == "single"
         tf = fp_time[kind] * (1 if single else a.B)
         ftxt = f"{tf * 1e3:.1f} ms" if single else f"{tf:.1f} s ({a.B} x single, extrapolated)"
-        lines.append(f"| {kind} | {case} | {t1 * 1e3:.1f} ms | {t2 * 1e3:.1f} ms | {t2 / t1:.2f} | {cpu_txt} | {ftxt} | "
-                     f"{tf / t1:.0f} | {c1:.2f} s | {c2:.2f} s | {diff:.1e} | "
-                     f"{fp_diff[kind]:.1e} |" if single else
-                     f"| {kind} | {case} | {t1 * 1e3:.1f} ms | {t2 * 1e3:.1f} ms | {t2 / t1:.2f} | {cpu_txt} | {ftxt} | "
-                     f"{tf / t1:.0f} | {c1:.2f} s | {c2:.2f} s | {diff:.1e} | (same filter) |")
+        lines.append(
+            f"| {kind} | {case} | {t1 * 1e3:.1f} ms | {t2 * 1e3:.1f} ms | {t2 / t1:.2f} | {cpu_txt} | {ftxt} | "
+            f"{tf / t1:.0f} | {c1:.2f} s | {c2:.2f} s | {diff:.1e} | "
+            f"{fp_diff[kind]:.1e} |"
+            if single
+            else f"| {kind} | {case} | {t1 * 1e3:.1f} ms | {t2 * 1e3:.1f} ms | {t2 / t1:.2f} | {cpu_txt} | {ftxt} | "
+            f"{tf / t1:.0f} | {c1:.2f} s | {c2:.2f} s | {diff:.1e} | (same filter) |"
+        )
     lines += ["", "<!-- END bench_nonlinear results -->"]
     text = "\n".join(lines)
     print(text)
@@ -227,7 +243,11 @@ def main():
         path = pathlib.Path(__file__).with_name("RESULTS.md")
         old = path.read_text(encoding="utf-8")
         pat = re.compile(r"<!-- BEGIN bench_nonlinear.*?<!-- END bench_nonlinear results -->", re.S)
-        new = pat.sub(lambda _: text, old) if pat.search(old) else old.rstrip() + "\n\n## Nonlinear filters\n\n" + text + "\n"
+        new = (
+            pat.sub(lambda _: text, old)
+            if pat.search(old)
+            else old.rstrip() + "\n\n## Nonlinear filters\n\n" + text + "\n"
+        )
         path.write_text(new, encoding="utf-8")
 
 

@@ -40,8 +40,10 @@ from jaxnav.survey import motion_segments, pack_points, point_sigmas, process_po
 
 FILES = {
     "Nagoya rooftop (MatRTKLIB, real, 5 min 1 Hz)": (DATA / "rtk_pos_matrtklib/static/rover_rtk.pos", 138.0),
-    "Spirent static rover (INSTINCT, simulated signals, 10 min 1 Hz)":
-        (DATA / "rtk_pos_instinct_simulated/Rover-static-2km-east_RTK_GPS-GAL_Forward_Continuous.pos", 9.0),
+    "Spirent static rover (INSTINCT, simulated signals, 10 min 1 Hz)": (
+        DATA / "rtk_pos_instinct_simulated/Rover-static-2km-east_RTK_GPS-GAL_Forward_Continuous.pos",
+        9.0,
+    ),
 }
 
 
@@ -52,7 +54,7 @@ def points(path, step, window, lon0_deg):
     seg = []
     for i, n in enumerate(names):
         gi = w["grid"][w["point"] == n]
-        grid[i, :gi.size], grid[i, gi.size:] = gi, gi[-1]
+        grid[i, : gi.size], grid[i, gi.size :] = gi, gi[-1]
         seg.append(w["segment"][w["point"] == n][0])
     return names, ser, grid, np.array(seg), np.radians(lon0_deg)
 
@@ -64,8 +66,12 @@ def fmt3(v, scale=1e3, d=3):
 def real_files():
     rows, s2rows = [], []
     for label, (path, lon0) in FILES.items():
-        for step, window, what in ((2.0, 60, "2 min at 2 s"), (1.0, 120, "2 min at 1 s"), (2.0, 30, "1 min at 2 s"),
-                                   (2.0, 15, "30 s at 2 s")):
+        for step, window, what in (
+            (2.0, 60, "2 min at 2 s"),
+            (1.0, 120, "2 min at 1 s"),
+            (2.0, 30, "1 min at 2 s"),
+            (2.0, 15, "30 s at 2 s"),
+        ):
             names, ser, grid, seg, l0 = points(path, step, window, lon0)
             n_all = len(names)
             keep = np.asarray(ser.mask).sum(1) >= 2  # points with fewer than 2 fixed epochs are left out
@@ -84,9 +90,11 @@ def real_files():
             pooled = np.sqrt(np.mean((actual / claimed) ** 2))
             kept = f"{len(names)}{'' if n_all == len(names) else f' of {n_all}'}"
             counts = ", ".join(str(int(n)) for n in np.asarray(res.n))
-            rows.append(f"| {label} | {what} | {kept} ({counts}) | "
-                        f"{fmt3(actual)} | {fmt3(claimed)} | {fmt3(actual / claimed, 1, 2)} ({pooled:.2f}) | "
-                        f"{fmt3(naive)} | {fmt3(actual / naive, 1, 1)} | {fmt3(np.mean(ps.lag1, 0), 1, 2)} |")
+            rows.append(
+                f"| {label} | {what} | {kept} ({counts}) | "
+                f"{fmt3(actual)} | {fmt3(claimed)} | {fmt3(actual / claimed, 1, 2)} ({pooled:.2f}) | "
+                f"{fmt3(naive)} | {fmt3(actual / naive, 1, 1)} | {fmt3(np.mean(ps.lag1, 0), 1, 2)} |"
+            )
             if what == "2 min at 2 s":
                 for smoother, r in outs.items():
                     raw = np.asarray(r.raw_xyh)
@@ -94,9 +102,11 @@ def real_files():
                     e19_conv = np.sqrt(np.mean(np.asarray(r.raw_precision) ** 2, 0))
                     e19_filt = np.sqrt(np.mean(np.asarray(r.precision) ** 2, 0))
                     sc_raw, sc_filt = raw.std(0, ddof=1), filt.std(0, ddof=1)
-                    s2rows.append(f"| {label} | {'forward + RTS' if smoother else 'forward filter'} | "
-                                  f"{fmt3(e19_conv / e19_filt, 1, 2)} | {fmt3(sc_raw)} | {fmt3(sc_filt)} | "
-                                  f"{fmt3(sc_raw / sc_filt, 1, 2)} | {fmt3(claimed)} |")
+                    s2rows.append(
+                        f"| {label} | {'forward + RTS' if smoother else 'forward filter'} | "
+                        f"{fmt3(e19_conv / e19_filt, 1, 2)} | {fmt3(sc_raw)} | {fmt3(sc_filt)} | "
+                        f"{fmt3(sc_raw / sc_filt, 1, 2)} | {fmt3(claimed)} |"
+                    )
     return rows, s2rows
 
 
@@ -133,9 +143,11 @@ def slow(mc, q):
     """The limit: an error process slower than the segment (Gauss-Markov tau = 20 min in 42 min)."""
     phi = float(np.exp(-2.0 / 1200.0))
     r, nr, tr, l1, exact = simulated(mc, seed=1, phi=phi)
-    print(f"\nLimit of the method ({mc} x 3 components; same 21 points, AR(1) 4 mm with tau = 20 min, phi "
-          f"{phi:.5f} per 2 s): actual / claimed {q(r)}; against the truth (exact sd {exact * 1e3:.2f} mm) "
-          f"truth rms / claimed {q(tr)}: the error common to the 42-min segment is not in the sigma.")
+    print(
+        f"\nLimit of the method ({mc} x 3 components; same 21 points, AR(1) 4 mm with tau = 20 min, phi "
+        f"{phi:.5f} per 2 s): actual / claimed {q(r)}; against the truth (exact sd {exact * 1e3:.2f} mm) "
+        f"truth rms / claimed {q(tr)}: the error common to the 42-min segment is not in the sigma."
+    )
 
 
 def drive_test():
@@ -144,8 +156,10 @@ def drive_test():
     t = np.r_[st.t, dr.t - dr.t[0] + st.t[-1] + 1.0]
     seg = motion_segments(t, np.r_[st.lat, dr.lat], np.r_[st.lon, dr.lon])
     ns = st.t.size
-    segs = [(int((seg.segment == s).sum()), float(t[seg.segment == s][-1] - t[seg.segment == s][0]))
-            for s in range(seg.n_segments)]
+    segs = [
+        (int((seg.segment == s).sum()), float(t[seg.segment == s][-1] - t[seg.segment == s][0]))
+        for s in range(seg.n_segments)
+    ]
     return ns, len(t) - ns, int(seg.moving[:ns].sum()), int(seg.moving[ns:].sum()), int(seg.short.sum()), segs
 
 
@@ -160,28 +174,36 @@ def main():
         slow(a.mc // 4, q)
         return
     rows, s2rows = real_files()
-    print("| file | points of | K points (epochs) | actual scatter x / y / h mm | claimed (acf_ess_segment) | "
-          "actual / claimed (pooled) | naive (independent epochs) | actual / naive | lag-1 autocorr. |")
+    print(
+        "| file | points of | K points (epochs) | actual scatter x / y / h mm | claimed (acf_ess_segment) | "
+        "actual / claimed (pooled) | naive (independent epochs) | actual / naive | lag-1 autocorr. |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
     print()
-    print("| file (2-minute points, 2 s) | S2 pipeline | eq. (19) conventional / filtered (S2's '4x') | "
-          "actual scatter of plain means mm | of filtered means mm | actual improvement | "
-          "claimed acf_ess_segment mm |")
+    print(
+        "| file (2-minute points, 2 s) | S2 pipeline | eq. (19) conventional / filtered (S2's '4x') | "
+        "actual scatter of plain means mm | of filtered means mm | actual improvement | "
+        "claimed acf_ess_segment mm |"
+    )
     print("|---|---|---|---|---|---|---|")
     print("\n".join(s2rows))
     print()
     r, nr, tr, l1, exact = simulated(a.mc)
-    print(f"Simulated u-blox regime ({a.mc} x 3 components; 21 two-minute points of one 42-min static half, "
-          f"white 1 mm + AR(1) 4 mm phi 0.97 per 2 s; mean estimated lag-1 {l1:.3f}): actual / claimed {q(r)}; "
-          f"within a factor 1.5: {np.mean((r > 1 / 1.5) & (r < 1.5)) * 100:.0f} %; actual / naive {q(nr)}. "
-          f"Against the truth (rms of the point means about the true position, exact sd {exact * 1e3:.2f} mm): "
-          f"truth rms / claimed {q(tr)}.")
+    print(
+        f"Simulated u-blox regime ({a.mc} x 3 components; 21 two-minute points of one 42-min static half, "
+        f"white 1 mm + AR(1) 4 mm phi 0.97 per 2 s; mean estimated lag-1 {l1:.3f}): actual / claimed {q(r)}; "
+        f"within a factor 1.5: {np.mean((r > 1 / 1.5) & (r < 1.5)) * 100:.0f} %; actual / naive {q(nr)}. "
+        f"Against the truth (rms of the point means about the true position, exact sd {exact * 1e3:.2f} mm): "
+        f"truth rms / claimed {q(tr)}."
+    )
     slow(a.mc // 4, q)
     ns, nd, ms, md, sh, segs = drive_test()
-    print(f"\nStatic/moving test (defaults): Nagoya static file ({ns} epochs) followed by the MatRTKLIB car drive "
-          f"({nd} epochs): moving {ms} of the static epochs (the last ones within 5 s of the departure), {md} of "
-          f"the drive's; {sh} epochs in static runs < 20 s; static segments (epochs, s): {segs}")
+    print(
+        f"\nStatic/moving test (defaults): Nagoya static file ({ns} epochs) followed by the MatRTKLIB car drive "
+        f"({nd} epochs): moving {ms} of the static epochs (the last ones within 5 s of the departure), {md} of "
+        f"the drive's; {sh} epochs in static runs < 20 s; static segments (epochs, s): {segs}"
+    )
     print(f"\n(whole script {time.time() - t0:.0f} s)")
 
 

@@ -28,10 +28,9 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import jax  # noqa: E402
 from _harness import cpu_model, git_revision, loadavg, write_section  # noqa: E402
 from _harness import package_version as _version  # noqa: E402
-
-import jax  # noqa: E402
 
 import jaxnav  # noqa: E402
 
@@ -42,10 +41,12 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxnav import filters as jf  # noqa: E402
-from jaxnav import sim  # noqa: E402
-from jaxnav import tune  # noqa: E402
-from jaxnav.ins import LCDiscretization, LCPropagation, LCSave, error_model_for, loosely_coupled  # noqa: E402
+from jaxnav import (
+    sim,  # noqa: E402
+    tune,  # noqa: E402
+)
 from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules, s0_measurements  # noqa: E402
+from jaxnav.ins import LCDiscretization, LCPropagation, LCSave, error_model_for, loosely_coupled  # noqa: E402
 
 BEGIN, END = "<!-- BEGIN bench_s0_study -->", "<!-- END bench_s0_study -->"
 
@@ -59,23 +60,43 @@ def study(exp, seeds, chunk, discretization, nav_every=1):
 
     def run(key, rule):
         r = sim.simulate(S.cfg, key, trajectory=S.truth)
-        return loosely_coupled(r.nav0, S.t_imu, r.imu.dtheta, r.imu.dv, s0_measurements(S.cfg, r.gnss, S.t_gnss),
-                               S.params, dt_imu=S.cfg.dt, error_model=error_model_for(exp["filter"]["n_states"]),
-                               inflation=rule, save=LCSave(save), discretization=LCDiscretization(discretization),
-                               propagation=LCPropagation(nav_every=nav_every))
+        return loosely_coupled(
+            r.nav0,
+            S.t_imu,
+            r.imu.dtheta,
+            r.imu.dv,
+            s0_measurements(S.cfg, r.gnss, S.t_gnss),
+            S.params,
+            dt_imu=S.cfg.dt,
+            error_model=error_model_for(exp["filter"]["n_states"]),
+            inflation=rule,
+            save=LCSave(save),
+            discretization=LCDiscretization(discretization),
+            propagation=LCPropagation(nav_every=nav_every),
+        )
 
     def summary(res):
         pe, ve = S.errors(res)
         cov = res.epochs.covs
-        return dict(rms=jnp.sqrt(jnp.mean(pe**2, 0)), pos_err=pe, vel_err=ve,
-                    sig=jnp.sqrt(jnp.diagonal(cov, axis1=1, axis2=2)), factors=res.epochs.factors)
+        return dict(
+            rms=jnp.sqrt(jnp.mean(pe**2, 0)),
+            pos_err=pe,
+            vel_err=ve,
+            sig=jnp.sqrt(jnp.diagonal(cov, axis1=1, axis2=2)),
+            factors=res.epochs.factors,
+        )
 
     def one(p, k):  # rule 0: attenuated (b = 0: classic), 1: fading; one program for all three
         rule = jf.switch(p["rule"], [jf.attenuated(p["b"], states=states), rules(exp)["fading"]])
         return summary(run(k, rule))
 
-    sw = tune.sweep(one, {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])},
-                    keys, chunk=chunk, progress=False)
+    sw = tune.sweep(
+        one,
+        {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])},
+        keys,
+        chunk=chunk,
+        progress=False,
+    )
     rms = {"classic": sw.values["rms"][0], "attenuated": sw.values["rms"][1], "fading": sw.values["rms"][2]}
     t = dict(compile=sw.compile_time_s, run=sw.wall_time_s - sw.compile_time_s)
     return {k: float(np.mean(v)) for k, v in rms.items()}, t
@@ -95,12 +116,15 @@ def main(argv=None):
         rms, t = study(exp, a.seeds, a.chunk, disc, k)
         disc = disc if k == 1 else f"{disc}, nav_every={k}"
         rows.append((disc, rms, t))
-        print(f"{disc:9s}: compile {t['compile']:.1f} s, run {t['run']:.1f} s; mean position RMS "
-              + ", ".join(f"{k} {v:.3f} m" for k, v in rms.items()), flush=True)
+        print(
+            f"{disc:9s}: compile {t['compile']:.1f} s, run {t['run']:.1f} s; mean position RMS "
+            + ", ".join(f"{k} {v:.3f} m" for k, v in rms.items()),
+            flush=True,
+        )
     wall = time.perf_counter() - t_all
     if a.no_write:
         return 0
-    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "## The full S0 study (`benchmarks/bench_s0_study.py`)",
         "",
@@ -117,8 +141,11 @@ def main(argv=None):
         "classic / attenuated "
         "/ fading (m) |",
         "|---|---|---|---|---|",
-        *[f"| {d} | {t['compile']:.1f} s | {t['run']:.1f} s | {3 * a.seeds / t['run']:.1f} | "
-          f"{r['classic']:.3f} / {r['attenuated']:.3f} / {r['fading']:.3f} |" for d, r, t in rows],
+        *[
+            f"| {d} | {t['compile']:.1f} s | {t['run']:.1f} s | {3 * a.seeds / t['run']:.1f} | "
+            f"{r['classic']:.3f} / {r['attenuated']:.3f} / {r['fading']:.3f} |"
+            for d, r, t in rows
+        ],
     ]
     write_section(pathlib.Path(__file__).with_name("RESULTS.md"), "\n".join(lines), BEGIN, END)
     return 0

@@ -20,9 +20,8 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from _harness import cpu_model, loadavg  # noqa: E402
-
 import jax  # noqa: E402
+from _harness import cpu_model, loadavg  # noqa: E402
 
 import jaxnav  # noqa: E402
 

@@ -60,7 +60,7 @@ from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
 
 N_DAYS = 3653
 WHITE = 2.0 * MM
-FLICKER = 6.0 * MM / YEAR ** 0.25
+FLICKER = 6.0 * MM / YEAR**0.25
 GAPS = 0.05
 RATES = np.array([3.0, -2.0, 1.0])  # mm/yr
 T0 = 10 * YEAR  # first day, s since J2000 (2010)
@@ -70,9 +70,19 @@ SIZE_BINS = (1.0, 2.0, 3.0, 4.0, 6.0, 10.0)
 
 def _noise(seed, n=N_DAYS):
     """(n, 3) m: rate + white + flicker, 5 % gaps (NaN); component c from key (seed, c)."""
-    cols = [np.asarray(mon.simulate_powerlaw_series(jax.random.fold_in(jax.random.PRNGKey(seed), c), n,
-                                                    rate=RATES[c] * MM_PER_YEAR, sigma_white=WHITE,
-                                                    amplitude=FLICKER, gap_fraction=GAPS)[0]) for c in range(3)]
+    cols = [
+        np.asarray(
+            mon.simulate_powerlaw_series(
+                jax.random.fold_in(jax.random.PRNGKey(seed), c),
+                n,
+                rate=RATES[c] * MM_PER_YEAR,
+                sigma_white=WHITE,
+                amplitude=FLICKER,
+                gap_fraction=GAPS,
+            )[0]
+        )
+        for c in range(3)
+    ]
     return np.stack(cols, axis=1)
 
 
@@ -102,9 +112,18 @@ def station(i):
 
 def as_series(t, y, name):
     n = len(t)
-    return io.DailySeries(station=name, path="simulated", fmt="tenv3", t=t, year=2000.0 + t / YEAR, enu=y,
-                          cov=np.tile(np.eye(3) * WHITE ** 2, (n, 1, 1)), origin=np.zeros(3),
-                          llh=np.full((n, 3), np.nan), n_masked=int(np.isnan(y).sum()))
+    return io.DailySeries(
+        station=name,
+        path="simulated",
+        fmt="tenv3",
+        t=t,
+        year=2000.0 + t / YEAR,
+        enu=y,
+        cov=np.tile(np.eye(3) * WHITE**2, (n, 1, 1)),
+        origin=np.zeros(3),
+        llh=np.full((n, 3), np.nan),
+        n_masked=int(np.isnan(y).sum()),
+    )
 
 
 def _done(path):
@@ -124,14 +143,24 @@ def part_jaxnav(out, start, stop, detect=8):
         fit = mon.fit_station(as_series(t, y, f"S{i:03d}"), detect=detect, random_walk=False)
         wall = time.perf_counter() - t0
         found = np.round((np.asarray(fit.steps) - t[0]) / DAY).astype(int).tolist()
-        rec = dict(station=i, true_days=days.tolist(), true_sizes=sizes.tolist(), found_days=found,
-                   found_up_mm=(fit.step_sizes[2] / MM).tolist(), gains=np.asarray(fit.step_gains).tolist(),
-                   wall_s=wall, load=os.getloadavg()[0])
+        rec = dict(
+            station=i,
+            true_days=days.tolist(),
+            true_sizes=sizes.tolist(),
+            found_days=found,
+            found_up_mm=(fit.step_sizes[2] / MM).tolist(),
+            gains=np.asarray(fit.step_gains).tolist(),
+            wall_s=wall,
+            load=os.getloadavg()[0],
+        )
         with path.open("a") as f:
             f.write(json.dumps(rec) + "\n")
         el = time.perf_counter() - t_all
-        print(f"jaxnav {k + 1}/{len(todo)} station {i}: {len(days)} true, found {len(found)} in {wall:.1f} s "
-              f"(elapsed {el:.0f} s, load {os.getloadavg()[0]:.1f})", flush=True)
+        print(
+            f"jaxnav {k + 1}/{len(todo)} station {i}: {len(days)} true, found {len(found)} in {wall:.1f} s "
+            f"(elapsed {el:.0f} s, load {os.getloadavg()[0]:.1f})",
+            flush=True,
+        )
 
 
 def _findoffsets_exe():
@@ -148,13 +177,15 @@ def run_findoffsets(t, x, *, threshold=20.0, max_offsets=8, timeout=900):
         d = Path(d)
         (d / "pre").mkdir()
         mjd = np.asarray(t) / DAY + MJD_J2000
-        (d / "pre/S.mom").write_text("# sampling period 1.0\n" + "".join(f"{m:.4f} {v * 1e3:.6f}\n"
-                                                                        for m, v in zip(mjd, x)))
+        (d / "pre/S.mom").write_text(
+            "# sampling period 1.0\n" + "".join(f"{m:.4f} {v * 1e3:.6f}\n" for m, v in zip(mjd, x))
+        )
         (d / "findoffsets.ctl").write_text(
             "DataFile S.mom\nDataDirectory pre\nOutputFile out.mom\ninterpolate no\nPhysicalUnit mm\n"
             "TimeUnit days\nScaleFactor 1.0\nperiodicsignals 365.25 182.625\nestimateoffsets yes\n"
             f"NoiseModels FlickerGGM White\nGGM_1mphi 6.9e-06\nuseRMLE yes\nOffsetThreshold {threshold}\n"
-            f"MaxOffsets {max_offsets}\nVerbose no\n")
+            f"MaxOffsets {max_offsets}\nVerbose no\n"
+        )
         t0 = time.perf_counter()
         r = subprocess.run([exe, "-i", "findoffsets.ctl"], cwd=d, capture_output=True, text=True, timeout=timeout)
         wall = time.perf_counter() - t0
@@ -174,16 +205,25 @@ def part_hector(out, start, stop, workers=1):
         v = np.isfinite(y[:, 2])
         mjds, wall = run_findoffsets(t[v], y[v, 2])
         found = sorted(int(round(m - (t[0] / DAY + MJD_J2000))) for m in mjds)
-        return dict(station=i, true_days=days.tolist(), true_sizes=sizes.tolist(), found_days=found, wall_s=wall,
-                    load=os.getloadavg()[0])
+        return dict(
+            station=i,
+            true_days=days.tolist(),
+            true_sizes=sizes.tolist(),
+            found_days=found,
+            wall_s=wall,
+            load=os.getloadavg()[0],
+        )
 
     with ThreadPoolExecutor(max_workers=workers) as ex:
         for k, rec in enumerate(ex.map(one, todo)):
             with path.open("a") as f:
                 f.write(json.dumps(rec) + "\n")
-            print(f"hector {k + 1}/{len(todo)} station {rec['station']}: {len(rec['true_days'])} true, found "
-                  f"{len(rec['found_days'])} in {rec['wall_s']:.1f} s (elapsed {time.perf_counter() - t_all:.0f} s, "
-                  f"load {rec['load']:.1f})", flush=True)
+            print(
+                f"hector {k + 1}/{len(todo)} station {rec['station']}: {len(rec['true_days'])} true, found "
+                f"{len(rec['found_days'])} in {rec['wall_s']:.1f} s (elapsed {time.perf_counter() - t_all:.0f} s, "
+                f"load {rec['load']:.1f})",
+                flush=True,
+            )
 
 
 def part_post(out, start, stop):
@@ -196,23 +236,40 @@ def part_post(out, start, stop):
         te = t[d] - 0.5 * DAY
         tau = float(rng.uniform(20.0, 200.0)) * DAY
         amp = rng.uniform(5.0, 15.0, 3) * rng.choice([-1.0, 1.0], 3) * WHITE
-        y = _noise(50_000 + i) + 5.0 * WHITE * (t >= te)[:, None] \
+        y = (
+            _noise(50_000 + i)
+            + 5.0 * WHITE * (t >= te)[:, None]
             + amp * np.asarray(mon.postseismic_column(t, te, "log", tau))[:, None]
+        )
         t0 = time.perf_counter()
-        fit = mon.fit_station(as_series(t, y, f"P{i:03d}"), steps=[te], postseismic=[(te, "log", None)],
-                              random_walk=False)
+        fit = mon.fit_station(
+            as_series(t, y, f"P{i:03d}"), steps=[te], postseismic=[(te, "log", None)], random_walk=False
+        )
         wall = time.perf_counter() - t0
         (p,) = fit.postseismic
         v, sd = fit.velocity / MM_PER_YEAR, fit.velocity_sigma / MM_PER_YEAR
-        rec = dict(station=i, tau_days=tau / DAY, tau_est_days=p.tau / DAY, tau_range_days=(p.tau_range / DAY).tolist(),
-                   amp_mm=(amp / MM).tolist(), amp_est_mm=(p.amplitude / MM).tolist(),
-                   amp_sigma_mm=(p.amplitude_sigma / MM).tolist(), rate=RATES.tolist(), rate_est=v.tolist(),
-                   rate_sigma=sd.tolist(), wall_s=wall, load=os.getloadavg()[0])
+        rec = dict(
+            station=i,
+            tau_days=tau / DAY,
+            tau_est_days=p.tau / DAY,
+            tau_range_days=(p.tau_range / DAY).tolist(),
+            amp_mm=(amp / MM).tolist(),
+            amp_est_mm=(p.amplitude / MM).tolist(),
+            amp_sigma_mm=(p.amplitude_sigma / MM).tolist(),
+            rate=RATES.tolist(),
+            rate_est=v.tolist(),
+            rate_sigma=sd.tolist(),
+            wall_s=wall,
+            load=os.getloadavg()[0],
+        )
         with path.open("a") as f:
             f.write(json.dumps(rec) + "\n")
-        print(f"post {i}: tau {tau / DAY:.0f} d -> {p.tau / DAY:.0f} d, amplitude error "
-              f"{np.max(np.abs(p.amplitude / amp - 1)) * 100:.1f} %, rate errors / sigma "
-              f"{np.round(np.abs(v - RATES) / sd, 2).tolist()} ({wall:.0f} s)", flush=True)
+        print(
+            f"post {i}: tau {tau / DAY:.0f} d -> {p.tau / DAY:.0f} d, amplitude error "
+            f"{np.max(np.abs(p.amplitude / amp - 1)) * 100:.1f} %, rate errors / sigma "
+            f"{np.round(np.abs(v - RATES) / sd, 2).tolist()} ({wall:.0f} s)",
+            flush=True,
+        )
 
 
 def match(true_days, found_days, tol):
@@ -244,15 +301,20 @@ def summarise(recs, tol):
     errs = np.array(errs, float)
     false = np.array(false)
     no_step = np.array([len(r["true_days"]) == 0 for r in recs])
-    return dict(n=len(recs), hit=hit, tot=tot, false_mean=float(false.mean()) if len(false) else np.nan,
-                false_no_step=float(false[no_step].mean()) if no_step.any() else np.nan,
-                series_with_false=int(np.sum(false > 0)),
-                err_median=float(np.median(errs)) if errs.size else np.nan,
-                err_0=float(np.mean(errs == 0)) if errs.size else np.nan,
-                err_le3=float(np.mean(errs <= 3)) if errs.size else np.nan,
-                err_p90=float(np.percentile(errs, 90)) if errs.size else np.nan,
-                wall=float(np.mean([r["wall_s"] for r in recs])) if recs else np.nan,
-                load=(float(min(r["load"] for r in recs)), float(max(r["load"] for r in recs))) if recs else (0, 0))
+    return dict(
+        n=len(recs),
+        hit=hit,
+        tot=tot,
+        false_mean=float(false.mean()) if len(false) else np.nan,
+        false_no_step=float(false[no_step].mean()) if no_step.any() else np.nan,
+        series_with_false=int(np.sum(false > 0)),
+        err_median=float(np.median(errs)) if errs.size else np.nan,
+        err_0=float(np.mean(errs == 0)) if errs.size else np.nan,
+        err_le3=float(np.mean(errs <= 3)) if errs.size else np.nan,
+        err_p90=float(np.percentile(errs, 90)) if errs.size else np.nan,
+        wall=float(np.mean([r["wall_s"] for r in recs])) if recs else np.nan,
+        load=(float(min(r["load"] for r in recs)), float(max(r["load"] for r in recs))) if recs else (0, 0),
+    )
 
 
 def report(out, tol):
@@ -270,43 +332,59 @@ def report(out, tol):
         sets = [(k, v) for k, v in res.items()]
     if sets:
         labels = [f"{a:g}-{b:g}" for a, b in zip(SIZE_BINS[:-1], SIZE_BINS[1:])]
-        L += ["| program | stations | " + " | ".join(f"found, {x} sigma" for x in labels)
-              + " | false steps per station (stations with none true) | stations with a false step | "
-              "date error median / share 0 d / <= 3 d / 90th pct (d) | s per station (load) |",
-              "|---|---|" + "---|" * len(labels) + "---|---|---|---|"]
+        L += [
+            "| program | stations | "
+            + " | ".join(f"found, {x} sigma" for x in labels)
+            + " | false steps per station (stations with none true) | stations with a false step | "
+            "date error median / share 0 d / <= 3 d / 90th pct (d) | s per station (load) |",
+            "|---|---|" + "---|" * len(labels) + "---|---|---|---|",
+        ]
         for name, recs in sets:
             s = summarise(recs, tol)
-            cells = " | ".join(f"{100 * h / t:.0f} % ({int(h)}/{int(t)})" if t else "-"
-                               for h, t in zip(s["hit"], s["tot"]))
-            L.append(f"| {name} | {s['n']} | {cells} | {s['false_mean']:.2f} ({s['false_no_step']:.2f}) | "
-                     f"{s['series_with_false']} | {s['err_median']:.0f} / {100 * s['err_0']:.0f} % / "
-                     f"{100 * s['err_le3']:.0f} % / {s['err_p90']:.0f} | {s['wall']:.1f} "
-                     f"({s['load'][0]:.1f}-{s['load'][1]:.1f}) |")
+            cells = " | ".join(
+                f"{100 * h / t:.0f} % ({int(h)}/{int(t)})" if t else "-" for h, t in zip(s["hit"], s["tot"])
+            )
+            L.append(
+                f"| {name} | {s['n']} | {cells} | {s['false_mean']:.2f} ({s['false_no_step']:.2f}) | "
+                f"{s['series_with_false']} | {s['err_median']:.0f} / {100 * s['err_0']:.0f} % / "
+                f"{100 * s['err_le3']:.0f} % / {s['err_p90']:.0f} | {s['wall']:.1f} "
+                f"({s['load'][0]:.1f}-{s['load'][1]:.1f}) |"
+            )
     p = out / "post.jsonl"
     if p.exists():
         recs = [json.loads(x) for x in p.read_text().splitlines() if x.strip()]
         ok_amp = [np.all(np.abs(np.array(r["amp_est_mm"]) / np.array(r["amp_mm"]) - 1) <= 0.10) for r in recs]
-        ok_rate = [np.all(np.abs(np.array(r["rate_est"]) - np.array(r["rate"])) <= np.array(r["rate_sigma"]))
-                   for r in recs]
+        ok_rate = [
+            np.all(np.abs(np.array(r["rate_est"]) - np.array(r["rate"])) <= np.array(r["rate_sigma"])) for r in recs
+        ]
         ok_tau = [r["tau_range_days"][0] <= r["tau_days"] <= r["tau_range_days"][1] for r in recs]
         worst = max(float(np.max(np.abs(np.array(r["amp_est_mm"]) / np.array(r["amp_mm"]) - 1))) for r in recs)
-        L.append(f"\npost-seismic log transient, {len(recs)} ten-year stations: amplitudes within 10 % in "
-                 f"{sum(ok_amp)}/{len(recs)} (worst {100 * worst:.1f} %), all three rates within 1 sigma in "
-                 f"{sum(ok_rate)}/{len(recs)}, tau interval covers the truth in {sum(ok_tau)}/{len(recs)}; "
-                 f"{np.mean([r['wall_s'] for r in recs]):.0f} s per station")
+        L.append(
+            f"\npost-seismic log transient, {len(recs)} ten-year stations: amplitudes within 10 % in "
+            f"{sum(ok_amp)}/{len(recs)} (worst {100 * worst:.1f} %), all three rates within 1 sigma in "
+            f"{sum(ok_rate)}/{len(recs)}, tau interval covers the truth in {sum(ok_tau)}/{len(recs)}; "
+            f"{np.mean([r['wall_s'] for r in recs]):.0f} s per station"
+        )
         zr = np.concatenate([(np.array(r["rate_est"]) - np.array(r["rate"])) / np.array(r["rate_sigma"]) for r in recs])
-        za = np.concatenate([(np.array(r["amp_est_mm"]) - np.array(r["amp_mm"])) / np.array(r["amp_sigma_mm"])
-                             for r in recs])
-        L.append(f"standardised errors over the {zr.size} components: rates RMS {np.sqrt(np.mean(zr ** 2)):.2f}, "
-                 f"within 1 sigma {100 * np.mean(np.abs(zr) <= 1):.0f} % (68 % expected); amplitudes RMS "
-                 f"{np.sqrt(np.mean(za ** 2)):.2f}, within 1 sigma {100 * np.mean(np.abs(za) <= 1):.0f} %")
+        za = np.concatenate(
+            [(np.array(r["amp_est_mm"]) - np.array(r["amp_mm"])) / np.array(r["amp_sigma_mm"]) for r in recs]
+        )
+        L.append(
+            f"standardised errors over the {zr.size} components: rates RMS {np.sqrt(np.mean(zr**2)):.2f}, "
+            f"within 1 sigma {100 * np.mean(np.abs(zr) <= 1):.0f} % (68 % expected); amplitudes RMS "
+            f"{np.sqrt(np.mean(za**2)):.2f}, within 1 sigma {100 * np.mean(np.abs(za) <= 1):.0f} %"
+        )
         for r in recs:
-            L.append(f"  P{r['station']:03d}: tau {r['tau_days']:.0f} -> {r['tau_est_days']:.0f} d "
-                     f"[{r['tau_range_days'][0]:.0f}, {r['tau_range_days'][1]:.0f}], amplitude mm "
-                     + ", ".join(f"{a:+.1f} -> {b:+.1f} +- {c:.1f}" for a, b, c in
-                                 zip(r["amp_mm"], r["amp_est_mm"], r["amp_sigma_mm"]))
-                     + ", rate error / sigma " + ", ".join(f"{abs(a - b) / c:.2f}" for a, b, c in
-                                                          zip(r["rate_est"], r["rate"], r["rate_sigma"])))
+            L.append(
+                f"  P{r['station']:03d}: tau {r['tau_days']:.0f} -> {r['tau_est_days']:.0f} d "
+                f"[{r['tau_range_days'][0]:.0f}, {r['tau_range_days'][1]:.0f}], amplitude mm "
+                + ", ".join(
+                    f"{a:+.1f} -> {b:+.1f} +- {c:.1f}"
+                    for a, b, c in zip(r["amp_mm"], r["amp_est_mm"], r["amp_sigma_mm"])
+                )
+                + ", rate error / sigma "
+                + ", ".join(f"{abs(a - b) / c:.2f}" for a, b, c in zip(r["rate_est"], r["rate"], r["rate_sigma"]))
+            )
     return "\n".join(L)
 
 

@@ -38,10 +38,9 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import jax  # noqa: E402
 from _harness import cpu_model, git_revision, loadavg, write_section  # noqa: E402
 from _harness import package_version as _version  # noqa: E402
-
-import jax  # noqa: E402
 
 import jaxnav  # noqa: E402
 
@@ -80,21 +79,40 @@ def tuning_vs_grid(setup, keys, n_grid, steps, chunk, max_evals):
     grid_loss = sw.values["loss"].mean(1)
     ib = int(np.argmin(grid_loss))
     space = tune.Space({"b": "unit"})
-    out = dict(grid_b=g["b"], grid_loss=grid_loss, grid_best_b=float(g["b"][ib]), grid_best=float(grid_loss[ib]),
-               grid_wall=sw.wall_time_s, grid_compile=sw.compile_time_s, grid_peak=sw.peak_bytes, chunk=sw.chunk)
+    out = dict(
+        grid_b=g["b"],
+        grid_loss=grid_loss,
+        grid_best_b=float(g["b"][ib]),
+        grid_best=float(grid_loss[ib]),
+        grid_wall=sw.wall_time_s,
+        grid_compile=sw.compile_time_s,
+        grid_peak=sw.peak_bytes,
+        chunk=sw.chunk,
+    )
     runs = {
-        "single-site L-BFGS, `tune.minimize_lbfgs`":
-            tune.minimize_lbfgs(loss, {"b": B_PAPER}, space, max_evals=max_evals, mode="forward"),
-        f"optax.lbfgs (zoom), {steps} steps, `tune.minimize`":
-            tune.minimize(loss, {"b": B_PAPER}, space, optimizer=optax.lbfgs(), steps=steps, mode="forward"),
+        "single-site L-BFGS, `tune.minimize_lbfgs`": tune.minimize_lbfgs(
+            loss, {"b": B_PAPER}, space, max_evals=max_evals, mode="forward"
+        ),
+        f"optax.lbfgs (zoom), {steps} steps, `tune.minimize`": tune.minimize(
+            loss, {"b": B_PAPER}, space, optimizer=optax.lbfgs(), steps=steps, mode="forward"
+        ),
     }
     out["tuned"] = []
     for name, res in runs.items():
         b, f = np.asarray(res.path["b"]), np.asarray(res.losses)
         keep = np.isfinite(f)
-        out["tuned"].append(dict(name=name, b=float(res.params["b"]), loss=float(res.loss), path=b[keep],
-                                 losses=f[keep], n_evals=res.n_evals, wall=res.wall_time_s,
-                                 compile=res.compile_time_s))
+        out["tuned"].append(
+            dict(
+                name=name,
+                b=float(res.params["b"]),
+                loss=float(res.loss),
+                path=b[keep],
+                losses=f[keep],
+                n_evals=res.n_evals,
+                wall=res.wall_time_s,
+                compile=res.compile_time_s,
+            )
+        )
     out["loss_paper"] = float(runs[next(iter(runs))].losses[0])
     return out
 
@@ -119,8 +137,12 @@ def gradient_checks(setup):
         e = np.zeros(4)
         e[i] = h
         fd = (np.asarray(f(jnp.asarray(th + e))) - np.asarray(f(jnp.asarray(th - e)))) / (2 * h)
-        r, what = {"b": (0, "attenuated, position RMS"), "rho": (1, "fading, position RMS"),
-                   "q_scale": (2, "attenuated, innovation NLL"), "r_scale": (2, "attenuated, innovation NLL")}[name]
+        r, what = {
+            "b": (0, "attenuated, position RMS"),
+            "rho": (1, "fading, position RMS"),
+            "q_scale": (2, "attenuated, innovation NLL"),
+            "r_scale": (2, "attenuated, innovation NLL"),
+        }[name]
         rows.append((name, what, J[r, i], fd[r], abs(J[r, i] - fd[r]) / abs(fd[r])))
     return rows, t_j
 
@@ -132,10 +154,12 @@ def memory(setup, keys, chunk):
         return s0_metrics(setup, {"b": b}, key, filter="attenuated", remat=remat)["loss"]
 
     out = {}
-    for label, fn in (("forward run", lambda b: att(b, False)),
-                      ("forward mode (jvp)", lambda b: jax.jvp(lambda x: att(x, False), (b,), (1.0,))[1]),
-                      ("reverse mode, remat=True", jax.grad(lambda b: att(b, True))),
-                      ("reverse mode, no remat", jax.grad(lambda b: att(b, False)))):
+    for label, fn in (
+        ("forward run", lambda b: att(b, False)),
+        ("forward mode (jvp)", lambda b: jax.jvp(lambda x: att(x, False), (b,), (1.0,))[1]),
+        ("reverse mode, remat=True", jax.grad(lambda b: att(b, True))),
+        ("reverse mode, no remat", jax.grad(lambda b: att(b, False))),
+    ):
         out[label] = _mem(jax.jit(fn).lower(jnp.asarray(B_PAPER)).compile())
 
     def point(p, k):
@@ -151,8 +175,13 @@ def memory(setup, keys, chunk):
 
 def ml_noise():
     zs = tune.simulate_cv_batch(jax.random.PRNGKey(11), 64, 500, sigma=0.003, q=1e-8)
-    res = tune.minimize(lambda p: tune.cv_nll(p, zs, sigma=0.003, q=1e-8), {"q_scale": 3.0, "r_scale": 0.3},
-                        tune.Space({"q_scale": "log", "r_scale": "log"}), optimizer=optax.adam(0.1), steps=150)
+    res = tune.minimize(
+        lambda p: tune.cv_nll(p, zs, sigma=0.003, q=1e-8),
+        {"q_scale": 3.0, "r_scale": 0.3},
+        tune.Space({"q_scale": "log", "r_scale": "log"}),
+        optimizer=optax.adam(0.1),
+        steps=150,
+    )
     return {k: float(v) for k, v in res.params.items()}, res.wall_time_s
 
 
@@ -171,17 +200,25 @@ def main(argv=None):
     load0 = loadavg()
     setup = S0Setup(load_experiment(), duration=duration)
     keys = jax.random.split(jax.random.PRNGKey(2019), runs)
-    print(f"S0 {setup.cfg.duration:.0f} s, {runs} runs; grid {n_grid}; L-BFGS <= {a.max_evals} evaluations; "
-          f"optax.lbfgs {a.steps} steps", flush=True)
+    print(
+        f"S0 {setup.cfg.duration:.0f} s, {runs} runs; grid {n_grid}; L-BFGS <= {a.max_evals} evaluations; "
+        f"optax.lbfgs {a.steps} steps",
+        flush=True,
+    )
     tg = tuning_vs_grid(setup, keys, n_grid, a.steps, a.chunk, a.max_evals)
-    print(f"grid: best b {tg['grid_best_b']:.3f} loss {tg['grid_best']:.4f} m, {tg['grid_wall']:.1f} s "
-          f"({tg['grid_compile']:.1f} s compile)")
+    print(
+        f"grid: best b {tg['grid_best_b']:.3f} loss {tg['grid_best']:.4f} m, {tg['grid_wall']:.1f} s "
+        f"({tg['grid_compile']:.1f} s compile)"
+    )
     for t in tg["tuned"]:
         t["gap"] = t["loss"] / tg["grid_best"] - 1.0
         t["ratio"] = t["wall"] / tg["grid_wall"]
-        print(f"{t['name']}: b {B_PAPER} -> {t['b']:.4f} loss {tg['loss_paper']:.4f} -> {t['loss']:.4f} m "
-              f"({100 * t['gap']:+.2f} % vs grid best), {t['n_evals']} evaluations, {t['wall']:.1f} s "
-              f"({t['compile']:.1f} s compile) = {100 * t['ratio']:.1f} % of the grid's wall time", flush=True)
+        print(
+            f"{t['name']}: b {B_PAPER} -> {t['b']:.4f} loss {tg['loss_paper']:.4f} -> {t['loss']:.4f} m "
+            f"({100 * t['gap']:+.2f} % vs grid best), {t['n_evals']} evaluations, {t['wall']:.1f} s "
+            f"({t['compile']:.1f} s compile) = {100 * t['ratio']:.1f} % of the grid's wall time",
+            flush=True,
+        )
     rows, t_j = gradient_checks(setup)
     for r in rows:
         print(f"d loss/d {r[0]:8s} ({r[1]:10s}): jacfwd {r[2]: .8e}  central diff {r[3]: .8e}  rel {r[4]:.1e}")
@@ -195,7 +232,7 @@ def main(argv=None):
     wall = time.perf_counter() - t_all
     if a.quick:
         return 0
-    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "## Gradient tuning vs grid search (`benchmarks/bench_tune.py`)",
         "",
@@ -212,14 +249,19 @@ def main(argv=None):
         f"{100 * (tg['loss_paper'] / tg['grid_best'] - 1):+.1f} % | — | — |",
         f"| dense grid, `tune.sweep` | {tg['grid_best_b']:.3f} | {tg['grid_best']:.4f} | 0 | {n_grid} x {runs} runs "
         f"| {tg['grid_wall']:.1f} s ({tg['grid_compile']:.1f} s) |",
-        *[f"| {t['name']}, forward mode | {t['b']:.4f} | {t['loss']:.4f} | {100 * t['gap']:+.2f} % "
-          f"| {t['n_evals']} x {runs} runs (value + derivative) | {t['wall']:.1f} s ({t['compile']:.1f} s) "
-          f"= **{100 * t['ratio']:.1f} %** of the grid |" for t in tg["tuned"]],
+        *[
+            f"| {t['name']}, forward mode | {t['b']:.4f} | {t['loss']:.4f} | {100 * t['gap']:+.2f} % "
+            f"| {t['n_evals']} x {runs} runs (value + derivative) | {t['wall']:.1f} s ({t['compile']:.1f} s) "
+            f"= **{100 * t['ratio']:.1f} %** of the grid |"
+            for t in tg["tuned"]
+        ],
         "",
-        *[f"{t['name']}: b at the evaluations {', '.join(f'{x:.4f}' for x in t['path'])} -> {t['b']:.4f}; run time "
-          f"without compilation {t['wall'] - t['compile']:.1f} s = "
-          f"{100 * (t['wall'] - t['compile']) / (tg['grid_wall'] - tg['grid_compile']):.1f} % of the grid's."
-          for t in tg["tuned"]],
+        *[
+            f"{t['name']}: b at the evaluations {', '.join(f'{x:.4f}' for x in t['path'])} -> {t['b']:.4f}; run time "
+            f"without compilation {t['wall'] - t['compile']:.1f} s = "
+            f"{100 * (t['wall'] - t['compile']) / (tg['grid_wall'] - tg['grid_compile']):.1f} % of the grid's."
+            for t in tg["tuned"]
+        ],
         "",
         "One evaluation is the mean over the runs of the value and its forward-mode derivative. "
         "`tune.minimize_lbfgs` advances L-BFGS and its strong-Wolfe line search one evaluation per scan step, so "

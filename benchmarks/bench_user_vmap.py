@@ -18,14 +18,12 @@ import argparse
 import sys
 import warnings
 
-import numpy as np
-from _harness import git_revision, loadavg, write_section
-
+import bench_filters as bf
 import jax
 import jax.numpy as jnp
-
-import bench_filters as bf
-from bench_filters import DT, N_OBS, Q_PSD, SIGMA, SCHED, jit_time, jf
+import numpy as np
+from _harness import git_revision, loadavg, write_section
+from bench_filters import DT, N_OBS, Q_PSD, SCHED, SIGMA, jf, jit_time
 
 BEGIN = "<!-- BEGIN bench_user_vmap results (generated; rerun the script to refresh) -->"
 END = "<!-- END bench_user_vmap results -->"
@@ -51,6 +49,7 @@ def main(argv=None):
     theta0 = jnp.array([np.log(Q_PSD), np.log(SIGMA)])
     from dynamax.linear_gaussian_ssm import lgssm_filter, lgssm_smoother
     from dynamax.linear_gaussian_ssm.inference import make_lgssm_params
+
     params = make_lgssm_params(m1, P1, F, Q, H, R)
 
     def jx_nll(theta, z):
@@ -67,18 +66,37 @@ def main(argv=None):
 
     vg = lambda f: jax.jit(jax.vmap(jax.value_and_grad(f), in_axes=(None, 0)))  # noqa: E731
     cases = {
-        "c": [("jaxnav vmap(kalman_filter)", jax.jit(jax.vmap(lambda z: jf.kalman_filter(
-                  model, x0, P0, z, save=("means",)).means)), True),
-              ("plain lax.scan", jax.jit(jax.vmap(lambda z: bf.plain_filter(F, H, Q, R, x0, P0, z))), False),
-              ("dynamax", jax.jit(jax.vmap(lambda z: lgssm_filter(params, z).filtered_means)), False)],
-        "g": [("jaxnav vmap(filter + RTS)", jax.jit(jax.vmap(lambda z: jf.rts_smoother(
-                  model, jf.kalman_filter(model, x0, P0, z)).means)), True),
-              ("plain lax.scan", jax.jit(jax.vmap(lambda z: (lambda o: bf.plain_rts(F, *o))(
-                  bf.plain_filter(F, H, Q, R, x0, P0, z, keep_all=True)))), False),
-              ("dynamax", jax.jit(jax.vmap(lambda z: lgssm_smoother(params, z).smoothed_means)), False)],
-        "f": [("jaxnav vmap(value_and_grad(log_likelihood))", vg(jx_ll), True),
-              ("jaxnav vmap(value_and_grad(kalman_filter(...).loglik))", vg(jx_nll), True),
-              ("dynamax", vg(dx_nll), False)],
+        "c": [
+            (
+                "jaxnav vmap(kalman_filter)",
+                jax.jit(jax.vmap(lambda z: jf.kalman_filter(model, x0, P0, z, save=("means",)).means)),
+                True,
+            ),
+            ("plain lax.scan", jax.jit(jax.vmap(lambda z: bf.plain_filter(F, H, Q, R, x0, P0, z))), False),
+            ("dynamax", jax.jit(jax.vmap(lambda z: lgssm_filter(params, z).filtered_means)), False),
+        ],
+        "g": [
+            (
+                "jaxnav vmap(filter + RTS)",
+                jax.jit(jax.vmap(lambda z: jf.rts_smoother(model, jf.kalman_filter(model, x0, P0, z)).means)),
+                True,
+            ),
+            (
+                "plain lax.scan",
+                jax.jit(
+                    jax.vmap(
+                        lambda z: (lambda o: bf.plain_rts(F, *o))(bf.plain_filter(F, H, Q, R, x0, P0, z, keep_all=True))
+                    )
+                ),
+                False,
+            ),
+            ("dynamax", jax.jit(jax.vmap(lambda z: lgssm_smoother(params, z).smoothed_means)), False),
+        ],
+        "f": [
+            ("jaxnav vmap(value_and_grad(log_likelihood))", vg(jx_ll), True),
+            ("jaxnav vmap(value_and_grad(kalman_filter(...).loglik))", vg(jx_nll), True),
+            ("dynamax", vg(dx_nll), False),
+        ],
     }
     rows = []
     with warnings.catch_warnings():
@@ -93,11 +111,15 @@ def main(argv=None):
         SCHED.run()
     load1 = loadavg()
     best = {(c, n, lab): min(r) for c, n, lab, _, r in rows}
-    out = [f"jaxnav {git_revision()}, T = {T}, B = {B}, minimum of {reps} interleaved rounds; load average "
-           f"(1/5/15 min) start {load0[0]:.2f} / {load0[1]:.2f} / {load0[2]:.2f}, end "
-           f"{load1[0]:.2f} / {load1[1]:.2f} / {load1[2]:.2f}. Speed-up columns: the reference's time / jaxnav's "
-           "(>= 1: jaxnav faster).", "",
-           "| case | implementation | data | min | vs plain lax.scan | vs dynamax |", "|---|---|---|---|---|---|"]
+    out = [
+        f"jaxnav {git_revision()}, T = {T}, B = {B}, minimum of {reps} interleaved rounds; load average "
+        f"(1/5/15 min) start {load0[0]:.2f} / {load0[1]:.2f} / {load0[2]:.2f}, end "
+        f"{load1[0]:.2f} / {load1[1]:.2f} / {load1[2]:.2f}. Speed-up columns: the reference's time / jaxnav's "
+        "(>= 1: jaxnav faster).",
+        "",
+        "| case | implementation | data | min | vs plain lax.scan | vs dynamax |",
+        "|---|---|---|---|---|---|",
+    ]
     for c, n, lab, _, r in rows:
         t = min(r)
         ps = best.get((c, "plain lax.scan", "clean"))

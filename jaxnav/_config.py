@@ -13,7 +13,6 @@ import os
 import pathlib
 import re
 import tomllib
-from typing import Optional
 
 import numpy as np
 
@@ -178,7 +177,7 @@ class Table:
 
     def check_bounds(self, key, v, *, lo=None, hi=None, lo_open=False, hi_open=False):
         """Refuse a number ``v`` (or each of a list) of ``key`` outside [lo, hi] (open ends as said)."""
-        for x in (v if isinstance(v, list) else [v]):
+        for x in v if isinstance(v, list) else [v]:
             if lo is not None and not (x > lo if lo_open else x >= lo):
                 self.fail(key, f"= {x!r} must be {'>' if lo_open else '>='} {lo:g}")
             if hi is not None and not (x < hi if hi_open else x <= hi):
@@ -186,22 +185,29 @@ class Table:
 
     def check_plausible(self, key, v, rng):
         """Refuse a number ``v`` (or each of a list) of ``key`` outside the plausible range (lo, hi), ends included."""
-        for x in (v if isinstance(v, list) else [v]):
+        for x in v if isinstance(v, list) else [v]:
             if not _is_number(x) or not math.isfinite(x):
                 self.fail(key, f"must be a finite number, got {x!r}")
             if not rng[0] <= x <= rng[1]:
-                self.fail(key, f"= {x!r} is outside the plausible range {_interval(*rng)} (a typing slip or "
-                               "a unit mix-up?)")
+                self.fail(
+                    key, f"= {x!r} is outside the plausible range {_interval(*rng)} (a typing slip or a unit mix-up?)"
+                )
 
-    def table(self, key, required: bool = False) -> Optional["Table"]:
+    def table(self, key, required: bool = False) -> Table | None:
         """The sub-table ``key`` as a :class:`Table` (None when absent and not required)."""
         self.used.add(key)
         if key not in self.data:
             if required:
                 self.fail(key, "is required")
             return None
-        return Table(self.data[key], self.key(key), source=self.source, error=self.error, plausible=self.plausible,
-                     variables=self.variables)
+        return Table(
+            self.data[key],
+            self.key(key),
+            source=self.source,
+            error=self.error,
+            plausible=self.plausible,
+            variables=self.variables,
+        )
 
     def tables(self, key) -> list:
         """The array of tables ``[[key]]`` as :class:`Table` s named ``key[i]`` (empty when absent)."""
@@ -209,10 +215,19 @@ class Table:
         v = self.data.get(key, [])
         if not isinstance(v, list):
             self.fail(key, f"must be an array of tables ([[{self.key(key)}]]), got {v!r}")
-        return [Table(t, f"{self.key(key)}[{i}]", source=self.source, error=self.error, plausible=self.plausible,
-                      variables=self.variables) for i, t in enumerate(v)]
+        return [
+            Table(
+                t,
+                f"{self.key(key)}[{i}]",
+                source=self.source,
+                error=self.error,
+                plausible=self.plausible,
+                variables=self.variables,
+            )
+            for i, t in enumerate(v)
+        ]
 
-    def file(self, key, required: bool = True) -> Optional[pathlib.Path]:
+    def file(self, key, required: bool = True) -> pathlib.Path | None:
         """A path ``key``: ``~`` and ``${NAME}`` expanded (``variables`` first, then the environment);
         a relative path is taken against the config file's folder, one that starts with a variable
         against the working directory."""

@@ -11,7 +11,6 @@ from jax.custom_batching import custom_vmap
 from jax.custom_derivatives import SymbolicZero
 from jax.scipy.linalg import solve_triangular
 
-
 #: log(2 pi), the constant of the Gaussian log-density
 LOG_2PI = math.log(2.0 * math.pi)
 

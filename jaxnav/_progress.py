@@ -44,8 +44,7 @@ class Progress:
       tty: force the terminal (True) or plain-line (False) form; default ``stream.isatty()``.
     """
 
-    def __init__(self, total: int, desc: str = "", *, unit: str = "item", enabled: bool = True, stream=None,
-                 tty=None):
+    def __init__(self, total: int, desc: str = "", *, unit: str = "item", enabled: bool = True, stream=None, tty=None):
         self.total, self.desc, self.unit = max(0, int(total)), desc, unit
         self.stream = sys.stderr if stream is None else stream
         self.enabled = bool(enabled) and progress_allowed()
@@ -82,8 +81,12 @@ class Progress:
         first = self._first is None
         if first:
             self._first = (now, self.done)
-        if first or self.done >= self.total or share - self._last_share >= LINE_EVERY_SHARE - 1e-12 \
-                or now - self._last_t >= LINE_EVERY_S:
+        if (
+            first
+            or self.done >= self.total
+            or share - self._last_share >= LINE_EVERY_SHARE - 1e-12
+            or now - self._last_t >= LINE_EVERY_S
+        ):
             self._line(now, share)
 
     def remaining_s(self, now=None):
@@ -102,10 +105,14 @@ class Progress:
             return
         self._last_t, self._last_share, self._written = now, share, self.done
         left, upper = self.remaining_s(now)
-        eta = "" if left is None else (f", about {left:.0f} s left at the first chunk's rate" if upper
-                                       else f", about {left:.0f} s left")
-        self.stream.write(f"{self.desc}: {self.done}/{self.total} {self.unit}s ({100.0 * share:.0f} %, "
-                          f"{now - self._t0:.0f} s{eta})\n")
+        eta = (
+            ""
+            if left is None
+            else (f", about {left:.0f} s left at the first chunk's rate" if upper else f", about {left:.0f} s left")
+        )
+        self.stream.write(
+            f"{self.desc}: {self.done}/{self.total} {self.unit}s ({100.0 * share:.0f} %, {now - self._t0:.0f} s{eta})\n"
+        )
         self.stream.flush()
 
     def __exit__(self, *exc):

@@ -42,33 +42,33 @@ _MESSAGES = {
     NONFINITE_IMU: "a NaN/inf IMU sample was mechanized: the navigation solution is invalid from there on",
     BAD_IMU_TIME: "an IMU sample interval was non-positive or non-finite",
     DISCRETIZATION_INACCURATE: "the Taylor discretisation of the error model had not converged (last term above "
-                               "1e-10 of Phi): raise LCDiscretization.order or use LCDiscretization('van_loan')",
+    "1e-10 of Phi): raise LCDiscretization.order or use LCDiscretization('van_loan')",
     COVARIANCE_INDEFINITE: "a filtered or predicted covariance of an adaptive filter lost positive "
-                           "semi-definiteness (eigenvalue below -1e-10 of its largest variance): the "
-                           "inflation or noise estimate diverged and the results are unreliable",
+    "semi-definiteness (eigenvalue below -1e-10 of its largest variance): the "
+    "inflation or noise estimate diverged and the results are unreliable",
     IMU_INCREMENT_TOO_LARGE: "an IMU rotation increment exceeded pi rad in one sample: the record is undersampled "
-                             "for strapdown integration, and the attitude series of nav_every > 1 is exact only "
-                             "up to 2 pi per sample (use nav_every=1)",
+    "for strapdown integration, and the attitude series of nav_every > 1 is exact only "
+    "up to 2 pi per sample (use nav_every=1)",
     BATCH_MASK_WIDENED: "finite measurements were left out because another sequence of the batch had NaN/inf at "
-                        "the same element (kalman_filter_batch shares one covariance recursion); for sequences "
-                        "with gaps of their own use jax.vmap(kalman_filter)",
+    "the same element (kalman_filter_batch shares one covariance recursion); for sequences "
+    "with gaps of their own use jax.vmap(kalman_filter)",
     PARAMETER_OUT_OF_RANGE: "a filter plug-in parameter was outside its documented range (a traced value, e.g. "
-                            "under vmap/grad, that the constructor could not check): the results are not those of "
-                            "the documented filter",
+    "under vmap/grad, that the constructor could not check): the results are not those of "
+    "the documented filter",
     NOISE_ESTIMATE_BOUNDED: "an adaptive noise estimate reached its bound (Sage-Husa R or Q outside the documented factor "
-                            "range of the model's): the data disagree with the model by more than that factor, e.g. an "
-                            "unmodelled change of dynamics was being attributed to the measurement noise",
+    "range of the model's): the data disagree with the model by more than that factor, e.g. an "
+    "unmodelled change of dynamics was being attributed to the measurement noise",
     INFLATION_CAPPED: "an adaptive prior-inflation factor reached its cap (fading lambda_k = max_factor): the "
-                      "innovations were far larger than the model explains (a diverging filter or model "
-                      "mismatch); the factor was limited there",
+    "innovations were far larger than the model explains (a diverging filter or model "
+    "mismatch); the factor was limited there",
     ROBUST_LOCKOUT: "a robust estimator rejected every valid measurement component for many consecutive epochs "
-                    "(IGG-III lock-out): the filter coasted on its prediction and may have lost the truth; use "
-                    "max_run to accept persistent changes",
+    "(IGG-III lock-out): the filter coasted on its prediction and may have lost the truth; use "
+    "max_run to accept persistent changes",
     GNSS_GATED: "GNSS epochs failed the chi-square innovation gate and were skipped (counted in n_gated)",
     FLOAT32_DATA_RANGE: "float32 with a data-dependent plug-in (fading, Sage-Husa, variance compensation, IGG-III, "
-                        "Yang) and a measurement more than 100 sigma from the origin: the plug-in's factor and noise "
-                        "come from float32 innovations whose rounding grows with |z| (variances measured 30-50 % off "
-                        "on long tracks); subtract a local origin from z and x0, or compute in float64",
+    "Yang) and a measurement more than 100 sigma from the origin: the plug-in's factor and noise "
+    "come from float32 innovations whose rounding grows with |z| (variances measured 30-50 % off "
+    "on long tracks); subtract a local origin from z and x0, or compute in float64",
 }
 
 #: flags that are reported but are not errors by default

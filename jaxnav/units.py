@@ -112,6 +112,7 @@ def ratio_to_ppm(x):
     """Dimensionless scale factor -> parts per million."""
     return x / PPM
 
+
 def powerlaw_amplitude_to_mm_yr(a, kappa):
     """Power-law noise amplitude m s^(kappa/4) (SI) -> mm/yr^(-kappa/4), Hector's unit (Williams 2003).
 

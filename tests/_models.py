@@ -12,6 +12,7 @@ def random_spd(rng, n, scale=1.0, cond=10.0):
 
 def random_stable_model(rng, n, m, T=None, *, radius=0.98):
     """F with spectral radius <= radius, random H, SPD Q and R; time-varying if T is given."""
+
     def F_():
         A = rng.normal(size=(n, n))
         return radius * A / max(np.abs(np.linalg.eigvals(A)).max(), 1e-12)

@@ -5,8 +5,22 @@ import json
 import jaxnav
 
 #: keys every provenance block has
-PROVENANCE_KEYS = {"jaxnav_version", "git_commit", "python_version", "jax_version", "date_utc", "finished_utc",
-                   "wall_time_s", "command", "argv", "cwd", "options", "config_file", "config", "subcommand"}
+PROVENANCE_KEYS = {
+    "jaxnav_version",
+    "git_commit",
+    "python_version",
+    "jax_version",
+    "date_utc",
+    "finished_utc",
+    "wall_time_s",
+    "command",
+    "argv",
+    "cwd",
+    "options",
+    "config_file",
+    "config",
+    "subcommand",
+}
 
 
 def no_constants(name):

@@ -1,8 +1,8 @@
 """Test configuration: float64 everywhere, persistent compilation cache for local reruns."""
 
 import os
-import sys
 import pathlib
+import sys
 
 
 def _pin_xdist_worker():
@@ -19,7 +19,7 @@ def _pin_xdist_worker():
     cpus = sorted(os.sched_getaffinity(0))
     if len(cpus) < n:
         return
-    os.sched_setaffinity(0, set(cpus[int(worker[2:]) % n::n]))
+    os.sched_setaffinity(0, set(cpus[int(worker[2:]) % n :: n]))
 
 
 _pin_xdist_worker()
@@ -65,11 +65,25 @@ import pytest  # noqa: E402
 # their compilations are built once. Scopes are handed out in collection order, so the long ones
 # (measured cold, serial) are put first and the run does not end on one of them.
 HEAVY = (
-    "test_docs_snippets.py", "test_notebooks.py::TestNotebook05", "test_tune_s0.py", "test_ins_time_offset.py",
-    "test_demo.py", "test_distributed.py", "test_ins_simulated.py", "test_integration.py",
-    "test_notebooks.py::TestNotebook01", "test_notebooks.py::TestNotebook04", "test_cadastral.py",
-    "test_notebooks.py::TestNotebook02", "test_sim.py", "test_notebooks.py::TestNotebook03", "test_tune.py",
-    "test_notebooks.py::TestNotebook00", "test_monitoring.py", "test_parallel.py", "test_filters_transforms.py",
+    "test_docs_snippets.py",
+    "test_notebooks.py::TestNotebook05",
+    "test_tune_s0.py",
+    "test_ins_time_offset.py",
+    "test_demo.py",
+    "test_distributed.py",
+    "test_ins_simulated.py",
+    "test_integration.py",
+    "test_notebooks.py::TestNotebook01",
+    "test_notebooks.py::TestNotebook04",
+    "test_cadastral.py",
+    "test_notebooks.py::TestNotebook02",
+    "test_sim.py",
+    "test_notebooks.py::TestNotebook03",
+    "test_tune.py",
+    "test_notebooks.py::TestNotebook00",
+    "test_monitoring.py",
+    "test_parallel.py",
+    "test_filters_transforms.py",
 )
 
 

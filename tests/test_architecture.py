@@ -64,7 +64,7 @@ def _find_cycle(graph):
         stack.append(u)
         for v in sorted(graph.get(u, ())):
             if state.get(v) == 1:
-                return stack[stack.index(v):] + [v]
+                return stack[stack.index(v) :] + [v]
             if v not in state:
                 cyc = visit(v)
                 if cyc:
@@ -117,7 +117,11 @@ def test_no_private_jax_and_no_global_switches(module):
         assert not isinstance(node, ast.Global), f"{module}: 'global' statement"
         if isinstance(node, ast.Assign):  # no monkey patching of attributes onto functions
             for t in node.targets:
-                if isinstance(t, ast.Attribute) and isinstance(t.value, ast.Name) and t.attr in ("lower", "_cache_size"):
+                if (
+                    isinstance(t, ast.Attribute)
+                    and isinstance(t.value, ast.Name)
+                    and t.attr in ("lower", "_cache_size")
+                ):
                     raise AssertionError(f"{module}: assigns {t.value.id}.{t.attr}")
 
 
@@ -136,8 +140,9 @@ def test_notebooks_import_public_names_only(path):
     for cell in nb["cells"]:
         if cell["cell_type"] != "code":
             continue
-        tree = ast.parse("\n".join(line for line in "".join(cell["source"]).splitlines()
-                                   if not line.lstrip().startswith(("%", "!"))))
+        tree = ast.parse(
+            "\n".join(line for line in "".join(cell["source"]).splitlines() if not line.lstrip().startswith(("%", "!")))
+        )
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("jaxnav"):
                 mods = [node.module] + [a.name for a in node.names]

@@ -26,7 +26,6 @@ import subprocess
 import tomllib
 
 import pytest
-
 from _paths import DATA_ROOT, ROOT
 
 BLOCK = re.compile(r"^```(?:console|bash)[ \t]*\n(.*?)^```[ \t]*$", re.M | re.S)
@@ -61,8 +60,12 @@ CASES = [(p, n, line) for p in _pages() for n, line in _lines(p)]
 
 
 def test_the_pages_have_commands():
-    words = {shlex.split(line, comments=True)[-1] if line.startswith("#!") else
-             next(w for w in shlex.split(line, comments=True) if "=" not in w) for _, _, line in CASES}
+    words = {
+        shlex.split(line, comments=True)[-1]
+        if line.startswith("#!")
+        else next(w for w in shlex.split(line, comments=True) if "=" not in w)
+        for _, _, line in CASES
+    }
     assert {"jaxnav", "make", "pip"} <= words | {"jaxnav"}, words
     assert sum(1 for _, _, line in CASES if "jaxnav ins walk_0827" in line) >= 1
 
@@ -132,8 +135,9 @@ def test_command_line_as_written(page, lineno, line, clone, monkeypatch, capsys)
     elif cmd == "make":
         if shutil.which("make") is None:
             pytest.skip("no make on this machine")
-        proc = subprocess.run(["make", "-n", *words[1:]], cwd=ROOT, text=True, capture_output=True,
-                              env=dict(os.environ, OUT="out/demo"))
+        proc = subprocess.run(
+            ["make", "-n", *words[1:]], cwd=ROOT, text=True, capture_output=True, env=dict(os.environ, OUT="out/demo")
+        )
         assert proc.returncode == 0, (where, proc.stderr)
         for recipe in proc.stdout.splitlines():
             m = re.search(r"\S*/bin/(jaxnav .*)$", recipe)

@@ -14,7 +14,6 @@ import sys
 
 import jax
 import pytest
-
 from _paths import DATA_ROOT, ROOT
 
 FENCE = re.compile(r"^```python[ \t]*\n(.*?)^```[ \t]*$", re.M | re.S)
@@ -52,8 +51,8 @@ def test_page_runs_as_written(page, tmp_path):
         env.pop(k, None)
     script = tmp_path / "page.py"
     script.write_text(_script(page), encoding="utf-8")
-    proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True,
-                          text=True, timeout=900)
+    proc = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900
+    )
     blocks = [ln for ln in proc.stderr.splitlines() if ln.startswith("--- ")]
-    assert proc.returncode == 0, (f"{page.name}: failed in {blocks[-1] if blocks else 'no block'}\n"
-                                  f"{proc.stderr[-3000:]}")
+    assert proc.returncode == 0, f"{page.name}: failed in {blocks[-1] if blocks else 'no block'}\n{proc.stderr[-3000:]}"

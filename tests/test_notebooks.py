@@ -87,7 +87,8 @@ def test_notebook_stored_stripped(path):
     nb = nbformat.read(path, as_version=4)
     nbformat.validate(nb)
     dirty = [
-        i for i, cell in enumerate(nb.cells)
+        i
+        for i, cell in enumerate(nb.cells)
         if cell.cell_type == "code" and (cell.get("outputs") or cell.get("execution_count") is not None)
     ]
     assert not dirty, f"{path.name}: code cells {dirty} carry outputs or execution counts; strip them"
@@ -121,8 +122,9 @@ def _executes(path):
         """Run the notebook top to bottom (short horizons); any cell error fails the test."""
         nb = nbformat.read(path, as_version=4)
         _execute(nb, tmp_path)
-        errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
-                  if o.output_type == "error"]
+        errors = [
+            o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if o.output_type == "error"
+        ]
         assert not errors
         # kept for the docs: `make docs` renders the executed copy when it is newer than the notebook
         EXECUTED.mkdir(parents=True, exist_ok=True)

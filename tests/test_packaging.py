@@ -25,7 +25,6 @@ import venv
 import zipfile
 
 import pytest
-
 from _paths import ROOT
 
 PKG = ROOT / "jaxnav"
@@ -34,25 +33,31 @@ TIMEOUT = 400  # s, per pip call (a cold cache downloads jax and jaxlib)
 
 def _env():
     """The caller's environment minus what would leak this interpreter's packages into the clean one."""
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "PYTHONSTARTUP", "PIP_USER")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "PYTHONSTARTUP", "PIP_USER")
+    }
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
     env["JAX_PLATFORMS"] = "cpu"
     return env
 
 
 def _run(cmd, cwd, timeout=TIMEOUT):
-    proc = subprocess.run([str(c) for c in cmd], cwd=cwd, env=_env(), capture_output=True, text=True,
-                          timeout=timeout)
-    assert proc.returncode == 0, f"{' '.join(map(str, cmd))} exited {proc.returncode}:\n{proc.stdout[-3000:]}\n" \
-                                 f"{proc.stderr[-3000:]}"
+    proc = subprocess.run([str(c) for c in cmd], cwd=cwd, env=_env(), capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, (
+        f"{' '.join(map(str, cmd))} exited {proc.returncode}:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    )
     return proc
 
 
 def _data_files():
     """Every file of the source package that is not Python source or a cache: what the wheel must ship."""
-    return sorted(p.relative_to(ROOT).as_posix() for p in PKG.rglob("*")
-                  if p.is_file() and p.suffix not in (".py", ".pyc") and "__pycache__" not in p.parts)
+    return sorted(
+        p.relative_to(ROOT).as_posix()
+        for p in PKG.rglob("*")
+        if p.is_file() and p.suffix not in (".py", ".pyc") and "__pycache__" not in p.parts
+    )
 
 
 @pytest.fixture(scope="module")

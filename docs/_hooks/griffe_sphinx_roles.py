@@ -111,7 +111,7 @@ def _split_inline_entries(text: str, known: set[str], title_ok: tuple[str, ...])
             for mm in _INLINE.finditer(cur):
                 names = [n.strip() for n in mm["names"].split(",")]
                 if all(n in known for n in names):
-                    pieces.append(cur[start:mm.start()].rstrip())
+                    pieces.append(cur[start : mm.start()].rstrip())
                     start = mm.start("names")
             if not pieces:
                 out.append(cur)
@@ -127,8 +127,9 @@ def _check_params(func: griffe.Function) -> None:
     if func.docstring is None:
         return
     names = {p.name for p in func.parameters}
-    variadic = any(p.kind in (griffe.ParameterKind.var_positional, griffe.ParameterKind.var_keyword)
-                   for p in func.parameters)
+    variadic = any(
+        p.kind in (griffe.ParameterKind.var_positional, griffe.ParameterKind.var_keyword) for p in func.parameters
+    )
     sections = griffe.parse_google(func.docstring, warn_unknown_params=False, warnings=False)
     for section in sections:
         if section.kind is not griffe.DocstringSectionKind.parameters:
@@ -138,7 +139,8 @@ def _check_params(func: griffe.Function) -> None:
                 if name not in names and not variadic:
                     griffe.logger.warning(
                         f"{func.relative_filepath}:{func.docstring.lineno}: Parameter '{name}' of "
-                        f"{func.path} (Args entry '{entry.name}') does not appear in the function signature")
+                        f"{func.path} (Args entry '{entry.name}') does not appear in the function signature"
+                    )
 
 
 _COMMENT = re.compile(r"#\s*(?P<text>.+?)\s*$")
@@ -149,8 +151,9 @@ def _new_docstring(attr: griffe.Attribute, text: str, lineno: int, endlineno: in
     ref = attr.parent.docstring
     parser = ref.parser if ref is not None and ref.parser is not None else griffe.Parser.google
     options = dict(ref.parser_options) if ref is not None and ref.parser_options else {}
-    return griffe.Docstring(text, lineno=lineno, endlineno=endlineno, parent=attr, parser=parser,
-                            parser_options=options)
+    return griffe.Docstring(
+        text, lineno=lineno, endlineno=endlineno, parent=attr, parser=parser, parser_options=options
+    )
 
 
 def _runtime_fields(attr: griffe.Attribute) -> set[str]:
@@ -183,12 +186,17 @@ def _comment_docstring(attr: griffe.Attribute) -> None:
     end = attr.endlineno or attr.lineno
     if end > attr.lineno:  # a multi-line value: a call that carries the docstring as a string argument
         try:
-            node = ast.parse("\n".join(lines[attr.lineno - 1:end])).body[0]
+            node = ast.parse("\n".join(lines[attr.lineno - 1 : end])).body[0]
         except (SyntaxError, IndexError):
             return
         call = getattr(node, "value", None)
-        if isinstance(call, ast.Call) and call.args and isinstance(call.args[-1], ast.Constant) \
-                and isinstance(call.args[-1].value, str) and len(call.args) >= 2:
+        if (
+            isinstance(call, ast.Call)
+            and call.args
+            and isinstance(call.args[-1], ast.Constant)
+            and isinstance(call.args[-1].value, str)
+            and len(call.args) >= 2
+        ):
             text = inspect.cleandoc(call.args[-1].value)
             fields = _runtime_fields(attr)
             if fields:
@@ -218,7 +226,9 @@ class SphinxRoles(griffe.Extension):
                 obj.docstring.value = _rewrite(obj, obj.docstring.value)
                 if obj.is_function:
                     known = {p.name for p in obj.parameters}
-                    obj.docstring.value = _split_inline_entries(obj.docstring.value, known, ("Args", "Arguments", "Parameters"))
+                    obj.docstring.value = _split_inline_entries(
+                        obj.docstring.value, known, ("Args", "Arguments", "Parameters")
+                    )
                 elif obj.is_class:
                     known = set(obj.members) | {p.name for p in getattr(obj, "parameters", [])}
                     obj.docstring.value = _split_inline_entries(obj.docstring.value, known, ("Attributes",))

@@ -41,9 +41,18 @@ def on_files(files, config):
                     src = EXECUTED
                 else:
                     stale.append(path.name)
-            files.append(File(path.relative_to(ROOT).as_posix(), src_dir=str(src), dest_dir=config["site_dir"],
-                              use_directory_urls=config["use_directory_urls"]))
+            files.append(
+                File(
+                    path.relative_to(ROOT).as_posix(),
+                    src_dir=str(src),
+                    dest_dir=config["site_dir"],
+                    use_directory_urls=config["use_directory_urls"],
+                )
+            )
     if stale:
-        log.info("notebooks rendered without outputs (no executed copy newer than the notebook; "
-                 "`make test` writes them to build/executed/): %s", ", ".join(stale))
+        log.info(
+            "notebooks rendered without outputs (no executed copy newer than the notebook; "
+            "`make test` writes them to build/executed/): %s",
+            ", ".join(stale),
+        )
     return files

@@ -44,7 +44,6 @@ import logging
 import pathlib
 import sys
 import time
-from typing import Optional
 
 from jaxnav.cli._common import CommandError, UsageError, figure_format_list
 
@@ -101,17 +100,37 @@ def _add_common(p, top: bool):
     """The options every command takes (see the module docstring); on a subcommand they default to
     SUPPRESS, so that a value given before the command is not overwritten by the subcommand's default."""
     d = {} if top else {"default": argparse.SUPPRESS}
-    p.add_argument("--debug", action="store_true", help="show the Python traceback of any error" if top
-                   else argparse.SUPPRESS, **d)
-    p.add_argument("-q", "--quiet", dest="verbosity", action="store_const", const=-1,
-                   help="no progress and no info lines; warnings, errors and the summary still show",
-                   **({"default": 0} if top else d))
-    p.add_argument("-v", "--verbose", dest="verbosity", action="store_const", const=1,
-                   help="also debug lines (timings, devices, configuration)", **d)
-    p.add_argument("--figure-format", dest="figure_formats", action="extend", type=figure_format_list,
-                   metavar="FMT",
-                   help="also write every figure in these formats beside the PNG: png, pdf, svg (several: "
-                        "'pdf svg' or 'pdf,svg'); default png", **({"default": []} if top else d))
+    p.add_argument(
+        "--debug", action="store_true", help="show the Python traceback of any error" if top else argparse.SUPPRESS, **d
+    )
+    p.add_argument(
+        "-q",
+        "--quiet",
+        dest="verbosity",
+        action="store_const",
+        const=-1,
+        help="no progress and no info lines; warnings, errors and the summary still show",
+        **({"default": 0} if top else d),
+    )
+    p.add_argument(
+        "-v",
+        "--verbose",
+        dest="verbosity",
+        action="store_const",
+        const=1,
+        help="also debug lines (timings, devices, configuration)",
+        **d,
+    )
+    p.add_argument(
+        "--figure-format",
+        dest="figure_formats",
+        action="extend",
+        type=figure_format_list,
+        metavar="FMT",
+        help="also write every figure in these formats beside the PNG: png, pdf, svg (several: "
+        "'pdf svg' or 'pdf,svg'); default png",
+        **({"default": []} if top else d),
+    )
 
 
 class _LineFormatter(logging.Formatter):
@@ -171,11 +190,16 @@ def main(argv=None) -> int:
 
         print(f"jaxnav {jaxnav.__version__}")
         return 0
-    parser = _Parser(prog="jaxnav", description="jaxnav command line", epilog=(
-        "-q, -v, --debug and --figure-format go before or after the command. Each command writes into --out "
-        "(default out/<command>) and records there results.json: jaxnav version, git commit, UTC date, the "
-        "command line, every option, the config file and its contents, and the files written. Messages and "
-        "progress go to stderr (a bar on a terminal, plain lines otherwise), the summary to stdout."))
+    parser = _Parser(
+        prog="jaxnav",
+        description="jaxnav command line",
+        epilog=(
+            "-q, -v, --debug and --figure-format go before or after the command. Each command writes into --out "
+            "(default out/<command>) and records there results.json: jaxnav version, git commit, UTC date, the "
+            "command line, every option, the config file and its contents, and the files written. Messages and "
+            "progress go to stderr (a bar on a terminal, plain lines otherwise), the summary to stdout."
+        ),
+    )
     parser.add_argument("--version", action="store_true", help="print 'jaxnav X.Y.Z' and exit")
     _add_common(parser, top=True)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -201,10 +225,19 @@ def main(argv=None) -> int:
         if log.isEnabledFor(logging.DEBUG):  # no jax.devices() here: it would start JAX before jax.distributed
             from jaxnav.io import git_commit
 
-            log.debug("jaxnav %s (commit %s), Python %s, command: jaxnav %s", jaxnav.__version__, git_commit(),
-                      sys.version.split()[0], " ".join(argv))
-            log.debug("options: %s", ", ".join(f"{k}={v!r}" for k, v in sorted(vars(args).items())
-                                               if not k.startswith("_") and k != "version"))
+            log.debug(
+                "jaxnav %s (commit %s), Python %s, command: jaxnav %s",
+                jaxnav.__version__,
+                git_commit(),
+                sys.version.split()[0],
+                " ".join(argv),
+            )
+            log.debug(
+                "options: %s",
+                ", ".join(
+                    f"{k}={v!r}" for k, v in sorted(vars(args).items()) if not k.startswith("_") and k != "version"
+                ),
+            )
             log.debug("figures written as: %s", ", ".join(["png", *[f for f in args.figure_formats if f != "png"]]))
         with figure_formats(*args.figure_formats):
             rc = args._run(args)
@@ -293,8 +326,13 @@ class _Start:
 
         out = pathlib.Path(out)
         options = {k: v for k, v in vars(args).items() if not k.startswith("_") and k not in ("command", "version")}
-        prov = provenance(argv=argv, options=options, config_file=getattr(args, "_config_file", None),
-                          config=getattr(args, "_config", None), date_utc=self.date_utc)
+        prov = provenance(
+            argv=argv,
+            options=options,
+            config_file=getattr(args, "_config_file", None),
+            config=getattr(args, "_config", None),
+            date_utc=self.date_utc,
+        )
         prov["subcommand"] = args.command
         prov["finished_utc"] = utc_now()
         prov["wall_time_s"] = time.perf_counter() - self.t0
@@ -304,11 +342,17 @@ class _Start:
         for name in own:
             _complete(out / name, prov, None)
         # a results.json left by an earlier run (of another command) in the same folder is replaced, not merged
-        _complete(out / "results.json", prov, sorted(written | {"results.json"}), results_in=own,
-                  fresh="results.json" not in written)
+        _complete(
+            out / "results.json",
+            prov,
+            sorted(written | {"results.json"}),
+            results_in=own,
+            fresh="results.json" not in written,
+        )
         files = written | {"results.json"}
-        logging.getLogger("jaxnav").info("wrote the provenance and the list of the %d files written into %s",
-                                         len(files), out / "results.json")
+        logging.getLogger("jaxnav").info(
+            "wrote the provenance and the list of the %d files written into %s", len(files), out / "results.json"
+        )
 
 
 def _is_writer() -> bool:
@@ -344,16 +388,22 @@ def _complete(path: pathlib.Path, prov: dict, files, results_in=(), fresh=False)
     write_json(path, data)
 
 
-def _internal(prog: str, exc: BaseException, after_s: Optional[float] = None) -> int:
+def _internal(prog: str, exc: BaseException, after_s: float | None = None) -> int:
     """Print the one line of an internal error (``after_s``: raised that long into the computation,
     after the input was checked); returns :data:`EXIT_INTERNAL`."""
     if after_s is not None:
-        print(f"{prog}: stopped {after_s:.1f} s into the computation, after the input was checked: "
-              f"{_one_line(exc)[:300]} (if this names a setting or file of yours, change it; otherwise it is a bug "
-              f"in jaxnav: rerun with --debug for the traceback and report it)", file=sys.stderr)
+        print(
+            f"{prog}: stopped {after_s:.1f} s into the computation, after the input was checked: "
+            f"{_one_line(exc)[:300]} (if this names a setting or file of yours, change it; otherwise it is a bug "
+            f"in jaxnav: rerun with --debug for the traceback and report it)",
+            file=sys.stderr,
+        )
         return EXIT_INTERNAL
-    print(f"{prog}: internal error: {type(exc).__name__}: {_one_line(exc)[:300]} (a bug in jaxnav: rerun with "
-          f"--debug for the traceback and report it)", file=sys.stderr)
+    print(
+        f"{prog}: internal error: {type(exc).__name__}: {_one_line(exc)[:300]} (a bug in jaxnav: rerun with "
+        f"--debug for the traceback and report it)",
+        file=sys.stderr,
+    )
     return EXIT_INTERNAL
 
 

@@ -18,7 +18,6 @@ import math
 import os
 import pathlib
 import uuid
-from typing import Optional
 
 #: the most Monte Carlo seeds (and batch sizes) a command accepts
 MAX_SEEDS = 100_000
@@ -43,7 +42,7 @@ class UsageError(CommandError):
     """Wrong or missing arguments; ``jaxnav`` prints ``jaxnav COMMAND: MESSAGE (see ... --help)``, exits with 2."""
 
 
-def int_range(lo: Optional[int] = None, hi: Optional[int] = None):
+def int_range(lo: int | None = None, hi: int | None = None):
     """An argparse ``type=``: an integer in [lo, hi] (None: unbounded), else a one-line argparse error."""
 
     def parse(text):
@@ -59,7 +58,7 @@ def int_range(lo: Optional[int] = None, hi: Optional[int] = None):
     return parse
 
 
-def float_range(lo: Optional[float] = None, hi: Optional[float] = None, *, lo_open=False, hi_open=False):
+def float_range(lo: float | None = None, hi: float | None = None, *, lo_open=False, hi_open=False):
     """An argparse ``type=``: a finite number in [lo, hi] (``lo_open``/``hi_open``: excluded ends)."""
 
     def parse(text):
@@ -67,11 +66,15 @@ def float_range(lo: Optional[float] = None, hi: Optional[float] = None, *, lo_op
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        bad = (not math.isfinite(v) or (lo is not None and (v <= lo if lo_open else v < lo))
-               or (hi is not None and (v >= hi if hi_open else v > hi)))
+        bad = (
+            not math.isfinite(v)
+            or (lo is not None and (v <= lo if lo_open else v < lo))
+            or (hi is not None and (v >= hi if hi_open else v > hi))
+        )
         if bad:
-            raise argparse.ArgumentTypeError(f"must be a finite number {_range_text(lo, hi, lo_open, hi_open)}, "
-                                             f"got {text}")
+            raise argparse.ArgumentTypeError(
+                f"must be a finite number {_range_text(lo, hi, lo_open, hi_open)}, got {text}"
+            )
         return v
 
     parse.__name__ = "number"
@@ -119,7 +122,7 @@ def input_file(path, option: str) -> pathlib.Path:
     return p
 
 
-def data_dir(args_data, subfolder: str, *, required: bool = True) -> Optional[pathlib.Path]:
+def data_dir(args_data, subfolder: str, *, required: bool = True) -> pathlib.Path | None:
     """The folder of one data set: ``<root>/<subfolder>``, the root being ``--data`` or ``$JAXNAV_DATA``.
 
     Every command gives ``--data`` (and ``JAXNAV_DATA``) the same meaning: the folder that holds the
@@ -142,8 +145,10 @@ def data_dir(args_data, subfolder: str, *, required: bool = True) -> Optional[pa
     elif os.environ.get(DATA_ENV):
         root, source = data_root(os.environ[DATA_ENV], DATA_ENV), DATA_ENV
     elif required:
-        raise CommandError(f"no data folder: give --data DIR or set {DATA_ENV} (the folder that holds the "
-                           f"data sets, with {subfolder}/ in it)")
+        raise CommandError(
+            f"no data folder: give --data DIR or set {DATA_ENV} (the folder that holds the "
+            f"data sets, with {subfolder}/ in it)"
+        )
     else:
         return None
     path = root / subfolder
@@ -154,8 +159,10 @@ def data_dir(args_data, subfolder: str, *, required: bool = True) -> Optional[pa
     hint = ""
     if root.name == subfolder:
         hint = f"; {root} looks like the data set itself: give the folder that holds it ({root.parent})"
-    raise CommandError(f"{path}: no such data folder ({source} = {root}, the folder that holds the data sets, "
-                       f"has no {subfolder}/{hint})")
+    raise CommandError(
+        f"{path}: no such data folder ({source} = {root}, the folder that holds the data sets, "
+        f"has no {subfolder}/{hint})"
+    )
 
 
 def data_root(value, source: str) -> pathlib.Path:
@@ -181,8 +188,9 @@ def add_config_parser(subparsers, name: str, what: str):
     """
     p = subparsers.add_parser(name, help=f"{what}; CONFIG is a TOML file or a shipped name (s0_b, cv_noise)")
     p.add_argument("config", help="sweep/tune TOML, or the name of a shipped one: s0_b, cv_noise")
-    p.add_argument("--out", default=f"out/{name}",
-                   help=f"output folder (created and checked first); default out/{name}")
+    p.add_argument(
+        "--out", default=f"out/{name}", help=f"output folder (created and checked first); default out/{name}"
+    )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     add_process_args(p)
     return p
@@ -196,15 +204,33 @@ def add_process_args(p):
     ``jax.distributed.initialize``. Without any of them the command runs as one process.
     """
     g = p.add_argument_group("several processes or hosts (jax.distributed; process 0 writes the results)")
-    g.add_argument("--coordinator", default=None, metavar="HOST:PORT",
-                   help="address of process 0's coordinator, the same for all processes "
-                        "(default $JAX_COORDINATOR_ADDRESS)")
-    g.add_argument("--num-processes", type=int_range(1, 100_000), default=None, metavar="N",
-                   help="number of processes, >= 1 (default $JAX_NUM_PROCESSES, or from SLURM/Open MPI)")
-    g.add_argument("--process-id", type=int_range(0, 99_999), default=None, metavar="I",
-                   help="this process, 0 .. N-1 (default $JAX_PROCESS_ID, or from SLURM/Open MPI)")
-    g.add_argument("--join-timeout", type=int_range(1, 86_400), default=300, metavar="S",
-                   help="seconds to wait for all processes to join; default 300")
+    g.add_argument(
+        "--coordinator",
+        default=None,
+        metavar="HOST:PORT",
+        help="address of process 0's coordinator, the same for all processes (default $JAX_COORDINATOR_ADDRESS)",
+    )
+    g.add_argument(
+        "--num-processes",
+        type=int_range(1, 100_000),
+        default=None,
+        metavar="N",
+        help="number of processes, >= 1 (default $JAX_NUM_PROCESSES, or from SLURM/Open MPI)",
+    )
+    g.add_argument(
+        "--process-id",
+        type=int_range(0, 99_999),
+        default=None,
+        metavar="I",
+        help="this process, 0 .. N-1 (default $JAX_PROCESS_ID, or from SLURM/Open MPI)",
+    )
+    g.add_argument(
+        "--join-timeout",
+        type=int_range(1, 86_400),
+        default=300,
+        metavar="S",
+        help="seconds to wait for all processes to join; default 300",
+    )
     return g
 
 
@@ -226,8 +252,10 @@ def start_processes(args) -> bool:
         raise UsageError(str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - JAX's runtime errors (timeouts, unreachable coordinator)
         where = args.coordinator or os.environ.get("JAX_COORDINATOR_ADDRESS") or "the cluster's coordinator"
-        raise CommandError(f"cannot join the processes of this study at {where}: {type(exc).__name__}: "
-                           f"{str(exc).strip().splitlines()[0] if str(exc).strip() else ''}") from None
+        raise CommandError(
+            f"cannot join the processes of this study at {where}: {type(exc).__name__}: "
+            f"{str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
+        ) from None
     return tune.is_writer()
 
 
@@ -241,8 +269,9 @@ def figure_format_list(text: str) -> list:
         if not f:
             continue
         if f not in FORMATS:
-            raise argparse.ArgumentTypeError(f"unknown figure format {f!r}; choose from {', '.join(FORMATS)} "
-                                             f"(several: pdf,svg)")
+            raise argparse.ArgumentTypeError(
+                f"unknown figure format {f!r}; choose from {', '.join(FORMATS)} (several: pdf,svg)"
+            )
         out.append(f)
     if not out:
         raise argparse.ArgumentTypeError(f"expected figure formats ({', '.join(FORMATS)}), got {text!r}")

@@ -12,26 +12,55 @@ from jaxnav.cli._common import UsageError, float_range, input_file, int_range, p
 def register(subparsers):
     """Add the ``allan`` subcommand; returns its parser."""
     p = subparsers.add_parser(
-        "allan", help="IMU noise from a static recording: Allan deviation per axis, fitted angle/velocity random "
-                      "walk, bias instability and rate random walk with uncertainties, figures and a [noise] TOML")
+        "allan",
+        help="IMU noise from a static recording: Allan deviation per axis, fitted angle/velocity random "
+        "walk, bias instability and rate random walk with uncertainties, figures and a [noise] TOML",
+    )
     p.add_argument("imu_file", help="the static IMU log")
-    p.add_argument("--format", default="rtklib-csv", choices=("rtklib-csv", "kf-gins", "csv"),
-                   help="IMU file format, as [imu] format of `jaxnav ins` (default rtklib-csv)")
-    p.add_argument("--tag", default=None, help="rtklib-csv: the RTKLIB time-tag file (default: IMU_FILE.tag if it "
-                                               "exists, else the counter column in ms)")
-    p.add_argument("--columns", default=None, metavar="MAP",
-                   help="csv: column map, e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6 (indices or header names)")
+    p.add_argument(
+        "--format",
+        default="rtklib-csv",
+        choices=("rtklib-csv", "kf-gins", "csv"),
+        help="IMU file format, as [imu] format of `jaxnav ins` (default rtklib-csv)",
+    )
+    p.add_argument(
+        "--tag",
+        default=None,
+        help="rtklib-csv: the RTKLIB time-tag file (default: IMU_FILE.tag if it exists, else the counter column in ms)",
+    )
+    p.add_argument(
+        "--columns",
+        default=None,
+        metavar="MAP",
+        help="csv: column map, e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6 (indices or header names)",
+    )
     p.add_argument("--units", default=None, metavar="MAP", help="csv: units, e.g. t=s,gyro=deg/s,accel=g")
     p.add_argument("--delimiter", default=",", help="csv: field separator, one character or 'whitespace'")
     p.add_argument("--gps-week", type=int_range(0, 5000), default=None, help="kf-gins: GPS week of the start")
-    p.add_argument("--start", type=float_range(0.0), default=None, metavar="S",
-                   help="use the log from this many seconds after its first sample")
-    p.add_argument("--end", type=float_range(0.0, lo_open=True), default=None, metavar="S",
-                   help="... up to this many seconds after its first sample")
-    p.add_argument("--tau-min", type=float_range(0.0, lo_open=True), default=None, metavar="S",
-                   help="fit only taus >= this (e.g. above an anti-alias filter's time constant)")
-    p.add_argument("--tau-max", type=float_range(0.0, lo_open=True), default=None, metavar="S",
-                   help="fit only taus <= this")
+    p.add_argument(
+        "--start",
+        type=float_range(0.0),
+        default=None,
+        metavar="S",
+        help="use the log from this many seconds after its first sample",
+    )
+    p.add_argument(
+        "--end",
+        type=float_range(0.0, lo_open=True),
+        default=None,
+        metavar="S",
+        help="... up to this many seconds after its first sample",
+    )
+    p.add_argument(
+        "--tau-min",
+        type=float_range(0.0, lo_open=True),
+        default=None,
+        metavar="S",
+        help="fit only taus >= this (e.g. above an anti-alias filter's time constant)",
+    )
+    p.add_argument(
+        "--tau-max", type=float_range(0.0, lo_open=True), default=None, metavar="S", help="fit only taus <= this"
+    )
     p.add_argument("--out", default="out/allan", help="output folder; default out/allan")
     return p
 
@@ -80,8 +109,9 @@ def run(args) -> int:
     units_map = _map(args.units, "--units", False) if args.units else None
     log = logging.getLogger("jaxnav")
     log.info("reading %s (%s)", path, args.format)
-    imu = read_imu(path, args.format, tag=tag, columns=columns, units_map=units_map, delimiter=delim,
-                   gps_week=args.gps_week)
+    imu = read_imu(
+        path, args.format, tag=tag, columns=columns, units_map=units_map, delimiter=delim, gps_week=args.gps_week
+    )
     tau_range = None
     if args.tau_min is not None or args.tau_max is not None:
         tau_range = (args.tau_min or 0.0, args.tau_max or float("inf"))

@@ -18,16 +18,24 @@ from jaxnav.cli._common import DATA_ENV, CommandError, begin_computation, data_r
 def register(subparsers):
     """Add the ``ins`` subcommand; returns its parser."""
     p = subparsers.add_parser(
-        "ins", help="INS/GNSS post-processing of your own IMU + GNSS logs from a config file: loosely coupled "
-                    "filter + RTS smoother, optional simulated-outage evaluation and likelihood tuning")
+        "ins",
+        help="INS/GNSS post-processing of your own IMU + GNSS logs from a config file: loosely coupled "
+        "filter + RTS smoother, optional simulated-outage evaluation and likelihood tuning",
+    )
     p.add_argument("config", help="ins TOML file, or a shipped config name: walk_0827")
     p.add_argument("--out", default=None, help="output folder (created and checked first); default out/ins/<name>")
-    p.add_argument("--tune", action="store_true",
-                   help="tune the [tune] params (noise densities, lever arm) by maximising the GNSS innovation "
-                        "likelihood over the whole run, then rerun and report before/after")
-    p.add_argument("--data", default=None,
-                   help=f"folder that holds the data sets (like ../shared/data; relative to the working directory); "
-                        f"stands for ${{{DATA_ENV}}} in the paths of CONFIG")
+    p.add_argument(
+        "--tune",
+        action="store_true",
+        help="tune the [tune] params (noise densities, lever arm) by maximising the GNSS innovation "
+        "likelihood over the whole run, then rerun and report before/after",
+    )
+    p.add_argument(
+        "--data",
+        default=None,
+        help=f"folder that holds the data sets (like ../shared/data; relative to the working directory); "
+        f"stands for ${{{DATA_ENV}}} in the paths of CONFIG",
+    )
     return p
 
 
@@ -49,8 +57,12 @@ def run(args) -> int:
 def check_input_files(cfg) -> None:
     """Every file the config names exists and is a file, else :class:`CommandError` naming it and its key."""
     truth = cfg.evaluate.truth if cfg.evaluate is not None else None
-    for p, key in ((cfg.imu.file, "imu.file"), (cfg.gnss.file, "gnss.file"), (cfg.imu.tag, "imu.tag"),
-                   (truth, "evaluate.truth")):
+    for p, key in (
+        (cfg.imu.file, "imu.file"),
+        (cfg.gnss.file, "gnss.file"),
+        (cfg.imu.tag, "imu.tag"),
+        (truth, "evaluate.truth"),
+    ):
         if p is not None and not p.is_file():
             raise CommandError(f"{p}: {'a folder, not a file' if p.is_dir() else 'no such file'} ({cfg.path}: {key})")
 

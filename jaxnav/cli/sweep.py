@@ -13,8 +13,9 @@ from jaxnav.cli._common import add_config_parser, prepare_out, record_config, st
 
 def register(subparsers):
     """Add the ``sweep`` subcommand; returns its parser."""
-    return add_config_parser(subparsers, "sweep",
-                             "vmap a parameter grid x Monte Carlo runs (chunked, sharded over devices)")
+    return add_config_parser(
+        subparsers, "sweep", "vmap a parameter grid x Monte Carlo runs (chunked, sharded over devices)"
+    )
 
 
 def run(args) -> int:

@@ -10,12 +10,19 @@ WALK_SET = "rtklibexplorer-gnss-imu"
 
 def register(subparsers):
     """Add the ``walk`` subcommand; returns its parser."""
-    p = subparsers.add_parser("walk", help="the real IMU + RTK walk set (same as `jaxnav ins walk_0827`): 15-state "
-                                           "LC filter and RTS with simulated 15 s GNSS outages, scored against the "
-                                           "withheld RTK-fixed positions")
-    p.add_argument("--data", default=None, help=f"folder that holds the data sets, with {WALK_SET}/ in it (like "
-                                                f"../shared/data; relative to the working directory); default "
-                                                f"${DATA_ENV}")
+    p = subparsers.add_parser(
+        "walk",
+        help="the real IMU + RTK walk set (same as `jaxnav ins walk_0827`): 15-state "
+        "LC filter and RTS with simulated 15 s GNSS outages, scored against the "
+        "withheld RTK-fixed positions",
+    )
+    p.add_argument(
+        "--data",
+        default=None,
+        help=f"folder that holds the data sets, with {WALK_SET}/ in it (like "
+        f"../shared/data; relative to the working directory); default "
+        f"${DATA_ENV}",
+    )
     p.add_argument("--out", default="out/walk", help="output folder; default out/walk")
     return p
 

@@ -29,6 +29,9 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
 """
 
 from jaxnav.experiments.filter_family import format_filter_family, run_filter_family
+from jaxnav.experiments.ins_config import InsConfig, load_ins_config
+from jaxnav.experiments.ins_output import format_ins, process
+from jaxnav.experiments.ins_run import InsRun, gnss_measurements, prepare, run_ins, tune_noise
 from jaxnav.experiments.s0 import (
     EXPERIMENT,
     FILTERS,
@@ -48,7 +51,6 @@ from jaxnav.experiments.s0 import (
     s0_rule,
     scenario,
 )
-from jaxnav.experiments.velocities import run_monitor_velocities, station_record
 from jaxnav.experiments.s1 import (
     S1_PUBLISHED,
     S1Settings,
@@ -58,30 +60,96 @@ from jaxnav.experiments.s1 import (
     run_s1_simulation,
     s1_tables,
 )
-from jaxnav.experiments.tuning import CONFIGS, Problem, format_sweep, format_tune, load_config, run_sweep, run_tune
 from jaxnav.experiments.s2 import format_rtk, run_rtk, write_simulated_survey
-from jaxnav.experiments.s3 import (ar_identification, detector_params_for, format_cadastral, grade_params,
-                                   preprocessing_check, run_cadastral, survey_monte_carlo, walk_detection)
-from jaxnav.experiments.ins_config import InsConfig, load_ins_config
-from jaxnav.experiments.ins_output import format_ins, process
-from jaxnav.experiments.ins_run import InsRun, gnss_measurements, prepare, run_ins, tune_noise
-from jaxnav.experiments.walk import (WALK_LEVER_RFU, WALK_SENSOR_TO_BODY, WalkData, format_walk, frame_check,
-                                     load_walk, run_walk, walk_config, write_walk_scores)
+from jaxnav.experiments.s3 import (
+    ar_identification,
+    detector_params_for,
+    format_cadastral,
+    grade_params,
+    preprocessing_check,
+    run_cadastral,
+    survey_monte_carlo,
+    walk_detection,
+)
+from jaxnav.experiments.tuning import CONFIGS, Problem, format_sweep, format_tune, load_config, run_sweep, run_tune
+from jaxnav.experiments.velocities import run_monitor_velocities, station_record
+from jaxnav.experiments.walk import (
+    WALK_LEVER_RFU,
+    WALK_SENSOR_TO_BODY,
+    WalkData,
+    format_walk,
+    frame_check,
+    load_walk,
+    run_walk,
+    walk_config,
+    write_walk_scores,
+)
 
 __all__ = [
-    "CONFIGS", "EXPERIMENT", "FILTERS", "Problem", "S0Setup", "S0_FILTERS", "S0_LOSSES", "S0_PARAMS", "S1Settings",
-    "S1_PUBLISHED", "cut_timeline", "filter_params", "format_filter_family", "format_s0", "format_s1_tables",
-    "format_sweep", "format_tune", "inflated_states", "load_config", "load_experiment", "rules", "run_filter_family",
-    "run_monitor_files", "run_monitor_simulation", "run_monitor_velocities", "station_record", "run_s0",
-    "run_s1_simulation", "run_sweep", "run_tune",
-    "s0_measurements", "s0_metrics", "s0_rule", "s1_tables", "scenario",
+    "CONFIGS",
+    "EXPERIMENT",
+    "FILTERS",
+    "Problem",
+    "S0Setup",
+    "S0_FILTERS",
+    "S0_LOSSES",
+    "S0_PARAMS",
+    "S1Settings",
+    "S1_PUBLISHED",
+    "cut_timeline",
+    "filter_params",
+    "format_filter_family",
+    "format_s0",
+    "format_s1_tables",
+    "format_sweep",
+    "format_tune",
+    "inflated_states",
+    "load_config",
+    "load_experiment",
+    "rules",
+    "run_filter_family",
+    "run_monitor_files",
+    "run_monitor_simulation",
+    "run_monitor_velocities",
+    "station_record",
+    "run_s0",
+    "run_s1_simulation",
+    "run_sweep",
+    "run_tune",
+    "s0_measurements",
+    "s0_metrics",
+    "s0_rule",
+    "s1_tables",
+    "scenario",
 ]
 __all__ += [
-    "format_rtk", "run_rtk", "write_simulated_survey",
-    "ar_identification", "detector_params_for", "format_cadastral", "grade_params", "preprocessing_check",
-    "run_cadastral", "survey_monte_carlo", "walk_detection",
-    "WALK_LEVER_RFU", "WALK_SENSOR_TO_BODY", "WalkData", "format_walk", "frame_check", "load_walk",
-    "run_walk", "walk_config", "write_walk_scores",
-    "InsConfig", "InsRun", "format_ins", "gnss_measurements", "load_ins_config", "prepare", "process", "run_ins",
+    "format_rtk",
+    "run_rtk",
+    "write_simulated_survey",
+    "ar_identification",
+    "detector_params_for",
+    "format_cadastral",
+    "grade_params",
+    "preprocessing_check",
+    "run_cadastral",
+    "survey_monte_carlo",
+    "walk_detection",
+    "WALK_LEVER_RFU",
+    "WALK_SENSOR_TO_BODY",
+    "WalkData",
+    "format_walk",
+    "frame_check",
+    "load_walk",
+    "run_walk",
+    "walk_config",
+    "write_walk_scores",
+    "InsConfig",
+    "InsRun",
+    "format_ins",
+    "gnss_measurements",
+    "load_ins_config",
+    "prepare",
+    "process",
+    "run_ins",
     "tune_noise",
 ]

@@ -45,8 +45,11 @@ def _nearest_grade(arw):
 def _edge(fit, sensor):
     """Per-axis values of an :class:`jaxnav.ins.AllanFit` in datasheet units (lists; unit in each key)."""
     if sensor == "gyro":
-        conv = (units.rad_per_sqrt_s_to_deg_per_sqrt_hour, units.rad_per_s_to_deg_per_hour,
-                units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour)
+        conv = (
+            units.rad_per_sqrt_s_to_deg_per_sqrt_hour,
+            units.rad_per_s_to_deg_per_hour,
+            units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour,
+        )
         heads = ("arw", "bias_instability", "rate_rw")
         tails = ("_deg_per_sqrt_h", "_deg_per_h", "_deg_per_h_per_sqrt_h")
         dev = ("adev", "_deg_per_h", units.rad_per_s_to_deg_per_hour)
@@ -57,8 +60,15 @@ def _edge(fit, sensor):
         dev = ("adev", "_mg", units.mps2_to_mg)
     lst = lambda a: [float(v) for v in np.asarray(a, float).reshape(-1)]  # noqa: E731
     out = {}
-    for j, (c, h, t, v, s) in enumerate(zip(conv, heads, tails, (fit.white, fit.bias_instability, fit.rate_rw),
-                                            (fit.white_sigma, fit.bias_instability_sigma, fit.rate_rw_sigma))):
+    for j, (c, h, t, v, s) in enumerate(
+        zip(
+            conv,
+            heads,
+            tails,
+            (fit.white, fit.bias_instability, fit.rate_rw),
+            (fit.white_sigma, fit.bias_instability_sigma, fit.rate_rw_sigma),
+        )
+    ):
         out[h + t] = lst(c(np.asarray(v)))
         out[h + "_sigma" + t] = lst(c(np.asarray(s)))
         out[h + "_upper_2sigma" + t] = lst(c(np.asarray(fit.upper)[..., j]))
@@ -68,8 +78,9 @@ def _edge(fit, sensor):
     out["tau_s"] = lst(fit.taus)
     av = np.asarray(fit.avar)
     out[dev[0] + dev[1]] = [lst(dev[2](np.sqrt(a))) for a in av]
-    out[dev[0] + "_sigma" + dev[1]] = [lst(dev[2](s / (2.0 * np.sqrt(np.maximum(a, 1e-300)))))
-                                       for a, s in zip(av, np.asarray(fit.avar_sigma))]
+    out[dev[0] + "_sigma" + dev[1]] = [
+        lst(dev[2](s / (2.0 * np.sqrt(np.maximum(a, 1e-300))))) for a, s in zip(av, np.asarray(fit.avar_sigma))
+    ]
     out["fitted"] = [bool(x) for x in fit.fitted]
     return out
 
@@ -91,28 +102,42 @@ def noise_toml(gyro, accel, *, source: str) -> str:
     vals = [
         ("arw_deg_per_sqrt_h", units.rad_per_sqrt_s_to_deg_per_sqrt_hour(n.gyro_arw), "gyro white noise"),
         ("vrw_m_per_s_per_sqrt_h", units.mps_per_sqrt_s_to_mps_per_sqrt_hour(n.accel_vrw), "accelerometer white noise"),
-        ("gyro_bias_instability_deg_per_h", units.rad_per_s_to_deg_per_hour(n.gyro_bias_instability),
-         "Gauss-Markov sigma = 1.075 B (its Allan peak at the 0.664 B floor)"),
+        (
+            "gyro_bias_instability_deg_per_h",
+            units.rad_per_s_to_deg_per_hour(n.gyro_bias_instability),
+            "Gauss-Markov sigma = 1.075 B (its Allan peak at the 0.664 B floor)",
+        ),
         ("bias_correlation_time_s", n.gyro_bias_tau, "gyro: tau of the Allan minimum / 1.893"),
         ("accel_bias_instability_mg", units.mps2_to_mg(n.accel_bias_instability), "Gauss-Markov sigma = 1.075 B"),
         ("accel_bias_correlation_time_s", n.accel_bias_tau, "accelerometer: tau of the Allan minimum / 1.893"),
-        ("gyro_bias_rw_deg_per_h_per_sqrt_h", units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour(n.gyro_bias_rw),
-         "rate random walk (used with states = 21)"),
-        ("accel_bias_rw_mg_per_sqrt_h", units.mps2_per_sqrt_s_to_mg_per_sqrt_hour(n.accel_bias_rw),
-         "rate random walk (used with states = 21)"),
+        (
+            "gyro_bias_rw_deg_per_h_per_sqrt_h",
+            units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour(n.gyro_bias_rw),
+            "rate random walk (used with states = 21)",
+        ),
+        (
+            "accel_bias_rw_mg_per_sqrt_h",
+            units.mps2_per_sqrt_s_to_mg_per_sqrt_hour(n.accel_bias_rw),
+            "rate random walk (used with states = 21)",
+        ),
     ]
-    lines = [f"# [noise] from the Allan variance of {source} (jaxnav allan): the largest of the three axes;",
-             "# a term the recording could not resolve is given its 2-sigma upper bound (see results.json)",
-             ]
+    lines = [
+        f"# [noise] from the Allan variance of {source} (jaxnav allan): the largest of the three axes;",
+        "# a term the recording could not resolve is given its 2-sigma upper bound (see results.json)",
+    ]
     dur = gyro.n * gyro.dt
     if dur < SHORT_RECORDING_S:
-        lines += [f"# only {dur:.0f} s of data (taus up to {float(gyro.taus[-1]):.3g} s): the bias instability, its "
-                  "correlation time and the rate random walk",
-                  "# are bounds or weak estimates here, written commented out (the grade's values stand); "
-                  "record an hour or longer to measure them"]
-    lines += ["[noise]",
-             f'grade = "{_nearest_grade(float(n.gyro_arw))}"  # nearest preset in ARW: turn-on bias and scale-factor '
-             "sigmas (not measurable from a static recording)"]
+        lines += [
+            f"# only {dur:.0f} s of data (taus up to {float(gyro.taus[-1]):.3g} s): the bias instability, its "
+            "correlation time and the rate random walk",
+            "# are bounds or weak estimates here, written commented out (the grade's values stand); "
+            "record an hour or longer to measure them",
+        ]
+    lines += [
+        "[noise]",
+        f'grade = "{_nearest_grade(float(n.gyro_arw))}"  # nearest preset in ARW: turn-on bias and scale-factor '
+        "sigmas (not measurable from a static recording)",
+    ]
     for key, v, what in vals:
         lo, hi = RANGES[f"noise.{key}"]
         v = float(v)
@@ -163,8 +188,10 @@ def run_allan(imu, out, *, source: str, start_s=None, end_s=None, tau_range=None
     if end_s is not None:
         keep &= rel <= end_s
     if keep.sum() < 64:
-        raise ValueError(f"{source}: only {int(keep.sum())} samples in the stretch "
-                         f"[{start_s or 0:g}, {end_s if end_s is not None else rel[-1]:g}] s; need >= 64")
+        raise ValueError(
+            f"{source}: only {int(keep.sum())} samples in the stretch "
+            f"[{start_s or 0:g}, {end_s if end_s is not None else rel[-1]:g}] s; need >= 64"
+        )
     sel = imu._replace(t=t[keep], f_b=np.asarray(imu.f_b)[keep], w_b=np.asarray(imu.w_b)[keep])
     bad = check_static(sel)
     if bad:
@@ -177,30 +204,56 @@ def run_allan(imu, out, *, source: str, start_s=None, end_s=None, tau_range=None
     eg, ea = _edge(fit_g, "gyro"), _edge(fit_a, "accel")
     dur = float(sel.t[-1] - sel.t[0])
     name = title or source
-    plot_allan(fit_g.taus, units.rad_per_s_to_deg_per_hour(np.sqrt(fit_g.avar)),
-               units.rad_per_s_to_deg_per_hour(fit_g.avar_sigma / (2 * np.sqrt(fit_g.avar))), fit_g.fitted,
-               units.rad_per_s_to_deg_per_hour(fit_g.white), units.rad_per_s_to_deg_per_hour(fit_g.bias_instability),
-               units.rad_per_s_to_deg_per_hour(fit_g.rate_rw), out / "allan_gyro.png",
-               title=f"gyro Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)", adev_unit="deg/h",
-               white_label=_labels(eg, 0, "deg/sqrt(h)"),
-               bi_label=_labels(eg, 1, "deg/h"), rrw_label=_labels(eg, 2, "deg/h/sqrt(h)"), resolved=fit_g.resolved,
-               bounds=np.stack([units.rad_per_s_to_deg_per_hour(fit_g.upper[..., j]) for j in range(3)], -1))
-    plot_allan(fit_a.taus, units.mps2_to_mg(np.sqrt(fit_a.avar)),
-               units.mps2_to_mg(fit_a.avar_sigma / (2 * np.sqrt(fit_a.avar))), fit_a.fitted,
-               units.mps2_to_mg(fit_a.white), units.mps2_to_mg(fit_a.bias_instability),
-               units.mps2_to_mg(fit_a.rate_rw), out / "allan_accel.png",
-               title=f"accelerometer Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)", adev_unit="mg",
-               white_label=_labels(ea, 0, "m/s/sqrt(h)"), bi_label=_labels(ea, 1, "mg"),
-               rrw_label=_labels(ea, 2, "mg/sqrt(h)"), resolved=fit_a.resolved,
-               bounds=np.stack([units.mps2_to_mg(fit_a.upper[..., j]) for j in range(3)], -1))
+    plot_allan(
+        fit_g.taus,
+        units.rad_per_s_to_deg_per_hour(np.sqrt(fit_g.avar)),
+        units.rad_per_s_to_deg_per_hour(fit_g.avar_sigma / (2 * np.sqrt(fit_g.avar))),
+        fit_g.fitted,
+        units.rad_per_s_to_deg_per_hour(fit_g.white),
+        units.rad_per_s_to_deg_per_hour(fit_g.bias_instability),
+        units.rad_per_s_to_deg_per_hour(fit_g.rate_rw),
+        out / "allan_gyro.png",
+        title=f"gyro Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)",
+        adev_unit="deg/h",
+        white_label=_labels(eg, 0, "deg/sqrt(h)"),
+        bi_label=_labels(eg, 1, "deg/h"),
+        rrw_label=_labels(eg, 2, "deg/h/sqrt(h)"),
+        resolved=fit_g.resolved,
+        bounds=np.stack([units.rad_per_s_to_deg_per_hour(fit_g.upper[..., j]) for j in range(3)], -1),
+    )
+    plot_allan(
+        fit_a.taus,
+        units.mps2_to_mg(np.sqrt(fit_a.avar)),
+        units.mps2_to_mg(fit_a.avar_sigma / (2 * np.sqrt(fit_a.avar))),
+        fit_a.fitted,
+        units.mps2_to_mg(fit_a.white),
+        units.mps2_to_mg(fit_a.bias_instability),
+        units.mps2_to_mg(fit_a.rate_rw),
+        out / "allan_accel.png",
+        title=f"accelerometer Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)",
+        adev_unit="mg",
+        white_label=_labels(ea, 0, "m/s/sqrt(h)"),
+        bi_label=_labels(ea, 1, "mg"),
+        rrw_label=_labels(ea, 2, "mg/sqrt(h)"),
+        resolved=fit_a.resolved,
+        bounds=np.stack([units.mps2_to_mg(fit_a.upper[..., j]) for j in range(3)], -1),
+    )
     summary = {
-        "input": {"file": source, "n_samples": int(keep.sum()), "n_uniform": int(y.shape[1]), "dt_s": dt,
-                  "duration_s": dur, "start_s": float(rel[keep][0]), "end_s": float(rel[keep][-1]),
-                  "tau_range_s": None if tau_range is None else [float(v) for v in tau_range]},
-        "gyro": eg, "accel": ea,
+        "input": {
+            "file": source,
+            "n_samples": int(keep.sum()),
+            "n_uniform": int(y.shape[1]),
+            "dt_s": dt,
+            "duration_s": dur,
+            "start_s": float(rel[keep][0]),
+            "end_s": float(rel[keep][-1]),
+            "tau_range_s": None if tau_range is None else [float(v) for v in tau_range],
+        },
+        "gyro": eg,
+        "accel": ea,
         "method": "overlapping Allan variance at 2 taus per octave (>= 3 clusters); weighted least squares of "
-                  "N^2/tau + (2 ln2/pi) B^2 + K^2 tau/3 with the estimator's variance (IEEE Std 952 Annex C); "
-                  "sigmas treat the taus as independent and are a lower bound",
+        "N^2/tau + (2 ln2/pi) B^2 + K^2 tau/3 with the estimator's variance (IEEE Std 952 Annex C); "
+        "sigmas treat the taus as independent and are a lower bound",
         "noise_toml": toml,
         "files": ["allan_gyro.png", "allan_accel.png", "noise.toml", "results.json"],
     }
@@ -212,21 +265,28 @@ def _labels(e, j, unit):
     """Legend texts "value +- sigma unit" per axis (or "< upper (not resolved)") of term j (0 white, 1 BI, 2 RRW)."""
     head = ("vrw" if "vrw_m_per_s_per_sqrt_h" in e else "arw", "bias_instability", "rate_rw")[j]
     key = next(k for k in e if k.startswith(head + "_") and "_sigma" not in k and "_upper" not in k)
-    tail = key[len(head):]
+    tail = key[len(head) :]
     vals, sig, up = e[key], e[f"{head}_sigma{tail}"], e[f"{head}_upper_2sigma{tail}"]
     res = [r[j] for r in e["resolved_white_bi_rrw"]]
-    return [f"{v:.3g} +- {s:.2g} {unit}" if r else f"< {u:.2g} {unit} (not resolved)"
-            for v, s, u, r in zip(vals, sig, up, res)]
+    return [
+        f"{v:.3g} +- {s:.2g} {unit}" if r else f"< {u:.2g} {unit} (not resolved)"
+        for v, s, u, r in zip(vals, sig, up, res)
+    ]
 
 
 def format_allan(summary: dict) -> str:
     """The command's summary: per sensor the fitted terms of each axis, then the TOML section."""
-    lines = [f"{summary['input']['file']}: {summary['input']['duration_s']:.0f} s static, "
-             f"dt {summary['input']['dt_s'] * 1e3:.3g} ms"]
-    for sensor, parts in (("gyro", ((0, "ARW", "deg/sqrt(h)"), (1, "bias instability", "deg/h"),
-                                    (2, "rate random walk", "deg/h/sqrt(h)"))),
-                          ("accel", ((0, "VRW", "m/s/sqrt(h)"), (1, "bias instability", "mg"),
-                                     (2, "rate random walk", "mg/sqrt(h)")))):
+    lines = [
+        f"{summary['input']['file']}: {summary['input']['duration_s']:.0f} s static, "
+        f"dt {summary['input']['dt_s'] * 1e3:.3g} ms"
+    ]
+    for sensor, parts in (
+        (
+            "gyro",
+            ((0, "ARW", "deg/sqrt(h)"), (1, "bias instability", "deg/h"), (2, "rate random walk", "deg/h/sqrt(h)")),
+        ),
+        ("accel", ((0, "VRW", "m/s/sqrt(h)"), (1, "bias instability", "mg"), (2, "rate random walk", "mg/sqrt(h)"))),
+    ):
         for j, what, unit in parts:
             lines.append(f"  {sensor:5s} {what:17s} x/y/z: " + "; ".join(_labels(summary[sensor], j, unit)))
     return "\n".join(lines) + "\n\n" + summary["noise_toml"]

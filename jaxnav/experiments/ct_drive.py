@@ -21,7 +21,7 @@ covariance plus a floor (``sigma_floor``) for its optimistic fixed-epoch sigmas.
 from __future__ import annotations
 
 import pathlib
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -159,8 +159,12 @@ def run_variants(model, zs, kinds=FILTERS, plugins=PLUGINS):
             else:
                 r = jf.unscented_kalman_filter(model, x0, P0, zs, alpha=UKF_ALPHA, **plugin(name))
                 s = jf.unscented_rts_smoother(model, r, alpha=UKF_ALPHA)
-            out[(kind, name)] = {"filtered": np.asarray(r.means), "smoothed": np.asarray(s.means),
-                                 "n_masked": int(r.n_nonfinite), "status": int(r.status)}
+            out[(kind, name)] = {
+                "filtered": np.asarray(r.means),
+                "smoothed": np.asarray(s.means),
+                "n_masked": int(r.n_nonfinite),
+                "status": int(r.status),
+            }
     return out
 
 
@@ -189,8 +193,18 @@ def turning(truth, threshold=np.radians(5.0), min_speed=1.0):
 STIFF = {"accel_std": 0.1, "turn_std": 0.005}  # a model that expects near-straight, steady driving
 
 
-def run_ct_drive(folder, out: Optional[str] = None, *, kinds=FILTERS, plugins=PLUGINS, n_outliers=6, seed=0,
-                 sigma_floor=0.1, stiff=STIFF, **model_kw) -> dict:
+def run_ct_drive(
+    folder,
+    out: str | None = None,
+    *,
+    kinds=FILTERS,
+    plugins=PLUGINS,
+    n_outliers=6,
+    seed=0,
+    sigma_floor=0.1,
+    stiff=STIFF,
+    **model_kw,
+) -> dict:
     """The whole comparison on the drive.
 
     1. Every (filter, plug-in) pair, filtered and smoothed, with :func:`ct_model` (``model_kw``).
@@ -217,8 +231,9 @@ def run_ct_drive(folder, out: Optional[str] = None, *, kinds=FILTERS, plugins=PL
     truth = drive.truth
 
     def errs(res):
-        return {(k, p, st): horizontal_errors(v[st], truth)
-                for (k, p), v in res.items() for st in ("filtered", "smoothed")}
+        return {
+            (k, p, st): horizontal_errors(v[st], truth) for (k, p), v in res.items() for st in ("filtered", "smoothed")
+        }
 
     res = run_variants(model, drive.zs, kinds, plugins)
     stiff_res = run_variants(ct_model(R, **stiff), drive.zs, ("EKF",), ("classic", "fading"))
@@ -226,14 +241,22 @@ def run_ct_drive(folder, out: Optional[str] = None, *, kinds=FILTERS, plugins=PL
     zo, ko = inject_outliers(drive.zs, runs & (drive.q == 1), n_outliers, seed=seed)
     bad = run_variants(model, zo, ("EKF",), ("classic", "igg3"))
     result = {
-        "drive": drive, "raw": horizontal_errors(drive.zs, truth), "measured": np.isfinite(drive.zs[:, 0]),
-        "turns": turning(truth), "fixed_runs": runs, "errors": errs(res), "manoeuvre_errors": errs(stiff_res),
-        "outlier_errors": errs(bad), "outlier_epochs": ko,
-        "n_masked": next(iter(res.values()))["n_masked"], "status": {k: v["status"] for k, v in res.items()},
+        "drive": drive,
+        "raw": horizontal_errors(drive.zs, truth),
+        "measured": np.isfinite(drive.zs[:, 0]),
+        "turns": turning(truth),
+        "fixed_runs": runs,
+        "errors": errs(res),
+        "manoeuvre_errors": errs(stiff_res),
+        "outlier_errors": errs(bad),
+        "outlier_epochs": ko,
+        "n_masked": next(iter(res.values()))["n_masked"],
+        "status": {k: v["status"] for k, v in res.items()},
         "figure": None,
     }
     if out is not None:
         from jaxnav.experiments.figures import plot_ct_drive
+
         outdir = pathlib.Path(out)
         outdir.mkdir(parents=True, exist_ok=True)
         result["figure"] = outdir / "ct_drive.png"
@@ -246,29 +269,47 @@ def format_ct_drive(result) -> str:
     meas, turns, runs = result["measured"], result["turns"], result["fixed_runs"]
     raw = result["raw"]
     f2 = lambda v: f"{v[0]:.2f} / {v[1]:.2f}"  # noqa: E731
-    lines = ["| filter | plug-in | filtered, all epochs | smoothed, all epochs | filtered, measured epochs | "
-             "smoothed, measured epochs |", "|---|---|---|---|---|---|",
-             f"| rover RTK itself | | | | {f2(scores(raw, meas))} | |"]
+    lines = [
+        "| filter | plug-in | filtered, all epochs | smoothed, all epochs | filtered, measured epochs | "
+        "smoothed, measured epochs |",
+        "|---|---|---|---|---|---|",
+        f"| rover RTK itself | | | | {f2(scores(raw, meas))} | |",
+    ]
     e = result["errors"]
     for k, p, st in e:
         if st == "filtered":
-            lines.append(f"| {k} | {p} | {f2(scores(e[(k, p, 'filtered')]))} | {f2(scores(e[(k, p, 'smoothed')]))} | "
-                         f"{f2(scores(e[(k, p, 'filtered')], meas))} | {f2(scores(e[(k, p, 'smoothed')], meas))} |")
-    lines += ["", "| stiff model, EKF | filtered, in turns | smoothed, in turns | filtered, all epochs |",
-              "|---|---|---|---|"]
+            lines.append(
+                f"| {k} | {p} | {f2(scores(e[(k, p, 'filtered')]))} | {f2(scores(e[(k, p, 'smoothed')]))} | "
+                f"{f2(scores(e[(k, p, 'filtered')], meas))} | {f2(scores(e[(k, p, 'smoothed')], meas))} |"
+            )
+    lines += [
+        "",
+        "| stiff model, EKF | filtered, in turns | smoothed, in turns | filtered, all epochs |",
+        "|---|---|---|---|",
+    ]
     m = result["manoeuvre_errors"]
     for p in ("classic", "fading"):
-        lines.append(f"| {p} | {f2(scores(m[('EKF', p, 'filtered')], turns))} | "
-                     f"{f2(scores(m[('EKF', p, 'smoothed')], turns))} | {f2(scores(m[('EKF', p, 'filtered')]))} |")
-    lines += ["", f"| {len(result['outlier_epochs'])} outliers of 20-50 m in the fixed runs, EKF | "
-                  "filtered, fixed runs | smoothed, fixed runs | filtered, all epochs |", "|---|---|---|---|"]
+        lines.append(
+            f"| {p} | {f2(scores(m[('EKF', p, 'filtered')], turns))} | "
+            f"{f2(scores(m[('EKF', p, 'smoothed')], turns))} | {f2(scores(m[('EKF', p, 'filtered')]))} |"
+        )
+    lines += [
+        "",
+        f"| {len(result['outlier_epochs'])} outliers of 20-50 m in the fixed runs, EKF | "
+        "filtered, fixed runs | smoothed, fixed runs | filtered, all epochs |",
+        "|---|---|---|---|",
+    ]
     o = result["outlier_errors"]
     clean = result["errors"]
     if ("EKF", "classic", "filtered") in clean:
-        lines.append(f"| classic, no outliers | {f2(scores(clean[('EKF', 'classic', 'filtered')], runs))} | "
-                     f"{f2(scores(clean[('EKF', 'classic', 'smoothed')], runs))} | "
-                     f"{f2(scores(clean[('EKF', 'classic', 'filtered')]))} |")
+        lines.append(
+            f"| classic, no outliers | {f2(scores(clean[('EKF', 'classic', 'filtered')], runs))} | "
+            f"{f2(scores(clean[('EKF', 'classic', 'smoothed')], runs))} | "
+            f"{f2(scores(clean[('EKF', 'classic', 'filtered')]))} |"
+        )
     for p in ("classic", "igg3"):
-        lines.append(f"| {p} | {f2(scores(o[('EKF', p, 'filtered')], runs))} | "
-                     f"{f2(scores(o[('EKF', p, 'smoothed')], runs))} | {f2(scores(o[('EKF', p, 'filtered')]))} |")
+        lines.append(
+            f"| {p} | {f2(scores(o[('EKF', p, 'filtered')], runs))} | "
+            f"{f2(scores(o[('EKF', p, 'smoothed')], runs))} | {f2(scores(o[('EKF', p, 'filtered')]))} |"
+        )
     return "\n".join(lines)

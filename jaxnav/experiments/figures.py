@@ -17,8 +17,7 @@ from jaxnav.units import MM
 AXES = ("E", "N", "U")
 
 
-def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, sweep_per_seed=None,
-            seed_label="seed 0"):
+def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, sweep_per_seed=None, seed_label="seed 0"):
     """Write the S0 figures into ``outdir``; return their paths.
 
     Args:
@@ -41,8 +40,10 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, swee
     ax[0].axis("equal")
     ax[0].legend()
     lat0, lon0 = np.rad2deg(pos[0, 0]), np.rad2deg(pos[0, 1])  # the truth's start, not a fixed text
-    ax[0].set_title(f"S0 true trajectory, start {abs(lon0):.2f} deg {'E' if lon0 >= 0 else 'W'}, "
-                    f"{abs(lat0):.2f} deg {'N' if lat0 >= 0 else 'S'}")
+    ax[0].set_title(
+        f"S0 true trajectory, start {abs(lon0):.2f} deg {'E' if lon0 >= 0 else 'W'}, "
+        f"{abs(lat0):.2f} deg {'N' if lat0 >= 0 else 'S'}"
+    )
     tt = np.asarray(truth.t)
     # ellipsoidal height, not the tangent-plane "up" (which drops ~d^2 / 2R, ~1 km over 115 km)
     ax[1].plot(tt, pos[:, 2] - pos[0, 2])
@@ -73,7 +74,9 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, swee
     for name, d in detail.items():
         fig, ax = plt.subplots(3, 2, figsize=(13, 8), sharex=True)
         for i in range(3):
-            for j, (err, sig, unit) in enumerate(((d["pos_err"], d["sig_pos"], "m"), (d["vel_err"], d["sig_vel"], "m/s"))):
+            for j, (err, sig, unit) in enumerate(
+                ((d["pos_err"], d["sig_pos"], "m"), (d["vel_err"], d["sig_vel"], "m/s"))
+            ):
                 ax[i, j].fill_between(t, -3 * sig[:, i], 3 * sig[:, i], color="0.85", label="+-3 sigma")
                 ax[i, j].plot(t, err[:, i], lw=0.8, label="error")
                 ax[i, j].set_ylabel(f"{'pos' if j == 0 else 'vel'} {AXES[i]}, {unit}")
@@ -94,8 +97,13 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, swee
     fax.append(fig.add_subplot(gs[1, 0], sharex=fax[0]))
     sax = fig.add_subplot(gs[:, 1])
     # S_k and lambda_k in separate panels: on one axis the attenuated filter's S_k lay under lambda_k
-    for a, (name, label, color) in zip(fax, (("attenuated", "S_k (attenuated, S0 eq. 11)", "tab:orange"),
-                                             ("fading", "lambda_k (fading, S0 eqs. 13-17)", "tab:blue"))):
+    for a, (name, label, color) in zip(
+        fax,
+        (
+            ("attenuated", "S_k (attenuated, S0 eq. 11)", "tab:orange"),
+            ("fading", "lambda_k (fading, S0 eqs. 13-17)", "tab:blue"),
+        ),
+    ):
         if name in detail:
             f = np.asarray(detail[name]["factors"])
             a.plot(t, f, lw=0.8, color=color, label=label)
@@ -113,10 +121,19 @@ def plot_s0(outdir, *, truth, gidx, t, detail, sweep_b, sweep_rms, b_paper, swee
     if sweep_per_seed is not None:
         ps = np.asarray(sweep_per_seed, float).reshape(len(sweep_b), -1)
         lo, hi, sd = ps.min(1), ps.max(1), ps.std(1)
-        sax.errorbar(sweep_b, sweep_rms, yerr=[sweep_rms - lo, hi - sweep_rms], fmt="none", ecolor="0.6",
-                     elinewidth=1, capsize=5, label=f"min-max over {ps.shape[1]} seeds")
-        sax.errorbar(sweep_b, sweep_rms, yerr=sd, fmt="o-", color="tab:blue", elinewidth=2.5, capsize=0,
-                     label="mean +- 1 std")
+        sax.errorbar(
+            sweep_b,
+            sweep_rms,
+            yerr=[sweep_rms - lo, hi - sweep_rms],
+            fmt="none",
+            ecolor="0.6",
+            elinewidth=1,
+            capsize=5,
+            label=f"min-max over {ps.shape[1]} seeds",
+        )
+        sax.errorbar(
+            sweep_b, sweep_rms, yerr=sd, fmt="o-", color="tab:blue", elinewidth=2.5, capsize=0, label="mean +- 1 std"
+        )
     else:
         sax.plot(sweep_b, sweep_rms, "o-", color="tab:blue", label="mean")
     i = int(np.argmin(np.abs(sweep_b - b_paper)))
@@ -158,8 +175,7 @@ def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathli
     starts = []
     for k, (ta, tb) in enumerate(scores.windows):
         w = (t >= ta) & (t < tb)
-        a.plot(ref[w, 0], ref[w, 1], "k.", ms=4,
-               label="withheld (outage n, numbered at its start)" if k == 0 else None)
+        a.plot(ref[w, 0], ref[w, 1], "k.", ms=4, label="withheld (outage n, numbered at its start)" if k == 0 else None)
         if w.any():
             starts.append((k + 1, ref[np.nonzero(w)[0][0], :2]))
     a.plot(ref[0, 0], ref[0, 1], "g^", label="start")
@@ -172,8 +188,14 @@ def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathli
     for n, xy in starts:
         if all(np.hypot(*(xy - q)) > 0.04 * span for q in placed):
             placed.append(xy)
-            a.annotate(str(n), xy, xytext=(3, 3), textcoords="offset points", fontsize=8,
-                       bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="0.5", lw=0.5, alpha=0.8))
+            a.annotate(
+                str(n),
+                xy,
+                xytext=(3, 3),
+                textcoords="offset points",
+                fontsize=8,
+                bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="0.5", lw=0.5, alpha=0.8),
+            )
     a.legend(fontsize=8)
     a.set_title(f"{title}: track, GNSS withheld on the outage windows")
     b = ax[1]
@@ -183,10 +205,24 @@ def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathli
     for j, k in enumerate(scored):  # one legend entry per solution, for all outages together
         ta, tb = scores.windows[k]
         w = (t >= ta) & (t < tb)
-        b.plot(t[w] - ta, scores.err_fwd[w], "-", color="C0", lw=1, alpha=0.8,
-               label=f"forward filter ({len(scored)} outages; max {fwd_max:.2f} m)" if j == 0 else None)
-        b.plot(t[w] - ta, scores.err_sm[w], "--", color="C1", lw=1, alpha=0.8,
-               label=f"RTS smoother (max {sm_max:.2f} m)" if j == 0 else None)
+        b.plot(
+            t[w] - ta,
+            scores.err_fwd[w],
+            "-",
+            color="C0",
+            lw=1,
+            alpha=0.8,
+            label=f"forward filter ({len(scored)} outages; max {fwd_max:.2f} m)" if j == 0 else None,
+        )
+        b.plot(
+            t[w] - ta,
+            scores.err_sm[w],
+            "--",
+            color="C1",
+            lw=1,
+            alpha=0.8,
+            label=f"RTS smoother (max {sm_max:.2f} m)" if j == 0 else None,
+        )
     skipped = len(scores.windows) - len(scored)
     if skipped:
         b.plot([], [], " ", label=f"{skipped} outage(s) without an RTK-fixed epoch inside (not scored)")
@@ -202,8 +238,7 @@ def plot_walk(scores, extras: dict, path, *, title: str = "walk_0827") -> pathli
 
 
 #: line colour of each filter in :func:`plot_filter_family`
-COLORS = {"classic": "tab:gray", "attenuated": "tab:orange", "fading": "tab:blue",
-          "variance_compensation": "tab:green"}
+COLORS = {"classic": "tab:gray", "attenuated": "tab:orange", "fading": "tab:blue", "variance_compensation": "tab:green"}
 
 
 def plot_filter_family(runs: dict, t, change, path, *, b=None):
@@ -247,8 +282,11 @@ def plot_filter_family(runs: dict, t, change, path, *, b=None):
             a.set_title(title, fontsize=9)
     ax[1].set_title("horizontal position error (same filters)", fontsize=9)
     ax[2].set_title("inflation factors of the predicted covariance", fontsize=9)
-    ax[0].set_title("Filter family on a constant-velocity series with an unmodelled acceleration burst (shaded)\n"
-                    "up position error, one Monte Carlo seed", fontsize=10)
+    ax[0].set_title(
+        "Filter family on a constant-velocity series with an unmodelled acceleration burst (shaded)\n"
+        "up position error, one Monte Carlo seed",
+        fontsize=10,
+    )
     fig.tight_layout()
     path = pathlib.Path(path)
     save_figure(fig, path, dpi=110)
@@ -291,24 +329,44 @@ def plot_ct_drive(result: dict, path):
     for (k, p, st), e in result["errors"].items():
         if p != "classic":  # the plug-ins are in the tables; here the filters and the smoother
             continue
-        ax[0].semilogy(t, e, "-" if st == "filtered" else "--", color=COLOR.get(k), lw=0.8 if st == "filtered" else 1.2,
-                       alpha=0.85, label=f"{k} classic, {st}")
+        ax[0].semilogy(
+            t,
+            e,
+            "-" if st == "filtered" else "--",
+            color=COLOR.get(k),
+            lw=0.8 if st == "filtered" else 1.2,
+            alpha=0.85,
+            label=f"{k} classic, {st}",
+        )
     ax[0].set_ylabel("horizontal error, m")
-    ax[0].set_title("Coordinated-turn model on the real 1 Hz RTK drive (mostly float): "
-                    "horizontal error against the reference")
+    ax[0].set_title(
+        "Coordinated-turn model on the real 1 Hz RTK drive (mostly float): horizontal error against the reference"
+    )
     _shade(ax[1], t, result["turns"], "red", "turning (reference > 5 deg/s)")
     for (k, p, st), e in result["manoeuvre_errors"].items():
         if st == "filtered":
-            ax[1].plot(t, e, STYLE.get(p, "-"), color="tab:gray" if p == "classic" else "tab:blue", lw=0.9,
-                       label=f"{k} {p} (stiff model)")
+            ax[1].plot(
+                t,
+                e,
+                STYLE.get(p, "-"),
+                color="tab:gray" if p == "classic" else "tab:blue",
+                lw=0.9,
+                label=f"{k} {p} (stiff model)",
+            )
     ax[1].set_ylabel("horizontal error, m")
     ax[1].set_ylim(0, 60)
     ax[1].set_title("Manoeuvres: a stiff model (turns unmodelled), classic vs fading (filtered)")
     _shade(ax[2], t, result["fixed_runs"], "green", "runs of fixed solutions")
     for (k, p, st), e in result["outlier_errors"].items():
         if st == "filtered":
-            ax[2].semilogy(t, e, STYLE.get(p, "-"), color="tab:gray" if p == "classic" else "tab:purple", lw=0.9,
-                           label=f"{k} {NAME.get(p, p)} (filtered)")
+            ax[2].semilogy(
+                t,
+                e,
+                STYLE.get(p, "-"),
+                color="tab:gray" if p == "classic" else "tab:purple",
+                lw=0.9,
+                label=f"{k} {NAME.get(p, p)} (filtered)",
+            )
     for i, k in enumerate(result["outlier_epochs"]):
         ax[2].axvline(t[k], color="red", lw=0.6, alpha=0.6, label="injected 20-50 m outlier" if i == 0 else None)
     ax[2].set_ylabel("horizontal error, m")

@@ -15,10 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.io import write_json
 from jaxnav import filters as jf
-from jaxnav.tune import is_writer, run_chunked
+from jaxnav.io import write_json
 from jaxnav.sim import simulate_cv_scenario
+from jaxnav.tune import is_writer, run_chunked
 from jaxnav.units import MM
 
 SIGMA = 3.0 * MM  # measurement noise, m
@@ -40,8 +40,15 @@ def _filters(b):
 
 def _one(key, epochs, b):
     """One seed: simulate the series and run every filter; position error, forecast deviation (m), factors."""
-    sc = simulate_cv_scenario(key, T=epochs, sigma=SIGMA, accel_std=ACCEL_STD, change_start=CHANGE_START,
-                              change_len=CHANGE_LEN, change_accel=CHANGE_ACCEL)
+    sc = simulate_cv_scenario(
+        key,
+        T=epochs,
+        sigma=SIGMA,
+        accel_std=ACCEL_STD,
+        change_start=CHANGE_START,
+        change_len=CHANGE_LEN,
+        change_accel=CHANGE_ACCEL,
+    )
     model = jf.constant_velocity(1.0, sigma=SIGMA, accel_var=ACCEL_STD**2)
     x0 = jnp.concatenate([sc.zs[0], jnp.zeros(3)])
     P0 = jnp.diag(jnp.array([SIGMA**2] * 3 + [1e-6] * 3))
@@ -50,9 +57,13 @@ def _one(key, epochs, b):
         r = jf.kalman_filter(model, x0, P0, sc.zs, save=("means", "pred_means", "factors", "noise"), **kw)
         err = r.means[:, :3] - sc.x_true[:, :3]
         fc = r.pred_means[:, :3] - sc.zs  # forecast X(k/k-1) minus the measurement (S1)
-        out[name] = dict(err=err, fc=fc, factors=r.factors,
-                         q=r.noise.q if name == "variance_compensation" else jnp.zeros((epochs, 3)),
-                         status=r.status)
+        out[name] = dict(
+            err=err,
+            fc=fc,
+            factors=r.factors,
+            q=r.noise.q if name == "variance_compensation" else jnp.zeros((epochs, 3)),
+            status=r.status,
+        )
     return out, sc
 
 
@@ -101,13 +112,27 @@ def run_filter_family(out="out/demo", seeds=64, epochs=1200, b=0.254, progress=T
     if writer:
         from jaxnav.experiments.figures import plot_filter_family
 
-        plot_filter_family({k: {kk: v[0] for kk, v in r.items()} for k, r in res.items()}, np.asarray(sc0.t),
-                           (i0, i1), fig_path, b=b)
+        plot_filter_family(
+            {k: {kk: v[0] for kk, v in r.items()} for k, r in res.items()}, np.asarray(sc0.t), (i0, i1), fig_path, b=b
+        )
     results = dict(
-        settings=dict(seeds=seeds, epochs=epochs, b=b, sigma_m=SIGMA, accel_std_mps2=ACCEL_STD,
-                      change_accel_mps2=list(CHANGE_ACCEL), change_epochs=[i0, i1], fading_window=10,
-                      vc_window=30, vc_horizon=10, vc_floor_rel=1.0),
-        table=table, wall_time_s=wall, jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
+        settings=dict(
+            seeds=seeds,
+            epochs=epochs,
+            b=b,
+            sigma_m=SIGMA,
+            accel_std_mps2=ACCEL_STD,
+            change_accel_mps2=list(CHANGE_ACCEL),
+            change_epochs=[i0, i1],
+            fading_window=10,
+            vc_window=30,
+            vc_horizon=10,
+            vc_floor_rel=1.0,
+        ),
+        table=table,
+        wall_time_s=wall,
+        jax_version=jax.__version__,
+        devices=[str(d) for d in jax.devices()],
     )
     if writer:
         write_json(outdir / "results.json", results, indent=2)
@@ -118,11 +143,15 @@ def format_filter_family(results: dict) -> str:
     """The table of :func:`run_filter_family`: mean +- std over seeds of the 3-D RMS, mm."""
     st = results["settings"]
     i0, i1 = st["change_epochs"]
-    hdr = f"{'filter':<22}" + "".join(f"{h:>18}" for h in ("pos before mm", "pos during mm", "pos after mm",
-                                                              "pos all mm", "forecast mm"))
-    lines = [f"Constant-velocity series, {st['epochs']} epochs at 1 Hz, sigma {st['sigma_m'] / MM:.0f} mm, "
-             f"unmodelled acceleration burst at epochs {i0}-{i1}; {st['seeds']} seeds (mean +- std of 3-D RMS)", hdr,
-             "-" * len(hdr)]
+    hdr = f"{'filter':<22}" + "".join(
+        f"{h:>18}" for h in ("pos before mm", "pos during mm", "pos after mm", "pos all mm", "forecast mm")
+    )
+    lines = [
+        f"Constant-velocity series, {st['epochs']} epochs at 1 Hz, sigma {st['sigma_m'] / MM:.0f} mm, "
+        f"unmodelled acceleration burst at epochs {i0}-{i1}; {st['seeds']} seeds (mean +- std of 3-D RMS)",
+        hdr,
+        "-" * len(hdr),
+    ]
     for name, row in results["table"].items():
         cells = [row[f"pos_rms_{s}_mm"] for s in ("before", "during", "after", "all")] + [row["forecast_rms_mm"]]
         lines.append(f"{name:<22}" + "".join(f"{c['mean']:>10.2f} +-{c['std']:>5.2f}" for c in cells))

@@ -20,12 +20,18 @@ from __future__ import annotations
 
 import math
 import pathlib
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from jaxnav._config import ConfigError, Table, load_toml
-from jaxnav.ins.mounting import C_RFU_FRD, mounting_from_dcm, mounting_from_groves_deg, mounting_from_rpy_deg, sensor_to_body
+from jaxnav.ins.mounting import (
+    C_RFU_FRD,
+    mounting_from_dcm,
+    mounting_from_groves_deg,
+    mounting_from_rpy_deg,
+    sensor_to_body,
+)
 from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
 
 __all__ = ["C_RFU_FRD", "CONFIG_DIR", "ConfigError", "InsConfig", "find_config", "load_ins_config", "sensor_to_body"]
@@ -96,15 +102,15 @@ class ImuSection(NamedTuple):
 
     file: pathlib.Path
     format: str
-    tag: Optional[pathlib.Path]
-    columns: Optional[dict]
-    units: Optional[dict]
+    tag: pathlib.Path | None
+    columns: dict | None
+    units: dict | None
     mounting: Any
     mounting_source: str
     time_offset_s: Any  # float (s) or "estimate"
     time_offset_search_s: float
-    gps_week: Optional[int] = None
-    delimiter: Optional[str] = ","
+    gps_week: int | None = None
+    delimiter: str | None = ","
 
 
 class GnssSection(NamedTuple):
@@ -112,16 +118,16 @@ class GnssSection(NamedTuple):
 
     file: pathlib.Path
     format: str
-    columns: Optional[dict]
-    units: Optional[dict]
+    columns: dict | None
+    units: dict | None
     lever_arm_frd: Any
     use_velocity: bool
     fixed_only: bool
     pos_sigma_floor: float
     vel_sigma_floor: float
-    gate_probability: Optional[float]
-    gps_week: Optional[int] = None
-    delimiter: Optional[str] = ","
+    gate_probability: float | None
+    gps_week: int | None = None
+    delimiter: str | None = ","
     sigma_m: Any = None
     gate_max_run: int = 10
 
@@ -137,23 +143,23 @@ class NoiseSection(NamedTuple):
     Initial 1-sigma: attitude (roll/pitch, heading) rad, velocity m/s, position m, biases rad/s, m/s^2.
     """
 
-    grade: Optional[str]
+    grade: str | None
     states: int
-    arw: Optional[float]
-    vrw: Optional[float]
-    gyro_bias_instability: Optional[float]
-    accel_bias_instability: Optional[float]
-    bias_correlation_time: Optional[float]
-    gyro_bias_rw: Optional[float]
-    accel_bias_rw: Optional[float]
+    arw: float | None
+    vrw: float | None
+    gyro_bias_instability: float | None
+    accel_bias_instability: float | None
+    bias_correlation_time: float | None
+    gyro_bias_rw: float | None
+    accel_bias_rw: float | None
     init_attitude: tuple
     init_velocity: float
     init_position: float
-    init_gyro_bias: Optional[float]
-    init_accel_bias: Optional[float]
-    bias_correlation_time_accel: Optional[float] = None
-    init_gyro_scale: Optional[float] = None
-    init_accel_scale: Optional[float] = None
+    init_gyro_bias: float | None
+    init_accel_bias: float | None
+    bias_correlation_time_accel: float | None = None
+    init_gyro_scale: float | None = None
+    init_accel_scale: float | None = None
 
 
 class AlignmentSection(NamedTuple):
@@ -197,11 +203,11 @@ class OdometerSection(NamedTuple):
     error state, initial 1-sigma ``init_scale_sigma`` (dimensionless)."""
 
     source: str
-    file: Optional[pathlib.Path]
-    columns: Optional[dict]
-    units: Optional[dict]
-    delimiter: Optional[str]
-    gps_week: Optional[int]
+    file: pathlib.Path | None
+    columns: dict | None
+    units: dict | None
+    delimiter: str | None
+    gps_week: int | None
     sigma: float
     rate_hz: float
     lever_arm_frd: Any
@@ -216,9 +222,9 @@ class HeadingSection(NamedTuple):
 
     file: pathlib.Path
     columns: dict
-    units: Optional[dict]
-    delimiter: Optional[str]
-    gps_week: Optional[int]
+    units: dict | None
+    delimiter: str | None
+    gps_week: int | None
     sigma: float
     rate_hz: float
 
@@ -235,11 +241,11 @@ class EvaluateSection(NamedTuple):
     gap_s: float
     end_margin_s: float
     outages: bool = True
-    truth: Optional[pathlib.Path] = None
+    truth: pathlib.Path | None = None
     truth_format: str = "kf-gins"
-    truth_columns: Optional[dict] = None
-    truth_units: Optional[dict] = None
-    truth_delimiter: Optional[str] = ","
+    truth_columns: dict | None = None
+    truth_units: dict | None = None
+    truth_delimiter: str | None = ","
 
 
 class TuneSection(NamedTuple):
@@ -270,11 +276,11 @@ class InsConfig(NamedTuple):
     noise: NoiseSection
     alignment: AlignmentSection
     constraints: ConstraintSection
-    evaluate: Optional[EvaluateSection]
+    evaluate: EvaluateSection | None
     tune: TuneSection
     raw: dict
-    odometer: Optional[OdometerSection] = None
-    heading: Optional[HeadingSection] = None
+    odometer: OdometerSection | None = None
+    heading: HeadingSection | None = None
 
 
 class _Reader(Table):
@@ -284,7 +290,7 @@ class _Reader(Table):
         super().__init__(d, section, source=path, error=ConfigError, plausible=RANGES, variables=variables)
 
 
-def _delimiter(r: "_Reader"):
+def _delimiter(r: _Reader):
     """``delimiter``: a one-character string, or "whitespace" (blanks, tabs and commas), default ","."""
     v = r.get("delimiter", str, ",")
     if v == "whitespace":
@@ -294,8 +300,7 @@ def _delimiter(r: "_Reader"):
     return v
 
 
-_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "odometer", "heading", "evaluate",
-             "tune")
+_SECTIONS = ("run", "imu", "gnss", "noise", "alignment", "constraints", "odometer", "heading", "evaluate", "tune")
 
 
 def _imu(path, d, variables=None) -> ImuSection:
@@ -341,9 +346,19 @@ def _imu(path, d, variables=None) -> ImuSection:
         off = r.get("time_offset_s", float, 0.0, lo=-10.0, hi=10.0)
     search = r.get("time_offset_search_s", float, 0.5, lo=0.0, lo_open=True, hi=10.0)
     r.done()
-    return ImuSection(file=f, format=fmt, tag=tag, columns=cols, units=units, mounting=mounting,
-                      mounting_source=src, time_offset_s=off, time_offset_search_s=search, gps_week=week,
-                      delimiter=delim)
+    return ImuSection(
+        file=f,
+        format=fmt,
+        tag=tag,
+        columns=cols,
+        units=units,
+        mounting=mounting,
+        mounting_source=src,
+        time_offset_s=off,
+        time_offset_search_s=search,
+        gps_week=week,
+        delimiter=delim,
+    )
 
 
 def _gnss(path, d, variables=None) -> GnssSection:
@@ -369,12 +384,22 @@ def _gnss(path, d, variables=None) -> GnssSection:
         gate = r.get("gate_probability", float, 0.9999, lo=0.5, hi=1.0 - 1e-12)
     else:
         gate = None
-    g = GnssSection(file=f, format=fmt, columns=cols, units=units, lever_arm_frd=lever,
-                    use_velocity=r.get("use_velocity", bool, True), fixed_only=r.get("fixed_only", bool, False),
-                    pos_sigma_floor=r.get("pos_sigma_floor_m", float, 0.02, lo=0.0),
-                    vel_sigma_floor=r.get("vel_sigma_floor_m_s", float, 0.05, lo=0.0), gate_probability=gate,
-                    gps_week=week, delimiter=delim, sigma_m=sig,
-                    gate_max_run=r.get("gate_max_run", int, 10, lo=1, hi=1_000_000))
+    g = GnssSection(
+        file=f,
+        format=fmt,
+        columns=cols,
+        units=units,
+        lever_arm_frd=lever,
+        use_velocity=r.get("use_velocity", bool, True),
+        fixed_only=r.get("fixed_only", bool, False),
+        pos_sigma_floor=r.get("pos_sigma_floor_m", float, 0.02, lo=0.0),
+        vel_sigma_floor=r.get("vel_sigma_floor_m_s", float, 0.05, lo=0.0),
+        gate_probability=gate,
+        gps_week=week,
+        delimiter=delim,
+        sigma_m=sig,
+        gate_max_run=r.get("gate_max_run", int, 10, lo=1, hi=1_000_000),
+    )
     r.done()
     return g
 
@@ -389,7 +414,8 @@ def _noise(path, d) -> NoiseSection:
         return None if v is None else v * scale
 
     n = NoiseSection(
-        grade=grade, states=states,
+        grade=grade,
+        states=states,
         arw=opt("arw_deg_per_sqrt_h", DEG_PER_SQRT_HOUR),
         vrw=opt("vrw_m_per_s_per_sqrt_h", 1.0 / math.sqrt(HOUR)),
         gyro_bias_instability=opt("gyro_bias_instability_deg_per_h", DEG_PER_HOUR),
@@ -403,31 +429,43 @@ def _noise(path, d) -> NoiseSection:
         init_gyro_bias=opt("init_gyro_bias_deg_per_s", DEG),
         init_accel_bias=opt("init_accel_bias_mg", MG),
         bias_correlation_time_accel=opt("accel_bias_correlation_time_s", 1.0),
-        init_gyro_scale=opt("init_gyro_scale_ppm", 1e-6), init_accel_scale=opt("init_accel_scale_ppm", 1e-6))
+        init_gyro_scale=opt("init_gyro_scale_ppm", 1e-6),
+        init_accel_scale=opt("init_accel_scale_ppm", 1e-6),
+    )
     if grade is None and (n.arw is None or n.vrw is None):
         r.fail("grade", "is required unless arw_deg_per_sqrt_h and vrw_m_per_s_per_sqrt_h are both given")
     for key, used in NOISE_KEY_STATES.items():  # a density the chosen model has no state for is not silently dropped
         if key in d and states not in used:
-            r.fail(key, f"is used only with states = {' or '.join(str(k) for k in used)} (the error states that "
-                        f"model it); with states = {states} it would be ignored: set states or remove the key")
+            r.fail(
+                key,
+                f"is used only with states = {' or '.join(str(k) for k in used)} (the error states that "
+                f"model it); with states = {states} it would be ignored: set states or remove the key",
+            )
     r.done()
     return n
 
 
 #: [noise] keys that only some state counts use (the others need no such entry: every model uses them)
 NOISE_KEY_STATES = {
-    "gyro_bias_instability_deg_per_h": (18, 21), "bias_correlation_time_s": (18, 21),
-    "accel_bias_instability_mg": (21,), "accel_bias_correlation_time_s": (21,),
-    "gyro_bias_rw_deg_per_h_per_sqrt_h": (21,), "accel_bias_rw_mg_per_sqrt_h": (21,),
-    "init_gyro_scale_ppm": (21,), "init_accel_scale_ppm": (21,),
+    "gyro_bias_instability_deg_per_h": (18, 21),
+    "bias_correlation_time_s": (18, 21),
+    "accel_bias_instability_mg": (21,),
+    "accel_bias_correlation_time_s": (21,),
+    "gyro_bias_rw_deg_per_h_per_sqrt_h": (21,),
+    "accel_bias_rw_mg_per_sqrt_h": (21,),
+    "init_gyro_scale_ppm": (21,),
+    "init_accel_scale_ppm": (21,),
 }
 
 
 def _pair(r: _Reader, key, default):
     r.used.add(key)
     v = r.data.get(key, list(default))
-    if (not isinstance(v, list) or len(v) != 2
-            or not all(isinstance(x, _NUM) and not isinstance(x, bool) and 0 < x < 360 for x in v)):
+    if (
+        not isinstance(v, list)
+        or len(v) != 2
+        or not all(isinstance(x, _NUM) and not isinstance(x, bool) and 0 < x < 360 for x in v)
+    ):
         r.fail(key, f"must be [roll/pitch, heading] 1-sigma in deg, each in (0, 360), got {v!r}")
     return v
 
@@ -442,10 +480,13 @@ def _alignment(path, d) -> AlignmentSection:
     else:
         h = r.get("heading", float, lo=-360.0, hi=360.0) * DEG
     att = r.get("attitude_deg", "vec3", None)  # [roll, pitch, heading] of the vehicle at the start
-    a = AlignmentSection(static_s=r.get("static_s", float, 1.5, lo=0.0, lo_open=True, hi=3600.0), heading=h,
-                         min_speed=r.get("min_speed_m_s", float, 0.5, lo=0.0, lo_open=True),
-                         course_s=r.get("course_s", float, 2.0, lo=0.0, lo_open=True),
-                         attitude=None if att is None else att * DEG)
+    a = AlignmentSection(
+        static_s=r.get("static_s", float, 1.5, lo=0.0, lo_open=True, hi=3600.0),
+        heading=h,
+        min_speed=r.get("min_speed_m_s", float, 0.5, lo=0.0, lo_open=True),
+        course_s=r.get("course_s", float, 2.0, lo=0.0, lo_open=True),
+        attitude=None if att is None else att * DEG,
+    )
     r.done()
     return a
 
@@ -461,20 +502,24 @@ def _constraints(path, d, platform="handheld") -> ConstraintSection:
     if z not in ("auto", False):
         r.fail("zupt", f"must be 'auto' or false, got {z!r}")
     pos = dict(lo=0.0, lo_open=True)
-    c = ConstraintSection(zupt=z, zupt_sigma=r.get("zupt_sigma_m_s", float, 0.02, **pos),
-                          zupt_rate_hz=r.get("zupt_rate_hz", float, 5.0, **pos),
-                          zaru=r.get("zaru", bool, False),
-                          zaru_density=r.get("zaru_density_deg_per_sqrt_h", float, 1.0, **pos) * DEG_PER_SQRT_HOUR,
-                          nhc=r.get("nhc", bool, False),
-                          nhc_sigma=r.get("nhc_sigma_m_s", float, 0.1, **pos),
-                          nhc_rate_hz=r.get("nhc_rate_hz", float, 10.0, **pos),
-                          nhc_lever_frd=_lever(r, "nhc_lever_frd_m"),
-                          detector_window=r.get("detector_window", int, None, lo=3, hi=100_000),
-                          detector_threshold=th,
-                          detector_sigma_a=r.get("detector_sigma_a_m_s2", float, 0.05, **pos),
-                          detector_sigma_w=r.get("detector_sigma_w_deg_s", float, 0.57, **pos) * DEG,
-                          detector_min_s=r.get("detector_min_s", float, None, lo=0.0),
-                          platform=platform, zupt_gnss_k=r.get("zupt_gnss_k", float, 3.0, **pos))
+    c = ConstraintSection(
+        zupt=z,
+        zupt_sigma=r.get("zupt_sigma_m_s", float, 0.02, **pos),
+        zupt_rate_hz=r.get("zupt_rate_hz", float, 5.0, **pos),
+        zaru=r.get("zaru", bool, False),
+        zaru_density=r.get("zaru_density_deg_per_sqrt_h", float, 1.0, **pos) * DEG_PER_SQRT_HOUR,
+        nhc=r.get("nhc", bool, False),
+        nhc_sigma=r.get("nhc_sigma_m_s", float, 0.1, **pos),
+        nhc_rate_hz=r.get("nhc_rate_hz", float, 10.0, **pos),
+        nhc_lever_frd=_lever(r, "nhc_lever_frd_m"),
+        detector_window=r.get("detector_window", int, None, lo=3, hi=100_000),
+        detector_threshold=th,
+        detector_sigma_a=r.get("detector_sigma_a_m_s2", float, 0.05, **pos),
+        detector_sigma_w=r.get("detector_sigma_w_deg_s", float, 0.57, **pos) * DEG,
+        detector_min_s=r.get("detector_min_s", float, None, lo=0.0),
+        platform=platform,
+        zupt_gnss_k=r.get("zupt_gnss_k", float, 3.0, **pos),
+    )
     r.done()
     return c
 
@@ -488,8 +533,11 @@ def _odometer(path, d, imu: ImuSection, variables=None) -> OdometerSection:
     delim = _delimiter(r)
     if src == "imu":
         if imu.format != "kf-gins":
-            r.fail("source", f"= 'imu' reads the odometer column of a KF-GINS IMU file, but imu.format = "
-                             f"{imu.format!r}: give source = 'csv' with file = ...")
+            r.fail(
+                "source",
+                f"= 'imu' reads the odometer column of a KF-GINS IMU file, but imu.format = "
+                f"{imu.format!r}: give source = 'csv' with file = ...",
+            )
         for k in ("file", "columns", "units", "gps_week", "delimiter"):
             if k in d:
                 r.fail(k, "is only used with source = 'csv'")
@@ -507,10 +555,19 @@ def _odometer(path, d, imu: ImuSection, variables=None) -> OdometerSection:
             if k not in allowed or v not in allowed[k]:
                 r.fail("units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or speed in {list(allowed['speed'])}")
     pos = dict(lo=0.0, lo_open=True)
-    o = OdometerSection(source=src, file=f, columns=cols, units=units, delimiter=delim, gps_week=week,
-                        sigma=r.get("sigma_m_s", float, 0.1, **pos), rate_hz=r.get("rate_hz", float, 2.0, **pos),
-                        lever_arm_frd=_lever(r, "lever_arm_frd_m"), estimate_scale=r.get("estimate_scale", bool, True),
-                        init_scale_sigma=r.get("init_scale_sigma_ppm", float, 2e4, **pos) * 1e-6)
+    o = OdometerSection(
+        source=src,
+        file=f,
+        columns=cols,
+        units=units,
+        delimiter=delim,
+        gps_week=week,
+        sigma=r.get("sigma_m_s", float, 0.1, **pos),
+        rate_hz=r.get("rate_hz", float, 2.0, **pos),
+        lever_arm_frd=_lever(r, "lever_arm_frd_m"),
+        estimate_scale=r.get("estimate_scale", bool, True),
+        init_scale_sigma=r.get("init_scale_sigma_ppm", float, 2e4, **pos) * 1e-6,
+    )
     r.done()
     return o
 
@@ -530,9 +587,15 @@ def _heading(path, d, variables=None) -> HeadingSection:
         if k not in allowed or v not in allowed[k]:
             r.fail("units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or heading in {list(allowed['heading'])}")
     pos = dict(lo=0.0, lo_open=True)
-    h = HeadingSection(file=f, columns=cols, units=units, delimiter=_delimiter(r),
-                       gps_week=r.get("gps_week", int, None, lo=0, hi=5000),
-                       sigma=r.get("sigma_deg", float, 1.0, **pos) * DEG, rate_hz=r.get("rate_hz", float, 1.0, **pos))
+    h = HeadingSection(
+        file=f,
+        columns=cols,
+        units=units,
+        delimiter=_delimiter(r),
+        gps_week=r.get("gps_week", int, None, lo=0, hi=5000),
+        sigma=r.get("sigma_deg", float, 1.0, **pos) * DEG,
+        rate_hz=r.get("rate_hz", float, 1.0, **pos),
+    )
     r.done()
     return h
 
@@ -554,8 +617,10 @@ def _evaluate(path, d, variables=None) -> EvaluateSection:
                 r.fail(k, "is only used with truth = FILE")
     if fmt == "csv" and truth is not None:
         if cols is None:
-            r.fail("truth_columns", "is required for truth_format = 'csv' (a table like {t = 0, lat = 1, lon = 2, "
-                                    "h = 3, ...})")
+            r.fail(
+                "truth_columns",
+                "is required for truth_format = 'csv' (a table like {t = 0, lat = 1, lon = 2, h = 3, ...})",
+            )
         for k, v in cols.items():
             if k not in _TRUTH_COLUMNS:
                 r.fail("truth_columns", f"has unknown key {k!r}; known: {list(_TRUTH_COLUMNS)}")
@@ -564,19 +629,29 @@ def _evaluate(path, d, variables=None) -> EvaluateSection:
         for k, v in (units or {}).items():
             allowed = {"t": ("s", "ms", "us", "ns"), "angle": ("deg", "rad")}
             if k not in allowed or v not in allowed[k]:
-                r.fail("truth_units", f"{k} = {v!r}: expected t in {list(allowed['t'])} or angle in "
-                                      f"{list(allowed['angle'])}")
+                r.fail(
+                    "truth_units",
+                    f"{k} = {v!r}: expected t in {list(allowed['t'])} or angle in {list(allowed['angle'])}",
+                )
     elif cols is not None or units is not None:
-        r.fail("truth_columns" if cols is not None else "truth_units", f"is only used with truth_format = 'csv', "
-                                                                        f"not {fmt!r}")
+        r.fail(
+            "truth_columns" if cols is not None else "truth_units",
+            f"is only used with truth_format = 'csv', not {fmt!r}",
+        )
     if not isinstance(delim, str) or not (delim == "whitespace" or len(delim) == 1):
         r.fail("truth_delimiter", f"must be one character or 'whitespace', got {delim!r}")
-    e = EvaluateSection(outage_s=r.get("outage_s", float, 15.0, lo=0.0, lo_open=True),
-                        first_s=r.get("first_s", float, 40.0, lo=0.0),
-                        gap_s=r.get("gap_s", float, 45.0, lo=0.0, lo_open=True),
-                        end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0),
-                        outages=r.get("outages", bool, True), truth=truth, truth_format=fmt, truth_columns=cols,
-                        truth_units=units, truth_delimiter=None if delim == "whitespace" else delim)
+    e = EvaluateSection(
+        outage_s=r.get("outage_s", float, 15.0, lo=0.0, lo_open=True),
+        first_s=r.get("first_s", float, 40.0, lo=0.0),
+        gap_s=r.get("gap_s", float, 45.0, lo=0.0, lo_open=True),
+        end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0),
+        outages=r.get("outages", bool, True),
+        truth=truth,
+        truth_format=fmt,
+        truth_columns=cols,
+        truth_units=units,
+        truth_delimiter=None if delim == "whitespace" else delim,
+    )
     if not e.outages and truth is None:
         r.fail("outages", "= false leaves nothing to evaluate: give truth = FILE, or drop [evaluate]")
     r.done()
@@ -589,9 +664,12 @@ def _tune(path, d) -> TuneSection:
     ps = d.get("params", ["arw", "vrw"])
     if not isinstance(ps, list) or not ps or not all(p in TUNABLE for p in ps) or len(set(ps)) != len(ps):
         r.fail("params", f"must be a non-empty list of distinct names from {list(TUNABLE)}, got {ps!r}")
-    t = TuneSection(params=tuple(ps), steps=r.get("steps", int, 25, lo=1, hi=10_000),
-                    mode=r.get("mode", str, "reverse", choices=("reverse", "forward")),
-                    loss=r.get("loss", str, "innovations", choices=("innovations", "outages")))
+    t = TuneSection(
+        params=tuple(ps),
+        steps=r.get("steps", int, 25, lo=1, hi=10_000),
+        mode=r.get("mode", str, "reverse", choices=("reverse", "forward")),
+        loss=r.get("loss", str, "innovations", choices=("innovations", "outages")),
+    )
     r.done()
     return t
 
@@ -633,14 +711,20 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
     platform = run.get("platform", str, "handheld", choices=("car", "handheld", "foot", "rover"))
     run.done()
     imu = _imu(path, d["imu"], variables)
-    return InsConfig(path=path, name=name, imu=imu, gnss=_gnss(path, d["gnss"], variables),
-                     noise=_noise(path, d.get("noise", {"grade": "consumer"})),
-                     alignment=_alignment(path, d.get("alignment", {})),
-                     constraints=_constraints(path, d.get("constraints", {}), platform),
-                     evaluate=_evaluate(path, d["evaluate"], variables) if "evaluate" in d else None,
-                     tune=_tune(path, d.get("tune", {})), raw=d,
-                     odometer=_odometer(path, d["odometer"], imu, variables) if "odometer" in d else None,
-                     heading=_heading(path, d["heading"], variables) if "heading" in d else None)
+    return InsConfig(
+        path=path,
+        name=name,
+        imu=imu,
+        gnss=_gnss(path, d["gnss"], variables),
+        noise=_noise(path, d.get("noise", {"grade": "consumer"})),
+        alignment=_alignment(path, d.get("alignment", {})),
+        constraints=_constraints(path, d.get("constraints", {}), platform),
+        evaluate=_evaluate(path, d["evaluate"], variables) if "evaluate" in d else None,
+        tune=_tune(path, d.get("tune", {})),
+        raw=d,
+        odometer=_odometer(path, d["odometer"], imu, variables) if "odometer" in d else None,
+        heading=_heading(path, d["heading"], variables) if "heading" in d else None,
+    )
 
 
 def _lever(r: _Reader, key):

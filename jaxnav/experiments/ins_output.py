@@ -18,6 +18,7 @@ from jaxnav.ins import position_sigmas_enu
 from jaxnav.ins.attitude import quat_to_euler
 from jaxnav.io import NavSolution, Track, write_geojson, write_kml, write_pos, write_trajectory_csv
 
+
 def _solution(run: InsRun, which: str) -> NavSolution:
     """The forward or smoothed solution at the filter epochs as :class:`jaxnav.io.NavSolution`."""
     ep = run.result.epochs
@@ -34,23 +35,39 @@ def _solution(run: InsRun, which: str) -> NavSolution:
     mask = np.asarray(run.prep.meas.mask)[:, :3].any(-1)
     used = np.where(row >= 0, mask[np.maximum(row, 0)], False)
     q = np.where(used, np.asarray(run.prep.pos.q)[run.prep.keep][np.maximum(row, 0)], 0)
-    return NavSolution(t=np.asarray(ep.t_nav, float), pos=pos, v_enu=np.asarray(nav.v_n), rpy=rpy,
-                       sig_pos_enu=position_sigmas_enu(P, pos, idx), sig_vel=sd[:, idx.dv], sig_att=sd[:, idx.phi],
-                       gnss_used=used, quality=q)
+    return NavSolution(
+        t=np.asarray(ep.t_nav, float),
+        pos=pos,
+        v_enu=np.asarray(nav.v_n),
+        rpy=rpy,
+        sig_pos_enu=position_sigmas_enu(P, pos, idx),
+        sig_vel=sd[:, idx.dv],
+        sig_att=sd[:, idx.phi],
+        gnss_used=used,
+        quality=q,
+    )
 
 
 def _tracks(run: InsRun) -> list:
     """:class:`jaxnav.io.Track` lines: smoothed and forward solutions, the smoothed one inside each outage."""
     sm = np.asarray(run.smoothed_nav.pos)
-    tracks = [Track("RTS smoothed", sm, color=KML_ORANGE, width=2, clamp_to_ground=True),
-              Track("forward filter", np.asarray(run.result.epochs.nav.pos), color=KML_BLUE, width=2,
-                    clamp_to_ground=True)]
+    tracks = [
+        Track("RTS smoothed", sm, color=KML_ORANGE, width=2, clamp_to_ground=True),
+        Track("forward filter", np.asarray(run.result.epochs.nav.pos), color=KML_BLUE, width=2, clamp_to_ground=True),
+    ]
     t = np.asarray(run.result.epochs.t)
     for k, (a, b) in enumerate(run.prep.outages):
         w = (t >= a) & (t < b)
         if w.sum() >= 2:
-            tracks.append(Track(f"simulated outage {k + 1}", sm[w], {"gpst_start_s": float(a), "gpst_end_s": float(b)},
-                                color=KML_RED, width=4))
+            tracks.append(
+                Track(
+                    f"simulated outage {k + 1}",
+                    sm[w],
+                    {"gpst_start_s": float(a), "gpst_end_s": float(b)},
+                    color=KML_RED,
+                    width=4,
+                )
+            )
     return tracks
 
 
@@ -64,13 +81,23 @@ def write_outputs(run: InsRun, out) -> list:
     cfg = run.prep.cfg
     sm, fw = _solution(run, "smoothed"), _solution(run, "forward")
     tracks = _tracks(run)
-    return [str(write_trajectory_csv(out / "trajectory.csv", sm, title=f"jaxnav ins: smoothed solution of {cfg.name}")),
-            str(write_trajectory_csv(out / "trajectory_forward.csv", fw,
-                                     title=f"jaxnav ins: forward solution of {cfg.name}")),
-            str(write_pos(out / f"{cfg.name}_ins.pos", sm,
-                          comments=[("program", "jaxnav ins (smoothed INS/GNSS solution)"), ("config", str(cfg.path))])),
-            str(write_geojson(out / "track.geojson", tracks)),
-            str(write_kml(out / "track.kml", tracks, name=f"jaxnav ins: {cfg.name}"))]
+    return [
+        str(write_trajectory_csv(out / "trajectory.csv", sm, title=f"jaxnav ins: smoothed solution of {cfg.name}")),
+        str(
+            write_trajectory_csv(
+                out / "trajectory_forward.csv", fw, title=f"jaxnav ins: forward solution of {cfg.name}"
+            )
+        ),
+        str(
+            write_pos(
+                out / f"{cfg.name}_ins.pos",
+                sm,
+                comments=[("program", "jaxnav ins (smoothed INS/GNSS solution)"), ("config", str(cfg.path))],
+            )
+        ),
+        str(write_geojson(out / "track.geojson", tracks)),
+        str(write_kml(out / "track.kml", tracks, name=f"jaxnav ins: {cfg.name}")),
+    ]
 
 
 def _evaluation(sc) -> dict:
@@ -79,27 +106,51 @@ def _evaluation(sc) -> dict:
     per = []
     for k, (a, b) in enumerate(sc.windows):
         w = (sc.t >= a) & (sc.t < b) & np.isfinite(sc.err_fwd)
-        per.append({"window": k + 1, "gpst_start_s": float(a), "gpst_end_s": float(b), "n_fixed_epochs": int(sc.n_ref[k]),
-                    "forward_rms_h_m": float(sc.fwd_rms[k]), "forward_max_h_m": float(sc.fwd_max[k]),
-                    "smoothed_rms_h_m": float(sc.sm_rms[k]), "smoothed_max_h_m": float(sc.sm_max[k]),
-                    "forward_sigma_h_at_end_m": float(sc.sig_fwd[w][-1]) if w.any() else float("nan"),
-                    "smoothed_sigma_h_max_m": float(np.max(sc.sig_sm[w])) if w.any() else float("nan")})
+        per.append(
+            {
+                "window": k + 1,
+                "gpst_start_s": float(a),
+                "gpst_end_s": float(b),
+                "n_fixed_epochs": int(sc.n_ref[k]),
+                "forward_rms_h_m": float(sc.fwd_rms[k]),
+                "forward_max_h_m": float(sc.fwd_max[k]),
+                "smoothed_rms_h_m": float(sc.sm_rms[k]),
+                "smoothed_max_h_m": float(sc.sm_max[k]),
+                "forward_sigma_h_at_end_m": float(sc.sig_fwd[w][-1]) if w.any() else float("nan"),
+                "smoothed_sigma_h_max_m": float(np.max(sc.sig_sm[w])) if w.any() else float("nan"),
+            }
+        )
         if not sc.n_ref[k]:
-            per[-1].update({f"{key}_null_reason": "no fixed GNSS epoch in the window" for key in
-                            ("forward_rms_h_m", "forward_max_h_m", "smoothed_rms_h_m", "smoothed_max_h_m")})
+            per[-1].update(
+                {
+                    f"{key}_null_reason": "no fixed GNSS epoch in the window"
+                    for key in ("forward_rms_h_m", "forward_max_h_m", "smoothed_rms_h_m", "smoothed_max_h_m")
+                }
+            )
         if not w.any():
-            per[-1].update({f"{key}_null_reason": "no scored epoch in the window" for key in
-                            ("forward_sigma_h_at_end_m", "smoothed_sigma_h_max_m")})
+            per[-1].update(
+                {
+                    f"{key}_null_reason": "no scored epoch in the window"
+                    for key in ("forward_sigma_h_at_end_m", "smoothed_sigma_h_max_m")
+                }
+            )
     sc_w = sc.withheld & np.isfinite(sc.err_fwd)
     # consistency: share of scored outage epochs whose horizontal error is within 3 of its own sigma
     # (the horizontal sigma sqrt(var_E + var_N); for a circular 2-D Gaussian P(r < 3 sigma_h / sqrt 2) = 98.9 %)
     within_f = float(np.mean(sc.err_fwd[sc_w] <= 3 * sc.sig_fwd[sc_w])) if sc_w.any() else float("nan")
     within_s = float(np.mean(sc.err_sm[sc_w] <= 3 * sc.sig_sm[sc_w])) if sc_w.any() else float("nan")
-    return {"forward_rms_h_m": sc.fwd_rms_all, "forward_max_h_m": float(np.nanmax(sc.fwd_max)) if np.any(sc.n_ref) else float("nan"),
-            "smoothed_rms_h_m": sc.sm_rms_all, "smoothed_max_h_m": float(np.nanmax(sc.sm_max)) if np.any(sc.n_ref) else float("nan"),
-            "forward_rms_h_outside_outages_m": sc.fwd_rms_outside,
-            "forward_share_within_3_sigma_h": within_f, "smoothed_share_within_3_sigma_h": within_s,
-            "n_windows": int(len(sc.windows)), "n_scored_windows": int(np.count_nonzero(sc.n_ref)), "windows": per}
+    return {
+        "forward_rms_h_m": sc.fwd_rms_all,
+        "forward_max_h_m": float(np.nanmax(sc.fwd_max)) if np.any(sc.n_ref) else float("nan"),
+        "smoothed_rms_h_m": sc.sm_rms_all,
+        "smoothed_max_h_m": float(np.nanmax(sc.sm_max)) if np.any(sc.n_ref) else float("nan"),
+        "forward_rms_h_outside_outages_m": sc.fwd_rms_outside,
+        "forward_share_within_3_sigma_h": within_f,
+        "smoothed_share_within_3_sigma_h": within_s,
+        "n_windows": int(len(sc.windows)),
+        "n_scored_windows": int(np.count_nonzero(sc.n_ref)),
+        "windows": per,
+    }
 
 
 def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
@@ -112,8 +163,14 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     name = run.prep.cfg.name
     paths = []
     if run.scores is not None:
-        paths.append(plot_walk(run.scores, {"enu_ref": run.enu_ref, "enu_fwd": run.enu_fwd, "enu_sm": run.enu_sm},
-                               out / f"track_outages.{fmt}", title=name))
+        paths.append(
+            plot_walk(
+                run.scores,
+                {"enu_ref": run.enu_ref, "enu_fwd": run.enu_fwd, "enu_sm": run.enu_sm},
+                out / f"track_outages.{fmt}",
+                title=name,
+            )
+        )
     g = run.gnss_epochs
     ep = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], run.result.epochs)
     t = np.asarray(run.prep.meas.t)
@@ -125,12 +182,30 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     d_pos = np.where(m[:, :3], run.enu_fwd - run.enu_ref, np.nan)
     v_ref = np.asarray(run.prep.pos.v_enu, float)[run.prep.keep]
     d_vel = np.where(m[:, 3:], np.asarray(ep.nav.v_n) - v_ref, np.nan)
-    paths.append(plot_ins_differences(t, d_pos, f.sig_pos_enu, d_vel, f.sig_vel, run.prep.outages,
-                                      out / f"differences_to_gnss.{fmt}",
-                                      title=f"{name}: forward filter minus GNSS (antenna position, velocity) with the filter's "
-                                            "+-3 sigma; GNSS withheld in the grey windows"))
-    paths.append(plot_ins_attitude(t, np.degrees(f.rpy), np.degrees(s.rpy), np.degrees(s.sig_att),
-                                   run.prep.outages, out / f"attitude.{fmt}", title=f"{name}: attitude of the vehicle frame"))
+    paths.append(
+        plot_ins_differences(
+            t,
+            d_pos,
+            f.sig_pos_enu,
+            d_vel,
+            f.sig_vel,
+            run.prep.outages,
+            out / f"differences_to_gnss.{fmt}",
+            title=f"{name}: forward filter minus GNSS (antenna position, velocity) with the filter's "
+            "+-3 sigma; GNSS withheld in the grey windows",
+        )
+    )
+    paths.append(
+        plot_ins_attitude(
+            t,
+            np.degrees(f.rpy),
+            np.degrees(s.rpy),
+            np.degrees(s.sig_att),
+            run.prep.outages,
+            out / f"attitude.{fmt}",
+            title=f"{name}: attitude of the vehicle frame",
+        )
+    )
     from jaxnav.ins import error_model_for
     from jaxnav.units import DEG_PER_HOUR, MG
 
@@ -140,28 +215,55 @@ def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     sd = np.sqrt(np.clip(np.diagonal(np.asarray(ep.covs), axis1=-2, axis2=-1), 0.0, None))
     gyro_f = (np.asarray(fb.gyro) + np.asarray(fb.markov)) / DEG_PER_HOUR
     gyro_s = (np.asarray(sb.gyro) + np.asarray(sb.markov)) / DEG_PER_HOUR
-    paths.append(plot_ins_biases(t, gyro_f, sd[:, idx.eps_b] / DEG_PER_HOUR, np.asarray(fb.accel) / MG,
-                                 sd[:, idx.nabla] / MG, run.prep.outages, out / f"biases.{fmt}",
-                                 title=f"{name}: estimated sensor biases ({n}-state model)", gyro_sm=gyro_s,
-                                 accel_sm=np.asarray(sb.accel) / MG))
+    paths.append(
+        plot_ins_biases(
+            t,
+            gyro_f,
+            sd[:, idx.eps_b] / DEG_PER_HOUR,
+            np.asarray(fb.accel) / MG,
+            sd[:, idx.nabla] / MG,
+            run.prep.outages,
+            out / f"biases.{fmt}",
+            title=f"{name}: estimated sensor biases ({n}-state model)",
+            gyro_sm=gyro_s,
+            accel_sm=np.asarray(sb.accel) / MG,
+        )
+    )
     ser = run.prep.standstill_info.get("_series")
     if ser is not None:
         from jaxnav.plot import plot_standstill
 
         info = run.prep.standstill_info
-        paths.append(plot_standstill(run.prep.t, ser["stat"], info["threshold"], run.prep.standstill,
-                                     ser["raw"] & ser["moving"], ser["t_gnss"], ser["speed"], ser["speed_sigma"],
-                                     run.prep.outages, out / f"standstill.{fmt}",
-                                     title=f"{name}: standstill detector ({info['platform']} preset) and GNSS check",
-                                     unconfirmed=ser["unconfirmed"]))
+        paths.append(
+            plot_standstill(
+                run.prep.t,
+                ser["stat"],
+                info["threshold"],
+                run.prep.standstill,
+                ser["raw"] & ser["moving"],
+                ser["t_gnss"],
+                ser["speed"],
+                ser["speed_sigma"],
+                run.prep.outages,
+                out / f"standstill.{fmt}",
+                title=f"{name}: standstill detector ({info['platform']} preset) and GNSS check",
+                unconfirmed=ser["unconfirmed"],
+            )
+        )
     off = run.prep.time_offset_info
     if "grid_s" in off:
         from jaxnav.plot import plot_time_offset_likelihood
 
-        paths.append(plot_time_offset_likelihood(off["grid_s"], off["loglik"], off["offset_s"], off["sigma_s"],
-                                                 out / f"time_offset.{fmt}",
-                                                 title=f"{name}: IMU-GNSS time offset by the innovation likelihood "
-                                                       f"({off['n_epochs_used']} GNSS epochs)"))
+        paths.append(
+            plot_time_offset_likelihood(
+                off["grid_s"],
+                off["loglik"],
+                off["offset_s"],
+                off["sigma_s"],
+                out / f"time_offset.{fmt}",
+                title=f"{name}: IMU-GNSS time offset by the innovation likelihood ({off['n_epochs_used']} GNSS epochs)",
+            )
+        )
     return [str(p) for p in paths]
 
 
@@ -170,8 +272,10 @@ def _edge_units(d):
     from jaxnav.units import rad_to_deg
 
     if isinstance(d, dict):
-        return {(k[:-4] + "_deg" if k.endswith("_rad") else k): (rad_to_deg(v) if k.endswith("_rad") else _edge_units(v))
-                for k, v in d.items()}
+        return {
+            (k[:-4] + "_deg" if k.endswith("_rad") else k): (rad_to_deg(v) if k.endswith("_rad") else _edge_units(v))
+            for k, v in d.items()
+        }
     return d
 
 
@@ -183,11 +287,16 @@ def _truth_evaluation(run: InsRun, truth, evaluation, *, tuned: bool):
 
     ev = run.prep.cfg.evaluate
     errs = {w: truth_errors(run, truth, w) for w in ("forward", "smoothed")}
-    block = {"file": str(ev.truth), "format": ev.truth_format, "n_records": int(np.asarray(truth.t).size),
-             "solution": "after --tune" if tuned else "as configured", "point": "IMU (not the antenna)",
-             "errors": "solution minus reference; position in local ENU at the reference, m; heading wrapped to "
-                       "+-180 deg; outages = the [evaluate] windows (GNSS withheld); NEES of the 3-D position "
-                       "(expected 3); shares within 3 sigma (expected 0.9973 per component)"}
+    block = {
+        "file": str(ev.truth),
+        "format": ev.truth_format,
+        "n_records": int(np.asarray(truth.t).size),
+        "solution": "after --tune" if tuned else "as configured",
+        "point": "IMU (not the antenna)",
+        "errors": "solution minus reference; position in local ENU at the reference, m; heading wrapped to "
+        "+-180 deg; outages = the [evaluate] windows (GNSS withheld); NEES of the 3-D position "
+        "(expected 3); shares within 3 sigma (expected 0.9973 per component)",
+    }
     for w, e in errs.items():
         block[w] = _edge_units(error_statistics(e, n_windows=int(np.asarray(run.prep.outages).shape[0])))
     out = dict(evaluation or {})
@@ -199,12 +308,15 @@ def _densities_dict(d) -> dict:
     from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
 
     n = d.imu
-    return {"arw_deg_per_sqrt_h": float(n.gyro_arw) / DEG_PER_SQRT_HOUR,
-            "vrw_m_per_s_per_sqrt_h": float(n.accel_vrw) * math.sqrt(HOUR),
-            "gyro_bias_instability_deg_per_h": float(n.gyro_bias_instability) / DEG_PER_HOUR,
-            "bias_correlation_time_s": float(n.gyro_bias_tau),
-            "init_gyro_bias_deg_per_s": float(n.gyro_bias_initial) / DEG,
-            "init_accel_bias_mg": float(n.accel_bias_initial) / MG, "pos_sigma_scale": float(d.pos_sigma_scale)}
+    return {
+        "arw_deg_per_sqrt_h": float(n.gyro_arw) / DEG_PER_SQRT_HOUR,
+        "vrw_m_per_s_per_sqrt_h": float(n.accel_vrw) * math.sqrt(HOUR),
+        "gyro_bias_instability_deg_per_h": float(n.gyro_bias_instability) / DEG_PER_HOUR,
+        "bias_correlation_time_s": float(n.gyro_bias_tau),
+        "init_gyro_bias_deg_per_s": float(n.gyro_bias_initial) / DEG,
+        "init_accel_bias_mg": float(n.accel_bias_initial) / MG,
+        "pos_sigma_scale": float(d.pos_sigma_scale),
+    }
 
 
 def _constraints(prep, run) -> dict:
@@ -212,18 +324,26 @@ def _constraints(prep, run) -> dict:
     from jaxnav.ins import standstill_intervals
 
     c = prep.cfg.constraints
-    d = {"zupt": c.zupt, "zaru": c.zaru, "nhc": c.nhc,
-         "n_filter_epochs": int(np.asarray(run.result.epochs.t).size), "n_gnss_epochs": int(prep.meas.t.size)}
+    d = {
+        "zupt": c.zupt,
+        "zaru": c.zaru,
+        "nhc": c.nhc,
+        "n_filter_epochs": int(np.asarray(run.result.epochs.t).size),
+        "n_gnss_epochs": int(prep.meas.t.size),
+    }
     if prep.standstill is not None:
         iv = np.asarray(standstill_intervals(prep.t, prep.standstill)).reshape(-1, 2)
-        d.update(standstill_samples=int(np.count_nonzero(prep.standstill)), standstill_intervals=int(iv.shape[0]),
-                 standstill_s=float(np.sum(iv[:, 1] - iv[:, 0])) if iv.size else 0.0,
-                 standstill_intervals_gpst_s=iv.tolist(),
-                 detector={k: v for k, v in prep.standstill_info.items() if not k.startswith("_")})
+        d.update(
+            standstill_samples=int(np.count_nonzero(prep.standstill)),
+            standstill_intervals=int(iv.shape[0]),
+            standstill_s=float(np.sum(iv[:, 1] - iv[:, 0])) if iv.size else 0.0,
+            standstill_intervals_gpst_s=iv.tolist(),
+            detector={k: v for k, v in prep.standstill_info.items() if not k.startswith("_")},
+        )
     return d
 
 
-def _odometer(prep, run) -> "dict | None":
+def _odometer(prep, run) -> dict | None:
     """The wheel-speed input and its estimated scale factor (1 + k: reading = (1 + k) speed) with 1-sigma:
     forward filter at the last epoch, RTS smoother (a random constant: the same at every epoch)."""
     o = prep.cfg.odometer
@@ -232,20 +352,29 @@ def _odometer(prep, run) -> "dict | None":
     from jaxnav.experiments.ins_run import run_error_model
 
     sp = np.asarray(prep.odometer_speed, float)
-    d = {"source": o.source if o.source == "imu" else str(o.file), "sigma_m_s": o.sigma, "rate_hz": o.rate_hz,
-         "lever_arm_frd_m": np.asarray(o.lever_arm_frd, float).tolist(),
-         "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(sp))), "imu_samples": int(sp.size),
-         "scale_factor_estimated": bool(o.estimate_scale)}
+    d = {
+        "source": o.source if o.source == "imu" else str(o.file),
+        "sigma_m_s": o.sigma,
+        "rate_hz": o.rate_hz,
+        "lever_arm_frd_m": np.asarray(o.lever_arm_frd, float).tolist(),
+        "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(sp))),
+        "imu_samples": int(sp.size),
+        "scale_factor_estimated": bool(o.estimate_scale),
+    }
     idx = run_error_model(prep.cfg).idx.s_odo
     if idx is not None:
         k_f = float(np.asarray(run.result.final_biases.odo_scale).reshape(-1)[0])
         P = np.asarray(run.result.epochs.covs)[-1]
         k_s = float(np.asarray(run.smoothed_biases.odo_scale)[0].reshape(-1)[0])
         Ps = np.asarray(run.smoothed_covs)[0]
-        d.update(scale_factor=1.0 + k_f, scale_factor_sigma=float(np.sqrt(max(P[idx, idx][0, 0], 0.0))),
-                 scale_factor_smoothed=1.0 + k_s, scale_factor_smoothed_sigma=float(np.sqrt(max(Ps[idx, idx][0, 0], 0.0))),
-                 scale_factor_initial_sigma=o.init_scale_sigma,
-                 scale_factor_model="reading = scale_factor x forward speed of the wheel point; a random constant")
+        d.update(
+            scale_factor=1.0 + k_f,
+            scale_factor_sigma=float(np.sqrt(max(P[idx, idx][0, 0], 0.0))),
+            scale_factor_smoothed=1.0 + k_s,
+            scale_factor_smoothed_sigma=float(np.sqrt(max(Ps[idx, idx][0, 0], 0.0))),
+            scale_factor_initial_sigma=o.init_scale_sigma,
+            scale_factor_model="reading = scale_factor x forward speed of the wheel point; a random constant",
+        )
     return d
 
 
@@ -270,54 +399,91 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
 
     truth = read_truth(cfg)  # before the filter: a bad reference file fails fast
     prep = prepare(cfg, progress=progress)
-    say(f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
-        f"running the filter and the smoother")
+    say(
+        f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
+        f"running the filter and the smoother"
+    )
     run = run_ins(prep)
     prov = provenance(config_file=cfg.path, config=cfg.raw)
     if command:
         prov["command"] = command
-    results = {"provenance": prov,
-               "mounting": {"source": cfg.imu.mounting_source,
-                            "C_vehicle_sensor": np.asarray(cfg.imu.mounting).tolist(),
-                            "C_body_rfu_sensor": np.asarray(prep.C_bs).tolist()},
-               "time_offset_s": prep.time_offset, "time_offset": prep.time_offset_info,
-               "alignment": {"roll_deg": math.degrees(float(prep.alignment.att0[1])),
-                             "pitch_deg": math.degrees(float(prep.alignment.att0[0])),
-                             "heading_deg": (-math.degrees(float(prep.alignment.att0[2]))) % 360.0,
-                             "heading_method": "GNSS course carried back by the gyro",
-                             "static_window_end_gpst_s": prep.alignment.t_static,
-                             "gyro_bias_deg_per_s": np.degrees(np.asarray(prep.alignment.gyro_bias)).tolist()},
-               "n_states": cfg.noise.states, "noise": _densities_dict(run.densities),
-               "imu": {"file": str(cfg.imu.file), "n_samples": int(prep.t.size),
-                       "n_skipped_lines": int(getattr(prep.imu, "n_skipped_lines", 0)),
-                       "gpst_start_s": float(prep.t[0]), "gpst_end_s": float(prep.t[-1])},
-               "gnss": {"file": str(cfg.gnss.file), "n_epochs_in_imu_span": int(prep.meas.t.size),
-                        "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
-                        "n_withheld": int(np.count_nonzero(prep.withheld))},
-               "constraints": _constraints(prep, run), "odometer": _odometer(prep, run),
-               "heading": None if prep.heading is None else {
-                   "file": str(cfg.heading.file), "rate_hz": cfg.heading.rate_hz,
-                   "default_sigma_deg": math.degrees(cfg.heading.sigma),
-                   "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(prep.heading[0])))},
-               "status": int(run.result.status), "status_flags": describe(run.result.status),
-               "status_ok": int(run.result.status) & ~INFO_FLAGS == 0,
-               "n_nonfinite": int(run.result.n_nonfinite),
-               "n_gated_gnss_epochs": int(run.result.n_gated) if run.result.n_gated is not None else 0,
-               "n_skipped_updates": int(run.result.n_skipped), "loglik": float(run.result.loglik),
-               "runtime_s": run.runtime_s, "evaluation": _evaluation(run.scores)}
+    results = {
+        "provenance": prov,
+        "mounting": {
+            "source": cfg.imu.mounting_source,
+            "C_vehicle_sensor": np.asarray(cfg.imu.mounting).tolist(),
+            "C_body_rfu_sensor": np.asarray(prep.C_bs).tolist(),
+        },
+        "time_offset_s": prep.time_offset,
+        "time_offset": prep.time_offset_info,
+        "alignment": {
+            "roll_deg": math.degrees(float(prep.alignment.att0[1])),
+            "pitch_deg": math.degrees(float(prep.alignment.att0[0])),
+            "heading_deg": (-math.degrees(float(prep.alignment.att0[2]))) % 360.0,
+            "heading_method": "GNSS course carried back by the gyro",
+            "static_window_end_gpst_s": prep.alignment.t_static,
+            "gyro_bias_deg_per_s": np.degrees(np.asarray(prep.alignment.gyro_bias)).tolist(),
+        },
+        "n_states": cfg.noise.states,
+        "noise": _densities_dict(run.densities),
+        "imu": {
+            "file": str(cfg.imu.file),
+            "n_samples": int(prep.t.size),
+            "n_skipped_lines": int(getattr(prep.imu, "n_skipped_lines", 0)),
+            "gpst_start_s": float(prep.t[0]),
+            "gpst_end_s": float(prep.t[-1]),
+        },
+        "gnss": {
+            "file": str(cfg.gnss.file),
+            "n_epochs_in_imu_span": int(prep.meas.t.size),
+            "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
+            "n_withheld": int(np.count_nonzero(prep.withheld)),
+        },
+        "constraints": _constraints(prep, run),
+        "odometer": _odometer(prep, run),
+        "heading": None
+        if prep.heading is None
+        else {
+            "file": str(cfg.heading.file),
+            "rate_hz": cfg.heading.rate_hz,
+            "default_sigma_deg": math.degrees(cfg.heading.sigma),
+            "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(prep.heading[0]))),
+        },
+        "status": int(run.result.status),
+        "status_flags": describe(run.result.status),
+        "status_ok": int(run.result.status) & ~INFO_FLAGS == 0,
+        "n_nonfinite": int(run.result.n_nonfinite),
+        "n_gated_gnss_epochs": int(run.result.n_gated) if run.result.n_gated is not None else 0,
+        "n_skipped_updates": int(run.result.n_skipped),
+        "loglik": float(run.result.loglik),
+        "runtime_s": run.runtime_s,
+        "evaluation": _evaluation(run.scores),
+    }
     if tune:
-        say(f"tuning {', '.join(cfg.tune.params)} by the {cfg.tune.loss} likelihood (L-BFGS, {cfg.tune.steps} evaluations)")
+        say(
+            f"tuning {', '.join(cfg.tune.params)} by the {cfg.tune.loss} likelihood (L-BFGS, {cfg.tune.steps} evaluations)"
+        )
         rep = tune_noise(prep, cfg.tune.params, max_evals=cfg.tune.steps, mode=cfg.tune.mode, loss_kind=cfg.tune.loss)
-        tuned_prep = prep._replace(lever_rfu=rep.lever_rfu, meas=prep.meas._replace(
-            lever=np.broadcast_to(rep.lever_rfu, np.shape(prep.meas.lever)).copy()))
+        tuned_prep = prep._replace(
+            lever_rfu=rep.lever_rfu,
+            meas=prep.meas._replace(lever=np.broadcast_to(rep.lever_rfu, np.shape(prep.meas.lever)).copy()),
+        )
         run_t = run_ins(tuned_prep, rep.densities)
-        results["tune"] = {"params": list(cfg.tune.params), "loss": cfg.tune.loss,
-                           "before_si": rep.before, "after_si": rep.after,
-                           "loglik_before": rep.loglik_before, "loglik_after": rep.loglik_after,
-                           "n_evals": rep.n_evals, "wall_time_s": rep.wall_time_s,
-                           "fitted_on": rep.fitted_on, "n_epochs": rep.n_epochs,
-                           "noise_after": _densities_dict(rep.densities),
-                           "evaluation_before": results["evaluation"], "evaluation_after": _evaluation(run_t.scores)}
+        results["tune"] = {
+            "params": list(cfg.tune.params),
+            "loss": cfg.tune.loss,
+            "before_si": rep.before,
+            "after_si": rep.after,
+            "loglik_before": rep.loglik_before,
+            "loglik_after": rep.loglik_after,
+            "n_evals": rep.n_evals,
+            "wall_time_s": rep.wall_time_s,
+            "fitted_on": rep.fitted_on,
+            "n_epochs": rep.n_epochs,
+            "noise_after": _densities_dict(rep.densities),
+            "evaluation_before": results["evaluation"],
+            "evaluation_after": _evaluation(run_t.scores),
+        }
         run = run_t
         results["odometer"] = _odometer(prep, run)
     results["tuning"] = _tuning(prep, results)
@@ -330,9 +496,18 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
     if errs is not None:
         from jaxnav.plot import plot_truth_errors
 
-        files.append(str(plot_truth_errors(errs["forward"], errs["smoothed"], run.prep.outages, out / "truth_errors.png",
-                                           title=f"{cfg.name}: IMU solution minus the reference trajectory "
-                                                 f"({cfg.evaluate.truth.name}), +-3 sigma; GNSS withheld in the grey windows")))
+        files.append(
+            str(
+                plot_truth_errors(
+                    errs["forward"],
+                    errs["smoothed"],
+                    run.prep.outages,
+                    out / "truth_errors.png",
+                    title=f"{cfg.name}: IMU solution minus the reference trajectory "
+                    f"({cfg.evaluate.truth.name}), +-3 sigma; GNSS withheld in the grey windows",
+                )
+            )
+        )
     results["files"] = sorted(pathlib.Path(f).relative_to(out).as_posix() for f in files) + ["results.json"]
     write_json(out / "results.json", results)
     return results
@@ -349,8 +524,10 @@ def _tuning(prep, results: dict) -> dict:
         fitted[", ".join(t["params"])] = {"fitted_on": t["fitted_on"], "n_epochs": t["n_epochs"]}
     out = {"fitted": fitted}
     if prep.withheld.any():
-        out["scored_on"] = ("the fixed-quality GNSS epochs inside the [evaluate] outages, withheld from the filter and "
-                            "from every fit, scored after fitting")
+        out["scored_on"] = (
+            "the fixed-quality GNSS epochs inside the [evaluate] outages, withheld from the filter and "
+            "from every fit, scored after fitting"
+        )
         out["n_withheld"] = int(np.count_nonzero(prep.withheld))
     return out
 
@@ -359,8 +536,10 @@ def _offset_note(o: dict) -> str:
     """'config', or 'estimate +- sigma ms from N GNSS epochs, K dropped at the search span's edges'."""
     if o.get("source") != "estimate" or "sigma_s" not in o:
         return o.get("source", "config")
-    return (f"estimate +- {1e3 * o['sigma_s']:.1f} ms from {o['n_epochs_used']} GNSS epochs, "
-            f"{o['n_epochs_dropped_at_span_edges']} dropped at the search span's edges")
+    return (
+        f"estimate +- {1e3 * o['sigma_s']:.1f} ms from {o['n_epochs_used']} GNSS epochs, "
+        f"{o['n_epochs_dropped_at_span_edges']} dropped at the search span's edges"
+    )
 
 
 def format_ins(results: dict) -> str:
@@ -368,72 +547,93 @@ def format_ins(results: dict) -> str:
     from jaxnav._status import status_words
 
     r = results
-    lines = [f"jaxnav ins: {r['provenance']['config_file']}",
-             f"  IMU {r['imu']['n_samples']} samples, GNSS {r['gnss']['n_epochs_used']} of "
-             f"{r['gnss']['n_epochs_in_imu_span']} epochs used ({r['gnss']['n_withheld']} withheld on simulated outages)",
-             f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "
-             f"({_offset_note(r['time_offset'])}); initial heading {r['alignment']['heading_deg']:.1f} deg",
-             f"  {r['n_states']}-state filter + RTS: status {status_words(r['status'])}, log-likelihood {r['loglik']:.1f}, "
-             f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
-             f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s"]
+    lines = [
+        f"jaxnav ins: {r['provenance']['config_file']}",
+        f"  IMU {r['imu']['n_samples']} samples, GNSS {r['gnss']['n_epochs_used']} of "
+        f"{r['gnss']['n_epochs_in_imu_span']} epochs used ({r['gnss']['n_withheld']} withheld on simulated outages)",
+        f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "
+        f"({_offset_note(r['time_offset'])}); initial heading {r['alignment']['heading_deg']:.1f} deg",
+        f"  {r['n_states']}-state filter + RTS: status {status_words(r['status'])}, log-likelihood {r['loglik']:.1f}, "
+        f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
+        f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s",
+    ]
     dr = r["time_offset"].get("drift", {})
     if "drift_s_per_s" in dr:
         w = dr["windows"]
-        lines.append(f"  time offset by halves: {w[0]['offset_s']:+.3f} / {w[1]['offset_s']:+.3f} s, clock drift "
-                     f"{dr['drift_s_per_s'] * 1e6:+.0f} +- {dr['drift_sigma_s_per_s'] * 1e6:.0f} ppm"
-                     + (f"\n  WARNING: {dr['warning']}" if dr.get("significant") else " (not significant)"))
+        lines.append(
+            f"  time offset by halves: {w[0]['offset_s']:+.3f} / {w[1]['offset_s']:+.3f} s, clock drift "
+            f"{dr['drift_s_per_s'] * 1e6:+.0f} +- {dr['drift_sigma_s_per_s'] * 1e6:.0f} ppm"
+            + (f"\n  WARNING: {dr['warning']}" if dr.get("significant") else " (not significant)")
+        )
     for msg in r.get("status_flags", []):
         lines.append(f"  {'note' if r.get('status_ok', True) else 'PROBLEM'}: {msg}")
     c = r.get("constraints", {})
     if "standstill_intervals" in c:
-        lines.append(f"  standstill: {c['standstill_intervals']} intervals, {c['standstill_s']:.1f} s (SHOE GLRT) -> "
-                     f"ZUPT{' + ZARU' if c['zaru'] else ''} updates")
+        lines.append(
+            f"  standstill: {c['standstill_intervals']} intervals, {c['standstill_s']:.1f} s (SHOE GLRT) -> "
+            f"ZUPT{' + ZARU' if c['zaru'] else ''} updates"
+        )
         dd = c.get("detector", {})
         if dd:
-            lines.append(f"  detector ({dd['platform']}): threshold {dd['threshold']:.1f} from {dd['threshold_source']}; "
-                         f"GNSS veto: {dd['vetoed_samples']} samples in {dd['vetoed_intervals']} intervals "
-                         f"({dd['vetoed_s']:.1f} s) where GNSS speed > {dd['gnss_k']:g} sigma, {dd['unconfirmed_intervals']} "
-                         f"unconfirmed by GNSS dropped; vs GNSS-static epochs: "
-                         f"precision {dd['precision']:.3f}, recall {dd['recall']:.3f} "
-                         f"(IMU alone {dd['imu_only_precision']:.3f} / {dd['imu_only_recall']:.3f})")
+            lines.append(
+                f"  detector ({dd['platform']}): threshold {dd['threshold']:.1f} from {dd['threshold_source']}; "
+                f"GNSS veto: {dd['vetoed_samples']} samples in {dd['vetoed_intervals']} intervals "
+                f"({dd['vetoed_s']:.1f} s) where GNSS speed > {dd['gnss_k']:g} sigma, {dd['unconfirmed_intervals']} "
+                f"unconfirmed by GNSS dropped; vs GNSS-static epochs: "
+                f"precision {dd['precision']:.3f}, recall {dd['recall']:.3f} "
+                f"(IMU alone {dd['imu_only_precision']:.3f} / {dd['imu_only_recall']:.3f})"
+            )
     o = r.get("odometer")
     if o:
-        sf = (f"; scale factor {o['scale_factor_smoothed']:.5f} +- {o['scale_factor_smoothed_sigma']:.5f} (smoothed), "
-              f"{o['scale_factor']:.5f} +- {o['scale_factor_sigma']:.5f} (forward, end)" if "scale_factor" in o
-              else "; scale factor taken as 1 (estimate_scale = false)")
-        lines.append(f"  odometer ({o['source']}): {o['imu_samples_with_reading']} of {o['imu_samples']} IMU samples "
-                     f"with a reading, {o['rate_hz']:g} Hz updates, sigma {o['sigma_m_s']:g} m/s{sf}")
+        sf = (
+            f"; scale factor {o['scale_factor_smoothed']:.5f} +- {o['scale_factor_smoothed_sigma']:.5f} (smoothed), "
+            f"{o['scale_factor']:.5f} +- {o['scale_factor_sigma']:.5f} (forward, end)"
+            if "scale_factor" in o
+            else "; scale factor taken as 1 (estimate_scale = false)"
+        )
+        lines.append(
+            f"  odometer ({o['source']}): {o['imu_samples_with_reading']} of {o['imu_samples']} IMU samples "
+            f"with a reading, {o['rate_hz']:g} Hz updates, sigma {o['sigma_m_s']:g} m/s{sf}"
+        )
     if c.get("nhc"):
         lines.append("  non-holonomic constraint on (lateral and vertical velocity zero while moving)")
 
     def ev(e, tag=""):
         if e is None or "n_windows" not in e:
             return
-        lines.append(f"  outages{tag}: {e['n_scored_windows']} of {e['n_windows']} windows scored; horizontal RMS "
-                     f"forward {e['forward_rms_h_m']:.2f} m (max {e['forward_max_h_m']:.2f} m), smoothed "
-                     f"{e['smoothed_rms_h_m']:.2f} m (max {e['smoothed_max_h_m']:.2f} m); within 3 sigma: "
-                     f"forward {100 * e['forward_share_within_3_sigma_h']:.0f} %, smoothed "
-                     f"{100 * e['smoothed_share_within_3_sigma_h']:.0f} %")
+        lines.append(
+            f"  outages{tag}: {e['n_scored_windows']} of {e['n_windows']} windows scored; horizontal RMS "
+            f"forward {e['forward_rms_h_m']:.2f} m (max {e['forward_max_h_m']:.2f} m), smoothed "
+            f"{e['smoothed_rms_h_m']:.2f} m (max {e['smoothed_max_h_m']:.2f} m); within 3 sigma: "
+            f"forward {100 * e['forward_share_within_3_sigma_h']:.0f} %, smoothed "
+            f"{100 * e['smoothed_share_within_3_sigma_h']:.0f} %"
+        )
 
     ev(r.get("evaluation"))
     tr = (r.get("evaluation") or {}).get("truth")
     if tr:
         for w in ("forward", "smoothed"):
             a, o, p = tr[w]["all"], tr[w]["outages"], tr[w]["outage_protocol"]
-            line = (f"  vs reference ({w}): 3-D position RMS {a['pos_3d_rms_m']:.3f} m, horizontal "
-                    f"{a['pos_h_rms_m']:.3f} m, velocity {a['vel_3d_rms_m_s']:.3f} m/s, roll/pitch/heading RMS "
-                    f"{a['roll_rms_deg']:.3f}/{a['pitch_rms_deg']:.3f}/{a['heading_rms_deg']:.3f} deg, position NEES "
-                    f"{a['nees_pos_mean']:.2f} (expect 3), within 3 sigma {100 * a['share_pos_within_3_sigma']:.1f} %")
+            line = (
+                f"  vs reference ({w}): 3-D position RMS {a['pos_3d_rms_m']:.3f} m, horizontal "
+                f"{a['pos_h_rms_m']:.3f} m, velocity {a['vel_3d_rms_m_s']:.3f} m/s, roll/pitch/heading RMS "
+                f"{a['roll_rms_deg']:.3f}/{a['pitch_rms_deg']:.3f}/{a['heading_rms_deg']:.3f} deg, position NEES "
+                f"{a['nees_pos_mean']:.2f} (expect 3), within 3 sigma {100 * a['share_pos_within_3_sigma']:.1f} %"
+            )
             if p["n_scored_windows"]:
-                line += (f"; outages: 3-D RMS {o['pos_3d_rms_m']:.3f} m, max drift per outage RMS "
-                         f"{p['rms_of_max_3d_drift_m']:.3f} m over {p['n_scored_windows']}")
+                line += (
+                    f"; outages: 3-D RMS {o['pos_3d_rms_m']:.3f} m, max drift per outage RMS "
+                    f"{p['rms_of_max_3d_drift_m']:.3f} m over {p['n_scored_windows']}"
+                )
             lines.append(line)
     if "tune" in r:
         t = r["tune"]
-        lines.append(f"  --tune ({t.get('loss', 'innovations')}): log-likelihood {t['loglik_before']:.1f} -> "
-                     f"{t['loglik_after']:.1f} "
-                     f"({t['n_evals']} evaluations, {t['wall_time_s']:.1f} s); "
-                     + ", ".join(f"{k} {_fmt(t['before_si'][k])} -> {_fmt(t['after_si'][k])}" for k in t["params"]))
+        lines.append(
+            f"  --tune ({t.get('loss', 'innovations')}): log-likelihood {t['loglik_before']:.1f} -> "
+            f"{t['loglik_after']:.1f} "
+            f"({t['n_evals']} evaluations, {t['wall_time_s']:.1f} s); "
+            + ", ".join(f"{k} {_fmt(t['before_si'][k])} -> {_fmt(t['after_si'][k])}" for k in t["params"])
+        )
         if "fitted_on" in t:
             lines.append(f"  --tune fitted on {t['n_epochs']} {t['fitted_on']}")
         ev(t["evaluation_after"], " after tuning")

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -28,19 +28,58 @@ import numpy as np
 
 from jaxnav.experiments.ins_config import ConfigError, InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins import (OutageScores, attitude_sigmas, clock_drift, estimate_time_offset, horizontal_fix_nll,
-                        horizontal_sigma, in_windows, interpolate_on_samples, likelihood_time_offset, nearest_samples,
-                        offset_search_epochs, outage_windows, position_cov_enu, score_outages, trajectory_errors,
-                        training_windows)
-from jaxnav.ins import (ImuNoise, LCGate, LCParams, LCSave, SensorBiases, coarse_alignment, gnss_checked_standstill,
-                        gnss_speed_test, standstill_intervals, error_model_for, lc_params, loosely_coupled, nhc,
-                        noise_preset, odometer, sensor_to_body, smooth, zaru, zupt)
+from jaxnav.ins import (
+    ImuNoise,
+    LCGate,
+    LCParams,
+    LCSave,
+    OutageScores,
+    SensorBiases,
+    attitude_sigmas,
+    clock_drift,
+    coarse_alignment,
+    error_model_for,
+    estimate_time_offset,
+    gnss_checked_standstill,
+    gnss_speed_test,
+    horizontal_fix_nll,
+    horizontal_sigma,
+    in_windows,
+    interpolate_on_samples,
+    lc_params,
+    likelihood_time_offset,
+    loosely_coupled,
+    nearest_samples,
+    nhc,
+    noise_preset,
+    odometer,
+    offset_search_epochs,
+    outage_windows,
+    position_cov_enu,
+    score_outages,
+    sensor_to_body,
+    smooth,
+    standstill_intervals,
+    training_windows,
+    trajectory_errors,
+    zaru,
+    zupt,
+)
 from jaxnav.ins import gnss_measurements as ins_gnss_measurements
 from jaxnav.ins import heading as heading_aid
 from jaxnav.ins.attitude import quat_to_dcm
-from jaxnav.io import (imu_increments, read_csv_gnss, read_csv_imu, read_csv_series, read_kfgins_gnss, read_kfgins_imu,
-                       read_kfgins_odometer, read_pos, read_rtklib_imu)
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
+from jaxnav.io import (
+    imu_increments,
+    read_csv_gnss,
+    read_csv_imu,
+    read_csv_series,
+    read_kfgins_gnss,
+    read_kfgins_imu,
+    read_kfgins_odometer,
+    read_pos,
+    read_rtklib_imu,
+)
 
 
 def read_inputs(cfg: InsConfig):
@@ -54,8 +93,14 @@ def read_inputs(cfg: InsConfig):
     truth = cfg.evaluate.truth if cfg.evaluate is not None else None
     odo = cfg.odometer.file if cfg.odometer is not None else None
     hdg = cfg.heading.file if cfg.heading is not None else None
-    for p, key in ((imu_c.file, "imu.file"), (g.file, "gnss.file"), (imu_c.tag, "imu.tag"), (truth, "evaluate.truth"),
-                   (odo, "odometer.file"), (hdg, "heading.file")):
+    for p, key in (
+        (imu_c.file, "imu.file"),
+        (g.file, "gnss.file"),
+        (imu_c.tag, "imu.tag"),
+        (truth, "evaluate.truth"),
+        (odo, "odometer.file"),
+        (hdg, "heading.file"),
+    ):
         if p is not None and not p.is_file():
             what = "a folder, not a file" if p.is_dir() else "no such file"
             raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
@@ -71,8 +116,9 @@ def read_inputs(cfg: InsConfig):
     elif g.format == "kf-gins":
         pos = read_kfgins_gnss(g.file, gps_week=g.gps_week)
     else:
-        pos = _csv(cfg, "gnss", lambda: read_csv_gnss(g.file, g.columns, g.units, delimiter=g.delimiter,
-                                                       sigma_m=g.sigma_m))
+        pos = _csv(
+            cfg, "gnss", lambda: read_csv_gnss(g.file, g.columns, g.units, delimiter=g.delimiter, sigma_m=g.sigma_m)
+        )
     return imu, pos
 
 
@@ -116,8 +162,17 @@ def heading_on_imu(cfg: InsConfig, t_imu):
     return hd, sg
 
 
-def gnss_measurements(pos_sol, t_imu, outages=(), *, lever_rfu=(0.0, 0.0, 0.0), pos_sigma_floor: float = 0.02,
-                      vel_sigma_floor: float = 0.05, use_velocity: bool = True, qualities=(1, 2)):
+def gnss_measurements(
+    pos_sol,
+    t_imu,
+    outages=(),
+    *,
+    lever_rfu=(0.0, 0.0, 0.0),
+    pos_sigma_floor: float = 0.02,
+    vel_sigma_floor: float = 0.05,
+    use_velocity: bool = True,
+    qualities=(1, 2),
+):
     """The solution's epochs inside the IMU span as :func:`jaxnav.ins.gnss_measurements`, masked inside the outages.
 
     Epochs inside an outage keep an all-False mask, so the filter reports its free-inertial
@@ -137,18 +192,28 @@ def gnss_measurements(pos_sol, t_imu, outages=(), *, lever_rfu=(0.0, 0.0, 0.0), 
     # an epoch needs an IMU sample ending at or before it (one inside the first sample's interval has none)
     keep = np.nonzero((gt >= t_imu[0] - 1e-9) & (gt <= t_imu[-1]))[0]
     if keep.size < 2:
-        raise ValueError(f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
-                         f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s")
+        raise ValueError(
+            f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
+            f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s"
+        )
     t = gt[keep]
     pos = np.stack([np.asarray(pos_sol.lat)[keep], np.asarray(pos_sol.lon)[keep], np.asarray(pos_sol.h)[keep]], -1)
     withheld = np.zeros(keep.size, bool)
     for a, b in np.asarray(outages, float).reshape(-1, 2):
         withheld |= (t >= a) & (t < b)
     use = np.isin(np.asarray(pos_sol.q)[keep], np.asarray(qualities)) & ~withheld
-    meas = ins_gnss_measurements(t, pos, np.asarray(pos_sol.v_enu, float)[keep], np.asarray(pos_sol.cov_enu)[keep],
-                                 np.asarray(pos_sol.vcov_enu, float)[keep], use=use,
-                                 use_vel=use if use_velocity else np.zeros_like(use), lever=lever_rfu,
-                                 pos_sigma_floor=pos_sigma_floor, vel_sigma_floor=vel_sigma_floor)
+    meas = ins_gnss_measurements(
+        t,
+        pos,
+        np.asarray(pos_sol.v_enu, float)[keep],
+        np.asarray(pos_sol.cov_enu)[keep],
+        np.asarray(pos_sol.vcov_enu, float)[keep],
+        use=use,
+        use_vel=use if use_velocity else np.zeros_like(use),
+        lever=lever_rfu,
+        pos_sigma_floor=pos_sigma_floor,
+        vel_sigma_floor=vel_sigma_floor,
+    )
     return meas, keep, withheld
 
 
@@ -170,11 +235,20 @@ class RunNoise(NamedTuple):
 
 
 #: ``[noise]`` keys (SI) -> :class:`jaxnav.ins.ImuNoise` fields
-NOISE_KEYS = {"arw": "gyro_arw", "vrw": "accel_vrw", "gyro_bias_instability": "gyro_bias_instability",
-              "bias_correlation_time": "gyro_bias_tau", "accel_bias_instability": "accel_bias_instability",
-              "bias_correlation_time_accel": "accel_bias_tau", "gyro_bias_rw": "gyro_bias_rw",
-              "accel_bias_rw": "accel_bias_rw", "init_gyro_bias": "gyro_bias_initial",
-              "init_accel_bias": "accel_bias_initial", "init_gyro_scale": "gyro_sf", "init_accel_scale": "accel_sf"}
+NOISE_KEYS = {
+    "arw": "gyro_arw",
+    "vrw": "accel_vrw",
+    "gyro_bias_instability": "gyro_bias_instability",
+    "bias_correlation_time": "gyro_bias_tau",
+    "accel_bias_instability": "accel_bias_instability",
+    "bias_correlation_time_accel": "accel_bias_tau",
+    "gyro_bias_rw": "gyro_bias_rw",
+    "accel_bias_rw": "accel_bias_rw",
+    "init_gyro_bias": "gyro_bias_initial",
+    "init_accel_bias": "accel_bias_initial",
+    "init_gyro_scale": "gyro_sf",
+    "init_accel_scale": "accel_sf",
+}
 
 
 def run_noise(cfg: InsConfig) -> RunNoise:
@@ -186,8 +260,12 @@ def run_noise(cfg: InsConfig) -> RunNoise:
     given = {f: getattr(n, k) for k, f in NOISE_KEYS.items() if getattr(n, k, None) is not None}
     if n.bias_correlation_time is not None:
         given.setdefault("accel_bias_tau", n.bias_correlation_time)
-    return RunNoise(imu=imu._replace(**given), init_att=np.asarray(n.init_attitude, float), init_vel=n.init_velocity,
-                    init_pos=n.init_position)
+    return RunNoise(
+        imu=imu._replace(**given),
+        init_att=np.asarray(n.init_attitude, float),
+        init_vel=n.init_velocity,
+        init_pos=n.init_position,
+    )
 
 
 def run_error_model(cfg: InsConfig):
@@ -206,8 +284,15 @@ def filter_params(noise: RunNoise, pos0, model, *, odo_scale_sigma=0.0) -> LCPar
     imu = noise.imu
     if model.idx.eps_r is not None:  # a Markov drift state with zero sigma would have no variance at all
         imu = imu._replace(gyro_bias_instability=jnp.maximum(imu.gyro_bias_instability, 1e-12))
-    return lc_params(model, imu, jnp.asarray(pos0, float), att=jnp.stack([att[0], att[0], att[1]]),
-                     vel=noise.init_vel, pos_enu=noise.init_pos, odo_scale=odo_scale_sigma)
+    return lc_params(
+        model,
+        imu,
+        jnp.asarray(pos0, float),
+        att=jnp.stack([att[0], att[0], att[1]]),
+        vel=noise.init_vel,
+        pos_enu=noise.init_pos,
+        odo_scale=odo_scale_sigma,
+    )
 
 
 class Prepared(NamedTuple):
@@ -257,26 +342,63 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
         q, spd, sig = gnss_speed_test(meas.t, enu, meas.vel, meas.R, mk[:, :3].all(1), mk[:, 3:].all(1))
         tg = np.asarray(meas.t, float)
     gap = 1.5 * float(np.median(np.diff(tg))) if tg is not None and tg.size > 1 else 1.0
-    r = gnss_checked_standstill(t, dv / dt[:, None], dth / dt[:, None], sigma_a=c.detector_sigma_a,
-                                sigma_w=c.detector_sigma_w, platform=c.platform, static_s=static_s,
-                                window=c.detector_window, min_s=c.detector_min_s, threshold=c.detector_threshold,
-                                t_gnss=tg, q_gnss=q, k_moving=c.zupt_gnss_k, max_gap_s=gap, rate_hz=rate)
+    r = gnss_checked_standstill(
+        t,
+        dv / dt[:, None],
+        dth / dt[:, None],
+        sigma_a=c.detector_sigma_a,
+        sigma_w=c.detector_sigma_w,
+        platform=c.platform,
+        static_s=static_s,
+        window=c.detector_window,
+        min_s=c.detector_min_s,
+        threshold=c.detector_threshold,
+        t_gnss=tg,
+        q_gnss=q,
+        k_moving=c.zupt_gnss_k,
+        max_gap_s=gap,
+        rate_hz=rate,
+    )
     sc, sc_imu = r.scores, r.imu_only_scores
-    info = {"kind": "SHOE GLRT", "platform": c.platform, "window_samples": r.window, "min_s": r.min_s,
-            "threshold": r.threshold, "threshold_source": "config" if r.threshold_source == "given" else r.threshold_source,
-            "quiet_samples": r.quiet_samples,
-            "sigma_a_m_s2": c.detector_sigma_a, "sigma_w_rad_s": c.detector_sigma_w, "gnss_check": meas is not None,
-            "gnss_k": c.zupt_gnss_k, "vetoed_samples": int(np.count_nonzero(r.vetoed)),
-            "vetoed_intervals": int(standstill_intervals(t, r.vetoed).shape[0]),
-            "vetoed_s": float(np.count_nonzero(r.vetoed) / rate),
-            "unconfirmed_samples": int(np.count_nonzero(r.unconfirmed)),
-            "unconfirmed_intervals": int(standstill_intervals(t, r.unconfirmed).shape[0]),
-            "gnss_static_samples": int(np.count_nonzero(r.static)), "gnss_moving_samples": int(np.count_nonzero(r.moving)),
-            "scored_samples": int(np.count_nonzero(r.covered)),
-            "precision": sc.precision, "recall": sc.recall, "tp": sc.tp, "fp": sc.fp, "fn": sc.fn, "tn": sc.tn,
-            "imu_only_precision": sc_imu.precision, "imu_only_recall": sc_imu.recall}
-    info["_series"] = {"stat": r.stat, "raw": r.raw, "moving": r.moving, "unconfirmed": r.unconfirmed,
-                       "static": r.static, "t_gnss": tg, "speed": spd, "speed_sigma": sig}
+    info = {
+        "kind": "SHOE GLRT",
+        "platform": c.platform,
+        "window_samples": r.window,
+        "min_s": r.min_s,
+        "threshold": r.threshold,
+        "threshold_source": "config" if r.threshold_source == "given" else r.threshold_source,
+        "quiet_samples": r.quiet_samples,
+        "sigma_a_m_s2": c.detector_sigma_a,
+        "sigma_w_rad_s": c.detector_sigma_w,
+        "gnss_check": meas is not None,
+        "gnss_k": c.zupt_gnss_k,
+        "vetoed_samples": int(np.count_nonzero(r.vetoed)),
+        "vetoed_intervals": int(standstill_intervals(t, r.vetoed).shape[0]),
+        "vetoed_s": float(np.count_nonzero(r.vetoed) / rate),
+        "unconfirmed_samples": int(np.count_nonzero(r.unconfirmed)),
+        "unconfirmed_intervals": int(standstill_intervals(t, r.unconfirmed).shape[0]),
+        "gnss_static_samples": int(np.count_nonzero(r.static)),
+        "gnss_moving_samples": int(np.count_nonzero(r.moving)),
+        "scored_samples": int(np.count_nonzero(r.covered)),
+        "precision": sc.precision,
+        "recall": sc.recall,
+        "tp": sc.tp,
+        "fp": sc.fp,
+        "fn": sc.fn,
+        "tn": sc.tn,
+        "imu_only_precision": sc_imu.precision,
+        "imu_only_recall": sc_imu.recall,
+    }
+    info["_series"] = {
+        "stat": r.stat,
+        "raw": r.raw,
+        "moving": r.moving,
+        "unconfirmed": r.unconfirmed,
+        "static": r.static,
+        "t_gnss": tg,
+        "speed": spd,
+        "speed_sigma": sig,
+    }
     return r.detected, info
 
 
@@ -292,12 +414,19 @@ def build_aids(cfg: InsConfig, standstill, odo_speed=None, hdg=None):
             aids.append(zaru(standstill, density=c.zaru_density, rate_hz=c.zupt_rate_hz))
     if c.nhc:
         active = None if standstill is None else ~standstill
-        aids.append(nhc(active, sigma=(c.nhc_sigma, c.nhc_sigma), lever_b=sensor_to_body(np.eye(3)) @ c.nhc_lever_frd,
-                        rate_hz=c.nhc_rate_hz))
+        aids.append(
+            nhc(
+                active,
+                sigma=(c.nhc_sigma, c.nhc_sigma),
+                lever_b=sensor_to_body(np.eye(3)) @ c.nhc_lever_frd,
+                rate_hz=c.nhc_rate_hz,
+            )
+        )
     o = cfg.odometer
     if o is not None and odo_speed is not None:
-        aids.append(odometer(odo_speed, sigma=o.sigma, lever_b=sensor_to_body(np.eye(3)) @ o.lever_arm_frd,
-                             rate_hz=o.rate_hz))
+        aids.append(
+            odometer(odo_speed, sigma=o.sigma, lever_b=sensor_to_body(np.eye(3)) @ o.lever_arm_frd, rate_hz=o.rate_hz)
+        )
     if cfg.heading is not None and hdg is not None:
         aids.append(heading_aid(hdg[0], sigma=hdg[1], default_sigma=cfg.heading.sigma, rate_hz=cfg.heading.rate_hz))
     return tuple(aids)
@@ -316,71 +445,137 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
     ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
-    if ev is not None and len(outage_windows(t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s,
-                                             end_margin_s=ev.end_margin_s)) == 0:
-        raise ConfigError(f"{cfg.path}: evaluate.first_s = {ev.first_s:g} + outage_s = {ev.outage_s:g} + "
-                          f"end_margin_s = {ev.end_margin_s:g} s leave no outage window in the {t[-1] - t[0]:.1f} s "
-                          "IMU span, so nothing would be withheld: lower them, or drop [evaluate]")
+    if (
+        ev is not None
+        and len(
+            outage_windows(
+                t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
+            )
+        )
+        == 0
+    ):
+        raise ConfigError(
+            f"{cfg.path}: evaluate.first_s = {ev.first_s:g} + outage_s = {ev.outage_s:g} + "
+            f"end_margin_s = {ev.end_margin_s:g} s leave no outage window in the {t[-1] - t[0]:.1f} s "
+            "IMU span, so nothing would be withheld: lower them, or drop [evaluate]"
+        )
     a = cfg.alignment
     dens = run_noise(cfg)
     att = None if a.attitude is None else np.array([a.attitude[1], a.attitude[0], -a.attitude[2]])
-    align = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], pos, static_s=a.static_s,
-                             min_speed=a.min_speed, course_s=a.course_s, heading=a.heading, attitude=att,
-                             gyro_arw=float(dens.imu.gyro_arw),
-                             gyro_bias_sigma=float(dens.imu.gyro_bias_instability))
+    align = coarse_alignment(
+        t,
+        dv / dt[:, None],
+        dth / dt[:, None],
+        pos,
+        static_s=a.static_s,
+        min_speed=a.min_speed,
+        course_s=a.course_s,
+        heading=a.heading,
+        attitude=att,
+        gyro_arw=float(dens.imu.gyro_arw),
+        gyro_bias_sigma=float(dens.imu.gyro_bias_instability),
+    )
     # the alignment starts at the first GNSS fix, i.e. at the antenna: move it to the IMU
     C_bn = np.asarray(quat_to_dcm(np.asarray(align.nav0.q_bn)))
     p0 = np.asarray(align.nav0.pos, float)
     p_imu = p0 - np.asarray(enu_to_curvilinear(p0, C_bn @ lever_rfu))
     align = align._replace(nav0=align.nav0._replace(pos=p_imu))
     ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
-    outages = np.zeros((0, 2)) if ev is None else outage_windows(
-        t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
+    outages = (
+        np.zeros((0, 2))
+        if ev is None
+        else outage_windows(
+            t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
+        )
+    )
     meas, keep, withheld = gnss_measurements(
-        pos, t, outages, lever_rfu=lever_rfu, pos_sigma_floor=cfg.gnss.pos_sigma_floor,
-        vel_sigma_floor=cfg.gnss.vel_sigma_floor, use_velocity=cfg.gnss.use_velocity,
-        qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))
-    standstill, stop_info = (detect_stops(cfg, t, dth, dv, dt, a.static_s, meas) if cfg.constraints.zupt == "auto"
-                             else (None, {}))
+        pos,
+        t,
+        outages,
+        lever_rfu=lever_rfu,
+        pos_sigma_floor=cfg.gnss.pos_sigma_floor,
+        vel_sigma_floor=cfg.gnss.vel_sigma_floor,
+        use_velocity=cfg.gnss.use_velocity,
+        qualities=(1,) if cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6),
+    )
+    standstill, stop_info = (
+        detect_stops(cfg, t, dth, dv, dt, a.static_s, meas) if cfg.constraints.zupt == "auto" else (None, {})
+    )
     odo = None
     if cfg.odometer is not None:
         t_odo, sp = read_odometer(cfg)
         odo = interpolate_on_samples(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
         if not np.isfinite(odo).any():
-            raise ConfigError(f"{cfg.path}: odometer: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s "
-                              f"(readings [{t_odo[0]:.3f}, {t_odo[-1]:.3f}] s before the time offset): check the "
-                              "odometer's time scale (odometer.gps_week)")
+            raise ConfigError(
+                f"{cfg.path}: odometer: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s "
+                f"(readings [{t_odo[0]:.3f}, {t_odo[-1]:.3f}] s before the time offset): check the "
+                "odometer's time scale (odometer.gps_week)"
+            )
     hdg = None
     if cfg.heading is not None:
         hdg = heading_on_imu(cfg, t)
         if not np.isfinite(hdg[0]).any():
-            raise ConfigError(f"{cfg.path}: heading: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s: "
-                              "check its time scale (heading.gps_week)")
-    return Prepared(cfg=cfg, imu=imu, pos=pos, C_bs=C_bs, lever_rfu=lever_rfu, time_offset=float(off),
-                    time_offset_info=off_info, t=t, dth=dth, dv=dv, dt=dt, alignment=align, outages=outages,
-                    meas=meas, keep=keep, withheld=withheld, densities=dens, standstill=standstill,
-                    aids=build_aids(cfg, standstill, odo, hdg), standstill_info=stop_info, odometer_speed=odo,
-                    heading=hdg)
+            raise ConfigError(
+                f"{cfg.path}: heading: no reading falls inside the IMU span [{t[0]:.3f}, {t[-1]:.3f}] s: "
+                "check its time scale (heading.gps_week)"
+            )
+    return Prepared(
+        cfg=cfg,
+        imu=imu,
+        pos=pos,
+        C_bs=C_bs,
+        lever_rfu=lever_rfu,
+        time_offset=float(off),
+        time_offset_info=off_info,
+        t=t,
+        dth=dth,
+        dv=dv,
+        dt=dt,
+        alignment=align,
+        outages=outages,
+        meas=meas,
+        keep=keep,
+        withheld=withheld,
+        densities=dens,
+        standstill=standstill,
+        aids=build_aids(cfg, standstill, odo, hdg),
+        standstill_info=stop_info,
+        odometer_speed=odo,
+        heading=hdg,
+    )
 
 
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
 
 
-def run_filter(prep: Prepared, d: Optional[RunNoise] = None, *, meas=None, save=_SAVE):
+def run_filter(prep: Prepared, d: RunNoise | None = None, *, meas=None, save=_SAVE):
     """The loosely coupled filter on a prepared recording; returns :class:`jaxnav.ins.LCResult`."""
     d = prep.densities if d is None else d
     o = prep.cfg.odometer
     model = run_error_model(prep.cfg)
-    params = filter_params(d, prep.alignment.nav0.pos, model,
-                           odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else 0.0)
+    params = filter_params(
+        d, prep.alignment.nav0.pos, model, odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else 0.0
+    )
     m = prep.meas if meas is None else meas
     m = m._replace(R=jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
     g = prep.cfg.gnss
     gate = None if g.gate_probability is None else LCGate(g.gate_probability, g.gate_max_run)
     z3 = np.zeros(3)
     b0 = SensorBiases(gyro=np.asarray(prep.alignment.gyro_bias), markov=z3, accel=z3)
-    return loosely_coupled(prep.alignment.nav0, prep.t, prep.dth, prep.dv, m, params, dt_imu=prep.dt, biases0=b0,
-                           error_model=model, save=LCSave(tuple(save)), aids=prep.aids, gate=gate)
+    return loosely_coupled(
+        prep.alignment.nav0,
+        prep.t,
+        prep.dth,
+        prep.dv,
+        m,
+        params,
+        dt_imu=prep.dt,
+        biases0=b0,
+        error_model=model,
+        save=LCSave(tuple(save)),
+        aids=prep.aids,
+        gate=gate,
+    )
 
 
 def antenna_enu(nav, t_nav, t, lever, pos0):
@@ -414,13 +609,13 @@ class InsRun(NamedTuple):
     enu_fwd: Any
     enu_sm: Any
     fixed: Any
-    scores: Optional[OutageScores]
+    scores: OutageScores | None
     runtime_s: float
     densities: RunNoise
     gnss_epochs: Any = None
 
 
-def run_ins(prep: Prepared, d: Optional[RunNoise] = None) -> InsRun:
+def run_ins(prep: Prepared, d: RunNoise | None = None) -> InsRun:
     """Forward filter + RTS smoother on a prepared recording, scored on its outages if it has any."""
     d = prep.densities if d is None else d
     t0 = time.perf_counter()
@@ -446,12 +641,33 @@ def run_ins(prep: Prepared, d: Optional[RunNoise] = None) -> InsRun:
     if prep.outages.shape[0]:
         e_f = np.hypot(*(enu_f - enu_ref)[:, :2].T)
         e_s = np.hypot(*(enu_s - enu_ref)[:, :2].T)
-        scores = score_outages(np.asarray(meas.t), e_f, e_s, fixed, prep.withheld, prep.outages, runtime_s=runtime,
-                               n_nonfinite=nonfinite, sig_f=horizontal_sigma(ep.covs, ep.nav.pos, model.idx),
-                               sig_s=horizontal_sigma(sm_P_g, sm_nav_g.pos, model.idx))
-    return InsRun(prep=prep, result=res, smoothed_nav=sm_nav, smoothed_biases=sm_b, smoothed_covs=sm_P,
-                  enu_ref=enu_ref, enu_fwd=enu_f, enu_sm=enu_s, fixed=fixed, scores=scores, runtime_s=runtime,
-                  densities=d, gnss_epochs=g)
+        scores = score_outages(
+            np.asarray(meas.t),
+            e_f,
+            e_s,
+            fixed,
+            prep.withheld,
+            prep.outages,
+            runtime_s=runtime,
+            n_nonfinite=nonfinite,
+            sig_f=horizontal_sigma(ep.covs, ep.nav.pos, model.idx),
+            sig_s=horizontal_sigma(sm_P_g, sm_nav_g.pos, model.idx),
+        )
+    return InsRun(
+        prep=prep,
+        result=res,
+        smoothed_nav=sm_nav,
+        smoothed_biases=sm_b,
+        smoothed_covs=sm_P,
+        enu_ref=enu_ref,
+        enu_fwd=enu_f,
+        enu_sm=enu_s,
+        fixed=fixed,
+        scores=scores,
+        runtime_s=runtime,
+        densities=d,
+        gnss_epochs=g,
+    )
 
 
 def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
@@ -465,22 +681,39 @@ def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
     gt = np.asarray(pos.t, float)
     t0, t1 = float(t_imu[0]), float(t_imu[-1])
     ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
-    windows = None if ev is None else outage_windows(t0, t1, first_s=ev.first_s, outage_s=ev.outage_s,
-                                                     gap_s=ev.gap_s, end_margin_s=ev.end_margin_s)
+    windows = (
+        None
+        if ev is None
+        else outage_windows(
+            t0, t1, first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
+        )
+    )
     sel = offset_search_epochs(gt, t_imu, span, windows)
     use, n = sel["use"], sel["n_used"]
     if n < MIN_SEARCH_EPOCHS:
-        raise ValueError(f"time offset search: only {n} GNSS epoch(s) lie inside the IMU span "
-                         f"[{t0:.3f}, {t1:.3f}] s at every trial offset within +-{span} s (GNSS "
-                         f"[{gt[0]:.3f}, {gt[-1]:.3f}] s; at least {MIN_SEARCH_EPOCHS} needed): check the time "
-                         "systems, or reduce imu.time_offset_search_s")
+        raise ValueError(
+            f"time offset search: only {n} GNSS epoch(s) lie inside the IMU span "
+            f"[{t0:.3f}, {t1:.3f}] s at every trial offset within +-{span} s (GNSS "
+            f"[{gt[0]:.3f}, {gt[-1]:.3f}] s; at least {MIN_SEARCH_EPOCHS} needed): check the time "
+            "systems, or reduce imu.time_offset_search_s"
+        )
     M = gt.size
-    sub = pos._replace(**{f: np.asarray(v)[use] for f, v in zip(pos._fields, pos)
-                          if isinstance(v, (np.ndarray, jnp.ndarray)) and np.ndim(v) >= 1 and np.shape(v)[0] == M})
-    return sub, {"n_epochs_used": n, "n_epochs_dropped_at_span_edges": sel["n_dropped_at_span_edges"],
-                 "n_epochs_withheld_by_evaluate": sel["n_withheld"],
-                 "fitted_on": ("GNSS epochs inside the IMU span at every trial offset"
-                               + (", outside the [evaluate] outages (widened by the search span)" if ev else ""))}
+    sub = pos._replace(
+        **{
+            f: np.asarray(v)[use]
+            for f, v in zip(pos._fields, pos)
+            if isinstance(v, (np.ndarray, jnp.ndarray)) and np.ndim(v) >= 1 and np.shape(v)[0] == M
+        }
+    )
+    return sub, {
+        "n_epochs_used": n,
+        "n_epochs_dropped_at_span_edges": sel["n_dropped_at_span_edges"],
+        "n_epochs_withheld_by_evaluate": sel["n_withheld"],
+        "fitted_on": (
+            "GNSS epochs inside the IMU span at every trial offset"
+            + (", outside the [evaluate] outages (widened by the search span)" if ev else "")
+        ),
+    }
 
 
 def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
@@ -503,21 +736,37 @@ def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress
     v = np.asarray(pos.v_enu, float)
     info = {"source": "estimate", **common}
     try:
-        est = estimate_time_offset(t, dth / dt[:, None], np.asarray(pos.t, float), v if np.all(np.isfinite(v)) else None,
-                                   llh=llh, f_b=dv / dt[:, None], max_offset_s=max(1.0, span + 0.5))
+        est = estimate_time_offset(
+            t,
+            dth / dt[:, None],
+            np.asarray(pos.t, float),
+            v if np.all(np.isfinite(v)) else None,
+            llh=llh,
+            f_b=dv / dt[:, None],
+            max_offset_s=max(1.0, span + 0.5),
+        )
         guess = float(est.offset_s)
-        info.update(first_guess="yaw rate vs GNSS course rate cross-correlation", first_guess_s=guess,
-                    first_guess_sigma_s=float(est.sigma_s), first_guess_corr=float(est.corr),
-                    first_guess_epochs=int(est.n_epochs))
+        info.update(
+            first_guess="yaw rate vs GNSS course rate cross-correlation",
+            first_guess_s=guess,
+            first_guess_sigma_s=float(est.sigma_s),
+            first_guess_corr=float(est.corr),
+            first_guess_epochs=int(est.n_epochs),
+        )
         if not est.corr > 0.5:
             raise ValueError(f"weak correlation {est.corr:.2f}")
     except ValueError as exc:  # too few turns or epochs: search around zero
         guess = 0.0
         info.update(first_guess=f"0 (cross-correlation not usable: {exc})")
     # likelihoods comparable between offsets: the same GNSS epochs, no gate, no pseudo-measurements
-    no_eval = cfg._replace(evaluate=None, imu=cfg.imu._replace(time_offset_s=0.0),
-                           gnss=cfg.gnss._replace(gate_probability=None),
-                           constraints=cfg.constraints._replace(zupt=False, nhc=False), odometer=None, heading=None)
+    no_eval = cfg._replace(
+        evaluate=None,
+        imu=cfg.imu._replace(time_offset_s=0.0),
+        gnss=cfg.gnss._replace(gate_probability=None),
+        constraints=cfg.constraints._replace(zupt=False, nhc=False),
+        odometer=None,
+        heading=None,
+    )
     cache = {}
     tg = np.asarray(pos.t, float)
     t_ref, T = 0.5 * (tg[0] + tg[-1]), float(tg[-1] - tg[0])
@@ -535,24 +784,37 @@ def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress
     best = res.offset_s
     drift = clock_drift(loglik, best, tg, span, widen_hint="widen imu.time_offset_search_s")
     grid = np.array(sorted(k[0] for k in cache if k[1] == 0.0))
-    info.update(method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
-                       "best, parabolic refinement", grid_s=grid, loglik=np.array([cache[(g, 0.0)] for g in grid]),
-                offset_s=best, sigma_s=res.sigma_s,
-                sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
-                             "(treats the innovations as independent: optimistic when GNSS errors are correlated "
-                             "in time)", at_search_edge=res.at_edge, drift=drift)
+    info.update(
+        method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
+        "best, parabolic refinement",
+        grid_s=grid,
+        loglik=np.array([cache[(g, 0.0)] for g in grid]),
+        offset_s=best,
+        sigma_s=res.sigma_s,
+        sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
+        "(treats the innovations as independent: optimistic when GNSS errors are correlated "
+        "in time)",
+        at_search_edge=res.at_edge,
+        drift=drift,
+    )
     if res.at_edge and progress:
-        progress(f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
-                 "imu.time_offset_search_s")
+        progress(
+            f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
+            "imu.time_offset_search_s"
+        )
     if drift.get("significant") and progress:
         progress(f"warning: {drift['warning']}")
     return best, info
 
 
 #: ``[tune] params`` name -> (ImuNoise or RunNoise field, or "lever_arm"; bijector)
-_TUNE_MAP = {"arw": ("gyro_arw", "log"), "vrw": ("accel_vrw", "log"),
-             "gyro_bias_instability": ("gyro_bias_instability", "log"),
-             "pos_sigma_scale": ("pos_sigma_scale", "log"), "lever_arm": ("lever_arm", "real")}
+_TUNE_MAP = {
+    "arw": ("gyro_arw", "log"),
+    "vrw": ("accel_vrw", "log"),
+    "gyro_bias_instability": ("gyro_bias_instability", "log"),
+    "pos_sigma_scale": ("pos_sigma_scale", "log"),
+    "lever_arm": ("lever_arm", "real"),
+}
 
 
 class TuneReport(NamedTuple):
@@ -585,8 +847,9 @@ def run_training_windows(prep: Prepared) -> np.ndarray:
     return training_windows(prep.outages, t1, ev.outage_s)
 
 
-def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse",
-               loss_kind: str = "innovations") -> TuneReport:
+def tune_noise(
+    prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse", loss_kind: str = "innovations"
+) -> TuneReport:
     """Maximum-likelihood tuning of noise densities (and the lever arm) by gradient through the whole filter.
 
     ``loss_kind``:
@@ -624,20 +887,28 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
         fixed = np.asarray(prep.pos.q)[prep.keep] == 1
         scored = inside & fixed & base_mask[:, :3].any(-1)
         if scored.sum() < 5:
-            raise ValueError(f"--tune loss 'outages': only {int(scored.sum())} fixed GNSS epochs inside the training "
-                             f"windows {tw.tolist()}; use loss = 'innovations'")
+            raise ValueError(
+                f"--tune loss 'outages': only {int(scored.sum())} fixed GNSS epochs inside the training "
+                f"windows {tw.tolist()}; use loss = 'innovations'"
+            )
         base_mask = base_mask & ~inside[:, None]
     all_gnss = prep.meas._replace(mask=base_mask)
     n_fit = int(scored.sum()) if scored is not None else int(base_mask[:, :3].any(-1).sum())
-    fitted_on = ("GNSS epochs the filter sees" + (", outside the [evaluate] outages" if prep.withheld.any() else "")
-                 + (": fixes withheld on the training windows" if scored is not None else ": their innovations"))
+    fitted_on = (
+        "GNSS epochs the filter sees"
+        + (", outside the [evaluate] outages" if prep.withheld.any() else "")
+        + (": fixes withheld on the training windows" if scored is not None else ": their innovations")
+    )
     d0 = prep.densities
     lever0 = jnp.asarray(prep.lever_rfu, float)
     p0 = {}
     for n in names:
         field, _ = _TUNE_MAP[n]
-        p0[n] = lever0 if field == "lever_arm" else jnp.asarray(
-            getattr(d0.imu if field in ImuNoise._fields else d0, field), float)
+        p0[n] = (
+            lever0
+            if field == "lever_arm"
+            else jnp.asarray(getattr(d0.imu if field in ImuNoise._fields else d0, field), float)
+        )
     space = Space({n: _TUNE_MAP[n][1] for n in names})
     pos0 = jnp.asarray(np.asarray(prep.alignment.nav0.pos, float))
     ref = jnp.asarray(np.asarray(prep.meas.pos, float))
@@ -646,8 +917,10 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
 
     def unpack(p):
         fields = {_TUNE_MAP[n][0]: p[n] for n in names if _TUNE_MAP[n][0] != "lever_arm"}
-        d = d0._replace(imu=d0.imu._replace(**{f: v for f, v in fields.items() if f in ImuNoise._fields}),
-                        **{f: v for f, v in fields.items() if f not in ImuNoise._fields})
+        d = d0._replace(
+            imu=d0.imu._replace(**{f: v for f, v in fields.items() if f in ImuNoise._fields}),
+            **{f: v for f, v in fields.items() if f not in ImuNoise._fields},
+        )
         lev = p.get("lever_arm", lever0)
         return d, lev
 
@@ -659,8 +932,17 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
         res = run_filter(prep, d, meas=m, save=("nav", "covs"))
         g = np.nonzero(np.asarray(res.epochs.gnss_row) >= 0)[0]
         nav = jax.tree_util.tree_map(lambda a: a[g], res.epochs.nav)
-        nll = horizontal_fix_nll(nav, res.epochs.covs[g], res.epochs.t_nav[g], jnp.asarray(np.asarray(prep.meas.t)),
-                                 ref, R_h * d.pos_sigma_scale**2, lev, pos0, idx)
+        nll = horizontal_fix_nll(
+            nav,
+            res.epochs.covs[g],
+            res.epochs.t_nav[g],
+            jnp.asarray(np.asarray(prep.meas.t)),
+            ref,
+            R_h * d.pos_sigma_scale**2,
+            lev,
+            pos0,
+            idx,
+        )
         return jnp.sum(jnp.where(jnp.asarray(scored), nll, 0.0))
 
     t0 = time.perf_counter()
@@ -670,9 +952,18 @@ def tune_noise(prep: Prepared, names, *, max_evals: int = 25, mode: str = "rever
     ll1 = -float(res.loss)
     si = {n: np.asarray(v).tolist() for n, v in p0.items()}
     so = {n: np.asarray(v).tolist() for n, v in res.params.items()}
-    return TuneReport(before=si, after=so, loglik_before=ll0, loglik_after=ll1, n_evals=int(res.n_evals),
-                      wall_time_s=time.perf_counter() - t0, densities=d1, lever_rfu=np.asarray(lev1),
-                      fitted_on=fitted_on, n_epochs=n_fit)
+    return TuneReport(
+        before=si,
+        after=so,
+        loglik_before=ll0,
+        loglik_after=ll1,
+        n_evals=int(res.n_evals),
+        wall_time_s=time.perf_counter() - t0,
+        densities=d1,
+        lever_rfu=np.asarray(lev1),
+        fitted_on=fitted_on,
+        n_epochs=n_fit,
+    )
 
 
 def _mask_without_outages(prep: Prepared):
@@ -680,11 +971,16 @@ def _mask_without_outages(prep: Prepared):
     ok = np.asarray(prep.meas.mask).copy()
     w = np.asarray(prep.withheld)
     if w.any():
-        full = gnss_measurements(prep.pos, prep.t, (), lever_rfu=prep.lever_rfu,
-                                 pos_sigma_floor=prep.cfg.gnss.pos_sigma_floor,
-                                 vel_sigma_floor=prep.cfg.gnss.vel_sigma_floor,
-                                 use_velocity=prep.cfg.gnss.use_velocity,
-                                 qualities=(1,) if prep.cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6))[0]
+        full = gnss_measurements(
+            prep.pos,
+            prep.t,
+            (),
+            lever_rfu=prep.lever_rfu,
+            pos_sigma_floor=prep.cfg.gnss.pos_sigma_floor,
+            vel_sigma_floor=prep.cfg.gnss.vel_sigma_floor,
+            use_velocity=prep.cfg.gnss.use_velocity,
+            qualities=(1,) if prep.cfg.gnss.fixed_only else (1, 2, 3, 4, 5, 6),
+        )[0]
         ok = np.asarray(full.mask)
     return ok
 
@@ -738,11 +1034,24 @@ def truth_errors(run: InsRun, truth, which: str):
     if t[0] < 2 * week <= tt[0]:
         tt = tt - math.floor(tt[0] / week) * week
     if tt[-1] < t[0] or tt[0] > t[-1]:
-        raise ConfigError(f"{run.prep.cfg.path}: evaluate.truth: {truth.path} spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, "
-                          f"the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no common epoch (another time scale? the "
-                          "reference must be in GPST like the GNSS solution)")
+        raise ConfigError(
+            f"{run.prep.cfg.path}: evaluate.truth: {truth.path} spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, "
+            f"the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no common epoch (another time scale? the "
+            "reference must be in GPST like the GNSS solution)"
+        )
     idx = run_error_model(run.prep.cfg).idx
     sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None))
-    return trajectory_errors(t, pos, v, rpy, tt, truth.pos, truth.v_enu, truth.rpy,
-                             cov_pos_enu=position_cov_enu(P, pos, idx), sig_vel=sd[:, idx.dv],
-                             sig_att=attitude_sigmas(P, heading, idx), windows=run.prep.outages)
+    return trajectory_errors(
+        t,
+        pos,
+        v,
+        rpy,
+        tt,
+        truth.pos,
+        truth.v_enu,
+        truth.rpy,
+        cov_pos_enu=position_cov_enu(P, pos, idx),
+        sig_vel=sd[:, idx.dv],
+        sig_att=attitude_sigmas(P, heading, idx),
+        windows=run.prep.outages,
+    )

@@ -14,19 +14,19 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import time
-from typing import Mapping
+from collections.abc import Mapping
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.io import write_json
 from jaxnav import filters as jf
 from jaxnav import ins, sim, tune
+from jaxnav._config import Table, load_toml
 from jaxnav.geodesy import meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_conj, quat_mul, quat_to_rv
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled
-from jaxnav._config import Table, load_toml
+from jaxnav.io import write_json
 
 #: the three filters of S0's Table 1
 FILTERS = ("classic", "attenuated", "fading")
@@ -41,9 +41,14 @@ _COUNT = dict(lo=1, hi=100_000)
 #: every section's keys: (kind of :meth:`jaxnav._config.Table.get`, its bounds or choices); all are required
 _SCHEMA = {
     "scenario": {"unsensed_velocity_steps": (bool, {})},
-    "filter": {"n_states": (int, dict(choices=(15, 18))), "q_scale": (float, _POSITIVE),
-               "r_scale": (float, _POSITIVE), "inflate_states": (list, {}),
-               "b": (float, dict(lo=0.0, hi=1.0, hi_open=True)), "fading_window": (int, _COUNT)},
+    "filter": {
+        "n_states": (int, dict(choices=(15, 18))),
+        "q_scale": (float, _POSITIVE),
+        "r_scale": (float, _POSITIVE),
+        "inflate_states": (list, {}),
+        "b": (float, dict(lo=0.0, hi=1.0, hi_open=True)),
+        "fading_window": (int, _COUNT),
+    },
     "monte_carlo": {"seeds": (int, _COUNT), "chunk": (int, _COUNT)},
     "sweep": {"b": ("numbers", {}), "seeds": (int, _COUNT)},
     "published": {"classic": ("numbers", {}), "attenuated": ("numbers", {}), "fading": ("numbers", {})},
@@ -64,8 +69,10 @@ def load_experiment(path=EXPERIMENT) -> dict:
         d[sec] = {k: t.get(k, kind, **bounds) for k, (kind, bounds) in keys.items()}
     f = d["filter"]
     if not all(isinstance(i, int) and not isinstance(i, bool) and 0 <= i < f["n_states"] for i in f["inflate_states"]):
-        tables["filter"].fail("inflate_states", f"must be a list of state indices in [0, {f['n_states'] - 1}], "
-                                                f"got {f['inflate_states']!r}")
+        tables["filter"].fail(
+            "inflate_states",
+            f"must be a list of state indices in [0, {f['n_states'] - 1}], got {f['inflate_states']!r}",
+        )
     bs = d["sweep"]["b"]
     if not bs or not all(0.0 <= b < 1.0 for b in bs):
         tables["sweep"].fail("b", f"must be a non-empty list of numbers in [0, 1), got {bs!r}")
@@ -79,8 +86,9 @@ def scenario(exp: dict):
     """The S0 scenario with the experiment's mismatch applied."""
     cfg = sim.s0_scenario()
     if exp["scenario"]["unsensed_velocity_steps"]:
-        segs = tuple(dataclasses.replace(s, sensed=False) if s.kind == "velocity_step" else s
-                     for s in cfg.trajectory.segments)
+        segs = tuple(
+            dataclasses.replace(s, sensed=False) if s.kind == "velocity_step" else s for s in cfg.trajectory.segments
+        )
         cfg = dataclasses.replace(cfg, trajectory=dataclasses.replace(cfg.trajectory, segments=segs))
     return cfg
 
@@ -95,16 +103,24 @@ def cut_timeline(cfg, duration: float):
         t += seg.duration + seg.hold
     if not segs:
         raise ValueError(f"duration {duration} s is shorter than the first trajectory segment")
-    return dataclasses.replace(cfg, duration=float(duration),
-                               trajectory=dataclasses.replace(cfg.trajectory, segments=tuple(segs)))
+    return dataclasses.replace(
+        cfg, duration=float(duration), trajectory=dataclasses.replace(cfg.trajectory, segments=tuple(segs))
+    )
 
 
 def filter_params(cfg, exp: dict) -> LCParams:
     """P0 and Qc from the scenario's sigmas (:func:`jaxnav.ins.lc_params` of :func:`jaxnav.sim.imu_noise`), Qc and R
     scaled by the experiment's mismatch."""
     f, ie = exp["filter"], cfg.initial_errors
-    p = ins.lc_params(ins.error_model_for(f["n_states"]), sim.imu_noise(cfg), jnp.asarray(cfg.origin),
-                      att=ie.attitude, vel=ie.velocity, pos_enu=ie.position, R_scale=f["r_scale"])
+    p = ins.lc_params(
+        ins.error_model_for(f["n_states"]),
+        sim.imu_noise(cfg),
+        jnp.asarray(cfg.origin),
+        att=ie.attitude,
+        vel=ie.velocity,
+        pos_enu=ie.position,
+        R_scale=f["r_scale"],
+    )
     return p._replace(Qc=p.Qc * f["q_scale"])
 
 
@@ -117,16 +133,24 @@ def rules(exp: dict, b=None) -> dict:
     """The three filters' inflation rules (attenuated with ``b`` if given)."""
     f = exp["filter"]
     states = inflated_states(exp)
-    return {"classic": None,
-            "attenuated": jf.attenuated(f["b"] if b is None else b, states=states),
-            "fading": jf.fading(window=f["fading_window"], states=states)}
+    return {
+        "classic": None,
+        "attenuated": jf.attenuated(f["b"] if b is None else b, states=states),
+        "fading": jf.fading(window=f["fading_window"], states=states),
+    }
 
 
 def s0_measurements(cfg, gnss, t) -> PVMeasurements:
     """The GPS position/velocity measurements of one S0 run (no lever arm; R diagonal from the scenario's sigmas)."""
     v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
-    return ins.gnss_measurements(t, gnss.pos, gnss.vel, np.diag(v3(cfg.gnss.pos_sigma) ** 2),
-                                 np.diag(v3(cfg.gnss.vel_sigma) ** 2), use=gnss.valid)
+    return ins.gnss_measurements(
+        t,
+        gnss.pos,
+        gnss.vel,
+        np.diag(v3(cfg.gnss.pos_sigma) ** 2),
+        np.diag(v3(cfg.gnss.vel_sigma) ** 2),
+        use=gnss.valid,
+    )
 
 
 def _rms9(pe, ve, ae):
@@ -165,9 +189,19 @@ class S0Setup:
         r = sim.simulate(self.cfg, key, trajectory=self.truth)
         meas = s0_measurements(self.cfg, r.gnss, self.t_gnss)
         params = self.params._replace(Qc=self.params.Qc * q_scale, R_scale=self.params.R_scale * r_scale)
-        return loosely_coupled(r.nav0, self.t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=self.cfg.dt,
-                               error_model=ins.error_model_for(self.exp["filter"]["n_states"]), inflation=inflation,
-                               save=ins.LCSave(tuple(save)), propagation=ins.LCPropagation(remat=remat))
+        return loosely_coupled(
+            r.nav0,
+            self.t_imu,
+            r.imu.dtheta,
+            r.imu.dv,
+            meas,
+            params,
+            dt_imu=self.cfg.dt,
+            error_model=ins.error_model_for(self.exp["filter"]["n_states"]),
+            inflation=inflation,
+            save=ins.LCSave(tuple(save)),
+            propagation=ins.LCPropagation(remat=remat),
+        )
 
     def errors(self, res):
         """(M, 3) position errors ENU (m) and (M, 3) velocity errors ENU (m/s) at the GPS epochs."""
@@ -216,8 +250,9 @@ def s0_rule(setup: S0Setup, filter, params: Mapping):
     raise ValueError(f"unknown S0 filter {filter!r}; expected one of {S0_FILTERS}")
 
 
-def s0_metrics(setup: S0Setup, params: Mapping, key, *, filter="attenuated", loss: str = "rms",
-               remat: bool = False) -> dict:
+def s0_metrics(
+    setup: S0Setup, params: Mapping, key, *, filter="attenuated", loss: str = "rms", remat: bool = False
+) -> dict:
     """One Monte Carlo run of the S0 experiment scored for tuning (pure in params and key).
 
     Args:
@@ -239,8 +274,14 @@ def s0_metrics(setup: S0Setup, params: Mapping, key, *, filter="attenuated", los
     if loss not in S0_LOSSES:
         raise ValueError(f"unknown loss {loss!r}; expected one of {S0_LOSSES}")
     rule = s0_rule(setup, filter, params)
-    res = setup.run(key, rule, save=("nav", "nis", "valid"), q_scale=params.get("q_scale", 1.0),
-                    r_scale=params.get("r_scale", 1.0), remat=remat)
+    res = setup.run(
+        key,
+        rule,
+        save=("nav", "nis", "valid"),
+        q_scale=params.get("q_scale", 1.0),
+        r_scale=params.get("r_scale", 1.0),
+        remat=remat,
+    )
     r = setup.rms_of(res)
     out = dict(rms=r, nll=tune.innovation_nll(res), nis=tune.nis_consistency(res))
     out["loss"] = {"rms": jnp.mean(r[:3]), "nll": out["nll"], "nis": out["nis"]}[loss]
@@ -281,11 +322,13 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         pe, ve = S.errors(res)
         ae = S.attitude_errors(res)
         cov = res.epochs.covs
-        sig_p = jnp.sqrt(jnp.stack([cov[:, 7, 7] * (S.RN * jnp.cos(S.lat)) ** 2, cov[:, 6, 6] * S.RM**2,
-                                    cov[:, 8, 8]], -1))
+        sig_p = jnp.sqrt(
+            jnp.stack([cov[:, 7, 7] * (S.RN * jnp.cos(S.lat)) ** 2, cov[:, 6, 6] * S.RM**2, cov[:, 8, 8]], -1)
+        )
         sig_v = jnp.sqrt(jnp.stack([cov[:, 3, 3], cov[:, 4, 4], cov[:, 5, 5]], -1))
-        return dict(rms=_rms9(pe, ve, ae), pos_err=pe, vel_err=ve, sig_pos=sig_p, sig_vel=sig_v,
-                    factors=res.epochs.factors)
+        return dict(
+            rms=_rms9(pe, ve, ae), pos_err=pe, vel_err=ve, sig_pos=sig_p, sig_vel=sig_v, factors=res.epochs.factors
+        )
 
     save = ("nav", "covs", "factors")
 
@@ -298,8 +341,14 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
 
     timing = {}
     t0 = time.perf_counter()
-    three = tune.sweep(s0_run, {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])},
-                       keys, chunk=chunk, desc="S0 classic, attenuated, fading", progress=progress)
+    three = tune.sweep(
+        s0_run,
+        {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])},
+        keys,
+        chunk=chunk,
+        desc="S0 classic, attenuated, fading",
+        progress=progress,
+    )
     timing["filters"] = time.perf_counter() - t0
     timing["compile"] = three.compile_time_s
     runs = {name: {k: v[i] for k, v in three.values.items()} for i, name in enumerate(FILTERS)}
@@ -313,13 +362,15 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         bs = np.sort(np.append(bs, exp["filter"]["b"]))
     skeys = keys[: exp["sweep"]["seeds"]]
     t0 = time.perf_counter()
-    sweep = tune.sweep(s0_run, {"b": bs, "rule": np.zeros_like(bs)}, skeys, chunk=chunk, desc="b sweep",
-                       progress=progress).values["rms"]  # (B, seeds, 9)
+    sweep = tune.sweep(
+        s0_run, {"b": bs, "rule": np.zeros_like(bs)}, skeys, chunk=chunk, desc="b sweep", progress=progress
+    ).values["rms"]  # (B, seeds, 9)
     timing["sweep"] = time.perf_counter() - t0
 
     # the first seed in detail for the figures
-    detail = {name: {k: runs[name][k][0] for k in ("pos_err", "vel_err", "sig_pos", "sig_vel", "factors")}
-              for name in FILTERS}
+    detail = {
+        name: {k: runs[name][k][0] for k in ("pos_err", "vel_err", "sig_pos", "sig_vel", "factors")} for name in FILTERS
+    }
 
     pub = exp["published"]
     table = {}
@@ -327,10 +378,16 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         r = rms[name]
         table[name] = dict(
             per_seed=dict(pos_rms_m=r[:, :3].tolist(), vel_rms_mps=r[:, 3:6].tolist(), att_rms_rad=r[:, 6:].tolist()),
-            mean=dict(pos_rms_m=r[:, :3].mean(0).tolist(), vel_rms_mps=r[:, 3:6].mean(0).tolist(),
-                      att_rms_rad=r[:, 6:].mean(0).tolist()),
-            std=dict(pos_rms_m=r[:, :3].std(0).tolist(), vel_rms_mps=r[:, 3:6].std(0).tolist(),
-                     att_rms_rad=r[:, 6:].std(0).tolist()),
+            mean=dict(
+                pos_rms_m=r[:, :3].mean(0).tolist(),
+                vel_rms_mps=r[:, 3:6].mean(0).tolist(),
+                att_rms_rad=r[:, 6:].mean(0).tolist(),
+            ),
+            std=dict(
+                pos_rms_m=r[:, :3].std(0).tolist(),
+                vel_rms_mps=r[:, 3:6].std(0).tolist(),
+                att_rms_rad=r[:, 6:].std(0).tolist(),
+            ),
             mean_pos_rms_m=float(r[:, :3].mean()),
             published=dict(pos_rms_m=pub[name][:3], vel_rms_mps=pub[name][3:]),
         )
@@ -341,18 +398,34 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
     if writer:
         from jaxnav.experiments.figures import plot_s0
 
-        figs = plot_s0(outdir, truth=S.truth, gidx=S.gidx, t=S.t_gnss, detail=detail, sweep_b=bs,
-                       sweep_rms=sweep_mean, b_paper=exp["filter"]["b"],
-                       sweep_per_seed=np.asarray(sweep[:, :, :3]).mean(-1),  # (B, seeds): the spread bars
-                       seed_label=f"seed 0 of {seeds}")
+        figs = plot_s0(
+            outdir,
+            truth=S.truth,
+            gidx=S.gidx,
+            t=S.t_gnss,
+            detail=detail,
+            sweep_b=bs,
+            sweep_rms=sweep_mean,
+            b_paper=exp["filter"]["b"],
+            sweep_per_seed=np.asarray(sweep[:, :, :3]).mean(-1),  # (B, seeds): the spread bars
+            seed_label=f"seed 0 of {seeds}",
+        )
     wall = time.perf_counter() - t_all
     results = dict(
-        settings=dict(seeds=seeds, experiment=exp, duration_s=S.cfg.duration, imu_rate_hz=S.cfg.imu_rate_hz,
-                      gps_rate_hz=S.cfg.gnss.rate_hz),
+        settings=dict(
+            seeds=seeds,
+            experiment=exp,
+            duration_s=S.cfg.duration,
+            imu_rate_hz=S.cfg.imu_rate_hz,
+            gps_rate_hz=S.cfg.gnss.rate_hz,
+        ),
         filters=table,
         sweep=dict(b=bs.tolist(), seeds=len(skeys), mean_pos_rms_m=sweep_mean.tolist(), best_b=float(bs[best])),
-        wall_time_s=dict(total=wall, **timing), figures=[str(f) for f in figs],
-        jax_version=jax.__version__, devices=[str(d) for d in jax.devices()], n_processes=jax.process_count(),
+        wall_time_s=dict(total=wall, **timing),
+        figures=[str(f) for f in figs],
+        jax_version=jax.__version__,
+        devices=[str(d) for d in jax.devices()],
+        n_processes=jax.process_count(),
     )
     if writer:
         write_json(outdir / "results.json", results)
@@ -364,24 +437,43 @@ def format_s0(results: dict) -> str:
     the published values (position m, velocity m/s, attitude deg), and the b sweep's best b."""
     exp = results["settings"]["experiment"]
     pub = exp["published"]
-    lines = [f"S0 INS/GPS, 2000 s, IMU 100 Hz, GPS 1 Hz, {results['settings']['seeds']} seeds (mean +- std of the "
-             f"per-run RMS; published = Table 1, one run)",
-             f"{'filter':<12}{'':<10}" + "".join(f"{h:>16}" for h in ("pos E m", "pos N m", "pos U m", "vel E m/s",
-                                                                         "vel N m/s", "vel U m/s", "att E deg",
-                                                                         "att N deg", "att U deg"))]
+    lines = [
+        f"S0 INS/GPS, 2000 s, IMU 100 Hz, GPS 1 Hz, {results['settings']['seeds']} seeds (mean +- std of the "
+        f"per-run RMS; published = Table 1, one run)",
+        f"{'filter':<12}{'':<10}"
+        + "".join(
+            f"{h:>16}"
+            for h in (
+                "pos E m",
+                "pos N m",
+                "pos U m",
+                "vel E m/s",
+                "vel N m/s",
+                "vel U m/s",
+                "att E deg",
+                "att N deg",
+                "att U deg",
+            )
+        ),
+    ]
     for name in FILTERS:
         ps = results["filters"][name]["per_seed"]
-        r = np.concatenate([np.asarray(ps["pos_rms_m"]), np.asarray(ps["vel_rms_mps"]),
-                            np.degrees(np.asarray(ps["att_rms_rad"]))], axis=1)
-        lines.append(f"{name:<12}{'jaxnav':<10}"
-                     + "".join(f"{m:>9.3f} +-{s:<5.3f}" for m, s in zip(r.mean(0), r.std(0))))
+        r = np.concatenate(
+            [np.asarray(ps["pos_rms_m"]), np.asarray(ps["vel_rms_mps"]), np.degrees(np.asarray(ps["att_rms_rad"]))],
+            axis=1,
+        )
+        lines.append(
+            f"{name:<12}{'jaxnav':<10}" + "".join(f"{m:>9.3f} +-{s:<5.3f}" for m, s in zip(r.mean(0), r.std(0)))
+        )
         lines.append(f"{'':<12}{'published':<10}" + "".join(f"{v:>16.3f}" for v in pub[name]))
     sw = results["sweep"]
     bs, mean = np.asarray(sw["b"]), np.asarray(sw["mean_pos_rms_m"])
     best = int(np.argmin(mean))
     b = exp["filter"]["b"]
-    lines.append(f"b sweep ({len(bs)} values x {sw['seeds']} seeds, mean position RMS): best b = {bs[best]:.3f} "
-                 f"({mean[best]:.3f} m); b = {b} gives {mean[np.argmin(np.abs(bs - b))]:.3f} m")
+    lines.append(
+        f"b sweep ({len(bs)} values x {sw['seeds']} seeds, mean position RMS): best b = {bs[best]:.3f} "
+        f"({mean[best]:.3f} m); b = {b} gives {mean[np.argmin(np.abs(bs - b))]:.3f} m"
+    )
     lines += S0_DIFFERENCES_NOTE
     return "\n".join(lines)
 

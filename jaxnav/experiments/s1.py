@@ -22,9 +22,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav import io
 from jaxnav._status import status_words
 from jaxnav.io import write_json
-from jaxnav import io
 from jaxnav.monitoring import (
     S1_THRESHOLDS_XYH,
     daily_forecasts,
@@ -48,8 +48,14 @@ S1_PUBLISHED = {
     "X": {"standard": (3.21, 0.53, 57.67), "adaptive": (0.80, 0.18, 99.94)},
     "Y": {"standard": (1.83, 0.33, 67.81), "adaptive": (0.80, 0.18, 99.97)},
     "H": {"standard": (8.27, 1.45, 43.39), "adaptive": (1.29, 0.58, 99.94)},
-    "internal": {"standard_plane": 5.4, "standard_height": 8.3, "adaptive_plane": 3.9, "adaptive_height": 6.6,
-                 "improvement_plane": 26.6, "improvement_height": 20.1},
+    "internal": {
+        "standard_plane": 5.4,
+        "standard_height": 8.3,
+        "adaptive_plane": 3.9,
+        "adaptive_height": 6.6,
+        "improvement_plane": 26.6,
+        "improvement_height": 20.1,
+    },
     "forecast_ratio": 2.0,
 }
 
@@ -98,9 +104,15 @@ class _Numbers(NamedTuple):
 
 def _numbers(st: S1Settings) -> _Numbers:
     f = lambda a: jnp.asarray(a, float)  # noqa: E731
-    return _Numbers(sigma=f(st.sigma), accel_std=f(st.accel_std), w_max=f(st.w_max),
-                    time_constant=f(st.time_constant), onset=f(st.onset), gross_frac=f(st.gross_frac),
-                    gross_size=f(st.gross_size))
+    return _Numbers(
+        sigma=f(st.sigma),
+        accel_std=f(st.accel_std),
+        w_max=f(st.w_max),
+        time_constant=f(st.time_constant),
+        onset=f(st.onset),
+        gross_frac=f(st.gross_frac),
+        gross_size=f(st.gross_size),
+    )
 
 
 def _period_run(key, num: _Numbers, S: int, T: int, filters: dict):
@@ -120,8 +132,9 @@ def _period_run(key, num: _Numbers, S: int, T: int, filters: dict):
     out = {}
     for name, kw_ in filters.items():
         f = forecast(model, x0, P0, zs, uncertainty=False, **kw_)
-        out[name] = dict(deviation=f.deviation, error=f.forecast - simu.pos, forecast=f.forecast,
-                         factors=f.factors, status=f.status)
+        out[name] = dict(
+            deviation=f.deviation, error=f.forecast - simu.pos, forecast=f.forecast, factors=f.factors, status=f.status
+        )
     t = jnp.arange(T)[:, None]
     episode = (t >= cfg.onset) & (t < cfg.onset + 3.0 / cfg.rate)  # (T, S)
     return out, dict(episode=episode, pos=simu.pos, zs=zs.reshape(T, S, 3), hit=hit.reshape(T, S, 3))
@@ -145,16 +158,26 @@ def _chunk(keys, num: _Numbers, static):
                 internal=internal_precision(o["forecast"][skip:][:, :, [1, 0, 2]], T - skip),
                 forecast_rms=rms(err, axis=(0, 2)),
                 episode_rms=rms(jnp.where(ep[..., None], err, jnp.nan), axis=(0, 2)),
-                status=o["status"], max_factor=jnp.max(o["factors"]),
+                status=o["status"],
+                max_factor=jnp.max(o["factors"]),
             )
-        return res, dict(filters={n: {k_: o[k_] for k_ in ("forecast", "error", "deviation", "factors")}
-                                  for n, o in out.items()}, **extra)
+        return res, dict(
+            filters={n: {k_: o[k_] for k_ in ("forecast", "error", "deviation", "factors")} for n, o in out.items()},
+            **extra,
+        )
 
     return jax.vmap(one)(keys)
 
 
-def run_s1_simulation(key, settings: S1Settings = S1Settings(), *, robust: bool = False, chunk: int = 4,
-                      progress: bool = False, keep_series: int = 1) -> dict:
+def run_s1_simulation(
+    key,
+    settings: S1Settings = S1Settings(),
+    *,
+    robust: bool = False,
+    chunk: int = 4,
+    progress: bool = False,
+    keep_series: int = 1,
+) -> dict:
     """Simulate ``n_periods`` periods of an S-station network and compare the S1 filters.
 
     Periods run in vmapped chunks of one compiled function; the numeric settings are traced, so
@@ -186,7 +209,7 @@ def run_s1_simulation(key, settings: S1Settings = S1Settings(), *, robust: bool 
         n_keep = min(keep_series - len(series), len(idx), P - int(idx[0]))
         if n_keep > 0:
             ser = jax.tree_util.tree_map(np.asarray, ser)
-            series.extend(jax.tree_util.tree_map(lambda a: a[j], ser) for j in range(n_keep))
+            series.extend(jax.tree_util.tree_map(lambda a, j=j: a[j], ser) for j in range(n_keep))
         return res
 
     res = map_chunked(call, P, chunk=min(int(chunk), P), desc="S1 periods", progress=progress, unit="period")
@@ -224,12 +247,16 @@ def s1_tables(result: dict, *, longitudinal=(0, 0), compare=("standard", "adapti
             a = np.asarray(arr) / MM
             t[key][name] = dict(min=float(a.min()), max=float(a.max()), mean=float(a.mean()))
         for i, ax in enumerate("XYH"):
-            t["table3_5"][ax][name] = (float(sts.max_abs[p, s, i] / MM), float(sts.mean_abs[p, s, i] / MM),
-                                       float(100 * sts.share_under[p, s, i]))
+            t["table3_5"][ax][name] = (
+                float(sts.max_abs[p, s, i] / MM),
+                float(sts.mean_abs[p, s, i] / MM),
+                float(100 * sts.share_under[p, s, i]),
+            )
         ip = result["internal"][name]
         n8 = min(8, np.asarray(ip.plane).shape[0])
-        t["table6"][name] = dict(plane=(np.asarray(ip.plane)[:n8, s] / MM).tolist(),
-                                 height=(np.asarray(ip.height)[:n8, s] / MM).tolist())
+        t["table6"][name] = dict(
+            plane=(np.asarray(ip.plane)[:n8, s] / MM).tolist(), height=(np.asarray(ip.height)[:n8, s] / MM).tolist()
+        )
     a, b = compare
     ipa, ipb = result["internal"][a], result["internal"][b]
     n8 = len(t["table6"][a]["plane"])
@@ -250,8 +277,10 @@ def format_s1_tables(tables: dict, *, compare=("standard", "adaptive")) -> str:
     L.append(f"{'filter':<18}{'m_P min':>9}{'m_P max':>9}{'m_P mean':>10}{'m_H min':>9}{'m_H max':>9}{'m_H mean':>10}")
     for name in compare:
         p1, p2 = tables["table1_plane"][name], tables["table2_height"][name]
-        L.append(f"{name:<18}{p1['min']:>9.2f}{p1['max']:>9.2f}{p1['mean']:>10.2f}"
-                 f"{p2['min']:>9.2f}{p2['max']:>9.2f}{p2['mean']:>10.2f}")
+        L.append(
+            f"{name:<18}{p1['min']:>9.2f}{p1['max']:>9.2f}{p1['mean']:>10.2f}"
+            f"{p2['min']:>9.2f}{p2['max']:>9.2f}{p2['mean']:>10.2f}"
+        )
     fr = tables["forecast_ratio"]
     L.append(f"ratio {a}/{b}: plane {fr['plane']:.2f}, height {fr['height']:.2f} (published: about 2)")
     L.append("")
@@ -267,18 +296,26 @@ def format_s1_tables(tables: dict, *, compare=("standard", "adaptive")) -> str:
     L.append("")
     L.append("Table 6: internal precision of the forecasts per period, mm, and improvement %")
     t6 = tables["table6"]
-    L.append(f"{'period':<8}{a + ' plane':>16}{a + ' height':>17}{b + ' plane':>16}{b + ' height':>17}"
-             f"{'impr. plane':>13}{'impr. height':>14}")
+    L.append(
+        f"{'period':<8}{a + ' plane':>16}{a + ' height':>17}{b + ' plane':>16}{b + ' height':>17}"
+        f"{'impr. plane':>13}{'impr. height':>14}"
+    )
     for i in range(len(t6[a]["plane"])):
-        L.append(f"{i + 1:<8}{t6[a]['plane'][i]:>16.2f}{t6[a]['height'][i]:>17.2f}{t6[b]['plane'][i]:>16.2f}"
-                 f"{t6[b]['height'][i]:>17.2f}{t6['improvement_plane'][i]:>13.1f}{t6['improvement_height'][i]:>14.1f}")
+        L.append(
+            f"{i + 1:<8}{t6[a]['plane'][i]:>16.2f}{t6[a]['height'][i]:>17.2f}{t6[b]['plane'][i]:>16.2f}"
+            f"{t6[b]['height'][i]:>17.2f}{t6['improvement_plane'][i]:>13.1f}{t6['improvement_height'][i]:>14.1f}"
+        )
     mean = lambda x: float(np.mean(x))  # noqa: E731
-    L.append(f"{'mean':<8}{mean(t6[a]['plane']):>16.2f}{mean(t6[a]['height']):>17.2f}{mean(t6[b]['plane']):>16.2f}"
-             f"{mean(t6[b]['height']):>17.2f}{mean(t6['improvement_plane']):>13.1f}"
-             f"{mean(t6['improvement_height']):>14.1f}")
+    L.append(
+        f"{'mean':<8}{mean(t6[a]['plane']):>16.2f}{mean(t6[a]['height']):>17.2f}{mean(t6[b]['plane']):>16.2f}"
+        f"{mean(t6[b]['height']):>17.2f}{mean(t6['improvement_plane']):>13.1f}"
+        f"{mean(t6['improvement_height']):>14.1f}"
+    )
     P = S1_PUBLISHED["internal"]
-    L.append(f"{'publ.':<8}{P['standard_plane']:>16.1f}{P['standard_height']:>17.1f}{P['adaptive_plane']:>16.1f}"
-             f"{P['adaptive_height']:>17.1f}{P['improvement_plane']:>13.1f}{P['improvement_height']:>14.1f}")
+    L.append(
+        f"{'publ.':<8}{P['standard_plane']:>16.1f}{P['standard_height']:>17.1f}{P['adaptive_plane']:>16.1f}"
+        f"{P['adaptive_height']:>17.1f}{P['improvement_plane']:>13.1f}{P['improvement_height']:>14.1f}"
+    )
     return "\n".join(L)
 
 
@@ -302,13 +339,23 @@ _S1_SHARE_THRESHOLD_MM = {"X": 0.5, "Y": 0.4, "H": 1.0}
 
 def _labelled_table3_5(t3: dict) -> dict:
     """S1 Tables 3-5 ({axis: {filter: (max, mean, share %)}}) with labelled fields for the JSON file."""
-    return {ax: {name: dict(max_abs_mm=v[0], mean_abs_mm=v[1], share_below_threshold_percent=v[2],
-                            threshold_mm=_S1_SHARE_THRESHOLD_MM.get(ax))
-                 for name, v in per.items()} for ax, per in t3.items()}
+    return {
+        ax: {
+            name: dict(
+                max_abs_mm=v[0],
+                mean_abs_mm=v[1],
+                share_below_threshold_percent=v[2],
+                threshold_mm=_S1_SHARE_THRESHOLD_MM.get(ax),
+            )
+            for name, v in per.items()
+        }
+        for ax, per in t3.items()
+    }
 
 
-def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, window: int = 30,
-                      horizon: int = 10) -> dict:
+def run_monitor_files(
+    files, out, *, period: int = 365, robust: bool = False, window: int = 30, horizon: int = 10
+) -> dict:
     """Velocities, forecasts and S1 statistics of daily station files; writes JSON and figures.
 
     Writes ``monitor.json`` and ``velocity_STATION.png`` per file into ``out``.
@@ -328,8 +375,10 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
     out.mkdir(parents=True, exist_ok=True)
     filters = s1_filters(window=window, horizon=horizon, robust=robust)
     result = {"stations": {}, "settings": dict(period=period, robust=robust, window=window, horizon=horizon)}
-    lines = [f"{'station':<8}{'axis':<6}{'CV filter mm/yr':>18}{'+-formal':>10}{'+-AR(1)':>9}{'LS slope':>10}"
-             f"{'published':>16}"]
+    lines = [
+        f"{'station':<8}{'axis':<6}{'CV filter mm/yr':>18}{'+-formal':>10}{'+-AR(1)':>9}{'LS slope':>10}"
+        f"{'published':>16}"
+    ]
     all_series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
     for f, s in zip(files, all_series):
         v = station_velocity(s)
@@ -339,7 +388,8 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
             P = max(1, min(period, len(s.t) - 1))
             ps = period_statistics(np.asarray(r.deviation), P, thresholds=(3 * MM, 3 * MM, 10 * MM))
             st[name] = dict(
-                m_P_mm=_tolist(np.asarray(ps.m_P)[:, 0] / MM), m_H_mm=_tolist(np.asarray(ps.m_H)[:, 0] / MM),
+                m_P_mm=_tolist(np.asarray(ps.m_P)[:, 0] / MM),
+                m_H_mm=_tolist(np.asarray(ps.m_H)[:, 0] / MM),
                 max_abs_mm=_tolist(np.asarray(ps.max_abs)[:, 0] / MM),
                 mean_abs_mm=_tolist(np.asarray(ps.mean_abs)[:, 0] / MM),
                 share_under_3_3_10mm=_tolist(np.asarray(ps.share_under)[:, 0]),
@@ -352,31 +402,50 @@ def run_monitor_files(files, out, *, period: int = 365, robust: bool = False, wi
         plot_daily_velocity(s, v, fig)
         ref = v.reference_velocity
         result["stations"][s.station] = dict(
-            file=str(f), format=s.fmt, epochs=v.n, span_years=v.span_years, masked_values=s.n_masked,
+            file=str(f),
+            format=s.fmt,
+            epochs=v.n,
+            span_years=v.span_years,
+            masked_values=s.n_masked,
             velocity_mm_per_yr=_enu_dict(v.velocity / MM_PER_YEAR),
             sigma_formal_mm_per_yr=_enu_dict(v.sigma / MM_PER_YEAR),
             sigma_ar1_mm_per_yr=_enu_dict(v.sigma_ar1 / MM_PER_YEAR),
             ls_slope_mm_per_yr=_enu_dict(v.ls_velocity / MM_PER_YEAR),
             published_mm_per_yr=None if ref is None else _enu_dict(ref / MM_PER_YEAR),
             published_sigma_mm_per_yr=None if ref is None else _enu_dict(v.reference_sigma / MM_PER_YEAR),
-            random_walk_psd_m2_per_s3=_enu_dict(v.accel_psd), forecast_statistics=st, figure=str(fig),
+            random_walk_psd_m2_per_s3=_enu_dict(v.accel_psd),
+            forecast_statistics=st,
+            figure=str(fig),
         )
         for i, ax in enumerate("ENU"):
             pub = "" if ref is None else f"{ref[i] / MM_PER_YEAR:+.2f}+-{v.reference_sigma[i] / MM_PER_YEAR:.2f}"
-            lines.append(f"{s.station:<8}{ax:<6}{v.velocity[i] / MM_PER_YEAR:>18.2f}{v.sigma[i] / MM_PER_YEAR:>10.3f}"
-                         f"{v.sigma_ar1[i] / MM_PER_YEAR:>9.3f}{v.ls_velocity[i] / MM_PER_YEAR:>10.2f}{pub:>16}")
+            lines.append(
+                f"{s.station:<8}{ax:<6}{v.velocity[i] / MM_PER_YEAR:>18.2f}{v.sigma[i] / MM_PER_YEAR:>10.3f}"
+                f"{v.sigma_ar1[i] / MM_PER_YEAR:>9.3f}{v.ls_velocity[i] / MM_PER_YEAR:>10.2f}{pub:>16}"
+            )
         fl = "  ".join(f"{n}: m_P {np.mean(d['m_P_mm']):.2f} m_H {np.mean(d['m_H_mm']):.2f} mm" for n, d in st.items())
         lines.append(f"{'':<8}one-day forecasts (mean over periods of {period} epochs): {fl}")
         if s.n_masked:
-            lines.append(f"{'':<8}{s.n_masked} position value(s) given as nan in {f}: masked (left out of the "
-                         f"filters and the LS slope)")
+            lines.append(
+                f"{'':<8}{s.n_masked} position value(s) given as nan in {f}: masked (left out of the "
+                f"filters and the LS slope)"
+            )
     result["text"] = "\n".join(lines)
     write_json(out / "monitor.json", result)
     return result
 
 
-def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs: int = 3600, robust: bool = False,
-                           gross: float = 0.0, seed: int = 2017, progress: bool = True) -> dict:
+def run_monitor_simulation(
+    out,
+    *,
+    periods: int = 60,
+    stations: int = 2,
+    epochs: int = 3600,
+    robust: bool = False,
+    gross: float = 0.0,
+    seed: int = 2017,
+    progress: bool = True,
+) -> dict:
     """The S1 experiment on simulated 1 Hz stations; writes S1's tables (JSON, text) and figures.
 
     Writes ``monitor.json``, ``s1_statistics.png`` and ``s1_period.png`` into ``out``.
@@ -399,9 +468,14 @@ def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs:
     wall = time.perf_counter() - t0
     tables = s1_tables(res)
     text = format_s1_tables(tables)
-    L = [f"S1 on simulated stations: {periods} periods x {stations} stations x {epochs} epochs at 1 Hz, "
-         f"gross errors {100 * gross:.1f} %", "", text, "",
-         "Forecast minus truth, RMS over all periods and stations (mm): whole periods / inside the episodes"]
+    L = [
+        f"S1 on simulated stations: {periods} periods x {stations} stations x {epochs} epochs at 1 Hz, "
+        f"gross errors {100 * gross:.1f} %",
+        "",
+        text,
+        "",
+        "Forecast minus truth, RMS over all periods and stations (mm): whole periods / inside the episodes",
+    ]
     for name in res["forecast_rms"]:
         whole, ep = np.mean(res["forecast_rms"][name]) / MM, np.mean(res["episode_rms"][name]) / MM
         L.append(f"  {name:<18}{whole:>8.2f}{ep:>10.2f}   status {status_words(res['status'][name])}")
@@ -412,15 +486,17 @@ def run_monitor_simulation(out, *, periods: int = 60, stations: int = 2, epochs:
     plot_s1_statistics(res, out / "s1_statistics.png")
     plot_s1_period(res["series"][0], out / "s1_period.png")
     result = dict(
-        settings={**{k: v for k, v in st._asdict().items() if k != "sigma"},
-                  "sigma_m": _enu_dict(st.sigma)},
+        settings={**{k: v for k, v in st._asdict().items() if k != "sigma"}, "sigma_m": _enu_dict(st.sigma)},
         tables={**tables, "table3_5": _labelled_table3_5(tables["table3_5"])},
         published={**S1_PUBLISHED, **_labelled_table3_5({ax: S1_PUBLISHED[ax] for ax in ("X", "Y", "H")})},
         text=text,
         forecast_rms_mm={k: float(np.mean(v) / MM) for k, v in res["forecast_rms"].items()},
         episode_rms_mm={k: float(np.mean(v) / MM) for k, v in res["episode_rms"].items()},
-        ratio_standard_adaptive=float(ratio), ratio_standard_adaptive_episodes=float(ratio_ep),
-        status=res["status"], wall_time_s=wall, jax_version=jax.__version__,
+        ratio_standard_adaptive=float(ratio),
+        ratio_standard_adaptive_episodes=float(ratio_ep),
+        status=res["status"],
+        wall_time_s=wall,
+        jax_version=jax.__version__,
         figures=[str(out / "s1_statistics.png"), str(out / "s1_period.png")],
     )
     write_json(out / "monitor.json", result)

@@ -16,15 +16,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.io import gpst_iso, write_json
 from jaxnav.geodesy import zone_central_meridian
 from jaxnav.io import (
+    gpst_iso,
     read_control_points,
     read_epoch_log,
     read_levelling,
     read_pos,
     write_control_points,
     write_epoch_log,
+    write_json,
     write_levelling,
     write_rtk_results,
 )
@@ -57,21 +58,39 @@ def _read_inputs(files, *, step, window, min_epochs, fixed_only, motion):
     for f in files:
         f = pathlib.Path(f)
         if f.suffix.lower() == ".pos":
-            w = windows_from_pos(read_pos(f), step=step, window=window, min_epochs=min_epochs,
-                                 fixed_only=fixed_only, motion=motion)
-            motion_counts.append(dict(file=str(f), n_epochs=w.pop("n_epochs"), n_moving=w.pop("n_moving"),
-                                      n_short_static=w.pop("n_short_static"), n_segments=w.pop("n_segments")))
+            w = windows_from_pos(
+                read_pos(f), step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only, motion=motion
+            )
+            motion_counts.append(
+                dict(
+                    file=str(f),
+                    n_epochs=w.pop("n_epochs"),
+                    n_moving=w.pop("n_moving"),
+                    n_short_static=w.pop("n_short_static"),
+                    n_segments=w.pop("n_segments"),
+                )
+            )
             n = len(w["t"])
             w["h_terminal"] = np.full(n, np.nan)
             w["xy_terminal"] = np.full((n, 2), np.nan)
             parts.append(w)
         else:
             log = read_epoch_log(f)
-            parts.append(dict(point=log.point, t=log.t, lat=log.lat, lon=log.lon, H=log.H, sigma=log.sigma,
-                              mask=np.ones(len(log.t), bool), h_terminal=log.h,
-                              xy_terminal=np.stack([log.x, log.y], -1),
-                              segment=np.array([f"{f.stem}/{p}" for p in log.point]),
-                              grid=np.full(len(log.t), -1, np.int64)))
+            parts.append(
+                dict(
+                    point=log.point,
+                    t=log.t,
+                    lat=log.lat,
+                    lon=log.lon,
+                    H=log.H,
+                    sigma=log.sigma,
+                    mask=np.ones(len(log.t), bool),
+                    h_terminal=log.h,
+                    xy_terminal=np.stack([log.x, log.y], -1),
+                    segment=np.array([f"{f.stem}/{p}" for p in log.point]),
+                    grid=np.full(len(log.t), -1, np.int64),
+                )
+            )
     names_seen = {}
     for f, p in zip(files, parts):
         for name in dict.fromkeys(p["point"]):
@@ -99,9 +118,23 @@ def _ratio(a: float, b: float) -> float:
     return a / b if math.isfinite(a) and math.isfinite(b) and b != 0.0 else float("nan")
 
 
-def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_width=3, step=2.0, window=60,
-            min_epochs=30, fixed_only=True, smoother=False, surface="auto", quiet=False,
-            motion: MotionParams | None = MotionParams()):
+def run_rtk(
+    files,
+    out,
+    *,
+    control=None,
+    levelling=None,
+    lon0_deg=None,
+    zone_width=3,
+    step=2.0,
+    window=60,
+    min_epochs=30,
+    fixed_only=True,
+    smoother=False,
+    surface="auto",
+    quiet=False,
+    motion: MotionParams | None = MotionParams(),
+):
     """Run the S2 pipeline on files and write ``rtk_results.csv``, ``rtk_results.json`` and ``rtk.png``.
 
     Args:
@@ -134,25 +167,37 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
     if not files:
         raise ValueError("jaxnav rtk: give at least one .pos or CSV epoch-log file")
     _log.info("reading %d file(s): %s", len(files), ", ".join(f.name for f in files))
-    ep, motion_counts = _read_inputs(files, step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only,
-                                     motion=motion)
+    ep, motion_counts = _read_inputs(
+        files, step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only, motion=motion
+    )
     if not len(ep["t"]):
-        raise ValueError(f"{', '.join(map(str, files))}: no epochs left to process (a .pos file needs occupations of "
-                         f"at least min_epochs={min_epochs} {'fixed ' if fixed_only else ''}epochs)")
+        raise ValueError(
+            f"{', '.join(map(str, files))}: no epochs left to process (a .pos file needs occupations of "
+            f"at least min_epochs={min_epochs} {'fixed ' if fixed_only else ''}epochs)"
+        )
     cp = read_control_points(control) if control is not None else None  # all files read before any work
     lev = read_levelling(levelling) if levelling is not None else None
     _, counts = np.unique(ep["point"], return_counts=True)
     length = int(-(-counts.max() // 20) * 20)  # padded to a multiple of 20: fewer compilations
-    names, series = pack_points(ep["point"], ep["t"], ep["lat"], ep["lon"], ep["H"], ep["sigma"],
-                                h_terminal=ep["h_terminal"], xy_terminal=ep["xy_terminal"], mask=ep["mask"],
-                                length=length)
+    names, series = pack_points(
+        ep["point"],
+        ep["t"],
+        ep["lat"],
+        ep["lon"],
+        ep["H"],
+        ep["sigma"],
+        h_terminal=ep["h_terminal"],
+        xy_terminal=ep["xy_terminal"],
+        mask=ep["mask"],
+        length=length,
+    )
     first = {n: i for i, n in reversed(list(enumerate(ep["point"])))}
     point_segment = np.array([ep["segment"][first[n]] for n in names])
     grid = np.full(np.shape(series.t), -1, np.int64)
     for i, n in enumerate(names):
         g = ep["grid"][ep["point"] == n]
-        grid[i, :len(g)] = g
-        grid[i, len(g):] = g[-1] if len(g) else -1
+        grid[i, : len(g)] = g
+        grid[i, len(g) :] = g[-1] if len(g) else -1
     if lon0_deg is None:  # each point in its own zone
         lon_pt = np.array([np.nanmean(np.where(m, lo, np.nan)) for lo, m in zip(series.lon, series.mask)])
         lon0 = np.asarray(zone_central_meridian(jnp.asarray(lon_pt), zone_width)[0])
@@ -160,118 +205,201 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
         lon0 = np.full(len(names), math.radians(lon0_deg))
     zones = sorted({round(float(v), 9) for v in rad_to_deg(lon0)})
     if control is not None and len(zones) > 1:
-        raise ValueError(f"points fall in zones with central meridians {zones} deg; one control set needs one "
-                         "projection: give --lon0")
-    summary = dict(files=[str(f) for f in files], n_points=len(names), lon0_deg=zones, smoother=smoother,
-                   excluded_moving_epochs=sum(c["n_moving"] for c in motion_counts),
-                   excluded_short_static_epochs=sum(c["n_short_static"] for c in motion_counts),
-                   motion_test=None if motion is None else dict(motion._asdict(), files=motion_counts),
-                   masked_epochs=int(np.sum(~np.asarray(ep["mask"]) | ~np.all(np.isfinite(ep["sigma"]), axis=1)
-                                        | ~np.isfinite(ep["lat"]) | ~np.isfinite(ep["lon"]) | ~np.isfinite(ep["H"]))))
+        raise ValueError(
+            f"points fall in zones with central meridians {zones} deg; one control set needs one "
+            "projection: give --lon0"
+        )
+    summary = dict(
+        files=[str(f) for f in files],
+        n_points=len(names),
+        lon0_deg=zones,
+        smoother=smoother,
+        excluded_moving_epochs=sum(c["n_moving"] for c in motion_counts),
+        excluded_short_static_epochs=sum(c["n_short_static"] for c in motion_counts),
+        motion_test=None if motion is None else dict(motion._asdict(), files=motion_counts),
+        masked_epochs=int(
+            np.sum(
+                ~np.asarray(ep["mask"])
+                | ~np.all(np.isfinite(ep["sigma"]), axis=1)
+                | ~np.isfinite(ep["lat"])
+                | ~np.isfinite(ep["lon"])
+                | ~np.isfinite(ep["H"])
+            )
+        ),
+    )
     transform = anomaly = None
     if control is not None:
-        con = connection_models(cp.lat, cp.lon, cp.H, np.stack([cp.x, cp.y], -1), cp.h, lon0=float(lon0[0]),
-                                surface=surface)
+        con = connection_models(
+            cp.lat, cp.lon, cp.H, np.stack([cp.x, cp.y], -1), cp.h, lon0=float(lon0[0]), surface=surface
+        )
         if con.transform is not None:
             transform = con.transform.params
             tp = con.transform
             summary["datum_transformation"] = dict(
-                model="4-parameter plane similarity (x' = t + (1+m) R(theta) x)", tx=float(tp.params.t[0]),
-                ty=float(tp.params.t[1]), theta_arcsec=float(tp.params.theta) / (math.pi / 648000),
-                m_ppm=float(tp.params.m) * 1e6, sigma0_mm=float(tp.sigma0) / MM,
-                residual_rms_mm=[float(v) / MM for v in tp.rms], n_control=int(tp.residuals.shape[0]))
+                model="4-parameter plane similarity (x' = t + (1+m) R(theta) x)",
+                tx=float(tp.params.t[0]),
+                ty=float(tp.params.t[1]),
+                theta_arcsec=float(tp.params.theta) / (math.pi / 648000),
+                m_ppm=float(tp.params.m) * 1e6,
+                sigma0_mm=float(tp.sigma0) / MM,
+                residual_rms_mm=[float(v) / MM for v in tp.rms],
+                n_control=int(tp.residuals.shape[0]),
+            )
         if con.anomaly is not None:
             anomaly = con.anomaly
-            summary["height_anomaly"] = dict(surface=anomaly.kind, sigma0_mm=float(anomaly.sigma0) / MM,
-                                             n_control=int(anomaly.residuals.shape[0]),
-                                             residuals_mm=[float(v) / MM for v in anomaly.residuals])
-    _log.info("filtering %d point(s) (%d epochs, %s)", len(names), int(np.size(ep["t"])),
-              "forward filter + RTS" if smoother else "forward filter")
-    res = process_points(series, lon0=jnp.asarray(lon0), transform=transform, anomaly=anomaly,
-                         smoother=smoother)
+            summary["height_anomaly"] = dict(
+                surface=anomaly.kind,
+                sigma0_mm=float(anomaly.sigma0) / MM,
+                n_control=int(anomaly.residuals.shape[0]),
+                residuals_mm=[float(v) / MM for v in anomaly.residuals],
+            )
+    _log.info(
+        "filtering %d point(s) (%d epochs, %s)",
+        len(names),
+        int(np.size(ep["t"])),
+        "forward filter + RTS" if smoother else "forward filter",
+    )
+    res = process_points(series, lon0=jnp.asarray(lon0), transform=transform, anomaly=anomaly, smoother=smoother)
     res = type(res)(*[np.asarray(a) if not isinstance(a, tuple) else a for a in res])
     grid = _point_grid(np.asarray(series.t), np.asarray(series.mask), grid)
     # precision with time-correlated epochs, on the filter's measurements (WGS-84 GK x, y, H)
     ps = point_sigmas(res.gk, np.asarray(series.mask) & (res.n[:, None] > 0), grid, point_segment)
     t_arr, m_arr = np.asarray(series.t), np.asarray(series.mask)
-    crs = ("reference grid of the control survey (4-parameter similarity from WGS-84 Gauss-Krueger; x north, "
-           "y east, m)" if transform is not None else "WGS-84 Gauss-Krueger (transverse Mercator, scale 1, no false "
-           "easting; x north, y east, m)")
+    crs = (
+        "reference grid of the control survey (4-parameter similarity from WGS-84 Gauss-Krueger; x north, y east, m)"
+        if transform is not None
+        else "WGS-84 Gauss-Krueger (transverse Mercator, scale 1, no false easting; x north, y east, m)"
+    )
     summary["crs"] = crs
     summary["zone"] = dict(central_meridian_deg=zones, zone_width_deg=None if lon0_deg is not None else zone_width)
-    summary["height_system"] = ("normal height: ellipsoidal H - fitted height anomaly (m)" if anomaly is not None
-                                else "WGS-84 ellipsoidal height (m)")
+    summary["height_system"] = (
+        "normal height: ellipsoidal H - fitted height anomaly (m)"
+        if anomaly is not None
+        else "WGS-84 ellipsoidal height (m)"
+    )
     summary["time_system"] = "GPST"
     summary["sigma_method"] = ps.method
     summary["sigma_method_description"] = (
         "standard deviation of each point's mean from the sample autocovariance of its static segment "
-        "(effective sample size; errors slower than the segment and errors common to the session not included)")
+        "(effective sample size; errors slower than the segment and errors common to the session not included)"
+    )
     h_level = np.full(len(names), np.nan)
     if levelling is not None:
         table = dict(zip(lev.point, lev.height))
         h_level = np.array([table.get(n, np.nan) for n in names])
-    prec = {key: dict(plane_mm=float(np.nanmean(np.hypot(p[:, 0], p[:, 1]))) / MM,
-                      height_mm=float(np.nanmean(p[:, 2])) / MM)
-            for key, p in (("filtered", res.precision), ("conventional", res.raw_precision),
-                           ("formal", res.formal_precision))}
+    prec = {
+        key: dict(
+            plane_mm=float(np.nanmean(np.hypot(p[:, 0], p[:, 1]))) / MM, height_mm=float(np.nanmean(p[:, 2])) / MM
+        )
+        for key, p in (
+            ("filtered", res.precision),
+            ("conventional", res.raw_precision),
+            ("formal", res.formal_precision),
+        )
+    }
     for key in ("conventional", "formal"):
         prec[f"factor_{key}_over_filtered"] = dict(  # NaN (null in the JSON) where the filtered precision is 0
             plane=_ratio(prec[key]["plane_mm"], prec["filtered"]["plane_mm"]),
-            height=_ratio(prec[key]["height_mm"], prec["filtered"]["height_mm"]))
+            height=_ratio(prec[key]["height_mm"], prec["filtered"]["height_mm"]),
+        )
     summary["internal_precision_mean"] = prec
     if np.any(np.isfinite(h_level)):
-        for key, h in (("filtered", res.xyh[:, 2]), ("conventional_terminal", res.terminal_xyh[:, 2]),
-                       ("conventional_H_anomaly", res.raw_xyh[:, 2])):
+        for key, h in (
+            ("filtered", res.xyh[:, 2]),
+            ("conventional_terminal", res.terminal_xyh[:, 2]),
+            ("conventional_H_anomaly", res.raw_xyh[:, 2]),
+        ):
             if np.any(np.isfinite(h - h_level)):
                 c = compare_levelling(h, h_level)
                 summary[f"levelling_{key}"] = dict(
-                    max_abs_cm=c.max_abs / CM, mean_cm=c.mean / CM, std_cm=c.std / CM, rms_cm=c.rms / CM,
-                    thresholds_cm=[float(v) / CM for v in c.thresholds], count_within=[int(v) for v in c.count_within],
-                    share_within=[float(v) for v in c.share_within])
+                    max_abs_cm=c.max_abs / CM,
+                    mean_cm=c.mean / CM,
+                    std_cm=c.std / CM,
+                    rms_cm=c.rms / CM,
+                    thresholds_cm=[float(v) / CM for v in c.thresholds],
+                    count_within=[int(v) for v in c.count_within],
+                    share_within=[float(v) for v in c.share_within],
+                )
     _log.info("writing rtk_results.csv, rtk_results.json and rtk.png into %s", out)
     proj = "; ".join(f"+proj=tmerc +lat_0=0 +lon_0={z:g} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m" for z in zones)
-    csv_crs = (f"{crs}; no EPSG code: a local grid fitted to {summary['datum_transformation']['n_control']} control "
-               f"points from WGS-84 Gauss-Krueger ({proj})" if transform is not None
-               else f"{crs}; no EPSG code, PROJ definition: {proj}")
+    csv_crs = (
+        f"{crs}; no EPSG code: a local grid fitted to {summary['datum_transformation']['n_control']} control "
+        f"points from WGS-84 Gauss-Krueger ({proj})"
+        if transform is not None
+        else f"{crs}; no EPSG code, PROJ definition: {proj}"
+    )
     if anomaly is not None:
-        csv_height = (f"normal height h = ellipsoidal H - height anomaly, the anomaly a {anomaly.kind} surface fitted "
-                      f"to {int(anomaly.residuals.shape[0])} control points (sigma0 "
-                      f"{float(anomaly.sigma0) / MM:.1f} mm); H_ellipsoidal_m is WGS-84 ellipsoidal")
+        csv_height = (
+            f"normal height h = ellipsoidal H - height anomaly, the anomaly a {anomaly.kind} surface fitted "
+            f"to {int(anomaly.residuals.shape[0])} control points (sigma0 "
+            f"{float(anomaly.sigma0) / MM:.1f} mm); H_ellipsoidal_m is WGS-84 ellipsoidal"
+        )
     else:
         csv_height = "WGS-84 ellipsoidal height (no control points, no height anomaly): h = H"
     width = "" if lon0_deg is not None else f", {zone_width} deg zones"
-    write_rtk_results(out / "rtk_results.csv", names, res, h_level, sigma=ps.sigma, sigma_method=ps.method,
-                      crs=csv_crs, zone=f"central meridian {', '.join(f'{z:g}' for z in zones)} deg{width}",
-                      height_system=csv_height)
+    write_rtk_results(
+        out / "rtk_results.csv",
+        names,
+        res,
+        h_level,
+        sigma=ps.sigma,
+        sigma_method=ps.method,
+        crs=csv_crs,
+        zone=f"central meridian {', '.join(f'{z:g}' for z in zones)} deg{width}",
+        height_system=csv_height,
+    )
     fnames = [pathlib.Path(f).name for f in files]
-    plot_rtk(res, out / "rtk.png", h_level=h_level if np.any(np.isfinite(h_level)) else None, names=names,
-             sigma=ps.sigma, title=f"RTK {len(names)} point{'s' if len(names) != 1 else ''} from "
-                                   f"{', '.join(fnames[:3])}{f' and {len(fnames) - 3} more' if len(fnames) > 3 else ''}")
+    plot_rtk(
+        res,
+        out / "rtk.png",
+        h_level=h_level if np.any(np.isfinite(h_level)) else None,
+        names=names,
+        sigma=ps.sigma,
+        title=f"RTK {len(names)} point{'s' if len(names) != 1 else ''} from "
+        f"{', '.join(fnames[:3])}{f' and {len(fnames) - 3} more' if len(fnames) > 3 else ''}",
+    )
     pts = []
     for i, n in enumerate(names):
         tv = t_arr[i][m_arr[i]]
-        pts.append(dict(
-            name=str(n), n_epochs=int(res.n[i]),
-            t_start=gpst_iso(tv[0]) if tv.size else None, t_end=gpst_iso(tv[-1]) if tv.size else None,
-            x_m=float(res.xyh[i, 0]), y_m=float(res.xyh[i, 1]), h_m=float(res.xyh[i, 2]),
-            sigma_x_m=float(ps.sigma[i, 0]), sigma_y_m=float(ps.sigma[i, 1]), sigma_h_m=float(ps.sigma[i, 2]),
-            sigma_method=ps.method,
-            sigma_naive_x_m=float(ps.sigma_naive[i, 0]), sigma_naive_y_m=float(ps.sigma_naive[i, 1]),
-            sigma_naive_h_m=float(ps.sigma_naive[i, 2]),
-            n_eff=[float(v) for v in ps.n_eff[i]], lag1_autocorrelation=[float(v) for v in ps.lag1[i]],
-            segment=str(point_segment[i]), segment_epochs=int(ps.segment_epochs[i]),
-            segment_points=int(ps.segment_points[i]),
-            # the earlier per-point keys, kept
-            point=str(n), n=int(res.n[i]), x=float(res.xyh[i, 0]), y=float(res.xyh[i, 1]), h=float(res.xyh[i, 2]),
-            precision_mm=[float(v) / MM for v in res.precision[i]],
-            raw_precision_mm=[float(v) / MM for v in res.raw_precision[i]],
-            formal_precision_mm=[float(v) / MM for v in res.formal_precision[i]]))
+        pts.append(
+            dict(
+                name=str(n),
+                n_epochs=int(res.n[i]),
+                t_start=gpst_iso(tv[0]) if tv.size else None,
+                t_end=gpst_iso(tv[-1]) if tv.size else None,
+                x_m=float(res.xyh[i, 0]),
+                y_m=float(res.xyh[i, 1]),
+                h_m=float(res.xyh[i, 2]),
+                sigma_x_m=float(ps.sigma[i, 0]),
+                sigma_y_m=float(ps.sigma[i, 1]),
+                sigma_h_m=float(ps.sigma[i, 2]),
+                sigma_method=ps.method,
+                sigma_naive_x_m=float(ps.sigma_naive[i, 0]),
+                sigma_naive_y_m=float(ps.sigma_naive[i, 1]),
+                sigma_naive_h_m=float(ps.sigma_naive[i, 2]),
+                n_eff=[float(v) for v in ps.n_eff[i]],
+                lag1_autocorrelation=[float(v) for v in ps.lag1[i]],
+                segment=str(point_segment[i]),
+                segment_epochs=int(ps.segment_epochs[i]),
+                segment_points=int(ps.segment_points[i]),
+                # the earlier per-point keys, kept
+                point=str(n),
+                n=int(res.n[i]),
+                x=float(res.xyh[i, 0]),
+                y=float(res.xyh[i, 1]),
+                h=float(res.xyh[i, 2]),
+                precision_mm=[float(v) / MM for v in res.precision[i]],
+                raw_precision_mm=[float(v) / MM for v in res.raw_precision[i]],
+                formal_precision_mm=[float(v) / MM for v in res.formal_precision[i]],
+            )
+        )
     summary["points"] = pts
     ok = np.all(np.isfinite(ps.sigma), axis=1) & np.all(np.isfinite(ps.sigma_naive), axis=1)
     summary["sigma_mean_mm"] = dict(
         corrected=[float(v) / MM for v in np.sqrt(np.mean(ps.sigma[ok] ** 2, axis=0))] if ok.any() else None,
         naive=[float(v) / MM for v in np.sqrt(np.mean(ps.sigma_naive[ok] ** 2, axis=0))] if ok.any() else None,
-        components=["x", "y", "h"])
+        components=["x", "y", "h"],
+    )
     summary["outputs"] = [str(out / "rtk_results.csv"), str(out / "rtk_results.json"), str(out / "rtk.png")]
     write_json(out / "rtk_results.json", summary)
     if not quiet:
@@ -282,45 +410,59 @@ def run_rtk(files, out, *, control=None, levelling=None, lon0_deg=None, zone_wid
 def format_rtk(summary: dict) -> str:
     """The summary of :func:`run_rtk` as text: internal precisions (mm, S2 eq. (19)) and levelling (cm, Table 3)."""
     p = summary["internal_precision_mean"]
-    lines = [f"S2 pipeline: {summary['n_points']} points, central meridian(s) {summary['lon0_deg']} deg, "
-             f"{'forward filter + RTS' if summary['smoother'] else 'forward filter'}"]
+    lines = [
+        f"S2 pipeline: {summary['n_points']} points, central meridian(s) {summary['lon0_deg']} deg, "
+        f"{'forward filter + RTS' if summary['smoother'] else 'forward filter'}"
+    ]
     mt = summary.get("motion_test")
     if mt is not None and mt["files"]:
         n_all = sum(c["n_epochs"] for c in mt["files"])
         moving, short = summary["excluded_moving_epochs"], summary["excluded_short_static_epochs"]
-        lines.append(f"  static/moving test (.pos files): {n_all - moving - short} of {n_all} epochs kept as static "
-                     f"in {sum(c['n_segments'] for c in mt['files'])} segment(s); left out: {moving} moving "
-                     f"(speed > {mt['v_max']:g} m/s or > {mt['d_max']:g} m in {mt['window_s']:g} s), {short} in "
-                     f"static runs < {mt['min_static_s']:g} s")
+        lines.append(
+            f"  static/moving test (.pos files): {n_all - moving - short} of {n_all} epochs kept as static "
+            f"in {sum(c['n_segments'] for c in mt['files'])} segment(s); left out: {moving} moving "
+            f"(speed > {mt['v_max']:g} m/s or > {mt['d_max']:g} m in {mt['window_s']:g} s), {short} in "
+            f"static runs < {mt['min_static_s']:g} s"
+        )
     sm = summary.get("sigma_mean_mm", {})
     if sm.get("corrected") is not None:
         c, nv = sm["corrected"], sm["naive"]
-        lines.append(f"  precision of a point mean, x / y / h mm (rms over points): {c[0]:.2f} / {c[1]:.2f} / "
-                     f"{c[2]:.2f} [{summary['sigma_method']}: correlated epochs]; epochs taken as independent: "
-                     f"{nv[0]:.2f} / {nv[1]:.2f} / {nv[2]:.2f} ({c[0] / nv[0]:.1f} / {c[1] / nv[1]:.1f} / "
-                     f"{c[2] / nv[2]:.1f}x optimistic)")
-    lines += ["  S2 internal precision of the mean, eq. (19) (epochs taken as independent), plane / height mm:",
-             f"    conventional averaging, eq. (19): {p['conventional']['plane_mm']:.2f} / "
-             f"{p['conventional']['height_mm']:.2f}",
-             f"    from the reported sigmas        : {p['formal']['plane_mm']:.2f} / {p['formal']['height_mm']:.2f}",
-             f"    filtered, eq. (19)              : {p['filtered']['plane_mm']:.2f} / "
-             f"{p['filtered']['height_mm']:.2f}"]
+        lines.append(
+            f"  precision of a point mean, x / y / h mm (rms over points): {c[0]:.2f} / {c[1]:.2f} / "
+            f"{c[2]:.2f} [{summary['sigma_method']}: correlated epochs]; epochs taken as independent: "
+            f"{nv[0]:.2f} / {nv[1]:.2f} / {nv[2]:.2f} ({c[0] / nv[0]:.1f} / {c[1] / nv[1]:.1f} / "
+            f"{c[2] / nv[2]:.1f}x optimistic)"
+        )
+    lines += [
+        "  S2 internal precision of the mean, eq. (19) (epochs taken as independent), plane / height mm:",
+        f"    conventional averaging, eq. (19): {p['conventional']['plane_mm']:.2f} / "
+        f"{p['conventional']['height_mm']:.2f}",
+        f"    from the reported sigmas        : {p['formal']['plane_mm']:.2f} / {p['formal']['height_mm']:.2f}",
+        f"    filtered, eq. (19)              : {p['filtered']['plane_mm']:.2f} / {p['filtered']['height_mm']:.2f}",
+    ]
     for key in ("levelling_conventional_terminal", "levelling_conventional_H_anomaly", "levelling_filtered"):
         if key in summary:
             c = summary[key]
-            shares = ", ".join(f"{s * 100:.1f} % within {th:g} cm"
-                               for s, th in zip(c["share_within"], c["thresholds_cm"]))
-            lines.append(f"  {key[10:]:>24}: max {c['max_abs_cm']:.2f} cm, mean {c['mean_cm']:.2f} cm, "
-                         f"std {c['std_cm']:.2f} cm; {shares}")
+            shares = ", ".join(
+                f"{s * 100:.1f} % within {th:g} cm" for s, th in zip(c["share_within"], c["thresholds_cm"])
+            )
+            lines.append(
+                f"  {key[10:]:>24}: max {c['max_abs_cm']:.2f} cm, mean {c['mean_cm']:.2f} cm, "
+                f"std {c['std_cm']:.2f} cm; {shares}"
+            )
     pts = summary.get("points") or []
     if pts:
         h = "h (normal)" if str(summary.get("height_system", "")).startswith("normal") else "h (ellipsoidal)"
-        lines.append(f"  points ({summary.get('crs', 'grid').split(' (')[0]}; x north, y east, {h}; sigma with "
-                     f"correlated epochs):")
+        lines.append(
+            f"  points ({summary.get('crs', 'grid').split(' (')[0]}; x north, y east, {h}; sigma with "
+            f"correlated epochs):"
+        )
         for q in pts[:POINTS_PRINTED]:
-            lines.append(f"    {q['name']}: x {q['x_m']:.4f} m, y {q['y_m']:.4f} m, h {q['h_m']:.4f} m; sigma x/y/h "
-                         f"{q['sigma_x_m'] / MM:.2f}/{q['sigma_y_m'] / MM:.2f}/{q['sigma_h_m'] / MM:.2f} mm "
-                         f"({q['n_epochs']} epochs)")
+            lines.append(
+                f"    {q['name']}: x {q['x_m']:.4f} m, y {q['y_m']:.4f} m, h {q['h_m']:.4f} m; sigma x/y/h "
+                f"{q['sigma_x_m'] / MM:.2f}/{q['sigma_y_m'] / MM:.2f}/{q['sigma_h_m'] / MM:.2f} mm "
+                f"({q['n_epochs']} epochs)"
+            )
         if len(pts) > POINTS_PRINTED:
             lines.append(f"    ... and {len(pts) - POINTS_PRINTED} more points in rtk_results.csv")
     lines.append(f"wrote {', '.join(summary['outputs'])}")
@@ -345,11 +487,28 @@ def write_simulated_survey(out, seed: int = 0):
     names = np.array([f"P{i + 1:02d}" for i in range(P)])
     m = sim.mask
     pts = np.repeat(names[:, None], sim.t.shape[1], axis=1)[m]
-    f_ep = write_epoch_log(out / "sim_epochs.csv", pts, sim.t[m], sim.xy_terminal[m][:, 0], sim.xy_terminal[m][:, 1],
-                           sim.h_terminal[m], sim.lat[m], sim.lon[m], sim.H[m], sim.sigma[m])
+    f_ep = write_epoch_log(
+        out / "sim_epochs.csv",
+        pts,
+        sim.t[m],
+        sim.xy_terminal[m][:, 0],
+        sim.xy_terminal[m][:, 1],
+        sim.h_terminal[m],
+        sim.lat[m],
+        sim.lon[m],
+        sim.H[m],
+        sim.sigma[m],
+    )
     C = sim.control_h.shape[0]
-    f_cp = write_control_points(out / "sim_control.csv", [f"K{i + 1}" for i in range(C)], sim.control_lat,
-                                sim.control_lon, sim.control_H, sim.control_xy[:, 0], sim.control_xy[:, 1],
-                                sim.control_h)
+    f_cp = write_control_points(
+        out / "sim_control.csv",
+        [f"K{i + 1}" for i in range(C)],
+        sim.control_lat,
+        sim.control_lon,
+        sim.control_H,
+        sim.control_xy[:, 0],
+        sim.control_xy[:, 1],
+        sim.control_h,
+    )
     f_lv = write_levelling(out / "sim_levelling.csv", names, sim.h_level)
     return f_ep, f_cp, f_lv, sim

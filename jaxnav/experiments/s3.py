@@ -11,16 +11,14 @@ from __future__ import annotations
 import math
 import pathlib
 import time
-from typing import Optional
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.io import write_json
 from jaxnav.experiments.walk import WALK_SENSOR_TO_BODY
 from jaxnav.geodesy import curvilinear_to_enu
-from jaxnav.io import imu_increments, read_stop_list, write_stop_list
+from jaxnav.io import imu_increments, read_stop_list, write_json, write_stop_list
 from jaxnav.plot import plot_cadastral_errors, plot_cadastral_route, plot_stop_detection
 from jaxnav.sim import calibration_record, load_cadastral, short_survey, simulate_cadastral, survey_truth
 from jaxnav.survey import (
@@ -56,14 +54,24 @@ def grade_params(scn, pipe: dict):
     """S3 pipeline parameters (:class:`jaxnav.survey.CadastralParams`, SI) from a scenario's IMU grade and the
     config's [pipeline] table (outlier_k, lowpass_hz, velocity/position/ZUPT sigmas)."""
     g, a, ie = scn.grade.gyro, scn.grade.accel, scn.grade.initial_errors
-    pre = PreprocessParams(k_gyro=float(pipe.get("outlier_k", 6.0)), k_accel=float(pipe.get("outlier_k", 6.0)),
-                           cutoff_hz=float(pipe.get("lowpass_hz", 20.0)))
-    return cadastral_params(gyro_bias=g.bias_sigma, gyro_markov=g.markov_sigma, gyro_tau=g.markov_tau, gyro_arw=g.white,
-                            accel_bias=a.bias_sigma, accel_vrw=a.white,
-                            attitude_sigma=tuple(max(x, 1e-6) for x in ie.attitude),
-                            velocity_sigma=float(pipe.get("velocity_sigma0_mps", 0.01)),
-                            position_sigma=float(pipe.get("position_sigma0_m", 0.005)),
-                            zupt_sigma=float(pipe.get("zupt_sigma_mps", 0.005)), pre=pre)
+    pre = PreprocessParams(
+        k_gyro=float(pipe.get("outlier_k", 6.0)),
+        k_accel=float(pipe.get("outlier_k", 6.0)),
+        cutoff_hz=float(pipe.get("lowpass_hz", 20.0)),
+    )
+    return cadastral_params(
+        gyro_bias=g.bias_sigma,
+        gyro_markov=g.markov_sigma,
+        gyro_tau=g.markov_tau,
+        gyro_arw=g.white,
+        accel_bias=a.bias_sigma,
+        accel_vrw=a.white,
+        attitude_sigma=tuple(max(x, 1e-6) for x in ie.attitude),
+        velocity_sigma=float(pipe.get("velocity_sigma0_mps", 0.01)),
+        position_sigma=float(pipe.get("position_sigma0_m", 0.005)),
+        zupt_sigma=float(pipe.get("zupt_sigma_mps", 0.005)),
+        pre=pre,
+    )
 
 
 def detector_params_for(scn):
@@ -76,8 +84,17 @@ def detector_params_for(scn):
     return DetectorParams(sigma_a=sa, sigma_g=sg, threshold=10.0)
 
 
-def survey_monte_carlo(scn, pipe: dict, seeds: int, *, stops=None, chunk: int = 8, progress: bool = True,
-                       seed0: int = 0, route_every: int = 50):
+def survey_monte_carlo(
+    scn,
+    pipe: dict,
+    seeds: int,
+    *,
+    stops=None,
+    chunk: int = 8,
+    progress: bool = True,
+    seed0: int = 0,
+    route_every: int = 50,
+):
     """Run the S3 pipeline on ``seeds`` simulated surveys (vmapped, chunked by :func:`jaxnav.tune.run_chunked`).
 
     Returns:
@@ -87,8 +104,12 @@ def survey_monte_carlo(scn, pipe: dict, seeds: int, *, stops=None, chunk: int = 
     """
     truth = survey_truth(scn)
     stop_list = truth.stops if stops is None else stops
-    plan = plan_survey(stop_list, truth.t_imu, meas_rate_hz=float(pipe.get("meas_rate_hz", 1.0)),
-                       margin_s=float(pipe.get("margin_s", 0.5)))
+    plan = plan_survey(
+        stop_list,
+        truth.t_imu,
+        meas_rate_hz=float(pipe.get("meas_rate_hz", 1.0)),
+        margin_s=float(pipe.get("margin_s", 0.5)),
+    )
     tpos = jnp.asarray(truth.pos[plan.arrival])
     params = grade_params(scn, pipe)
     det = detector_params_for(scn)
@@ -103,10 +124,19 @@ def survey_monte_carlo(scn, pipe: dict, seeds: int, *, stops=None, chunk: int = 
         # segmentation follows preprocessing (S3 steps 1-2): wild values would look like motion
         pre = preprocess_imu(run.dtheta, run.dv, dt, params.pre, lowpass=False)
         stat = stance_statistic(pre.dv / dt, pre.dtheta / dt, det, window=int(round(0.5 / dt)))
-        route = {k: v[route_every - 1::route_every] for k, v in out.route.items()}
-        return dict(errors=errs, sigma_f=out.sigma_forward, sigma_b=out.sigma_backward, weight=out.weight_forward,
-                    n_rejected=out.n_rejected, n_wild=run.n_wild, status=out.status, static=stat < det.threshold,
-                    statistic=stat.astype(jnp.float32), route=route)
+        route = {k: v[route_every - 1 :: route_every] for k, v in out.route.items()}
+        return dict(
+            errors=errs,
+            sigma_f=out.sigma_forward,
+            sigma_b=out.sigma_backward,
+            weight=out.weight_forward,
+            n_rejected=out.n_rejected,
+            n_wild=run.n_wild,
+            status=out.status,
+            static=stat < det.threshold,
+            statistic=stat.astype(jnp.float32),
+            route=route,
+        )
 
     keys = jax.random.split(jax.random.PRNGKey(seed0), seeds)
     t0 = time.perf_counter()
@@ -127,13 +157,23 @@ def ar_identification(seed: int = 0, n: int = 20000, reps: int = 200):
     out["order_aic"] = sel_aic.order
     for m in ("yule_walker", "ls"):
         f = fit_ar(x, 2, m)
-        out[m] = {"phi": np.asarray(f.phi).tolist(), "se": np.asarray(f.se).tolist(),
-                  "z": (np.asarray(f.phi - phi) / np.asarray(f.se)).tolist(), "sigma2": float(f.sigma2)}
+        out[m] = {
+            "phi": np.asarray(f.phi).tolist(),
+            "se": np.asarray(f.se).tolist(),
+            "z": (np.asarray(f.phi - phi) / np.asarray(f.se)).tolist(),
+            "sigma2": float(f.sigma2),
+        }
     keys = jax.random.split(jax.random.PRNGKey(seed + 1), reps)
     fits = jax.jit(jax.vmap(lambda k: fit_ar(simulate_ar(k, phi, 1.0, 2000), 2, "yule_walker")))(keys)
     z = np.abs(np.asarray(fits.phi - phi) / np.asarray(fits.se))
-    out["coverage"] = {"reps": reps, "n": 2000, "within_1se": float((z < 1).mean()), "within_2se": float((z < 2).mean()),
-                       "expected_1se": 0.6827, "expected_2se": 0.9545}
+    out["coverage"] = {
+        "reps": reps,
+        "n": 2000,
+        "within_1se": float((z < 1).mean()),
+        "within_2se": float((z < 2).mean()),
+        "expected_1se": 0.6827,
+        "expected_2se": 0.9545,
+    }
     return out
 
 
@@ -142,8 +182,10 @@ def preprocessing_check(scn, seed: int = 0, n: int = 60000, axis: int = 0):
     variance ((rad/s)^2, (m/s^2)^2) after each preprocessing step; returns a JSON-ready dict."""
     rec = calibration_record(scn, jax.random.PRNGKey(seed), n)
     out = {"n": n, "rate_hz": scn.imu_rate_hz, "n_wild": int(rec.n_wild)}
-    for name, y, col, floor in (("gyro", rec.gyro[:, axis], rec.gyro_coloured[:, axis], 1e-4),
-                                ("accel", rec.accel[:, axis], rec.accel_coloured[:, axis], 1e-3)):
+    for name, y, col, floor in (
+        ("gyro", rec.gyro[:, axis], rec.gyro_coloured[:, axis], 1e-4),
+        ("accel", rec.accel[:, axis], rec.accel_coloured[:, axis], 1e-3),
+    ):
         clean = reject_outliers(y, 6.0, floor)
         c = clean.clean
         lp = zero_phase_lowpass(c, scn.dt, 20.0)
@@ -162,18 +204,37 @@ def preprocessing_check(scn, seed: int = 0, n: int = 60000, axis: int = 0):
         seld = select_ar_order(yd, 6, criterion="bic")
         Rd = R / m
         kfd = ar_kalman(yd, seld.fit.phi, seld.fit.sigma2, Rd)
-        dec = {"block_s": 1.0, "n": nb, "ar_order_bic": seld.order, "ar_phi": np.asarray(seld.fit.phi).tolist(),
-               "ar_se": np.asarray(seld.fit.se).tolist(), "white_variance": float(Rd),
-               "var_error_raw_minus_drift": v(yd - cd), "var_error_ar_kalman_minus_drift": v(kfd.error - cd),
-               "var_drift": v(cd)}
+        dec = {
+            "block_s": 1.0,
+            "n": nb,
+            "ar_order_bic": seld.order,
+            "ar_phi": np.asarray(seld.fit.phi).tolist(),
+            "ar_se": np.asarray(seld.fit.se).tolist(),
+            "white_variance": float(Rd),
+            "var_error_raw_minus_drift": v(yd - cd),
+            "var_error_ar_kalman_minus_drift": v(kfd.error - cd),
+            "var_drift": v(cd),
+        }
         out[name] = {
-            "var_raw": v(y), "var_outliers_rejected": v(c), "var_lowpass_20hz": v(lp), "var_ar_kalman": v(kf.error),
-            "reduction_total": v(y) / v(kf.error), "n_rejected": int(clean.n_rejected),
-            "var_coloured_truth": v(col), "var_ar_kalman_minus_coloured": v(kf.error - col),
-            "ar_order_bic": sel.order, "ar_phi": np.asarray(sel.fit.phi).tolist(), "ar_se": np.asarray(sel.fit.se).tolist(),
-            "white_variance": float(R), "decimated_1s": dec,
-            "stats_raw": {k: float(getattr(st_raw, k)) for k in ("mean", "var", "skew", "kurt", "jb", "jb_p", "runs_z", "runs_p")},
-            "stats_clean": {k: float(getattr(st, k)) for k in ("mean", "var", "skew", "kurt", "jb", "jb_p", "runs_z", "runs_p")},
+            "var_raw": v(y),
+            "var_outliers_rejected": v(c),
+            "var_lowpass_20hz": v(lp),
+            "var_ar_kalman": v(kf.error),
+            "reduction_total": v(y) / v(kf.error),
+            "n_rejected": int(clean.n_rejected),
+            "var_coloured_truth": v(col),
+            "var_ar_kalman_minus_coloured": v(kf.error - col),
+            "ar_order_bic": sel.order,
+            "ar_phi": np.asarray(sel.fit.phi).tolist(),
+            "ar_se": np.asarray(sel.fit.se).tolist(),
+            "white_variance": float(R),
+            "decimated_1s": dec,
+            "stats_raw": {
+                k: float(getattr(st_raw, k)) for k in ("mean", "var", "skew", "kurt", "jb", "jb_p", "runs_z", "runs_p")
+            },
+            "stats_clean": {
+                k: float(getattr(st, k)) for k in ("mean", "var", "skew", "kurt", "jb", "jb_p", "runs_z", "runs_p")
+            },
         }
     return out
 
@@ -202,16 +263,32 @@ def walk_detection(data_dir, out_dir=None):
     fig = None
     if out_dir is not None:
         fig = str(pathlib.Path(out_dir) / "cadastral_walk_detection.png")
-        plot_stop_detection(fig, t - t[0], r.statistic, prm.threshold, r.spans - t[0], ref - t[0],
-                            title="stop detector (GLRT) on the real walk set walk_0827",
-                            extra=(gt[sel] - t[0], speed[sel], "RTK horizontal speed, m/s"),
-                            true_label="RTK static (speed < 0.1 m/s)")
-    return {"n_samples": int(t.size), "rate_hz": float(1 / np.median(dt)),
-            "threshold": float(prm.threshold), "window": win,
-            "detected_spans_s": (r.spans - t[0]).round(2).tolist(), "rtk_static_spans_s": (ref - t[0]).round(2).tolist(),
-            "precision": sc.precision, "recall": sc.recall, "n_detected": sc.n_detected, "n_rtk": sc.n_true,
-            "start_error_s": sc.start_error.round(2).tolist(), "end_error_s": sc.end_error.round(2).tolist(),
-            "figure": fig}
+        plot_stop_detection(
+            fig,
+            t - t[0],
+            r.statistic,
+            prm.threshold,
+            r.spans - t[0],
+            ref - t[0],
+            title="stop detector (GLRT) on the real walk set walk_0827",
+            extra=(gt[sel] - t[0], speed[sel], "RTK horizontal speed, m/s"),
+            true_label="RTK static (speed < 0.1 m/s)",
+        )
+    return {
+        "n_samples": int(t.size),
+        "rate_hz": float(1 / np.median(dt)),
+        "threshold": float(prm.threshold),
+        "window": win,
+        "detected_spans_s": (r.spans - t[0]).round(2).tolist(),
+        "rtk_static_spans_s": (ref - t[0]).round(2).tolist(),
+        "precision": sc.precision,
+        "recall": sc.recall,
+        "n_detected": sc.n_detected,
+        "n_rtk": sc.n_true,
+        "start_error_s": sc.start_error.round(2).tolist(),
+        "end_error_s": sc.end_error.round(2).tolist(),
+        "figure": fig,
+    }
 
 
 def _enu(pos, ref):
@@ -220,9 +297,20 @@ def _enu(pos, ref):
     return np.asarray(curvilinear_to_enu(ref, pos - ref))
 
 
-def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None, chunk: int = 8,
-                  progress: bool = True, n_legs: Optional[int] = None, walk_dir=None, ar_reps: int = 200,
-                  calib_samples: int = 60000) -> dict:
+def run_cadastral(
+    out,
+    *,
+    config=None,
+    seeds: int = 64,
+    grades=None,
+    stops=None,
+    chunk: int = 8,
+    progress: bool = True,
+    n_legs: int | None = None,
+    walk_dir=None,
+    ar_reps: int = 200,
+    calib_samples: int = 60000,
+) -> dict:
     """The whole S3 experiment; writes ``out/results.json`` and figures, returns the results dict.
 
     Args:
@@ -244,15 +332,22 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
         if g not in scns:
             raise ValueError(f"unknown IMU grade {g!r}; the config has {list(scns)}")
     user_stops = None if stops is None else read_stop_list(stops)
-    results = {"command": "jaxnav cadastral", "seeds": seeds, "config": str(config or "jaxnav/sim/scenarios/cadastral.toml"),
-               "stages": {"forward": "(a) raw data, pure strapdown from the last known-coordinate point",
-                          "preprocessed": "(a) on preprocessed data (wild values, 20 Hz zero-phase low-pass)",
-                          "smoothed": "(b) + class-1 KF/RTS at stops -> sensor errors compensated, strapdown from the "
-                                      "smoothed state at the last known-coordinate point",
-                          "fused": "(c) + reverse navigation from the next known-coordinate point, inverse-variance fusion",
-                          "filtered": "diagnostic: causal class-1 filter at the target stop (uses the target's ZUPT)",
-                          "rts": "diagnostic: RTS-smoothed class-1 solution at the target stop"},
-               "grades": {}, "devices": [str(d) for d in jax.devices()]}
+    results = {
+        "command": "jaxnav cadastral",
+        "seeds": seeds,
+        "config": str(config or "jaxnav/sim/scenarios/cadastral.toml"),
+        "stages": {
+            "forward": "(a) raw data, pure strapdown from the last known-coordinate point",
+            "preprocessed": "(a) on preprocessed data (wild values, 20 Hz zero-phase low-pass)",
+            "smoothed": "(b) + class-1 KF/RTS at stops -> sensor errors compensated, strapdown from the "
+            "smoothed state at the last known-coordinate point",
+            "fused": "(c) + reverse navigation from the next known-coordinate point, inverse-variance fusion",
+            "filtered": "diagnostic: causal class-1 filter at the target stop (uses the target's ZUPT)",
+            "rts": "diagnostic: RTS-smoothed class-1 solution at the target stop",
+        },
+        "grades": {},
+        "devices": [str(d) for d in jax.devices()],
+    }
     for g in names:
         scn = scns[g]
         if n_legs:
@@ -264,8 +359,13 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
         errs = {s: res["errors"][s] for s in STAGES}
         summ = summarize_errors(errs)
         tnames = [plan.stops.name[k] for k in plan.targets]
-        per_seed = {s: {"horizontal_m": np.hypot(errs[s][..., 0], errs[s][..., 1]).round(5).tolist(),
-                        "vertical_m": np.abs(errs[s][..., 2]).round(5).tolist()} for s in STAGES}
+        per_seed = {
+            s: {
+                "horizontal_m": np.hypot(errs[s][..., 0], errs[s][..., 1]).round(5).tolist(),
+                "vertical_m": np.abs(errs[s][..., 2]).round(5).tolist(),
+            }
+            for s in STAGES
+        }
         # stop detection on the simulated data
         t_imu = truth.t_imu
         true_spans = np.stack([truth.stops.t_start, truth.stops.t_end], 1)
@@ -273,56 +373,95 @@ def run_cadastral(out, *, config=None, seeds: int = 64, grades=None, stops=None,
         for i in range(seeds):
             sp = static_spans(res["static"][i], t_imu, min_duration=2.0, min_gap=0.5)
             scores.append(match_stops(sp, true_spans, t=t_imu, static=res["static"][i]))
-        det = {"precision_mean": float(np.mean([s.precision for s in scores])),
-               "recall_mean": float(np.mean([s.recall for s in scores])),
-               "precision_min": float(np.min([s.precision for s in scores])),
-               "recall_min": float(np.min([s.recall for s in scores])),
-               "sample_precision_mean": float(np.mean([s.sample_precision for s in scores])),
-               "sample_recall_mean": float(np.mean([s.sample_recall for s in scores])),
-               "boundary_error_s_mean_abs": float(np.mean(np.abs(np.concatenate(
-                   [np.concatenate([s.start_error, s.end_error]) for s in scores])))),
-               "n_true_stops": len(true_spans), "threshold": float(mc["detector"].threshold)}
+        det = {
+            "precision_mean": float(np.mean([s.precision for s in scores])),
+            "recall_mean": float(np.mean([s.recall for s in scores])),
+            "precision_min": float(np.min([s.precision for s in scores])),
+            "recall_min": float(np.min([s.recall for s in scores])),
+            "sample_precision_mean": float(np.mean([s.sample_precision for s in scores])),
+            "sample_recall_mean": float(np.mean([s.sample_recall for s in scores])),
+            "boundary_error_s_mean_abs": float(
+                np.mean(np.abs(np.concatenate([np.concatenate([s.start_error, s.end_error]) for s in scores])))
+            ),
+            "n_true_stops": len(true_spans),
+            "threshold": float(mc["detector"].threshold),
+        }
         a, c = summ["forward"], summ["fused"]
-        check = {"fused_over_forward_h": c["rms_h"] / a["rms_h"], "fused_over_forward_v": c["rms_v"] / a["rms_v"],
-                 "fused_over_preprocessed_h": c["rms_h"] / summ["preprocessed"]["rms_h"],
-                 "fused_over_smoothed_h": c["rms_h"] / summ["smoothed"]["rms_h"],
-                 "fused_over_smoothed_v": c["rms_v"] / summ["smoothed"]["rms_v"]}
+        check = {
+            "fused_over_forward_h": c["rms_h"] / a["rms_h"],
+            "fused_over_forward_v": c["rms_v"] / a["rms_v"],
+            "fused_over_preprocessed_h": c["rms_h"] / summ["preprocessed"]["rms_h"],
+            "fused_over_smoothed_h": c["rms_h"] / summ["smoothed"]["rms_h"],
+            "fused_over_smoothed_v": c["rms_v"] / summ["smoothed"]["rms_v"],
+        }
         check["pass_c_le_0.7a"] = bool(check["fused_over_forward_h"] <= 0.7 and check["fused_over_forward_v"] <= 0.7)
         # figures
         ref = truth.pos[0]
         route = _enu(truth.pos, ref)
         st_enu = _enu(truth.stop_pos, ref)
-        est = {"(b) strapdown from known points, seed 0": _enu(res["route"]["smoothed"][0], ref)[:, :2],
-               "(c) reverse navigation, seed 0": _enu(res["route"]["backward"][0], ref)[:, :2]}
+        est = {
+            "(b) strapdown from known points, seed 0": _enu(res["route"]["smoothed"][0], ref)[:, :2],
+            "(c) reverse navigation, seed 0": _enu(res["route"]["backward"][0], ref)[:, :2],
+        }
         f_route = out / f"cadastral_route_{g}.png"
         f_err = out / f"cadastral_errors_{g}.png"
         f_det = out / f"cadastral_detection_{g}.png"
         if writer:
-            plot_cadastral_route(f_route, route[:, :2], st_enu[:, :2], plan.stops.kind, plan.stops.name,
-                                 estimates=est, title=f"S3 cadastral survey, {g} IMU (seed 0)",
-                                 target_errors={s: errs[s][0] for s in ("forward", "preprocessed", "smoothed",
-                                                                       "fused", "rts")})
-            plot_cadastral_errors(f_err, errs,
-                                  title=f"S3 target errors, {g} IMU, {seeds} seed{'s' if seeds != 1 else ''} x "
-                                        f"{len(tnames)} target{'s' if len(tnames) != 1 else ''} (boxes: quartiles, "
-                                        f"whiskers: 1.5 IQR)")
-            plot_stop_detection(f_det, t_imu, np.asarray(res["statistic"][0], float), float(mc["detector"].threshold),
-                                static_spans(res["static"][0], t_imu, min_duration=2.0, min_gap=0.5), true_spans,
-                                title=f"stop detector (GLRT) on the simulated survey, {g} IMU, seed 0 of {seeds}")
+            plot_cadastral_route(
+                f_route,
+                route[:, :2],
+                st_enu[:, :2],
+                plan.stops.kind,
+                plan.stops.name,
+                estimates=est,
+                title=f"S3 cadastral survey, {g} IMU (seed 0)",
+                target_errors={s: errs[s][0] for s in ("forward", "preprocessed", "smoothed", "fused", "rts")},
+            )
+            plot_cadastral_errors(
+                f_err,
+                errs,
+                title=f"S3 target errors, {g} IMU, {seeds} seed{'s' if seeds != 1 else ''} x "
+                f"{len(tnames)} target{'s' if len(tnames) != 1 else ''} (boxes: quartiles, "
+                f"whiskers: 1.5 IQR)",
+            )
+            plot_stop_detection(
+                f_det,
+                t_imu,
+                np.asarray(res["statistic"][0], float),
+                float(mc["detector"].threshold),
+                static_spans(res["static"][0], t_imu, min_duration=2.0, min_gap=0.5),
+                true_spans,
+                title=f"stop detector (GLRT) on the simulated survey, {g} IMU, seed 0 of {seeds}",
+            )
         status = np.bitwise_or.reduce(np.asarray(res["status"]).ravel())
         results["grades"][g] = {
-            "survey": {"duration_s": scn.duration, "n_imu": int(t_imu.size), "n_stops": len(plan.stops.t_start),
-                       "stops": [{"name": plan.stops.name[k], "kind": STOP_KINDS[plan.stops.kind[k]],
-                                  "t_start": float(plan.stops.t_start[k]), "t_end": float(plan.stops.t_end[k])}
-                                 for k in range(len(plan.stops.t_start))],
-                       "targets": tnames, "class3": [bool(x) for x in plan.class3]},
-            "summary": summ, "check": check, "per_seed": per_seed,
+            "survey": {
+                "duration_s": scn.duration,
+                "n_imu": int(t_imu.size),
+                "n_stops": len(plan.stops.t_start),
+                "stops": [
+                    {
+                        "name": plan.stops.name[k],
+                        "kind": STOP_KINDS[plan.stops.kind[k]],
+                        "t_start": float(plan.stops.t_start[k]),
+                        "t_end": float(plan.stops.t_end[k]),
+                    }
+                    for k in range(len(plan.stops.t_start))
+                ],
+                "targets": tnames,
+                "class3": [bool(x) for x in plan.class3],
+            },
+            "summary": summ,
+            "check": check,
+            "per_seed": per_seed,
             "fusion_weight_forward_mean": np.asarray(res["weight"]).mean(axis=(0,)).round(4).tolist(),
             "sigma_forward_mean_m": np.asarray(res["sigma_f"]).mean(0).round(4).tolist(),
             "sigma_backward_mean_m": np.asarray(res["sigma_b"]).mean(0).round(4).tolist(),
             "wild_values_injected_mean": float(np.mean(res["n_wild"])),
             "wild_values_rejected_mean": float(np.mean(res["n_rejected"])),
-            "status_flags": int(status), "detection": det, "wall_s": mc["wall"],
+            "status_flags": int(status),
+            "detection": det,
+            "wall_s": mc["wall"],
             "figures": [str(f_route), str(f_err), str(f_det)],
             "preprocessing": preprocessing_check(scn, n=calib_samples),
         }
@@ -344,38 +483,53 @@ def format_cadastral(results: dict) -> str:
     lines = []
     for g, r in results["grades"].items():
         s = r["summary"]
-        lines.append(f"\n{g} IMU, {results['seeds']} seeds x {len(r['survey']['targets'])} targets "
-                     f"({r['survey']['duration_s']:.0f} s survey, {r['wall_s']:.1f} s Monte Carlo)")
-        lines.append(f"  {'stage':<14}{'RMS h m':>10}{'RMS v m':>10}{'median h':>10}{'p95 h':>10}"
-                     f"{'h/(a)':>8}{'v/(a)':>8}")
+        lines.append(
+            f"\n{g} IMU, {results['seeds']} seeds x {len(r['survey']['targets'])} targets "
+            f"({r['survey']['duration_s']:.0f} s survey, {r['wall_s']:.1f} s Monte Carlo)"
+        )
+        lines.append(
+            f"  {'stage':<14}{'RMS h m':>10}{'RMS v m':>10}{'median h':>10}{'p95 h':>10}{'h/(a)':>8}{'v/(a)':>8}"
+        )
         for st in STAGES:
             x = s[st]
-            lines.append(f"  {st:<14}{x['rms_h']:>10.3f}{x['rms_v']:>10.3f}{x['median_h']:>10.3f}{x['p95_h']:>10.3f}"
-                         f"{x['ratio_h_vs_forward']:>8.3f}{x['ratio_v_vs_forward']:>8.3f}")
+            lines.append(
+                f"  {st:<14}{x['rms_h']:>10.3f}{x['rms_v']:>10.3f}{x['median_h']:>10.3f}{x['p95_h']:>10.3f}"
+                f"{x['ratio_h_vs_forward']:>8.3f}{x['ratio_v_vs_forward']:>8.3f}"
+            )
         c = r["check"]
-        lines.append(f"  (c)/(a): h {c['fused_over_forward_h']:.4f}, v {c['fused_over_forward_v']:.4f} -> "
-                     f"{'PASS' if c['pass_c_le_0.7a'] else 'FAIL'} (<= 0.7); "
-                     f"(c)/(b): h {c['fused_over_smoothed_h']:.3f}, v {c['fused_over_smoothed_v']:.3f}")
+        lines.append(
+            f"  (c)/(a): h {c['fused_over_forward_h']:.4f}, v {c['fused_over_forward_v']:.4f} -> "
+            f"{'PASS' if c['pass_c_le_0.7a'] else 'FAIL'} (<= 0.7); "
+            f"(c)/(b): h {c['fused_over_smoothed_h']:.3f}, v {c['fused_over_smoothed_v']:.3f}"
+        )
         d = r["detection"]
-        lines.append(f"  stop detector (simulated): precision {d['precision_mean']:.3f} "
-                     f"(min {d['precision_min']:.3f}), recall {d['recall_mean']:.3f} (min {d['recall_min']:.3f}), "
-                     f"sample precision {d['sample_precision_mean']:.3f} / recall {d['sample_recall_mean']:.3f}")
+        lines.append(
+            f"  stop detector (simulated): precision {d['precision_mean']:.3f} "
+            f"(min {d['precision_min']:.3f}), recall {d['recall_mean']:.3f} (min {d['recall_min']:.3f}), "
+            f"sample precision {d['sample_precision_mean']:.3f} / recall {d['sample_recall_mean']:.3f}"
+        )
         p = r["preprocessing"]
         for sn, unit in (("gyro", "(rad/s)^2"), ("accel", "(m/s^2)^2")):
             q = p[sn]
-            lines.append(f"  preprocessing {sn}: residual variance {unit} raw {q['var_raw']:.3e} -> outliers "
-                         f"{q['var_outliers_rejected']:.3e} -> AR({q['ar_order_bic']}) Kalman {q['var_ar_kalman']:.3e} "
-                         f"(x{q['reduction_total']:.1f} lower)")
+            lines.append(
+                f"  preprocessing {sn}: residual variance {unit} raw {q['var_raw']:.3e} -> outliers "
+                f"{q['var_outliers_rejected']:.3e} -> AR({q['ar_order_bic']}) Kalman {q['var_ar_kalman']:.3e} "
+                f"(x{q['reduction_total']:.1f} lower)"
+            )
     a = results["ar_identification"]
-    lines.append(f"\nAR(2) phi = {a['phi_true']}: Yule-Walker {np.round(a['yule_walker']['phi'], 4).tolist()} +- "
-                 f"{np.round(a['yule_walker']['se'], 4).tolist()} (z = {np.round(a['yule_walker']['z'], 2).tolist()}); "
-                 f"BIC order {a['order_bic']}; coverage within 1 SE {a['coverage']['within_1se']:.3f} (0.683), "
-                 f"2 SE {a['coverage']['within_2se']:.3f} (0.954)")
+    lines.append(
+        f"\nAR(2) phi = {a['phi_true']}: Yule-Walker {np.round(a['yule_walker']['phi'], 4).tolist()} +- "
+        f"{np.round(a['yule_walker']['se'], 4).tolist()} (z = {np.round(a['yule_walker']['z'], 2).tolist()}); "
+        f"BIC order {a['order_bic']}; coverage within 1 SE {a['coverage']['within_1se']:.3f} (0.683), "
+        f"2 SE {a['coverage']['within_2se']:.3f} (0.954)"
+    )
     w = results["walk_detection"]
     if "skipped" in w:
         lines.append(f"walk set: {w['skipped']}")
     else:
-        lines.append(f"walk set: detected stops {w['detected_spans_s']} s; RTK static {w['rtk_static_spans_s']} s; "
-                     f"precision {w['precision']:.2f}, recall {w['recall']:.2f}")
+        lines.append(
+            f"walk set: detected stops {w['detected_spans_s']} s; RTK static {w['rtk_static_spans_s']} s; "
+            f"precision {w['precision']:.2f}, recall {w['recall']:.2f}"
+        )
     lines.append(f"total wall time {results['wall_s_total']:.1f} s")
     return "\n".join(lines)

@@ -20,9 +20,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxnav.io import write_json
 from jaxnav import filters as jf
 from jaxnav import tune
+from jaxnav._config import Table, load_toml
 from jaxnav.experiments.s0 import (
     EXPERIMENT,
     S0_FILTERS,
@@ -32,7 +32,7 @@ from jaxnav.experiments.s0 import (
     load_experiment,
     s0_metrics,
 )
-from jaxnav._config import Table, load_toml
+from jaxnav.io import write_json
 from jaxnav.sim import simulate_linear
 
 _log = logging.getLogger(__name__)
@@ -41,19 +41,37 @@ _log = logging.getLogger(__name__)
 CONFIGS = pathlib.Path(__file__).with_name("configs")
 _POS = dict(lo=0.0, lo_open=True, hi=1e6)
 #: keys of [problem] and [tune]: (kind of :meth:`jaxnav._config.Table.get`, bounds or choices)
-_PROBLEM = {"kind": (str, dict(choices=("s0", "cv"))), "filter": (str, dict(choices=S0_FILTERS)),
-            "loss": (str, dict(choices=S0_LOSSES)), "seeds": (int, dict(lo=1, hi=100_000)),
-            "seed": (int, dict(lo=0, hi=2**32 - 1)), "duration": (float, _POS), "experiment": (str, {}),
-            "series": (int, dict(lo=1, hi=100_000)), "epochs": (int, dict(lo=2, hi=10**6)),
-            "sigma": (float, dict(lo=0.0, lo_open=True, hi=1e4)), "q": (float, _POS)}
+_PROBLEM = {
+    "kind": (str, dict(choices=("s0", "cv"))),
+    "filter": (str, dict(choices=S0_FILTERS)),
+    "loss": (str, dict(choices=S0_LOSSES)),
+    "seeds": (int, dict(lo=1, hi=100_000)),
+    "seed": (int, dict(lo=0, hi=2**32 - 1)),
+    "duration": (float, _POS),
+    "experiment": (str, {}),
+    "series": (int, dict(lo=1, hi=100_000)),
+    "epochs": (int, dict(lo=2, hi=10**6)),
+    "sigma": (float, dict(lo=0.0, lo_open=True, hi=1e4)),
+    "q": (float, _POS),
+}
 _OPTIMIZERS = ("adam", "sgd", "lbfgs", "lbfgs_wolfe")
 _MODES = ("auto", "forward", "reverse")
-_TUNE = {"optimizer": (str, dict(choices=_OPTIMIZERS)), "learning_rate": (float, _POS),
-         "steps": (int, dict(lo=1, hi=10**6)), "mode": (str, dict(choices=_MODES)),
-         "landscape": (int, dict(lo=0, hi=10**5))}
+_TUNE = {
+    "optimizer": (str, dict(choices=_OPTIMIZERS)),
+    "learning_rate": (float, _POS),
+    "steps": (int, dict(lo=1, hi=10**6)),
+    "mode": (str, dict(choices=_MODES)),
+    "landscape": (int, dict(lo=0, hi=10**5)),
+}
 #: allowed values of each tunable parameter (bounds of :meth:`jaxnav._config.Table.get`)
-_PARAM_RANGE = {"b": dict(lo=0.0, hi=1.0, hi_open=True), "q_scale": _POS, "r_scale": _POS,
-                "S": dict(lo=1.0, hi=1e6), "rho": _POS, "tau": _POS}
+_PARAM_RANGE = {
+    "b": dict(lo=0.0, hi=1.0, hi_open=True),
+    "q_scale": _POS,
+    "r_scale": _POS,
+    "S": dict(lo=1.0, hi=1e6),
+    "rho": _POS,
+    "tau": _POS,
+}
 
 
 def _keys(t: Table, schema: dict) -> dict:
@@ -82,8 +100,9 @@ def load_config(spec) -> dict:
         prob.setdefault("filter", "attenuated")
         prob.setdefault("loss", "rms")
         prob.setdefault("seeds", 8)
-        allowed = set(S0_PARAMS[prob["filter"]]) | {"q_scale", "r_scale"} | (
-            {"tau"} if prob["filter"] == "fading" else set())
+        allowed = (
+            set(S0_PARAMS[prob["filter"]]) | {"q_scale", "r_scale"} | ({"tau"} if prob["filter"] == "fading" else set())
+        )
     else:
         prob.setdefault("loss", "nll")
         prob.setdefault("series", 64)
@@ -102,8 +121,11 @@ def load_config(spec) -> dict:
         t = params_t.table(name)
         t.expect(("init", "bijector", "trainable"))
         init = t.get("init", float, **_PARAM_RANGE[name])
-        p = {"init": init, "bijector": t.get("bijector", str, "unit" if name == "b" else "log"),
-             "trainable": t.get("trainable", bool, True)}
+        p = {
+            "init": init,
+            "bijector": t.get("bijector", str, "unit" if name == "b" else "log"),
+            "trainable": t.get("trainable", bool, True),
+        }
         try:
             tune.bijector(p["bijector"])
         except (ValueError, TypeError) as exc:
@@ -127,8 +149,11 @@ def load_config(spec) -> dict:
             sw_t.fail(name, "is not a parameter: a sweep axis needs a [params.NAME] section")
         t = sw_t.table(name)
         t.expect(("start", "stop", "num", "log"))
-        ax = {"start": t.get("start", float, **_PARAM_RANGE[name]), "stop": t.get("stop", float, **_PARAM_RANGE[name]),
-              "num": t.get("num", int, lo=1, hi=10**6)}
+        ax = {
+            "start": t.get("start", float, **_PARAM_RANGE[name]),
+            "stop": t.get("stop", float, **_PARAM_RANGE[name]),
+            "num": t.get("num", int, lo=1, hi=10**6),
+        }
         if t.has("log"):
             ax["log"] = t.get("log", bool)
         for end in ("start", "stop"):
@@ -153,16 +178,22 @@ class Problem:
         self.cfg = cfg
         self.kind = prob["kind"]
         self.init = {k: float(v["init"]) for k, v in cfg["params"].items()}
-        self.space = tune.Space({k: v["bijector"] for k, v in cfg["params"].items()},
-                                trainable=tuple(k for k, v in cfg["params"].items() if v["trainable"]))
+        self.space = tune.Space(
+            {k: v["bijector"] for k, v in cfg["params"].items()},
+            trainable=tuple(k for k, v in cfg["params"].items() if v["trainable"]),
+        )
         if self.kind == "s0":
             exp = load_experiment(prob.get("experiment") or EXPERIMENT)
             self.setup = S0Setup(exp, duration=prob.get("duration"))
             self.keys = jax.random.split(jax.random.PRNGKey(prob["seed"]), prob["seeds"])
-            self.loss_name = {"rms": "mean position RMS, m", "nll": "innovation NLL per component",
-                              "nis": "NIS consistency (log ratio)^2"}[prob["loss"]]
-            self.loss_column = {"rms": "loss_rms_m", "nll": "loss_nll_per_component",
-                                "nis": "loss_nis_log_ratio_sq"}[prob["loss"]]
+            self.loss_name = {
+                "rms": "mean position RMS, m",
+                "nll": "innovation NLL per component",
+                "nis": "NIS consistency (log ratio)^2",
+            }[prob["loss"]]
+            self.loss_column = {"rms": "loss_rms_m", "nll": "loss_nll_per_component", "nis": "loss_nis_log_ratio_sq"}[
+                prob["loss"]
+            ]
         else:
             self.keys = jax.random.split(jax.random.PRNGKey(prob["seed"]), prob["series"])
             self.loss_name = "innovation NLL per component"
@@ -219,10 +250,12 @@ def run_sweep(config, out, *, progress=True) -> dict:
     if not axes:
         raise ValueError(f"{cfg['_path']}: [sweep] has no axes")
     g = _grid(P, axes)
-    _log.info("sweep of %s: %d grid points x %d Monte Carlo runs", ", ".join(axes), len(next(iter(g.values()))),
-              len(P.keys))
-    res = tune.sweep(lambda p, k: P.point(p, k), g, P.keys, chunk=cfg["sweep"].get("chunk"), progress=progress,
-                     desc="sweep")
+    _log.info(
+        "sweep of %s: %d grid points x %d Monte Carlo runs", ", ".join(axes), len(next(iter(g.values()))), len(P.keys)
+    )
+    res = tune.sweep(
+        lambda p, k: P.point(p, k), g, P.keys, chunk=cfg["sweep"].get("chunk"), progress=progress, desc="sweep"
+    )
     loss = res.values["loss"]  # (G, K)
     mean = loss.mean(1)
     best = int(np.argmin(mean))
@@ -239,17 +272,31 @@ def run_sweep(config, out, *, progress=True) -> dict:
 
         figs = plot_sweep(out, grid=g, axes=list(axes), loss=loss, loss_name=P.loss_name, init=P.init)
     results = dict(
-        command="sweep", config=cfg["_path"], problem=cfg["problem"], loss_name=P.loss_name,
+        command="sweep",
+        config=cfg["_path"],
+        problem=cfg["problem"],
+        loss_name=P.loss_name,
         grid={k: v for k, v in g.items()},
-        axes=list(axes), loss_mean=mean, loss_std=loss.std(1), loss_per_run=loss,
+        axes=list(axes),
+        loss_mean=mean,
+        loss_std=loss.std(1),
+        loss_per_run=loss,
         best={**{k: float(v[best]) for k, v in g.items()}, "loss": float(mean[best])},
-        runs=len(P.keys), points=len(mean), chunk=res.chunk, n_devices=res.n_devices, n_processes=res.n_processes,
+        runs=len(P.keys),
+        points=len(mean),
+        chunk=res.chunk,
+        n_devices=res.n_devices,
+        n_processes=res.n_processes,
         peak_bytes_per_chunk=res.peak_bytes,
         wall_time_s=dict(total=time.perf_counter() - t0, sweep=res.wall_time_s, compile=res.compile_time_s),
-        figures=[str(f) for f in figs], table=str(out / "table.csv"),
-        table_columns=dict(parameters="dimensionless scale factors (as in the config)",
-                           loss=f"{P.loss_column}_mean/_std/_min/_max over the Monte Carlo runs: {P.loss_name}"),
-        jax_version=jax.__version__, devices=[str(d) for d in jax.devices()],
+        figures=[str(f) for f in figs],
+        table=str(out / "table.csv"),
+        table_columns=dict(
+            parameters="dimensionless scale factors (as in the config)",
+            loss=f"{P.loss_column}_mean/_std/_min/_max over the Monte Carlo runs: {P.loss_name}",
+        ),
+        jax_version=jax.__version__,
+        devices=[str(d) for d in jax.devices()],
     )
     if "rms" in res.values:
         results["rms_best_mean"] = res.values["rms"][best].mean(0)
@@ -261,10 +308,13 @@ def run_sweep(config, out, *, progress=True) -> dict:
 def format_sweep(results: dict) -> str:
     """One line: the size and wall time of :func:`run_sweep`'s sweep and its best point."""
     b, w = results["best"], results["wall_time_s"]
-    return (f"sweep: {results['points']} points x {results['runs']} runs in {w['sweep']:.1f} s "
-            f"({w['compile']:.1f} s compile, {results['n_devices']} device(s), chunk {results['chunk']}); "
-            f"best " + ", ".join(f"{k} = {v:.4g}" for k, v in b.items() if k != "loss")
-            + f": {results['loss_name']} {b['loss']:.4f}")
+    return (
+        f"sweep: {results['points']} points x {results['runs']} runs in {w['sweep']:.1f} s "
+        f"({w['compile']:.1f} s compile, {results['n_devices']} device(s), chunk {results['chunk']}); "
+        f"best "
+        + ", ".join(f"{k} = {v:.4g}" for k, v in b.items() if k != "loss")
+        + f": {results['loss_name']} {b['loss']:.4f}"
+    )
 
 
 def _optimizer(tn):
@@ -289,51 +339,96 @@ def run_tune(config, out, *, progress=True) -> dict:
         out.mkdir(parents=True, exist_ok=True)  # before the computation: an unusable folder fails now
     P = Problem(cfg)
     tn = cfg["tune"]
-    _log.info("tuning %s of %s: %s, %d %s over %d Monte Carlo runs (one compiled lax.scan: no progress until it "
-              "returns)", ", ".join(P.init), cfg["problem"].get("kind", "?"), tn["optimizer"], tn["steps"],
-              "loss evaluations" if tn["optimizer"] == "lbfgs_wolfe" else "steps", len(P.keys))
+    _log.info(
+        "tuning %s of %s: %s, %d %s over %d Monte Carlo runs (one compiled lax.scan: no progress until it returns)",
+        ", ".join(P.init),
+        cfg["problem"].get("kind", "?"),
+        tn["optimizer"],
+        tn["steps"],
+        "loss evaluations" if tn["optimizer"] == "lbfgs_wolfe" else "steps",
+        len(P.keys),
+    )
     if tn["optimizer"] == "lbfgs_wolfe":  # steps = evaluation budget; the loss is compiled once
         res = tune.minimize_lbfgs(P.loss, P.init, P.space, max_evals=tn["steps"], mode=tn["mode"])
         done = np.isfinite(np.asarray(res.losses))
-        res = res._replace(losses=np.asarray(res.losses)[done], grad_norm=np.asarray(res.grad_norm)[done],
-                           path={k: np.asarray(v)[done] for k, v in res.path.items()})
+        res = res._replace(
+            losses=np.asarray(res.losses)[done],
+            grad_norm=np.asarray(res.grad_norm)[done],
+            path={k: np.asarray(v)[done] for k, v in res.path.items()},
+        )
     else:
         res = tune.minimize(P.loss, P.init, P.space, optimizer=_optimizer(tn), steps=tn["steps"], mode=tn["mode"])
     t_tune = time.perf_counter() - t0
     final = {k: float(v) for k, v in res.params.items()}
-    _log.info("tuned in %.1f s (compilation included): %s; %s %.4g -> %.4g", t_tune,
-              ", ".join(f"{k} {float(P.init[k]):.4g} -> {v:.4g}" for k, v in final.items()), P.loss_name,
-              float(res.losses[0]), float(res.loss))
+    _log.info(
+        "tuned in %.1f s (compilation included): %s; %s %.4g -> %.4g",
+        t_tune,
+        ", ".join(f"{k} {float(P.init[k]):.4g} -> {v:.4g}" for k, v in final.items()),
+        P.loss_name,
+        float(res.losses[0]),
+        float(res.loss),
+    )
     landscape = None
     if tn["landscape"] and len(P.init) == 1:
         (name,) = P.init
         ax = cfg["sweep"].get(name)
         vals = _axis(dict(ax, num=tn["landscape"])) if ax else None
         if vals is not None:
-            sw = tune.sweep(lambda p, k: P.point(p, k), {name: vals}, P.keys, chunk=cfg["sweep"].get("chunk"),
-                            progress=progress, desc="landscape")
+            sw = tune.sweep(
+                lambda p, k: P.point(p, k),
+                {name: vals},
+                P.keys,
+                chunk=cfg["sweep"].get("chunk"),
+                progress=progress,
+                desc="landscape",
+            )
             landscape = dict(values=vals, loss=sw.values["loss"].mean(1), wall_time_s=sw.wall_time_s)
     # Monte Carlo distribution of the per-run loss at the start and at the tuned values (a 2-point sweep)
     _log.info("scoring the start and the tuned values over %d Monte Carlo runs", len(P.keys))
-    ends = tune.sweep(lambda p, k: P.point(p, k)["loss"], {k: [P.init[k], final[k]] for k in P.init}, P.keys,
-                      chunk=cfg["sweep"].get("chunk"), progress=False).values
+    ends = tune.sweep(
+        lambda p, k: P.point(p, k)["loss"],
+        {k: [P.init[k], final[k]] for k in P.init},
+        P.keys,
+        chunk=cfg["sweep"].get("chunk"),
+        progress=False,
+    ).values
     start_runs, final_runs = ends[0], ends[1]
     figs = []
     if writer:
         from jaxnav.plot import plot_tune
 
-        figs = plot_tune(out, path={k: np.asarray(v) for k, v in res.path.items()}, losses=np.asarray(res.losses),
-                         final=final, final_loss=float(res.loss), landscape=landscape, loss_name=P.loss_name,
-                         start_runs=start_runs, final_runs=final_runs)
+        figs = plot_tune(
+            out,
+            path={k: np.asarray(v) for k, v in res.path.items()},
+            losses=np.asarray(res.losses),
+            final=final,
+            final_loss=float(res.loss),
+            landscape=landscape,
+            loss_name=P.loss_name,
+            start_runs=start_runs,
+            final_runs=final_runs,
+        )
     results = dict(
-        command="tune", config=cfg["_path"], problem=cfg["problem"], loss_name=P.loss_name, init=P.init,
+        command="tune",
+        config=cfg["_path"],
+        problem=cfg["problem"],
+        loss_name=P.loss_name,
+        init=P.init,
         tuned=final,
-        loss_init=float(res.losses[0]), loss_final=float(res.loss), losses=np.asarray(res.losses),
-        path={k: np.asarray(v) for k, v in res.path.items()}, grad_norm=np.asarray(res.grad_norm),
-        optimizer=dict(tn), loss_evaluations=int(res.n_evals), runs=len(P.keys),
+        loss_init=float(res.losses[0]),
+        loss_final=float(res.loss),
+        losses=np.asarray(res.losses),
+        path={k: np.asarray(v) for k, v in res.path.items()},
+        grad_norm=np.asarray(res.grad_norm),
+        optimizer=dict(tn),
+        loss_evaluations=int(res.n_evals),
+        runs=len(P.keys),
         loss_per_run=dict(init=start_runs, tuned=final_runs),
-        landscape=landscape, wall_time_s=dict(tune=t_tune, total=time.perf_counter() - t0),
-        figures=[str(f) for f in figs], jax_version=jax.__version__, n_processes=jax.process_count(),
+        landscape=landscape,
+        wall_time_s=dict(tune=t_tune, total=time.perf_counter() - t0),
+        figures=[str(f) for f in figs],
+        jax_version=jax.__version__,
+        n_processes=jax.process_count(),
         n_devices=len(jax.devices()),
     )
     if writer:
@@ -344,7 +439,9 @@ def run_tune(config, out, *, progress=True) -> dict:
 def format_tune(results: dict) -> str:
     """One line: optimiser, steps, wall time and the parameters and loss before and after :func:`run_tune`."""
     tn, init = results["optimizer"], results["init"]
-    return (f"tune: {tn['optimizer']} x {tn['steps']} steps ({tn['mode']} mode) over {results['runs']} runs in "
-            f"{results['wall_time_s']['tune']:.1f} s: "
-            + ", ".join(f"{k} {init[k]:.4g} -> {v:.4g}" for k, v in results["tuned"].items())
-            + f"; {results['loss_name']} {results['loss_init']:.4f} -> {results['loss_final']:.4f}")
+    return (
+        f"tune: {tn['optimizer']} x {tn['steps']} steps ({tn['mode']} mode) over {results['runs']} runs in "
+        f"{results['wall_time_s']['tune']:.1f} s: "
+        + ", ".join(f"{k} {init[k]:.4g} -> {v:.4g}" for k, v in results["tuned"].items())
+        + f"; {results['loss_name']} {results['loss_init']:.4f} -> {results['loss_final']:.4f}"
+    )

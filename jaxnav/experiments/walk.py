@@ -29,19 +29,27 @@ from __future__ import annotations
 
 import math
 import pathlib
-from typing import Any, NamedTuple, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from jaxnav.experiments.figures import plot_walk
 from jaxnav.experiments.ins_config import load_ins_config
 from jaxnav.experiments.ins_run import filter_params, gnss_measurements, prepare, run_ins
 from jaxnav.ins import (
-    ERROR_MODEL_15, LCSave, OutageScores, SensorBiases, coarse_alignment, loosely_coupled, mounting_from_groves_deg,
+    ERROR_MODEL_15,
+    LCSave,
+    OutageScores,
+    SensorBiases,
+    coarse_alignment,
+    loosely_coupled,
+    mounting_from_groves_deg,
     sensor_to_body,
 )
 from jaxnav.ins.attitude import quat_to_euler
-from jaxnav.experiments.figures import plot_walk
 from jaxnav.io import imu_increments, read_pos, read_rtklib_imu, write_json
+
 
 class WalkData(NamedTuple):
     """The walk recording: :class:`jaxnav.io.ImuLog` and :class:`jaxnav.io.PosSolution` (both GPST s since 1980)."""
@@ -99,9 +107,18 @@ def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None
         data = load_walk(data)
     cfg = walk_config(pathlib.Path(data.imu.path).resolve().parent.parent.parent) if cfg is None else cfg
     run = run_ins(prepare(cfg, imu=data.imu, pos=data.pos, progress=None))
-    extras = dict(alignment=run.prep.alignment, result=run.result, meas=run.prep.meas, smoothed_nav=run.smoothed_nav,
-                  smoothed_biases=run.smoothed_biases, enu_fwd=run.enu_fwd, enu_sm=run.enu_sm, enu_ref=run.enu_ref,
-                  fixed=run.fixed, run=run)
+    extras = dict(
+        alignment=run.prep.alignment,
+        result=run.result,
+        meas=run.prep.meas,
+        smoothed_nav=run.smoothed_nav,
+        smoothed_biases=run.smoothed_biases,
+        enu_fwd=run.enu_fwd,
+        enu_sm=run.enu_sm,
+        enu_ref=run.enu_ref,
+        fixed=run.fixed,
+        run=run,
+    )
     scores = run.scores
     if out_dir is not None:
         fig = plot_walk(scores, extras, pathlib.Path(out_dir) / fig_name, title=cfg.name)
@@ -111,26 +128,42 @@ def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None
 
 #: ``scores.json`` key of each :class:`OutageScores` field: unit-suffixed (m, s), horizontal errors
 WALK_SCORE_KEYS = {
-    "windows": "outage_windows_gpst_s", "n_ref": "n_fixed_epochs_per_outage",
-    "fwd_max": "forward_max_h_m", "sm_max": "smoothed_max_h_m", "fwd_rms": "forward_rms_h_m",
-    "sm_rms": "smoothed_rms_h_m", "fwd_rms_all": "forward_rms_h_all_outages_m",
-    "sm_rms_all": "smoothed_rms_h_all_outages_m", "fwd_max_mean": "forward_max_h_mean_over_outages_m",
-    "sm_max_mean": "smoothed_max_h_mean_over_outages_m", "fwd_rms_outside": "forward_rms_h_outside_outages_m",
-    "t": "epoch_gpst_s", "err_fwd": "forward_error_h_m", "err_sm": "smoothed_error_h_m",
-    "withheld": "gnss_withheld", "runtime_s": "runtime_s", "figure": "figure",
-    "n_nonfinite_nav": "n_nonfinite_nav_values", "sig_fwd": "forward_sigma_h_m", "sig_sm": "smoothed_sigma_h_m",
+    "windows": "outage_windows_gpst_s",
+    "n_ref": "n_fixed_epochs_per_outage",
+    "fwd_max": "forward_max_h_m",
+    "sm_max": "smoothed_max_h_m",
+    "fwd_rms": "forward_rms_h_m",
+    "sm_rms": "smoothed_rms_h_m",
+    "fwd_rms_all": "forward_rms_h_all_outages_m",
+    "sm_rms_all": "smoothed_rms_h_all_outages_m",
+    "fwd_max_mean": "forward_max_h_mean_over_outages_m",
+    "sm_max_mean": "smoothed_max_h_mean_over_outages_m",
+    "fwd_rms_outside": "forward_rms_h_outside_outages_m",
+    "t": "epoch_gpst_s",
+    "err_fwd": "forward_error_h_m",
+    "err_sm": "smoothed_error_h_m",
+    "withheld": "gnss_withheld",
+    "runtime_s": "runtime_s",
+    "figure": "figure",
+    "n_nonfinite_nav": "n_nonfinite_nav_values",
+    "sig_fwd": "forward_sigma_h_m",
+    "sig_sm": "smoothed_sigma_h_m",
 }
 
 
-def write_walk_scores(out_dir, scores: OutageScores, *, extra: Optional[dict] = None) -> pathlib.Path:
+def write_walk_scores(out_dir, scores: OutageScores, *, extra: dict | None = None) -> pathlib.Path:
     """Write :class:`OutageScores` as ``out_dir/scores.json``: strict JSON (:func:`jaxnav.io.write_json`:
     a NaN -- an epoch that is not a fixed reference, an outage without one -- is null with a
     ``<key>_null_reason``), keys with units (:data:`WALK_SCORE_KEYS`), a ``"units"`` note; ``extra``
     (e.g. a provenance block) is added at the top."""
     path = pathlib.Path(out_dir) / "scores.json"
     d = {WALK_SCORE_KEYS.get(k, k): v for k, v in scores._asdict().items()}
-    d = {**(extra or {}), "units": "suffix _m metres, _s seconds (GPST); errors and sigmas horizontal "
-                                  "(east-north) against the withheld RTK-fixed positions", **d}
+    d = {
+        **(extra or {}),
+        "units": "suffix _m metres, _s seconds (GPST); errors and sigmas horizontal "
+        "(east-north) against the withheld RTK-fixed positions",
+        **d,
+    }
     write_json(path, d)
     return path
 
@@ -139,15 +172,25 @@ def format_walk(scores: OutageScores) -> str:
     """The per-outage and overall horizontal errors of :func:`run_walk` as text (m)."""
     lines = [f"walk set, {len(scores.windows)} simulated GNSS outages of 15 s scored against withheld RTK-fixed fixes"]
     for k, (w, n) in enumerate(zip(scores.windows, scores.n_ref)):
-        lines.append(f"  outage {k + 1} [{w[0]:.1f}, {w[1]:.1f}] s, {int(n)} fixed epochs: max horizontal error "
-                     f"forward {scores.fwd_max[k]:.2f} m, smoothed {scores.sm_max[k]:.2f} m")
-    lines.append(f"  RMS over outages: forward {scores.fwd_rms_all:.2f} m, smoothed {scores.sm_rms_all:.2f} m; "
-                 f"forward outside outages {scores.fwd_rms_outside:.3f} m")
+        lines.append(
+            f"  outage {k + 1} [{w[0]:.1f}, {w[1]:.1f}] s, {int(n)} fixed epochs: max horizontal error "
+            f"forward {scores.fwd_max[k]:.2f} m, smoothed {scores.sm_max[k]:.2f} m"
+        )
+    lines.append(
+        f"  RMS over outages: forward {scores.fwd_rms_all:.2f} m, smoothed {scores.sm_rms_all:.2f} m; "
+        f"forward outside outages {scores.fwd_rms_outside:.3f} m"
+    )
     return "\n".join(lines)
 
 
-def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180.0, 270.0),
-                C_bs=WALK_SENSOR_TO_BODY, until_s: float = 40.0, cfg=None) -> dict:
+def frame_check(
+    data,
+    *,
+    candidates: Sequence[float] | None = (0.0, 90.0, 180.0, 270.0),
+    C_bs=WALK_SENSOR_TO_BODY,
+    until_s: float = 40.0,
+    cfg=None,
+) -> dict:
     """Check a sensor -> body rotation on the data.
 
     Returns the specific force at rest in the body frame (m/s^2; must be ~ +g on up) and the innovation
@@ -165,8 +208,12 @@ def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180
     t0 = float(np.asarray(data.imu.t)[0])
     st = np.asarray(data.imu.t) <= t0 + 1.5
     f_rest = np.asarray(C_bs) @ np.asarray(data.imu.f_b)[st].mean(0)
-    out = {"f_rest_body": f_rest, "w_rest_body": np.asarray(C_bs) @ np.asarray(data.imu.w_b)[st].mean(0),
-           "loglik": {}, "heading_minus_course_deg": {}}
+    out = {
+        "f_rest_body": f_rest,
+        "w_rest_body": np.asarray(C_bs) @ np.asarray(data.imu.w_b)[st].mean(0),
+        "loglik": {},
+        "heading_minus_course_deg": {},
+    }
     # gyro sign: body-up rate (device held roughly level) against the GNSS course rate while walking;
     # yaw (counter-clockwise) rate = -heading rate, so the correlation must be strongly positive
     ps = data.pos
@@ -196,9 +243,18 @@ def frame_check(data, *, candidates: Optional[Sequence[float]] = (0.0, 90.0, 180
         al = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], data.pos)
         meas, _, _ = gnss_measurements(data.pos, t, lever_rfu=WALK_LEVER_RFU)
         z3 = np.zeros(3)
-        res = loosely_coupled(al.nav0, t, dth, dv, meas, filter_params(noise, al.nav0.pos, ERROR_MODEL_15), dt_imu=dt,
-                              biases0=SensorBiases(np.asarray(al.gyro_bias), z3, z3), error_model=ERROR_MODEL_15,
-                              save=LCSave(("nav",)))
+        res = loosely_coupled(
+            al.nav0,
+            t,
+            dth,
+            dv,
+            meas,
+            filter_params(noise, al.nav0.pos, ERROR_MODEL_15),
+            dt_imu=dt,
+            biases0=SensorBiases(np.asarray(al.gyro_bias), z3, z3),
+            error_model=ERROR_MODEL_15,
+            save=LCSave(("nav",)),
+        )
         out["loglik"][yaw] = float(res.loglik)
         # converged device heading minus the velocity course while walking (median over epochs after
         # 20 s): the forward axis points along the walk if this is small

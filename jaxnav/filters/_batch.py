@@ -35,7 +35,6 @@ flagged (``BATCH_MASK_WIDENED``). Batches with their own gaps per sequence (real
 from __future__ import annotations
 
 from functools import partial
-from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -44,8 +43,7 @@ from jaxnav import _status
 from jaxnav._numerics import safe_cholesky, whiten
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import data_independent
-from jaxnav.filters._smoother import (SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains,
-                                      vmap_sharing)
+from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains, vmap_sharing
 from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, scan_setup, step_with_gain
 
 #: per-epoch outputs that differ between the sequences of a shared-recursion batch
@@ -85,9 +83,21 @@ def worth_blocking(B, T, n, m, save, itemsize=8, block=BLOCK, floor_bytes=256 * 
     return maps <= max(floor_bytes, out)
 
 
-def kalman_filter_batch(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimator=None, mask=None,
-                        save=ALL_OUTPUTS, unroll: int = 1, allow_float32: bool = False,
-                        block="auto", joseph: bool = True) -> KalmanResult:
+def kalman_filter_batch(
+    model: LinearGaussian,
+    x0,
+    P0,
+    zs,
+    *,
+    inflation=None,
+    estimator=None,
+    mask=None,
+    save=ALL_OUTPUTS,
+    unroll: int = 1,
+    allow_float32: bool = False,
+    block="auto",
+    joseph: bool = True,
+) -> KalmanResult:
     """The Kalman filter for B sequences that share one covariance recursion (S0 eqs. (4)-(12)).
 
     Equal to ``jax.vmap(kalman_filter)`` for batches whose non-finite elements are common to all
@@ -114,9 +124,11 @@ def kalman_filter_batch(model: LinearGaussian, x0, P0, zs, *, inflation=None, es
       ValueError: shapes (named), a data-dependent plug-in, a bad ``block``.
     """
     if not data_independent(inflation, estimator):
-        raise ValueError("kalman_filter_batch shares one covariance recursion, which needs a data-independent "
-                         "inflation rule and noise estimator (classic, constant, attenuated); for fading, "
-                         "variance compensation, Sage-Husa or robust filters use jax.vmap(kalman_filter)")
+        raise ValueError(
+            "kalman_filter_batch shares one covariance recursion, which needs a data-independent "
+            "inflation rule and noise estimator (classic, constant, attenuated); for fading, "
+            "variance compensation, Sage-Husa or robust filters use jax.vmap(kalman_filter)"
+        )
     if not (block == "auto" or block is None or (isinstance(block, int) and block >= 1)):
         raise ValueError(f"block must be 'auto', None or an integer >= 1, got {block!r}")
     zshape = jnp.shape(zs)
@@ -124,18 +136,29 @@ def kalman_filter_batch(model: LinearGaussian, x0, P0, zs, *, inflation=None, es
         raise ValueError(f"zs has shape {zshape}; expected (B, T, m)")
     if jnp.ndim(x0) not in (1, 2) or (jnp.ndim(x0) == 2 and jnp.shape(x0)[0] != zshape[0]):
         raise ValueError(f"x0 has shape {jnp.shape(x0)}; expected (n,) or ({zshape[0]}, n) to match zs {zshape}")
-    return _kalman_filter_batch(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
-                                save=tuple(save), unroll=unroll, allow_float32=allow_float32, block=block,
-                                joseph=joseph)
+    return _kalman_filter_batch(
+        model,
+        x0,
+        P0,
+        zs,
+        inflation=inflation,
+        estimator=estimator,
+        mask=mask,
+        save=tuple(save),
+        unroll=unroll,
+        allow_float32=allow_float32,
+        block=block,
+        joseph=joseph,
+    )
 
 
 @partial(jax.jit, static_argnames=("save", "unroll", "allow_float32", "block", "joseph"))
-def _kalman_filter_batch(model, x0, P0, zs, *, inflation, estimator, mask, save, unroll, allow_float32, block,
-                         joseph):
+def _kalman_filter_batch(model, x0, P0, zs, *, inflation, estimator, mask, save, unroll, allow_float32, block, joseph):
     B, T, m = zs.shape
     x0s = jnp.broadcast_to(x0, (B, jnp.shape(x0)[-1]))
-    params, init, xs, save, (n, _, _, _), tv, dtype = scan_setup(model, x0s[0], P0, zs[0], inflation, estimator,
-                                                                 mask, save, allow_float32)
+    params, init, xs, save, (n, _, _, _), tv, dtype = scan_setup(
+        model, x0s[0], P0, zs[0], inflation, estimator, mask, save, allow_float32
+    )
     zs = jnp.asarray(zs, dtype)
     # the batch's common mask: an element non-finite in any sequence is masked in all
     user = xs.mask
@@ -144,20 +167,32 @@ def _kalman_filter_batch(model, x0, P0, zs, *, inflation, estimator, mask, save,
     n_bad = jnp.sum(user & ~fin, axis=(1, 2)).astype(jnp.int32)
     widened = jnp.any(user & fin & ~common, axis=(1, 2))
     xs = xs._replace(mask=common)
-    seq_flags = (jnp.where(n_bad > 0, _status.NONFINITE_MEASUREMENT, 0)
-                 | jnp.where(widened, _status.BATCH_MASK_WIDENED, 0)).astype(jnp.int32)
+    seq_flags = (
+        jnp.where(n_bad > 0, _status.NONFINITE_MEASUREMENT, 0) | jnp.where(widened, _status.BATCH_MASK_WIDENED, 0)
+    ).astype(jnp.int32)
 
     final, (allv, K) = _covariance_pass(params, init, xs, unroll, joseph)
-    L = block if isinstance(block, int) else (BLOCK if block == "auto" and worth_blocking(
-        B, T, n, m, save, jnp.dtype(dtype).itemsize) else None)
+    L = (
+        block
+        if isinstance(block, int)
+        else (BLOCK if block == "auto" and worth_blocking(B, T, n, m, save, jnp.dtype(dtype).itemsize) else None)
+    )
     if L is None:
         out, ll, x_final, fin_state = _means_recursion(model, tv, allv, K, xs, x0s, zs, save)
     else:
         out, ll, x_final, fin_state = _means_blocks(model, tv, allv, K, xs, x0s, zs, save, min(L, T))
     shared = {g: allv[g] for g in save if g not in PER_SEQUENCE}
     status = final.status | seq_flags | jnp.where(fin_state, 0, _status.NONFINITE_STATE).astype(jnp.int32)
-    return KalmanResult(**out, **shared, loglik=ll, n_nonfinite=n_bad, n_skipped=final.n_skipped,
-                        status=status, x_final=x_final, P_final=final.P)
+    return KalmanResult(
+        **out,
+        **shared,
+        loglik=ll,
+        n_nonfinite=n_bad,
+        n_skipped=final.n_skipped,
+        status=status,
+        x_final=x_final,
+        P_final=final.P,
+    )
 
 
 def _covariance_pass(params, init, xs, unroll, joseph):
@@ -184,8 +219,16 @@ def _shared_terms(model, tv, allv, K, xs):
     Hm = jnp.where(valid[:, :, None], jnp.asarray(H, dtype), 0.0)
     observed = jnp.any(valid, axis=-1)
     # allv["logliks"] is -(log det S + m log 2 pi) / 2 where observed and S factored (zero data)
-    return dict(F=F, Hm=Hm, K=K, Linv=Linv, valid=valid.astype(dtype), c_ll=allv["logliks"],
-                okf=(observed & ok).astype(dtype), obsf=observed.astype(dtype))
+    return dict(
+        F=F,
+        Hm=Hm,
+        K=K,
+        Linv=Linv,
+        valid=valid.astype(dtype),
+        c_ll=allv["logliks"],
+        okf=(observed & ok).astype(dtype),
+        obsf=observed.astype(dtype),
+    )
 
 
 def _means_recursion(model, tv, allv, K, xs, x0s, zs, save):
@@ -244,8 +287,7 @@ def _block_maps(F, Hm, K, Linv, valid, groups):
         pPhi, pPsi = Fj @ Phi, Fj @ Psi
         vPhi, vPsi = -(Hj @ pPhi), vj[..., None] * Sj - Hj @ pPsi
         xPhi, xPsi = pPhi + Kj @ vPhi, pPsi + Kj @ vPsi
-        maps = dict(means=(xPhi, xPsi), pred_means=(pPhi, pPsi), innovations=(vPhi, vPsi),
-                    w=(Lj @ vPhi, Lj @ vPsi))
+        maps = dict(means=(xPhi, xPsi), pred_means=(pPhi, pPsi), innovations=(vPhi, vPsi), w=(Lj @ vPhi, Lj @ vPsi))
         return (xPhi, xPsi), tuple(maps[g] for g in groups if g != "end")
 
     lead = lambda a: jnp.swapaxes(a, 0, 1)  # noqa: E731  (L, nb, ...) for the scan
@@ -283,21 +325,21 @@ def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
         # masked elements may hold NaN/inf: zero them (multiply-then-clean is a plain vector
         # operation here; a select on the mask costs ~10 us per block, measured)
         zb = jax.lax.dynamic_slice_in_dim(Z, t0 * m, Lk * m, axis=1)
-        zb = jnp.nan_to_num(zb * jax.lax.dynamic_slice_in_dim(vflat, t0 * m, Lk * m), nan=0.0, posinf=0.0,
-                            neginf=0.0)
+        zb = jnp.nan_to_num(zb * jax.lax.dynamic_slice_in_dim(vflat, t0 * m, Lk * m), nan=0.0, posinf=0.0, neginf=0.0)
         Y = jnp.concatenate([s, zb], axis=1) @ M
         cols, off = {}, 0
         for g in groups:
             w = width[g] * (1 if g == "end" else Lk)
-            cols[g] = Y[:, off:off + w]
+            cols[g] = Y[:, off : off + w]
             off += w
         wv = cols["w"].reshape(B, Lk, m)
         nis = jnp.sum(wv * wv, axis=-1)
         sl = lambda a: jax.lax.dynamic_slice_in_dim(a, t0, Lk)  # noqa: E731
         lls = sl(sh["okf"]) * (sl(sh["c_ll"]) - 0.5 * nis)
         vals = dict(cols, nis=sl(sh["obsf"]) * nis, logliks=lls)
-        bufs = {g: jax.lax.dynamic_update_slice_in_dim(b, vals[g], t0 * (b.shape[1] // T), axis=1)
-                for g, b in bufs.items()}
+        bufs = {
+            g: jax.lax.dynamic_update_slice_in_dim(b, vals[g], t0 * (b.shape[1] // T), axis=1) for g, b in bufs.items()
+        }
         state = cols["means"] if "means" in cols else cols["end"]
         fin = fin & jnp.all(jnp.isfinite(state), axis=1)
         return state[:, -n:], bufs, ll + jnp.sum(lls, axis=1), fin
@@ -305,11 +347,11 @@ def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
     carry = (jnp.asarray(x0s, dtype), bufs0, jnp.zeros((B,), dtype), jnp.ones((B,), bool))
     per_epoch = (sh["F"], sh["Hm"], sh["K"], sh["Linv"], sh["valid"])
     if nb:
-        blk = [a[:nb * Lb].reshape((nb, Lb) + a.shape[1:]) for a in per_epoch]
+        blk = [a[: nb * Lb].reshape((nb, Lb) + a.shape[1:]) for a in per_epoch]
         maps = _block_maps(*blk, groups)
         carry, _ = jax.lax.scan(lambda c, k: (apply(c, k * Lb, Lb, maps[k]), None), carry, jnp.arange(nb))
     if tail:
-        blk = [a[nb * Lb:][None] for a in per_epoch]
+        blk = [a[nb * Lb :][None] for a in per_epoch]
         carry = apply(carry, nb * Lb, tail, _block_maps(*blk, groups)[0])
     x_final, bufs, ll, fin = carry
     shape = {g: (B, T, width[g]) for g in ("means", "pred_means", "innovations")}
@@ -317,8 +359,9 @@ def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
     return out, ll, x_final, fin
 
 
-def rts_smoother_batch(model: LinearGaussian, filtered: KalmanResult, *, save=SMOOTHER_OUTPUTS,
-                       unroll: int = 1) -> SmootherResult:
+def rts_smoother_batch(
+    model: LinearGaussian, filtered: KalmanResult, *, save=SMOOTHER_OUTPUTS, unroll: int = 1
+) -> SmootherResult:
     """RTS smoothing of a :func:`kalman_filter_batch` result: shared gains, per-sequence means.
 
     The gains C_t = P_t F_{t+1}^T P_{t+1|t}^{-1} and the smoothed covariances depend only on
@@ -339,8 +382,10 @@ def rts_smoother_batch(model: LinearGaussian, filtered: KalmanResult, *, save=SM
         if getattr(filtered, name) is None:
             raise ValueError(f"rts_smoother_batch needs the filter output '{name}': run the filter with it in save=")
     if jnp.ndim(filtered.means) != 3 or jnp.ndim(filtered.covs) != 3:
-        raise ValueError(f"rts_smoother_batch needs a kalman_filter_batch result: means {jnp.shape(filtered.means)} "
-                         f"(expected (B, T, n)) and covs {jnp.shape(filtered.covs)} (expected (T, n, n))")
+        raise ValueError(
+            f"rts_smoother_batch needs a kalman_filter_batch result: means {jnp.shape(filtered.means)} "
+            f"(expected (B, T, n)) and covs {jnp.shape(filtered.covs)} (expected (T, n, n))"
+        )
     return _rts_smoother_batch(model, filtered, save=tuple(save), unroll=unroll)
 
 
@@ -402,9 +447,9 @@ def _smoothed_means_blocks(C, A, xs, L):
 
     carry = (jnp.zeros((B, n), xs.dtype), jnp.zeros((B, T * n), xs.dtype))
     if tail:
-        carry = apply(carry, nb * L, tail, maps(C[nb * L:][None], A[nb * L:][None])[0])
+        carry = apply(carry, nb * L, tail, maps(C[nb * L :][None], A[nb * L :][None])[0])
     if nb:
-        Mb = maps(C[:nb * L].reshape(nb, L, n, n), A[:nb * L].reshape(nb, L, n, n))
+        Mb = maps(C[: nb * L].reshape(nb, L, n, n), A[: nb * L].reshape(nb, L, n, n))
         carry, _ = jax.lax.scan(lambda c, k: (apply(c, k * L, L, Mb[k]), None), carry, jnp.arange(nb), reverse=True)
     return carry[1].reshape(B, T, n)
 
@@ -445,12 +490,29 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
 
     like = jax.eval_shape(per_sequence)
     shared_args = [in_batched[i] for i in (0, 2, 4, 5, 6)]
-    if (check_finite and in_batched[3] and data_independent(inflation, estimator)
-            and not any(jax.tree_util.tree_leaves(shared_args)) and jnp.ndim(zs) == 3):
+    if (
+        check_finite
+        and in_batched[3]
+        and data_independent(inflation, estimator)
+        and not any(jax.tree_util.tree_leaves(shared_args))
+        and jnp.ndim(zs) == 3
+    ):
+
         def shared():
-            out = _kalman_filter_batch(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
-                                       save=save, unroll=unroll, allow_float32=allow_float32, block="auto",
-                                       joseph=joseph)
+            out = _kalman_filter_batch(
+                model,
+                x0,
+                P0,
+                zs,
+                inflation=inflation,
+                estimator=estimator,
+                mask=mask,
+                save=save,
+                unroll=unroll,
+                allow_float32=allow_float32,
+                block="auto",
+                joseph=joseph,
+            )
             return _broadcast_like(out, like)
 
         used = True if mask is None else jnp.asarray(mask, bool)

@@ -13,7 +13,7 @@ functions are shorthands):
 
 from __future__ import annotations
 
-from typing import ClassVar, NamedTuple, Optional
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -115,7 +115,7 @@ class VarianceCompensation(NoiseEstimator):
     ridge: jax.Array = 0.0
     window: int = static_field(30)
     horizon: int = static_field(1)
-    min_epochs: Optional[int] = static_field(None)
+    min_epochs: int | None = static_field(None)
 
     def __post_init__(self):
         window, horizon, min_epochs = self.window, self.horizon, self.min_epochs
@@ -125,8 +125,7 @@ class VarianceCompensation(NoiseEstimator):
             raise ValueError(f"VarianceCompensation: horizon must be a positive integer, got {horizon!r}")
         if min_epochs is not None and (int(min_epochs) != min_epochs or not 1 <= min_epochs <= window):
             raise ValueError(f"VarianceCompensation: min_epochs must be in 1..window, got {min_epochs!r}")
-        check_ranges("VarianceCompensation", self.ranges, floor=self.floor, floor_rel=self.floor_rel,
-                     ridge=self.ridge)
+        check_ranges("VarianceCompensation", self.ranges, floor=self.floor, floor_rel=self.floor_rel, ridge=self.ridge)
         for name in ("floor", "floor_rel", "ridge"):
             object.__setattr__(self, name, leaf(getattr(self, name)))
         object.__setattr__(self, "window", int(window))
@@ -171,7 +170,10 @@ class VarianceCompensation(NoiseEstimator):
             W=jnp.where(obs, state.W.at[state.pos].set(w), state.W),
             pos=jnp.where(obs, (state.pos + 1) % N, state.pos),
             count=jnp.minimum(state.count + obs.astype(jnp.int32), N),
-            x_lag=x_lag, P_lag=P_lag, C_lag=C_lag, n_lag=n_lag,
+            x_lag=x_lag,
+            P_lag=P_lag,
+            C_lag=C_lag,
+            n_lag=n_lag,
         )
         AW = st.A * st.W[..., None]
         p = A_k.shape[-1]
@@ -293,8 +295,12 @@ class SageHusa(NoiseEstimator):
         values are flagged in ``status`` instead).
     """
 
-    ranges: ClassVar[dict] = {"b": Range(0.0, 1.0, lo_open=True), "eig_floor": Range(0.0),
-                              "r_min": Range(0.0, 1.0, lo_open=True, hi_open=False), "r_max": Range(1.0)}
+    ranges: ClassVar[dict] = {
+        "b": Range(0.0, 1.0, lo_open=True),
+        "eig_floor": Range(0.0),
+        "r_min": Range(0.0, 1.0, lo_open=True, hi_open=False),
+        "r_max": Range(1.0),
+    }
 
     b: jax.Array = 0.95
     eig_floor: jax.Array = 0.0
@@ -310,8 +316,12 @@ class SageHusa(NoiseEstimator):
             object.__setattr__(self, name, leaf(getattr(self, name)))
 
     def init(self, n, m, p, dtype):
-        return SageHusaState(Q=jnp.zeros((n, n), dtype), R=jnp.zeros((m, m), dtype), count=jnp.zeros((), dtype),
-                             bounded=jnp.zeros((), bool))
+        return SageHusaState(
+            Q=jnp.zeros((n, n), dtype),
+            R=jnp.zeros((m, m), dtype),
+            count=jnp.zeros((), dtype),
+            bounded=jnp.zeros((), bool),
+        )
 
     def noise(self, state, ctx):
         first = state.count == 0
@@ -350,8 +360,9 @@ class SageHusa(NoiseEstimator):
         return SageHusaState(Q=Q, R=R, count=jnp.where(obs, c, state.count), bounded=bounded)
 
 
-def variance_compensation(window: int = 30, *, horizon: int = 1, floor=0.0, floor_rel=1e-2, ridge=0.0,
-                          min_epochs: Optional[int] = None) -> VarianceCompensation:
+def variance_compensation(
+    window: int = 30, *, horizon: int = 1, floor=0.0, floor_rel=1e-2, ridge=0.0, min_epochs: int | None = None
+) -> VarianceCompensation:
     """Variance-compensation estimator of diag(D_Omega) (S1 eqs. (12)-(19)); see the class.
 
     Args:
@@ -365,8 +376,9 @@ def variance_compensation(window: int = 30, *, horizon: int = 1, floor=0.0, floo
     Raises:
       ValueError: window, horizon or min_epochs not a positive integer; negative floor, floor_rel, ridge.
     """
-    return VarianceCompensation(floor=floor, floor_rel=floor_rel, ridge=ridge, window=window, horizon=horizon,
-                                min_epochs=min_epochs)
+    return VarianceCompensation(
+        floor=floor, floor_rel=floor_rel, ridge=ridge, window=window, horizon=horizon, min_epochs=min_epochs
+    )
 
 
 def sage_husa(b=0.95, *, estimate: str = "R", eig_floor=0.0, r_min=1e-2, r_max=1e2) -> SageHusa:

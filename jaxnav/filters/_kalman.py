@@ -8,7 +8,7 @@ covariance recursion for a clean batch with shared model, P0, mask and a data-in
 from __future__ import annotations
 
 import weakref
-from functools import lru_cache, partial
+from functools import cache, partial
 from typing import Any, NamedTuple
 
 import jax
@@ -17,9 +17,21 @@ from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, filter_step, scan_setup
 
 
-def kalman_filter(model: LinearGaussian, x0, P0, zs, *, inflation=None, estimator=None, mask=None,
-                  save=ALL_OUTPUTS, unroll: int = 1, allow_float32: bool = False,
-                  check_finite: bool = True, joseph: bool = True) -> KalmanResult:
+def kalman_filter(
+    model: LinearGaussian,
+    x0,
+    P0,
+    zs,
+    *,
+    inflation=None,
+    estimator=None,
+    mask=None,
+    save=ALL_OUTPUTS,
+    unroll: int = 1,
+    allow_float32: bool = False,
+    check_finite: bool = True,
+    joseph: bool = True,
+) -> KalmanResult:
     """Run the Kalman filter family over a measurement series with ``lax.scan`` (S0 eqs. (4)-(17)).
 
     Convention: ``x0, P0`` are the estimate at k = 0 and every ``zs[t]`` is used after one
@@ -107,7 +119,7 @@ def filter_call_of(means, covs, pred_means, pred_covs):
     """The :class:`FilterCall` whose result holds exactly these four moments (the same objects), else None.
 
     Lets :func:`~jaxnav.filters.rts_smoother` given a filter's result unchanged redo the filter
-    behind its own ``vmap`` rule (:func:`jaxnav.filters._smoother.rts_smoother`).
+    behind its own ``vmap`` rule (:func:`jaxnav.filters.rts_smoother`).
     """
     entry = _CALLS.get(id(covs))
     if entry is None:
@@ -116,7 +128,7 @@ def filter_call_of(means, covs, pred_means, pred_covs):
     return call if all(r() is a for r, a in zip(refs, (means, covs, pred_means, pred_covs))) else None
 
 
-@lru_cache(maxsize=None)
+@cache
 def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
     """:func:`_kalman_filter` for one static configuration, with a ``vmap`` rule and exact derivatives.
 
@@ -125,9 +137,22 @@ def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
     ``custom_vmap`` has no reverse mode, so derivatives (``jvp``, ``grad``, any nesting with
     ``vmap``) are those of the plain filter: exact, per sequence under ``vmap``.
     """
+
     def plain(model, x0, P0, zs, inflation, estimator, mask):
-        return _kalman_filter(model, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask, save=save,
-                              unroll=unroll, allow_float32=allow_float32, check_finite=check_finite, joseph=joseph)
+        return _kalman_filter(
+            model,
+            x0,
+            P0,
+            zs,
+            inflation=inflation,
+            estimator=estimator,
+            mask=mask,
+            save=save,
+            unroll=unroll,
+            allow_float32=allow_float32,
+            check_finite=check_finite,
+            joseph=joseph,
+        )
 
     @jax.custom_batching.custom_vmap
     def batched(*args):
@@ -136,8 +161,17 @@ def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
     @batched.def_vmap
     def rule(axis_size, in_batched, *args):
         from jaxnav.filters._batch import vmap_filter_rule
-        return vmap_filter_rule(plain, in_batched, args, save=save, unroll=unroll, allow_float32=allow_float32,
-                                check_finite=check_finite, joseph=joseph)
+
+        return vmap_filter_rule(
+            plain,
+            in_batched,
+            args,
+            save=save,
+            unroll=unroll,
+            allow_float32=allow_float32,
+            check_finite=check_finite,
+            joseph=joseph,
+        )
 
     @jax.custom_jvp
     def run(*args):
@@ -148,8 +182,9 @@ def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
 
 
 @partial(jax.jit, static_argnames=("save", "unroll", "allow_float32", "check_finite", "joseph"))
-def _kalman_filter(model, x0, P0, zs, *, inflation, estimator, mask, save, unroll, allow_float32,
-                   check_finite, joseph) -> KalmanResult:
+def _kalman_filter(
+    model, x0, P0, zs, *, inflation, estimator, mask, save, unroll, allow_float32, check_finite, joseph
+) -> KalmanResult:
     params, init, xs, save, _, _, _ = scan_setup(model, x0, P0, zs, inflation, estimator, mask, save, allow_float32)
 
     def body(state, inp):
@@ -160,6 +195,11 @@ def _kalman_filter(model, x0, P0, zs, *, inflation, estimator, mask, save, unrol
     # the backward pass reads one state per epoch. No effect on forward runs or forward mode.
     final, info = jax.lax.scan(jax.checkpoint(body, prevent_cse=False), init, xs, unroll=unroll)
     return KalmanResult(
-        **info._asdict(), loglik=final.loglik, n_nonfinite=final.n_nonfinite,
-        n_skipped=final.n_skipped, status=final.status, x_final=final.x, P_final=final.P,
+        **info._asdict(),
+        loglik=final.loglik,
+        n_nonfinite=final.n_nonfinite,
+        n_skipped=final.n_skipped,
+        status=final.status,
+        x_final=final.x,
+        P_final=final.P,
     )

@@ -91,8 +91,7 @@ def _gradients_batched(axis_size, in_batched, model, x0, P0, zs, mask):
     (``lax.cond`` picks, as :func:`jaxnav.filters.kalman_filter` does under ``vmap``)."""
     del axis_size
     axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
-    per_sequence = jax.vmap(lambda m, x, P, z, k: loglik_and_gradients(m, x, P, z, k & jnp.isfinite(z)),
-                            in_axes=axes)
+    per_sequence = jax.vmap(lambda m, x, P, z, k: loglik_and_gradients(m, x, P, z, k & jnp.isfinite(z)), in_axes=axes)
     shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (0, 2, 4)]))
     if shared and in_batched[3]:
         fin = jnp.isfinite(jax.lax.optimization_barrier(zs))
@@ -100,7 +99,8 @@ def _gradients_batched(axis_size, in_batched, model, x0, P0, zs, mask):
         out = jax.lax.cond(
             jnp.all(fin == fin[0]),
             lambda: jax.vmap(loglik_and_gradients, in_axes=(None, axes[1], None, 0, None))(model, x0, P0, zs, common),
-            lambda: per_sequence(model, x0, P0, zs, mask))
+            lambda: per_sequence(model, x0, P0, zs, mask),
+        )
     else:
         out = per_sequence(model, x0, P0, zs, mask)
     return out, jax.tree_util.tree_map(lambda _: True, out)
@@ -152,8 +152,11 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     K = f.pred_covs @ jnp.swapaxes(SiH, -1, -2)
     eye_n = jnp.eye(n, dtype=dtype)
     F = model.F
-    F_next = jnp.concatenate([F[1:], jnp.zeros((1, n, n), dtype)]) if tv["F"] else jnp.concatenate(
-        [jnp.broadcast_to(F, (T - 1, n, n)), jnp.zeros((1, n, n), dtype)])
+    F_next = (
+        jnp.concatenate([F[1:], jnp.zeros((1, n, n), dtype)])
+        if tv["F"]
+        else jnp.concatenate([jnp.broadcast_to(F, (T - 1, n, n)), jnp.zeros((1, n, n), dtype)])
+    )
     W = jnp.swapaxes(F_next @ (eye_n - K @ Hm), -1, -2)
     HtSiH = jnp.swapaxes(Hm, -1, -2) @ SiH
 
@@ -173,22 +176,21 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     Fi = at("F")
     bF = jnp.einsum(f"tj,{Fi}jk->tk", b, F)
     bFP = jnp.sum(bF[:, :, None] * P_prev, axis=1)  # (b^T F P_t-1)_t
-    gF = (fold("ti,tj->ij", b, m_prev + bFP, leaf="F")
-          + 2.0 * fold(f"tij,{Fi}jk,tkl->il", A_cov, F, P_prev, leaf="F"))
+    gF = fold("ti,tj->ij", b, m_prev + bFP, leaf="F") + 2.0 * fold(f"tij,{Fi}jk,tkl->il", A_cov, F, P_prev, leaf="F")
     F0 = F[0] if tv["F"] else F
     gx0 = F0.T @ b[0]
     gP0 = F0.T @ (A_cov[0] + 0.5 * jnp.outer(b[0], b[0])) @ F0
     if model.G is None:
-        gQ = (A_cov + 0.5 * b[:, :, None] * b[:, None, :]) if tv["Q"] else (
-            jnp.sum(A_cov, axis=0) + 0.5 * b.T @ b)
+        gQ = (A_cov + 0.5 * b[:, :, None] * b[:, None, :]) if tv["Q"] else (jnp.sum(A_cov, axis=0) + 0.5 * b.T @ b)
         gG = None
     else:
         G, Q = model.G, model.Q
         Gi, Qi = at("G"), at("Q")
         bG = jnp.einsum(f"tj,{Gi}jk->tk", b, G)
         gQ = fold(f"{Gi}ji,tjk,{Gi}kl->il", G, A_cov, G, leaf="Q") + 0.5 * fold("ti,tl->il", bG, bG, leaf="Q")
-        gG = (2.0 * fold(f"tij,{Gi}jk,{Qi}kl->il", A_cov, G, Q, leaf="G")
-              + fold("ti,tl->il", b, jnp.einsum(f"tk,{Qi}kl->tl", bG, Q), leaf="G"))
+        gG = 2.0 * fold(f"tij,{Gi}jk,{Qi}kl->il", A_cov, G, Q, leaf="G") + fold(
+            "ti,tl->il", b, jnp.einsum(f"tk,{Qi}kl->tl", bG, Q), leaf="G"
+        )
 
     # measurement sensitivities over the valid components (R^-1 of the valid block, zero elsewhere)
     both = valid[:, :, None] & valid[:, None, :]
@@ -196,8 +198,11 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     e = jnp.where(valid, zs - jnp.sum(Hm * sm_means[:, None, :], axis=-1), 0.0)
     Rie = jnp.sum(Ri * e[:, None, :], axis=-1)
     RiH = Ri @ Hm
-    gR = 0.5 * (fold("ti,tj->ij", Rie, Rie, leaf="R") + fold("tij,tjk,tlk->il", RiH, sm_covs, RiH, leaf="R")
-                - (Ri if tv["R"] else jnp.sum(Ri, axis=0)))
+    gR = 0.5 * (
+        fold("ti,tj->ij", Rie, Rie, leaf="R")
+        + fold("tij,tjk,tlk->il", RiH, sm_covs, RiH, leaf="R")
+        - (Ri if tv["R"] else jnp.sum(Ri, axis=0))
+    )
     gH = fold("ti,tj->ij", Rie, sm_means, leaf="H") - fold("tij,tjk->ik", RiH, sm_covs, leaf="H")
     gz = -Rie
 

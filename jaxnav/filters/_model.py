@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -29,7 +29,7 @@ class LinearGaussian(NamedTuple):
     H: jnp.ndarray
     Q: jnp.ndarray
     R: jnp.ndarray
-    G: Optional[jnp.ndarray] = None
+    G: jnp.ndarray | None = None
 
 
 def _leaf_shape(name, a, base, T):

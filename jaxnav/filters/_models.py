@@ -3,7 +3,7 @@ model with position measurements (nonlinear)."""
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import jax.numpy as jnp
 
@@ -48,7 +48,7 @@ def constant_velocity(dt, *, sigma, accel_var=None, q=None, ndim: int = 3) -> Li
     return LinearGaussian(F=F, H=H, Q=jnp.kron(Qc, I), R=R)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _ct_functions(dt: float):
     """(f, h) of :func:`coordinated_turn` for the step ``dt`` s, one pair per step so that jit caches hold."""
 

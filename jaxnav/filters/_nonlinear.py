@@ -16,19 +16,21 @@ log-likelihood are the linear filter's:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
-from typing import Any, Callable, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
+from jaxnav import _status
 from jaxnav._numerics import cho_solve, gaussian_loglik, masked_measurement, safe_cholesky, symmetrize, whiten
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import pytree_dataclass, static_field
-from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, rts_smoother, smoothed_covs, smoothed_means
+from jaxnav.filters._rts import rts_smoother
+from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoothed_means
 from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, UpdateResult, scan_setup, step_with_gain
-from jaxnav import _status
 
 
 @pytree_dataclass
@@ -50,8 +52,8 @@ class NonlinearGaussian:
     h: Callable = static_field()
     Q: jax.Array
     R: jax.Array
-    F_jac: Optional[Callable] = static_field(None)
-    H_jac: Optional[Callable] = static_field(None)
+    F_jac: Callable | None = static_field(None)
+    H_jac: Callable | None = static_field(None)
 
     @property
     def jacobian_f(self) -> Callable:
@@ -109,8 +111,16 @@ def _update(x_pred, P_pred, z, H, R, valid, joseph):
         P = symmetrize(P_pred - _mul(K, PHt.T))
     w = whiten(L, v)
     loglik = gaussian_loglik(w, L, jnp.sum(valid))
-    return UpdateResult(x=jnp.where(ok, x, x_pred), P=jnp.where(ok, P, P_pred), v=v, S=S,
-                        K=jnp.where(ok, K, 0.0), nis=jnp.sum(w * w), loglik=loglik, ok=ok)
+    return UpdateResult(
+        x=jnp.where(ok, x, x_pred),
+        P=jnp.where(ok, P, P_pred),
+        v=v,
+        S=S,
+        K=jnp.where(ok, K, 0.0),
+        nis=jnp.sum(w * w),
+        loglik=loglik,
+        ok=ok,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -123,11 +133,11 @@ def merwe_weights(n: int, alpha, beta, kappa, dtype):
     lambda = alpha^2 (n + kappa) - n; Wm_0 = lambda / c, Wc_0 = Wm_0 + 1 - alpha^2 + beta,
     W_i = 1 / (2c). alpha = 1, beta = kappa = 0 is the third-degree cubature rule (zero centre weight).
     """
-    lam = alpha ** 2 * (n + kappa) - n
+    lam = alpha**2 * (n + kappa) - n
     c = n + lam
     w = jnp.full((2 * n + 1,), 0.5 / c, dtype)
     Wm = w.at[0].set(lam / c)
-    Wc = w.at[0].set(lam / c + 1.0 - alpha ** 2 + beta)
+    Wc = w.at[0].set(lam / c + 1.0 - alpha**2 + beta)
     return Wm, Wc, c
 
 
@@ -225,20 +235,24 @@ def _check_model(model, x0, zs, inputs):
     (n,), (T, m) = xs, zsh
     t0 = jax.tree_util.tree_map(lambda a: a[0], _epochs(inputs, T))
     x = jax.ShapeDtypeStruct((n,), jnp.result_type(x0, float))
-    for name, fn, want in (("f", model.f, (n,)), ("h", model.h, (m,)),
-                           ("F_jac", model.jacobian_f, (n, n)), ("H_jac", model.jacobian_h, (m, n))):
+    for name, fn, want in (
+        ("f", model.f, (n,)),
+        ("h", model.h, (m,)),
+        ("F_jac", model.jacobian_f, (n, n)),
+        ("H_jac", model.jacobian_h, (m, n)),
+    ):
         got = tuple(jax.eval_shape(fn, x, t0).shape)
         if got != want:
             raise ValueError(f"model.{name}(x, t) has shape {got}; expected {want} for x0 {xs} and zs {zsh}")
     return n, m, T
 
 
-def _run(model, x0, P0, zs, lin_of, *, inflation, estimator, mask, save, inputs, unroll, allow_float32,
-         check_finite, joseph):
+def _run(
+    model, x0, P0, zs, lin_of, *, inflation, estimator, mask, save, inputs, unroll, allow_float32, check_finite, joseph
+):
     n, m, T = _check_model(model, x0, zs, inputs)
     lg = LinearGaussian(F=jnp.eye(n), H=jnp.zeros((m, n)), Q=model.Q, R=model.R)
-    params, init, xs, save, _, _, dtype = scan_setup(lg, x0, P0, zs, inflation, estimator, mask, save,
-                                                     allow_float32)
+    params, init, xs, save, _, _, dtype = scan_setup(lg, x0, P0, zs, inflation, estimator, mask, save, allow_float32)
     params = params._replace(model=params.model._replace(F=None, H=None))
     ts = _epochs(inputs, T)
 
@@ -249,8 +263,13 @@ def _run(model, x0, P0, zs, lin_of, *, inflation, estimator, mask, save, inputs,
 
     final, info = jax.lax.scan(jax.checkpoint(body, prevent_cse=False), init, (xs, ts), unroll=unroll)
     return KalmanResult(
-        **info._asdict(), loglik=final.loglik, n_nonfinite=final.n_nonfinite,
-        n_skipped=final.n_skipped, status=final.status, x_final=final.x, P_final=final.P,
+        **info._asdict(),
+        loglik=final.loglik,
+        n_nonfinite=final.n_nonfinite,
+        n_skipped=final.n_skipped,
+        status=final.status,
+        x_final=final.x,
+        P_final=final.P,
     )
 
 
@@ -286,10 +305,23 @@ _COMMON_DOC = """
 """
 
 
-def extended_kalman_filter(model: NonlinearGaussian, x0, P0, zs, *, iterations: int = 1, inflation=None,
-                           estimator=None, mask=None, save=ALL_OUTPUTS, inputs=None, unroll: int = 1,
-                           allow_float32: bool = False, check_finite: bool = True,
-                           joseph: bool = True) -> KalmanResult:
+def extended_kalman_filter(
+    model: NonlinearGaussian,
+    x0,
+    P0,
+    zs,
+    *,
+    iterations: int = 1,
+    inflation=None,
+    estimator=None,
+    mask=None,
+    save=ALL_OUTPUTS,
+    inputs=None,
+    unroll: int = 1,
+    allow_float32: bool = False,
+    check_finite: bool = True,
+    joseph: bool = True,
+) -> KalmanResult:
     """Extended Kalman filter: the shared step on the first-order Taylor expansion of f and h.
 
     x_{k,k-1} = f(x_{k-1}), P_{k,k-1} = F P F^T + Q with F = df/dx(x_{k-1}); the update uses
@@ -298,15 +330,43 @@ def extended_kalman_filter(model: NonlinearGaussian, x0, P0, zs, *, iterations: 
     with H_i, K_i at the iterate x_i; the saved innovations, NIS and log-likelihood are those of
     the last linearisation.
     """
-    return _ekf(model, x0, P0, zs, iterations=int(iterations), inflation=inflation, estimator=estimator,
-                mask=mask, save=tuple(save), inputs=inputs, unroll=unroll, allow_float32=allow_float32,
-                check_finite=check_finite, joseph=joseph)
+    return _ekf(
+        model,
+        x0,
+        P0,
+        zs,
+        iterations=int(iterations),
+        inflation=inflation,
+        estimator=estimator,
+        mask=mask,
+        save=tuple(save),
+        inputs=inputs,
+        unroll=unroll,
+        allow_float32=allow_float32,
+        check_finite=check_finite,
+        joseph=joseph,
+    )
 
 
-def unscented_kalman_filter(model: NonlinearGaussian, x0, P0, zs, *, alpha=1e-3, beta=2.0, kappa=0.0,
-                            inflation=None, estimator=None, mask=None, save=ALL_OUTPUTS, inputs=None,
-                            unroll: int = 1, allow_float32: bool = False, check_finite: bool = True,
-                            joseph: bool = True) -> KalmanResult:
+def unscented_kalman_filter(
+    model: NonlinearGaussian,
+    x0,
+    P0,
+    zs,
+    *,
+    alpha=1e-3,
+    beta=2.0,
+    kappa=0.0,
+    inflation=None,
+    estimator=None,
+    mask=None,
+    save=ALL_OUTPUTS,
+    inputs=None,
+    unroll: int = 1,
+    allow_float32: bool = False,
+    check_finite: bool = True,
+    joseph: bool = True,
+) -> KalmanResult:
     """Unscented Kalman filter with Van der Merwe's scaled sigma points (alpha, beta, kappa as in
     filterpy's ``MerweScaledSigmaPoints``; array leaves, so they may be traced).
 
@@ -315,9 +375,24 @@ def unscented_kalman_filter(model: NonlinearGaussian, x0, P0, zs, *, alpha=1e-3,
     With alpha = 1e-3 the centre weight is about -1e6 and the moments lose about 6-7 digits to
     cancellation (7e-7 m against filterpy on a 1 km track); alpha in 0.1-1 is better conditioned.
     """
-    return _spkf(model, x0, P0, zs, alpha, beta, kappa, inflation=inflation, estimator=estimator, mask=mask,
-                 save=tuple(save), inputs=inputs, unroll=unroll, allow_float32=allow_float32,
-                 check_finite=check_finite, joseph=joseph)
+    return _spkf(
+        model,
+        x0,
+        P0,
+        zs,
+        alpha,
+        beta,
+        kappa,
+        inflation=inflation,
+        estimator=estimator,
+        mask=mask,
+        save=tuple(save),
+        inputs=inputs,
+        unroll=unroll,
+        allow_float32=allow_float32,
+        check_finite=check_finite,
+        joseph=joseph,
+    )
 
 
 def cubature_kalman_filter(model: NonlinearGaussian, x0, P0, zs, **kwargs) -> KalmanResult:
@@ -341,8 +416,9 @@ for _fn in (extended_kalman_filter, unscented_kalman_filter):
 # smoothers
 
 
-def extended_rts_smoother(model: NonlinearGaussian, filtered, *, inputs=None, unroll: int = 1,
-                          save=SMOOTHER_OUTPUTS) -> SmootherResult:
+def extended_rts_smoother(
+    model: NonlinearGaussian, filtered, *, inputs=None, unroll: int = 1, save=SMOOTHER_OUTPUTS
+) -> SmootherResult:
     """Extended RTS smoother: :func:`~jaxnav.filters.rts_smoother` with F_{t+1} = df/dx at the
     filtered mean x_t, over the filter's saved moments.
 
@@ -366,8 +442,17 @@ def _erts(model, filtered, *, inputs, unroll, save):
     return rts_smoother(LinearGaussian(F=Fs, H=None, Q=None, R=None), filtered, unroll=unroll, save=save)
 
 
-def unscented_rts_smoother(model: NonlinearGaussian, filtered, *, alpha=1e-3, beta=2.0, kappa=0.0, inputs=None,
-                           unroll: int = 1, save=SMOOTHER_OUTPUTS) -> SmootherResult:
+def unscented_rts_smoother(
+    model: NonlinearGaussian,
+    filtered,
+    *,
+    alpha=1e-3,
+    beta=2.0,
+    kappa=0.0,
+    inputs=None,
+    unroll: int = 1,
+    save=SMOOTHER_OUTPUTS,
+) -> SmootherResult:
     """Unscented RTS smoother (Saerkkae 2008): C_t = P_{x,f} P_{t+1|t}^{-1} from sigma points of
     (x_t, P_t) through f, then the RTS recursions over the saved predicted moments.
 
@@ -388,7 +473,9 @@ def unscented_rts_smoother(model: NonlinearGaussian, filtered, *, alpha=1e-3, be
 def _urts(model, filtered, alpha, beta, kappa, *, inputs, unroll, save):
     for name in ("means", "covs", "pred_means", "pred_covs"):
         if getattr(filtered, name, None) is None:
-            raise ValueError(f"unscented_rts_smoother needs the filter output '{name}': run the filter with it in save=")
+            raise ValueError(
+                f"unscented_rts_smoother needs the filter output '{name}': run the filter with it in save="
+            )
     T, n = filtered.means.shape
     dt = filtered.means.dtype
     Wm, Wc, c = merwe_weights(n, alpha, beta, kappa, dt)

@@ -15,13 +15,21 @@ associative scan hung intermittently on the development machine, see DESIGN.md.)
 from __future__ import annotations
 
 from functools import partial
-from typing import Optional
 
 import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import cho_solve, gaussian_loglik, masked_measurement, mT, safe_cholesky, solve_small, symmetrize, whiten
+from jaxnav._numerics import (
+    cho_solve,
+    gaussian_loglik,
+    masked_measurement,
+    mT,
+    safe_cholesky,
+    solve_small,
+    symmetrize,
+    whiten,
+)
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoother_gains, smoother_inputs
@@ -58,7 +66,7 @@ def _filter_combine(ei, ej):
     M = jnp.eye(n, dtype=Ai.dtype) + mm(Ci, Jj)
     rhs = jnp.concatenate([Ai, (bi + _mv(Ci, etaj))[..., None], Ci], axis=-1)
     W = solve_small(M, rhs)
-    WA, Wb, WC = W[..., :n], W[..., n], W[..., n + 1:]
+    WA, Wb, WC = W[..., :n], W[..., n], W[..., n + 1 :]
     A = mm(Aj, WA)
     b = _mv(Aj, Wb) + bj
     C = symmetrize(mm(mm(Aj, WC), mT(Aj)) + Cj)
@@ -115,8 +123,7 @@ def _blocked_scan(fn, elems, identity, chunk):
         totals = tuple(lo[-1] for lo in loc)  # (c, ...)
         _, pref = jax.lax.scan(body, tuple(t[0] for t in totals), tuple(t[1:-1] for t in totals))
         pref = tuple(jnp.concatenate([t[:1], p], axis=0) for t, p in zip(totals, pref))  # (c-1, ...)
-        fixed = fn(tuple(jnp.broadcast_to(p[None], (chunk,) + p.shape) for p in pref),
-                   tuple(lo[:, 1:] for lo in loc))
+        fixed = fn(tuple(jnp.broadcast_to(p[None], (chunk,) + p.shape) for p in pref), tuple(lo[:, 1:] for lo in loc))
         loc = tuple(jnp.concatenate([lo[:, :1], f], axis=1) for lo, f in zip(loc, fixed))
     return tuple(jnp.swapaxes(lo, 0, 1).reshape((c * chunk,) + lo.shape[2:])[:T] for lo in loc)
 
@@ -133,7 +140,7 @@ def _scan(fn, elems, identity, method, chunk, reverse):
         raise ValueError(f"method must be 'blocked' or 'tree', got {method!r}")
     T = elems[0].shape[0]
     if chunk is None:
-        chunk = max(1, int(round(T ** 0.5)))
+        chunk = max(1, int(round(T**0.5)))
     if reverse:
         elems = tuple(jnp.flip(x, 0) for x in elems)
     out = _blocked_scan(fn, elems, identity, int(chunk))
@@ -146,9 +153,19 @@ def _tv(a, T, base_ndim):
 
 
 @partial(jax.jit, static_argnames=("save", "allow_float32", "check_finite", "method", "chunk"))
-def parallel_filter(model: LinearGaussian, x0, P0, zs, *, mask=None, save=ALL_OUTPUTS,
-                    allow_float32: bool = False, check_finite: bool = True, method: str = "blocked",
-                    chunk: Optional[int] = None) -> KalmanResult:
+def parallel_filter(
+    model: LinearGaussian,
+    x0,
+    P0,
+    zs,
+    *,
+    mask=None,
+    save=ALL_OUTPUTS,
+    allow_float32: bool = False,
+    check_finite: bool = True,
+    method: str = "blocked",
+    chunk: int | None = None,
+) -> KalmanResult:
     """Classic Kalman filter by a parallel associative scan (Särkkä & García-Fernández 2021, Sec. IV).
 
     Same model, convention and outputs as :func:`~jaxnav.filters.kalman_filter` without plug-ins
@@ -180,8 +197,9 @@ def parallel_filter(model: LinearGaussian, x0, P0, zs, *, mask=None, save=ALL_OU
       ValueError: at trace time for inconsistent shapes, unknown outputs or float32 without
         ``allow_float32``.
     """
-    model, x0, P0, zs, mask, save, (n, m, p, T), tv, dtype = prepare_inputs(model, x0, P0, zs, mask, save,
-                                                                             allow_float32)
+    model, x0, P0, zs, mask, save, (n, m, p, T), tv, dtype = prepare_inputs(
+        model, x0, P0, zs, mask, save, allow_float32
+    )
     F, H, Q, R, G = model
     # a model closed over by the caller's jit is constant: without the barrier XLA would
     # constant-fold the (T, n, n) element arrays built from it (minutes for T = 86 400)
@@ -240,20 +258,36 @@ def parallel_filter(model: LinearGaussian, x0, P0, zs, *, mask=None, save=ALL_OU
     bad_flag = _status.NONFINITE_MEASUREMENT if check_finite else _status.NONFINITE_UNMASKED
     status = jnp.where(n_bad > 0, bad_flag, 0)
     status = status | jnp.where(jnp.any(observed & ~ok), _status.CHOLESKY_FAILED, 0)
-    status = status | jnp.where(jnp.all(jnp.isfinite(means)) & jnp.all(jnp.isfinite(covs)), 0,
-                                _status.NONFINITE_STATE)
-    allv = dict(means=means, covs=covs, pred_means=pred_m, pred_covs=pred_P, innovations=v, innov_covs=Sp,
-                nis=jnp.where(observed, nis, 0.0), logliks=ll, factors=jnp.ones((T,), dtype), noise=(),
-                valid=mv.astype(jnp.int32))
+    status = status | jnp.where(jnp.all(jnp.isfinite(means)) & jnp.all(jnp.isfinite(covs)), 0, _status.NONFINITE_STATE)
+    allv = dict(
+        means=means,
+        covs=covs,
+        pred_means=pred_m,
+        pred_covs=pred_P,
+        innovations=v,
+        innov_covs=Sp,
+        nis=jnp.where(observed, nis, 0.0),
+        logliks=ll,
+        factors=jnp.ones((T,), dtype),
+        noise=(),
+        valid=mv.astype(jnp.int32),
+    )
     out = {name: allv[name] for name in save}
-    return KalmanResult(**out, loglik=jnp.sum(ll), n_nonfinite=n_bad,
-                        n_skipped=jnp.sum(~observed).astype(jnp.int32), status=status.astype(jnp.int32),
-                        x_final=means[-1], P_final=covs[-1])
+    return KalmanResult(
+        **out,
+        loglik=jnp.sum(ll),
+        n_nonfinite=n_bad,
+        n_skipped=jnp.sum(~observed).astype(jnp.int32),
+        status=status.astype(jnp.int32),
+        x_final=means[-1],
+        P_final=covs[-1],
+    )
 
 
 @partial(jax.jit, static_argnames=("save", "method", "chunk"))
-def parallel_smoother(model: LinearGaussian, filtered, *, save=SMOOTHER_OUTPUTS, method: str = "blocked",
-                      chunk: Optional[int] = None) -> SmootherResult:
+def parallel_smoother(
+    model: LinearGaussian, filtered, *, save=SMOOTHER_OUTPUTS, method: str = "blocked", chunk: int | None = None
+) -> SmootherResult:
     """RTS smoother by a reverse associative scan (Särkkä & García-Fernández 2021, Sec. IV-B).
 
     Elements E_t = P_t F_{t+1}^T P_{t+1|t}^{-1}, g_t = x_t - E_t x_{t+1|t},
@@ -283,8 +317,11 @@ def parallel_smoother(model: LinearGaussian, filtered, *, save=SMOOTHER_OUTPUTS,
     if want_cov:
         Lc = symmetrize(Ps[:-1] - mm(mm(E[:-1], Pp[1:]), mT(E[:-1])))
         elems = elems + (jnp.concatenate([Lc, Ps[-1:]], axis=0),)
-    identity = (jnp.eye(n, dtype=xs.dtype), jnp.zeros((n,), xs.dtype), jnp.zeros((n, n), xs.dtype))[:len(elems)]
+    identity = (jnp.eye(n, dtype=xs.dtype), jnp.zeros((n,), xs.dtype), jnp.zeros((n, n), xs.dtype))[: len(elems)]
     res = _scan(_smoother_combine, elems, identity, method, chunk, True)
-    return SmootherResult(means=res[1] if "means" in save else None,
-                          covs=res[2] if want_cov else None,
-                          gains=E if "gains" in save else None, status=status)
+    return SmootherResult(
+        means=res[1] if "means" in save else None,
+        covs=res[2] if want_cov else None,
+        gains=E if "gains" in save else None,
+        status=status,
+    )

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, NamedTuple, Optional, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
@@ -168,7 +168,7 @@ class InflationRule(Protocol):
         states (then the block of those states is scaled by f_k, their cross terms by sqrt(f_k)).
     """
 
-    states: Optional[tuple] = None
+    states: tuple | None = None
 
     @property
     def data_independent(self) -> bool:

@@ -22,7 +22,7 @@ come out in ``KalmanResult.noise`` (:class:`RobustInfo`), the factors 1/alpha in
 
 from __future__ import annotations
 
-from typing import ClassVar, NamedTuple, Optional
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -173,13 +173,16 @@ class IGG3(NoiseEstimator):
         flagged in ``status`` instead); max_run or lockout not a positive integer.
     """
 
-    ranges: ClassVar[dict] = {"k0": Range(0.0, lo_open=True), "k1": Range(0.0, lo_open=True),
-                              "w_min": Range(0.0, 1.0, lo_open=True, hi_open=False)}
+    ranges: ClassVar[dict] = {
+        "k0": Range(0.0, lo_open=True),
+        "k1": Range(0.0, lo_open=True),
+        "w_min": Range(0.0, 1.0, lo_open=True, hi_open=False),
+    }
 
     k0: jax.Array = 2.0
     k1: jax.Array = 4.5
     w_min: jax.Array = 1e-12
-    max_run: Optional[int] = static_field(2)
+    max_run: int | None = static_field(2)
     lockout: int = static_field(20)
 
     def __post_init__(self):
@@ -258,13 +261,12 @@ class YangFactor(InflationRule):
       ValueError: c0 <= 0, c1 <= c0 or max_factor < 1 (concrete values); bad ``states``.
     """
 
-    ranges: ClassVar[dict] = {"c0": Range(0.0, lo_open=True), "c1": Range(0.0, lo_open=True),
-                              "max_factor": Range(1.0)}
+    ranges: ClassVar[dict] = {"c0": Range(0.0, lo_open=True), "c1": Range(0.0, lo_open=True), "max_factor": Range(1.0)}
 
     c0: jax.Array = 1.0
-    c1: Optional[jax.Array] = None
+    c1: jax.Array | None = None
     max_factor: jax.Array = 1e6
-    states: Optional[tuple] = static_field(None)
+    states: tuple | None = static_field(None)
 
     def __post_init__(self):
         check_ranges("YangFactor", self.ranges, c0=self.c0, c1=self.c1, max_factor=self.max_factor)
@@ -295,7 +297,9 @@ class YangFactor(InflationRule):
         f = jnp.where(ok, 1.0 / jnp.where(ok, alpha, 1.0), cap)
         flags = range_flags(self, self.ranges)
         if c1 is not None:
-            flags = flags | jnp.where(c1 > jnp.asarray(self.c0, dt), 0, _status.PARAMETER_OUT_OF_RANGE).astype(jnp.int32)
+            flags = flags | jnp.where(c1 > jnp.asarray(self.c0, dt), 0, _status.PARAMETER_OUT_OF_RANGE).astype(
+                jnp.int32
+            )
         return jnp.where(ctx.observed, f, 1.0), state, flags
 
 
@@ -329,8 +333,10 @@ class Chain(NoiseEstimator):
             raise ValueError("Chain: give at least one estimator")
         for e in parts:
             if not isinstance(e, NoiseEstimator):
-                raise ValueError(f"Chain: {type(e).__name__} is not a noise estimator (jaxnav.filters.NoiseEstimator: "
-                                 "data_independent, init, noise, after, screen)")
+                raise ValueError(
+                    f"Chain: {type(e).__name__} is not a noise estimator (jaxnav.filters.NoiseEstimator: "
+                    "data_independent, init, noise, after, screen)"
+                )
         object.__setattr__(self, "parts", parts)
 
     @property
@@ -371,7 +377,7 @@ def _concrete(x):
         return None
 
 
-def igg3(k0=2.0, k1=4.5, *, w_min=1e-12, max_run: Optional[int] = 2, lockout: int = 20) -> IGG3:
+def igg3(k0=2.0, k1=4.5, *, w_min=1e-12, max_run: int | None = 2, lockout: int = 20) -> IGG3:
     """IGG-III robust equivalent-weight estimator (R_ij / sqrt(w_i w_j)); see :class:`IGG3`.
 
     Args:

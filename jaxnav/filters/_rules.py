@@ -12,7 +12,7 @@ traced values are flagged in ``status`` at run time); the lower-case functions a
 
 from __future__ import annotations
 
-from typing import ClassVar, NamedTuple, Optional
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -76,7 +76,7 @@ class Constant(InflationRule):
     ranges: ClassVar[dict] = {"S": Range(1.0)}
 
     S: jax.Array
-    states: Optional[tuple] = static_field(None)
+    states: tuple | None = static_field(None)
 
     def __post_init__(self):
         check_ranges("Constant", self.ranges, S=self.S)
@@ -122,7 +122,7 @@ class Attenuated(InflationRule):
     ranges: ClassVar[dict] = {"b": Range(0.0, 1.0)}
 
     b: jax.Array
-    states: Optional[tuple] = static_field(None)
+    states: tuple | None = static_field(None)
 
     def __post_init__(self):
         check_ranges("Attenuated", self.ranges, b=self.b)
@@ -214,15 +214,18 @@ class Fading(InflationRule):
         (0, inf), max_factor outside [1, inf) (traced values are flagged in ``status`` instead).
     """
 
-    ranges: ClassVar[dict] = {"rho": Range(0.0, lo_open=True), "smooth": Range(0.0, lo_open=True),
-                              "max_factor": Range(1.0)}
+    ranges: ClassVar[dict] = {
+        "rho": Range(0.0, lo_open=True),
+        "smooth": Range(0.0, lo_open=True),
+        "max_factor": Range(1.0),
+    }
 
-    rho: Optional[jax.Array] = None
-    smooth: Optional[jax.Array] = None
+    rho: jax.Array | None = None
+    smooth: jax.Array | None = None
     max_factor: jax.Array = 1e6
-    window: Optional[int] = static_field(None)
+    window: int | None = static_field(None)
     absolute: bool = static_field(True)
-    states: Optional[tuple] = static_field(None)
+    states: tuple | None = static_field(None)
 
     def __post_init__(self):
         if self.window is not None and self.rho is not None:
@@ -267,8 +270,7 @@ class Fading(InflationRule):
             C = jnp.where(obs, C, state.C)
             trPv = C
             new = state._replace(C=C, started=state.started | obs)
-        trN = (trPv - _masked_trace(ctx.H @ ctx.GQG @ ctx.H.T, ctx.valid)
-               - _masked_trace(ctx.R_used, ctx.valid))
+        trN = trPv - _masked_trace(ctx.H @ ctx.GQG @ ctx.H.T, ctx.valid) - _masked_trace(ctx.R_used, ctx.valid)
         trM = _masked_trace(ctx.H @ inflated_part(ctx.FPF, self.states) @ ctx.H.T, ctx.valid)
         pos_M = trM > 0
         ratio = trN / jnp.where(pos_M, trM, 1.0)  # double-where: finite gradient when trM = 0
@@ -314,8 +316,9 @@ class Switch(InflationRule):
             raise ValueError("Switch: give at least one rule")
         states = {r.states for r in rules if not isinstance(r, NoInflation)}  # factor 1: its states do not matter
         if len(states) > 1:
-            raise ValueError(f"Switch: the rules inflate different states {sorted(map(str, states))}; "
-                             "one filter step needs one set")
+            raise ValueError(
+                f"Switch: the rules inflate different states {sorted(map(str, states))}; one filter step needs one set"
+            )
         object.__setattr__(self, "rules", rules)
         object.__setattr__(self, "index", jnp.asarray(self.index))
 
@@ -378,8 +381,9 @@ def attenuated(b, *, states=None) -> Attenuated:
     return Attenuated(b=b, states=states)
 
 
-def fading(window: Optional[int] = None, rho=None, *, smooth=None, absolute: bool = True,
-           max_factor=1e6, states=None) -> Fading:
+def fading(
+    window: int | None = None, rho=None, *, smooth=None, absolute: bool = True, max_factor=1e6, states=None
+) -> Fading:
     """Fading-memory rule lambda_k (S0 eqs. (13)-(17)); see :class:`Fading`.
 
     Args:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache, partial
+from functools import cache, partial
 from typing import Any, NamedTuple
 
 import jax
@@ -10,8 +10,6 @@ import jax.numpy as jnp
 
 from jaxnav import _status
 from jaxnav._numerics import cho_solve, mm, safe_cholesky, symmetrize
-from jaxnav.filters._kalman import filter_call_of
-from jaxnav.filters._model import LinearGaussian
 
 
 class SmootherResult(NamedTuple):
@@ -32,128 +30,7 @@ class SmootherResult(NamedTuple):
 SMOOTHER_OUTPUTS = ("means", "covs", "gains")
 
 
-def rts_smoother(model: LinearGaussian, filtered, *, unroll: int = 1, save=SMOOTHER_OUTPUTS) -> SmootherResult:
-    """RTS smoother: C_t = P_t F_{t+1}^T P_{t+1|t}^{-1}, x^s_t = x_t + C_t (x^s_{t+1} - x_{t+1|t}).
-
-    P^s_t = P_t + C_t (P^s_{t+1} - P_{t+1|t}) C_t^T. It uses the filter's *saved* predicted
-    moments, so for an inflated (attenuated or fading) filter it smooths with the inflated priors
-    the filter actually used; for the classic filter it equals the textbook RTS.
-
-    The gains depend only on the filter's covariances: under ``jax.vmap`` with a shared model they
-    are computed once for the batch when the covariances are not batched, or when every
-    sequence's equal the first's (checked at run time), else per sequence. Given the result of
-    :func:`~jaxnav.filters.kalman_filter` unchanged (the same arrays), the smoother redoes that
-    filter behind one run-time choice under ``vmap`` (:func:`_batch_aware_filter_rts`): a clean
-    batch runs :func:`~jaxnav.filters.kalman_filter_batch` and
-    :func:`~jaxnav.filters.rts_smoother_batch`, so the filter's covariances are never written B
-    times; a batch with unmasked NaN/inf runs the filter and smoother of every sequence (if the
-    filter's own outputs are used too, its per-sequence filter then runs twice). Derivatives are
-    the plain smoother's.
-    :func:`~jaxnav.filters.rts_smoother_batch` smooths a :func:`~jaxnav.filters.kalman_filter_batch` result.
-
-    Args:
-      model: the model given to the filter (only F is used; (n, n) or (T, n, n)).
-      filtered: a :class:`KalmanResult` with ``means``, ``covs``, ``pred_means``, ``pred_covs``.
-      unroll: ``lax.scan`` unroll factor.
-      save: static subset of ("means", "covs", "gains") to return (others are None). The
-        smoothed-covariance recursion is skipped when "covs" is not requested (the means need
-        only the gains).
-    Returns:
-      :class:`SmootherResult`.
-    Raises:
-      ValueError: if the needed outputs were not saved, or F has a wrong shape.
-    """
-    save = tuple(save)
-    moments = tuple(getattr(filtered, name, None) for name in ("means", "covs", "pred_means", "pred_covs"))
-    if any(a is None for a in moments):
-        smoother_inputs(model, filtered, save, "rts_smoother")  # raises, naming the missing output
-    call = filter_call_of(*moments)
-    if call is not None and _same_array(getattr(model, "F", None), call.args[0].F):
-        return _batch_aware_filter_rts(unroll, save, call.static)(model, call.args, *moments)
-    return _batch_aware_rts(unroll, save)(model, *moments)
-
-
-def _same_array(a, b):
-    """Whether a and b are one array: the same object, or equal concrete values (trace time)."""
-    if a is b:
-        return True
-    if a is None or b is None or isinstance(a, jax.core.Tracer) or isinstance(b, jax.core.Tracer):
-        return False
-    return jnp.shape(a) == jnp.shape(b) and bool(jnp.all(jnp.asarray(a) == jnp.asarray(b)))
-
-
-@lru_cache(maxsize=None)
-def _batch_aware_filter_rts(unroll, save, fstatic):
-    """:func:`_rts_smoother` of a :func:`~jaxnav.filters.kalman_filter` result given with that filter's arguments.
-
-    Without ``vmap`` it is the plain smoother of the four moments (the filter's arguments are
-    unused). Under ``vmap``, when the filter's rule could share one covariance recursion (model,
-    P0, mask and a data-independent rule shared, NaN masking on), the filter is redone here behind
-    one run-time choice: a batch with no unmasked NaN/inf runs
-    :func:`~jaxnav.filters.kalman_filter_batch` and :func:`~jaxnav.filters.rts_smoother_batch`
-    (covariances and gains once, the means in blocks), any other batch the plain filter and
-    smoother of every sequence. The moments given are then unused, so the filter's own run is
-    dead code under ``jit`` when only the smoother's outputs are used, and its covariances are
-    never written B times. Either branch equals a loop. Derivatives are the plain smoother's.
-    """
-    fsave, funroll, allow_float32, check_finite, joseph = fstatic
-
-    def plain(model, fargs, means, covs, pred_means, pred_covs):
-        return _rts_smoother(model, _Moments(means, covs, pred_means, pred_covs), unroll=unroll, save=save)
-
-    @jax.custom_batching.custom_vmap
-    def batched(*args):
-        return plain(*args)
-
-    @batched.def_vmap
-    def rule(axis_size, in_batched, model, fargs, *moments):
-        from jaxnav.filters._batch import _broadcast_like, _kalman_filter_batch, _rts_smoother_batch
-        from jaxnav.filters._kalman import _kalman_filter
-        from jaxnav.filters._plugins import data_independent
-
-        fmodel, x0, P0, zs, inflation, estimator, mask = fargs
-        fb = in_batched[1]
-        shareable = (check_finite and fb[3] and all(in_batched[2:]) and data_independent(inflation, estimator)
-                     and not any(jax.tree_util.tree_leaves([in_batched[0]] + [fb[i] for i in (0, 2, 4, 5, 6)]))
-                     and jnp.ndim(zs) == 3)
-        if not shareable:
-            return _rts_rule(model, moments, (in_batched[0],) + tuple(in_batched[2:]), unroll, save)
-        faxes = jax.tree_util.tree_map(lambda b: 0 if b else None, fb)
-
-        def filt(*a):
-            return _kalman_filter(*a[:4], inflation=a[4], estimator=a[5], mask=a[6], save=fsave, unroll=funroll,
-                                  allow_float32=allow_float32, check_finite=check_finite, joseph=joseph)
-
-        def per_sequence():
-            def one(*a):
-                f = filt(*a)
-                return _rts_smoother(model, _Moments(f.means, f.covs, f.pred_means, f.pred_covs), unroll=unroll,
-                                     save=save)
-            return jax.vmap(one, in_axes=faxes)(*fargs)
-
-        def shared():
-            res = _kalman_filter_batch(fmodel, x0, P0, zs, inflation=inflation, estimator=estimator, mask=mask,
-                                       save=("means", "covs", "pred_covs"), unroll=funroll,
-                                       allow_float32=allow_float32, block="auto", joseph=joseph)
-            return _broadcast_like(_rts_smoother_batch(model, res, save=save, unroll=unroll), like)
-
-        like = jax.eval_shape(per_sequence)
-        used = True if mask is None else jnp.asarray(mask, bool)
-        if jnp.ndim(used) == 1:
-            used = used[:, None]
-        clean = jnp.all(jnp.isfinite(zs) | ~jnp.asarray(used, bool))
-        out = jax.lax.cond(clean, shared, per_sequence)
-        return out, jax.tree_util.tree_map(lambda _: True, out)
-
-    @jax.custom_jvp
-    def run(*args):
-        return batched(*args)
-
-    run.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
-    return run
-
-
-@lru_cache(maxsize=None)
+@cache
 def _batch_aware_rts(unroll, save):
     """:func:`_rts_smoother` on the four saved moments, with a ``vmap`` rule and exact derivatives.
 
@@ -163,6 +40,7 @@ def _batch_aware_rts(unroll, save):
     are computed once and only the means per sequence; else the plain per-sequence smoothers.
     Derivatives are those of the plain smoother (``custom_vmap`` has no reverse mode).
     """
+
     def plain(model, means, covs, pred_means, pred_covs):
         filtered = _Moments(means=means, covs=covs, pred_means=pred_means, pred_covs=pred_covs)
         return _rts_smoother(model, filtered, unroll=unroll, save=save)
@@ -210,8 +88,11 @@ def _rts_rule(model, moments, in_batched, unroll, save):
     def shared():
         one = _Moments(means=means[0], covs=covs[0], pred_means=pred_means[0], pred_covs=pred_covs[0])
         C, status = smoother_gains(model, one, save)
-        sm = jax.vmap(lambda x, xp: smoothed_means(C, x, xp, unroll), in_axes=(axes[1], axes[3]))(
-            means, pred_means) if "means" in save else None
+        sm = (
+            jax.vmap(lambda x, xp: smoothed_means(C, x, xp, unroll), in_axes=(axes[1], axes[3]))(means, pred_means)
+            if "means" in save
+            else None
+        )
         P_s = smoothed_covs(C, covs[0], pred_covs[0], unroll) if "covs" in save else None
         out = SmootherResult(means=sm, covs=P_s, gains=C if "gains" in save else None, status=status)
         return jax.tree_util.tree_map(lambda a, s: jnp.broadcast_to(a, s.shape), out, like)
@@ -236,8 +117,9 @@ def vmap_sharing(fn, in_axes, args, fields):
     except ValueError:
         axes = type(out_type)(*[0] * len(names))
         out = jax.vmap(fn, in_axes=in_axes, out_axes=axes)(*args)
-    batched = type(out_type)(*[jax.tree_util.tree_map(lambda _, a=a: a == 0, getattr(out, name))
-                               for name, a in zip(names, axes)])
+    batched = type(out_type)(
+        *[jax.tree_util.tree_map(lambda _, a=a: a == 0, getattr(out, name)) for name, a in zip(names, axes)]
+    )
     return out, batched
 
 
@@ -310,6 +192,7 @@ def smoothed_means(C, xs, xp, unroll=1):
     Returns:
       (T, n) smoothed means.
     """
+
     def body(x_next, inp):
         x, x_p, Ck = inp
         x_s = x + mm(Ck, x_next - x_p)
@@ -327,6 +210,7 @@ def smoothed_covs(C, Ps, Pp, unroll=1):
     Returns:
       (T, n, n) smoothed covariances.
     """
+
     def body(P_next, inp):
         P, P_p, Ck = inp
         P_s = symmetrize(P + mm(mm(Ck, P_next - P_p), Ck.T))

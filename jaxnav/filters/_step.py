@@ -8,7 +8,7 @@ estimators (:mod:`._plugins`) plug into :func:`filter_step`. The drivers
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -29,8 +29,8 @@ from jaxnav.filters._model import LinearGaussian, check_shapes
 from jaxnav.filters._plugins import (
     InflationRule,
     NoEstimator,
-    NoiseEstimator,
     NoInflation,
+    NoiseEstimator,
     PostUpdate,
     StepContext,
     data_independent,
@@ -39,8 +39,17 @@ from jaxnav.filters._rules import inflation_scale
 
 #: every per-epoch output a filter run can save
 ALL_OUTPUTS = (
-    "means", "covs", "pred_means", "pred_covs", "innovations", "innov_covs",
-    "nis", "logliks", "factors", "noise", "valid",
+    "means",
+    "covs",
+    "pred_means",
+    "pred_covs",
+    "innovations",
+    "innov_covs",
+    "nis",
+    "logliks",
+    "factors",
+    "noise",
+    "valid",
 )
 
 
@@ -90,11 +99,11 @@ class StepInput(NamedTuple):
 
     z: jax.Array
     mask: jax.Array
-    F: Optional[jax.Array] = None
-    H: Optional[jax.Array] = None
-    Q: Optional[jax.Array] = None
-    R: Optional[jax.Array] = None
-    G: Optional[jax.Array] = None
+    F: jax.Array | None = None
+    H: jax.Array | None = None
+    Q: jax.Array | None = None
+    R: jax.Array | None = None
+    G: jax.Array | None = None
 
 
 class StepInfo(NamedTuple):
@@ -104,17 +113,17 @@ class StepInfo(NamedTuple):
     leading axis T).
     """
 
-    means: Optional[jax.Array] = None
-    covs: Optional[jax.Array] = None
-    pred_means: Optional[jax.Array] = None
-    pred_covs: Optional[jax.Array] = None
-    innovations: Optional[jax.Array] = None
-    innov_covs: Optional[jax.Array] = None
-    nis: Optional[jax.Array] = None
-    logliks: Optional[jax.Array] = None
-    factors: Optional[jax.Array] = None
+    means: jax.Array | None = None
+    covs: jax.Array | None = None
+    pred_means: jax.Array | None = None
+    pred_covs: jax.Array | None = None
+    innovations: jax.Array | None = None
+    innov_covs: jax.Array | None = None
+    nis: jax.Array | None = None
+    logliks: jax.Array | None = None
+    factors: jax.Array | None = None
     noise: Any = None
-    valid: Optional[jax.Array] = None
+    valid: jax.Array | None = None
 
 
 class UpdateResult(NamedTuple):
@@ -200,8 +209,16 @@ def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True):
         P = symmetrize(P_pred - mm(K, PHt.T))
     w = whiten(L, v)
     loglik = gaussian_loglik(w, L, jnp.sum(valid))
-    return UpdateResult(x=jnp.where(ok, x, x_pred), P=jnp.where(ok, P, P_pred), v=v, S=S,
-                        K=jnp.where(ok, K, 0.0), nis=jnp.sum(w * w), loglik=loglik, ok=ok)
+    return UpdateResult(
+        x=jnp.where(ok, x, x_pred),
+        P=jnp.where(ok, P, P_pred),
+        v=v,
+        S=S,
+        K=jnp.where(ok, K, 0.0),
+        nis=jnp.sum(w * w),
+        loglik=loglik,
+        ok=ok,
+    )
 
 
 def _near_psd(P, rel=1e-10):
@@ -211,8 +228,14 @@ def _near_psd(P, rel=1e-10):
     return jnp.all(jnp.isfinite(cholesky(P + shift * jnp.eye(P.shape[-1], dtype=P.dtype))))
 
 
-def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=ALL_OUTPUTS,
-                check_finite: bool = True, joseph: bool = True):
+def filter_step(
+    state: FilterState,
+    inp: StepInput,
+    params: FilterParams,
+    save=ALL_OUTPUTS,
+    check_finite: bool = True,
+    joseph: bool = True,
+):
     """One epoch of the Kalman filter family: noise, inflation, predict, update (S0 eqs. (4)-(17)).
 
     Args:
@@ -229,8 +252,9 @@ def filter_step(state: FilterState, inp: StepInput, params: FilterParams, save=A
     return new, StepInfo(**{name: allv[name] for name in save})
 
 
-def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, check_finite: bool,
-                   joseph: bool = True, lin=None):
+def step_with_gain(
+    state: FilterState, inp: StepInput, params: FilterParams, check_finite: bool, joseph: bool = True, lin=None
+):
     """:func:`filter_step` returning (state, every output by name, the gain K (n, m) applied).
 
     The batch entry points run it once on zero data for the batch's shared covariances and gains.
@@ -266,8 +290,22 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
         v = jnp.where(valid, z - z_hat, 0.0)
         z_obs = z
         z = jnp.where(valid, z - z_hat + mm(H, x_pred), 0.0)  # the affine model's z - b
-    ctx = StepContext(k=k, v=v, z=z, x_pred=x_pred, valid=valid, observed=observed, F=F, H=Hm, G=Gm, Q=Q, R=R,
-                      FPF=FPF, GQG=GQG, R_used=R)
+    ctx = StepContext(
+        k=k,
+        v=v,
+        z=z,
+        x_pred=x_pred,
+        valid=valid,
+        observed=observed,
+        F=F,
+        H=Hm,
+        G=Gm,
+        Q=Q,
+        R=R,
+        FPF=FPF,
+        GQG=GQG,
+        R_used=R,
+    )
     GQG, R_used, est_state, (noise_info, est_flag) = est.noise(state.est, ctx)
     ctx = ctx._replace(GQG=GQG, R_used=R_used)
     factor, rule_state, rule_flag = rule.factor(state.rule, ctx)
@@ -308,14 +346,29 @@ def step_with_gain(state: FilterState, inp: StepInput, params: FilterParams, che
     ll = jnp.where(observed & up.ok, up.loglik, 0.0)
 
     new = FilterState(
-        x=up.x, P=up.P, k=k, rule=rule_state, est=est_state,
-        status=state.status | flags.astype(jnp.int32), loglik=state.loglik + ll,
+        x=up.x,
+        P=up.P,
+        k=k,
+        rule=rule_state,
+        est=est_state,
+        status=state.status | flags.astype(jnp.int32),
+        loglik=state.loglik + ll,
         n_nonfinite=state.n_nonfinite + n_bad,
         n_skipped=state.n_skipped + (~observed).astype(jnp.int32),
     )
-    allv = dict(means=up.x, covs=up.P, pred_means=x_pred, pred_covs=P_pred, innovations=up.v,
-                innov_covs=up.S, nis=jnp.where(observed, up.nis, 0.0), logliks=ll,
-                factors=factor, noise=noise_info, valid=jnp.sum(valid).astype(jnp.int32))
+    allv = dict(
+        means=up.x,
+        covs=up.P,
+        pred_means=x_pred,
+        pred_covs=P_pred,
+        innovations=up.v,
+        innov_covs=up.S,
+        nis=jnp.where(observed, up.nis, 0.0),
+        logliks=ll,
+        factors=factor,
+        noise=noise_info,
+        valid=jnp.sum(valid).astype(jnp.int32),
+    )
     return new, allv, up.K
 
 
@@ -336,9 +389,15 @@ def init_state(x0, P0, m: int, *, p=None, inflation=None, estimator=None) -> Fil
     rule = NoInflation() if inflation is None else inflation
     est = NoEstimator() if estimator is None else estimator
     return FilterState(
-        x=jnp.asarray(x0, dtype), P=jnp.asarray(P0, dtype), k=jnp.zeros((), dtype),
-        rule=rule.init(n, m, p, dtype), est=est.init(n, m, p, dtype), status=jnp.zeros((), jnp.int32),
-        loglik=jnp.zeros((), dtype), n_nonfinite=jnp.zeros((), jnp.int32), n_skipped=jnp.zeros((), jnp.int32),
+        x=jnp.asarray(x0, dtype),
+        P=jnp.asarray(P0, dtype),
+        k=jnp.zeros((), dtype),
+        rule=rule.init(n, m, p, dtype),
+        est=est.init(n, m, p, dtype),
+        status=jnp.zeros((), jnp.int32),
+        loglik=jnp.zeros((), dtype),
+        n_nonfinite=jnp.zeros((), jnp.int32),
+        n_skipped=jnp.zeros((), jnp.int32),
     )
 
 
@@ -379,12 +438,16 @@ def scan_setup(model, x0, P0, zs, inflation, estimator, mask, save, allow_float3
     Sizes are (n, m, p, T); ``tv`` says which model leaves are time-varying (they become scan
     inputs, the static ones stay in ``params.model``).
     """
-    model, x0, P0, zs, mask, save, (n, m, p, T), tv, dtype = prepare_inputs(model, x0, P0, zs, mask, save,
-                                                                             allow_float32)
+    model, x0, P0, zs, mask, save, (n, m, p, T), tv, dtype = prepare_inputs(
+        model, x0, P0, zs, mask, save, allow_float32
+    )
     static = LinearGaussian(*[None if tv[name] else getattr(model, name) for name in LinearGaussian._fields])
     xs = StepInput(z=zs, mask=mask, **{name: getattr(model, name) for name in tv if tv[name]})
-    params = FilterParams(model=static, inflation=NoInflation() if inflation is None else inflation,
-                          estimator=NoEstimator() if estimator is None else estimator)
+    params = FilterParams(
+        model=static,
+        inflation=NoInflation() if inflation is None else inflation,
+        estimator=NoEstimator() if estimator is None else estimator,
+    )
     init = init_state(x0, P0, m, p=p, inflation=params.inflation, estimator=params.estimator)
     return params, init, xs, save, (n, m, p, T), tv, dtype
 
@@ -409,21 +472,20 @@ class KalmanResult(NamedTuple):
     with a leading batch axis B on the per-sequence fields and none on the shared ones.
     """
 
-    means: Optional[jax.Array] = None
-    covs: Optional[jax.Array] = None
-    pred_means: Optional[jax.Array] = None
-    pred_covs: Optional[jax.Array] = None
-    innovations: Optional[jax.Array] = None
-    innov_covs: Optional[jax.Array] = None
-    nis: Optional[jax.Array] = None
-    logliks: Optional[jax.Array] = None
-    factors: Optional[jax.Array] = None
+    means: jax.Array | None = None
+    covs: jax.Array | None = None
+    pred_means: jax.Array | None = None
+    pred_covs: jax.Array | None = None
+    innovations: jax.Array | None = None
+    innov_covs: jax.Array | None = None
+    nis: jax.Array | None = None
+    logliks: jax.Array | None = None
+    factors: jax.Array | None = None
     noise: Any = None
-    valid: Optional[jax.Array] = None
-    loglik: Optional[jax.Array] = None
-    n_nonfinite: Optional[jax.Array] = None
-    n_skipped: Optional[jax.Array] = None
-    status: Optional[jax.Array] = None
-    x_final: Optional[jax.Array] = None
-    P_final: Optional[jax.Array] = None
-
+    valid: jax.Array | None = None
+    loglik: jax.Array | None = None
+    n_nonfinite: jax.Array | None = None
+    n_skipped: jax.Array | None = None
+    status: jax.Array | None = None
+    x_final: jax.Array | None = None
+    P_final: jax.Array | None = None

@@ -72,8 +72,17 @@ def zone_central_meridian(lon, zone_width: int = 3):
     return jnp.radians(6.0 * zone - 3.0), zone.astype(jnp.int32)
 
 
-def gauss_kruger(lat, lon, *, lon0, ellipsoid: Ellipsoid = WGS84, k0: float = 1.0,
-                 false_easting: float = FALSE_EASTING, zone=None, with_extras: bool = False):
+def gauss_kruger(
+    lat,
+    lon,
+    *,
+    lon0,
+    ellipsoid: Ellipsoid = WGS84,
+    k0: float = 1.0,
+    false_easting: float = FALSE_EASTING,
+    zone=None,
+    with_extras: bool = False,
+):
     """Gauss-Krüger forward projection: geodetic (rad) -> (x north, y east) in m.
 
     Krüger n-series to sixth order (Karney 2011, eqs. (7)-(11)); branch-free.
@@ -117,13 +126,29 @@ def gauss_kruger(lat, lon, *, lon0, ellipsoid: Ellipsoid = WGS84, k0: float = 1.
         return x, y
     gamma = jnp.arctan2(taup * jnp.tan(lam), jnp.sqrt(1.0 + taup * taup)) + jnp.arctan2(q, p)
     slat = jnp.sin(lat)
-    k = (k0 * jnp.sqrt(1.0 - ellipsoid.e2 * slat * slat) * jnp.sqrt(1.0 + tau * tau)
-         / jnp.sqrt(taup * taup + cl * cl) * A / ellipsoid.a * jnp.sqrt(p * p + q * q))
+    k = (
+        k0
+        * jnp.sqrt(1.0 - ellipsoid.e2 * slat * slat)
+        * jnp.sqrt(1.0 + tau * tau)
+        / jnp.sqrt(taup * taup + cl * cl)
+        * A
+        / ellipsoid.a
+        * jnp.sqrt(p * p + q * q)
+    )
     return x, y, GaussKrugerExtras(convergence=gamma, scale=k)
 
 
-def gauss_kruger_inverse(x, y, *, lon0, ellipsoid: Ellipsoid = WGS84, k0: float = 1.0,
-                         false_easting: float = FALSE_EASTING, zone=None, iterations: int = 4):
+def gauss_kruger_inverse(
+    x,
+    y,
+    *,
+    lon0,
+    ellipsoid: Ellipsoid = WGS84,
+    k0: float = 1.0,
+    false_easting: float = FALSE_EASTING,
+    zone=None,
+    iterations: int = 4,
+):
     """Gauss-Krüger inverse projection: (x north, y east) in m -> geodetic (lat, lon) in rad.
 
     Krüger n-series to sixth order (Karney 2011, eqs. (11), (36)) followed by Newton's method
@@ -153,7 +178,11 @@ def gauss_kruger_inverse(x, y, *, lon0, ellipsoid: Ellipsoid = WGS84, k0: float 
     tau = taup
     for _ in range(iterations):
         tp = _tau_prime(tau, e)
-        dtau = ((taup - tp) / jnp.sqrt(1.0 + tp * tp) * (1.0 + (1.0 - e2) * tau * tau)
-                / ((1.0 - e2) * jnp.sqrt(1.0 + tau * tau)))
+        dtau = (
+            (taup - tp)
+            / jnp.sqrt(1.0 + tp * tp)
+            * (1.0 + (1.0 - e2) * tau * tau)
+            / ((1.0 - e2) * jnp.sqrt(1.0 + tau * tau))
+        )
         tau = tau + dtau
     return jnp.arctan(tau), lam + lon0

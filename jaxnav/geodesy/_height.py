@@ -16,7 +16,7 @@ observation beyond its 6 parameters), otherwise the plane (at least 3 points).
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -43,9 +43,9 @@ class HeightAnomalyModel(NamedTuple):
     coef: jax.Array
     center: jax.Array
     scale: Any
-    residuals: Optional[jax.Array] = None
+    residuals: jax.Array | None = None
     sigma0: Any = None
-    cov: Optional[jax.Array] = None
+    cov: jax.Array | None = None
     dof: int = 0
 
     @property
@@ -94,8 +94,9 @@ def fit_height_anomaly(x, y, zeta, *, kind: str = "auto", weights=None) -> Heigh
         raise ValueError(f"kind must be 'auto', 'plane' or 'quadratic', got {kind!r}")
     p = SURFACES[kind]
     if n < p:
-        raise ValueError(f"a {kind} height-anomaly surface has {p} parameters and needs at least {p} "
-                         f"control points, got {n}")
+        raise ValueError(
+            f"a {kind} height-anomaly surface has {p} parameters and needs at least {p} control points, got {n}"
+        )
     center = jnp.stack([jnp.mean(x), jnp.mean(y)])
     scale = jnp.sqrt(jnp.mean((x - center[0]) ** 2 + (y - center[1]) ** 2))
     scale = jnp.where(scale > 0, scale, 1.0)
@@ -104,8 +105,7 @@ def fit_height_anomaly(x, y, zeta, *, kind: str = "auto", weights=None) -> Heigh
     coef = _solve_weighted(A, zeta[:, None], w)
     v = zeta - A @ coef
     sigma0, cov, dof = _lsq_stats(A, v[:, None], w, p)
-    return HeightAnomalyModel(coef=coef, center=center, scale=scale, residuals=v, sigma0=sigma0,
-                              cov=cov, dof=dof)
+    return HeightAnomalyModel(coef=coef, center=center, scale=scale, residuals=v, sigma0=sigma0, cov=cov, dof=dof)
 
 
 def height_anomaly(model: HeightAnomalyModel, x, y):

@@ -191,8 +191,10 @@ def _check_pairs(src, dst, d, p, what):
     n = ss[0]
     need = -(-p // d)
     if n * d < p:
-        raise ValueError(f"{what}: {p} parameters need at least {need} common points ({n * d} coordinates "
-                         f"from {n} points are fewer than the {p} parameters)")
+        raise ValueError(
+            f"{what}: {p} parameters need at least {need} common points ({n * d} coordinates "
+            f"from {n} points are fewer than the {p} parameters)"
+        )
     return n
 
 
@@ -228,8 +230,9 @@ def _solve_weighted(J, r, w):
 
 
 @partial(jax.jit, static_argnames=("convention", "exact", "iterations"))
-def estimate_helmert7(src, dst, *, convention: str = "position_vector", exact: bool = False, weights=None,
-                      iterations: int = 4) -> HelmertFit:
+def estimate_helmert7(
+    src, dst, *, convention: str = "position_vector", exact: bool = False, weights=None, iterations: int = 4
+) -> HelmertFit:
     """Estimate a 7-parameter similarity from N >= 3 common points by (weighted) least squares.
 
     Gauss-Newton on the full model (``iterations`` fixed; from zero, two already reach float64
@@ -273,8 +276,15 @@ def estimate_helmert7(src, dst, *, convention: str = "position_vector", exact: b
     cov = A @ cov_c @ A.T
     th0 = to_origin(theta)
     params = Helmert7(t=th0[:3], r=th0[3:6], s=th0[6])
-    return HelmertFit(params=params, residuals=v, sigma0=sigma0, cov=cov, std=jnp.sqrt(jnp.diag(cov)), dof=dof,
-                      rms=jnp.sqrt(jnp.mean(v**2, axis=0)))
+    return HelmertFit(
+        params=params,
+        residuals=v,
+        sigma0=sigma0,
+        cov=cov,
+        std=jnp.sqrt(jnp.diag(cov)),
+        dof=dof,
+        rms=jnp.sqrt(jnp.mean(v**2, axis=0)),
+    )
 
 
 @jax.jit
@@ -316,5 +326,12 @@ def estimate_similarity2d(src, dst, *, weights=None) -> HelmertFit:
     cov = A @ cov_c @ A.T
     p = convert(sol)
     params = Similarity2D(t=p[:2], theta=p[2], m=p[3])
-    return HelmertFit(params=params, residuals=v, sigma0=sigma0, cov=cov, std=jnp.sqrt(jnp.diag(cov)), dof=dof,
-                      rms=jnp.sqrt(jnp.mean(v**2, axis=0)))
+    return HelmertFit(
+        params=params,
+        residuals=v,
+        sigma0=sigma0,
+        cov=cov,
+        std=jnp.sqrt(jnp.diag(cov)),
+        dof=dof,
+        rms=jnp.sqrt(jnp.mean(v**2, axis=0)),
+    )

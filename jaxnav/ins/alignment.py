@@ -58,6 +58,7 @@ class Alignment(NamedTuple):
 @jax.jit
 def _attitude_only(q0, dtheta):
     """Attitude-only strapdown q_{k+1} = q_k (x) q(dtheta_k); returns the final q."""
+
     def step(q, phi):
         return quat_mul(q, rv_to_quat(phi)), None
 
@@ -89,9 +90,22 @@ def _gnss_velocity(pos_sol, lat0, lon0, h0):
     return gt, v
 
 
-def coarse_alignment(t, f_b, w_b, pos_sol=None, *, static_s: float = 1.5, min_speed: float = 0.5,
-                     course_s: float = 2.0, heading="gnss", position=None, attitude=None, gyro_arw=None,
-                     gyro_bias_sigma: float = 0.0, max_gyrocompass_sigma: float = math.radians(1.0)) -> Alignment:
+def coarse_alignment(
+    t,
+    f_b,
+    w_b,
+    pos_sol=None,
+    *,
+    static_s: float = 1.5,
+    min_speed: float = 0.5,
+    course_s: float = 2.0,
+    heading="gnss",
+    position=None,
+    attitude=None,
+    gyro_arw=None,
+    gyro_bias_sigma: float = 0.0,
+    max_gyrocompass_sigma: float = math.radians(1.0),
+) -> Alignment:
     """Coarse alignment for a static start (host side, numpy).
 
     1. Levelling (Groves 2013, ch. 5, initialization and alignment): the mean specific
@@ -143,8 +157,9 @@ def coarse_alignment(t, f_b, w_b, pos_sol=None, *, static_s: float = 1.5, min_sp
     f_b = np.asarray(f_b, float)
     w_b = np.asarray(w_b, float)
     if t.ndim != 1 or f_b.shape != (t.size, 3) or w_b.shape != (t.size, 3):
-        raise ValueError(f"coarse_alignment: t (N,), f_b and w_b (N, 3) expected, got {t.shape}, {f_b.shape}, "
-                         f"{w_b.shape}")
+        raise ValueError(
+            f"coarse_alignment: t (N,), f_b and w_b (N, 3) expected, got {t.shape}, {f_b.shape}, {w_b.shape}"
+        )
     if t.size < 2:
         raise ValueError("coarse_alignment needs at least 2 IMU samples")
     if isinstance(heading, str):
@@ -221,6 +236,17 @@ def coarse_alignment(t, f_b, w_b, pos_sol=None, *, static_s: float = 1.5, min_sp
     C_bn = np.asarray(euler_to_dcm(att0))
     gyro_bias = w_mean - C_bn.T @ w_ie_n
     nav0 = NavState(q_bn=np.asarray(euler_to_quat(att0)), v_n=np.zeros(3), pos=np.array([lat0, lon0, h0]))
-    return Alignment(nav0=nav0, gyro_bias=gyro_bias, att0=att0, t_static=float(t[st][-1]), t_heading=t_head,
-                     course=course, yaw_change=yaw_change, heading_method=method, heading_sigma=sigma,
-                     gyrocompass_sigma=gc_sigma, gyro_arw=arw, n_static=n_static)
+    return Alignment(
+        nav0=nav0,
+        gyro_bias=gyro_bias,
+        att0=att0,
+        t_static=float(t[st][-1]),
+        t_heading=t_head,
+        course=course,
+        yaw_change=yaw_change,
+        heading_method=method,
+        heading_sigma=sigma,
+        gyrocompass_sigma=gc_sigma,
+        gyro_arw=arw,
+        n_static=n_static,
+    )

@@ -243,7 +243,7 @@ def _fit_axis(taus, av, K):
     up = np.where(act & (p > 0), p + 2.0 * sd, np.sqrt(np.maximum(fth, 0.0) + 2.0 * fsd))
     res = act & (p > 2.0 * sd)  # resolved: positive and at least twice its sigma
     up = np.where(res, up, np.maximum(up, p + 2.0 * sd))
-    floor = (math.sqrt(3.0) * p[0] / p[2] if p[2] > 0 and p[0] > 0 else taus[-1] if p[2] <= 0 else taus[0])
+    floor = math.sqrt(3.0) * p[0] / p[2] if p[2] > 0 and p[0] > 0 else taus[-1] if p[2] <= 0 else taus[0]
     return {"theta": p, "sd": sd, "res": res, "up": up, "chi2": chi2, "floor": floor}
 
 
@@ -318,23 +318,42 @@ def allan_noise_fit(y, dt, *, tau_range=None, per_octave: int = 1, kind: str = "
         lo, hi = (float(v) for v in tau_range)
         fitted = (taus >= lo * (1 - 1e-9)) & (taus <= hi * (1 + 1e-9))
     if fitted.sum() < 3:
-        raise ValueError(f"only {int(fitted.sum())} averaging times to fit (taus {taus[0]:g}..{taus[-1]:g} s); "
-                         "need >= 3: a longer recording or a wider tau range")
+        raise ValueError(
+            f"only {int(fitted.sum())} averaging times to fit (taus {taus[0]:g}..{taus[-1]:g} s); "
+            "need >= 3: a longer recording or a wider tau range"
+        )
     batch = av.shape[:-1]
     flat = av.reshape(-1, taus.size)
     fitted = _trim_short(taus, flat, K, fitted) if tau_range is None else fitted
-    out = {k: np.zeros((flat.shape[0],) + s) for k, s in
-           (("theta", (3,)), ("sd", (3,)), ("res", (3,)), ("up", (3,)), ("chi2", ()), ("floor", ()))}
+    out = {
+        k: np.zeros((flat.shape[0],) + s)
+        for k, s in (("theta", (3,)), ("sd", (3,)), ("res", (3,)), ("up", (3,)), ("chi2", ()), ("floor", ()))
+    }
     for i, a in enumerate(flat):
         out_i = _fit_axis(taus[fitted], a[fitted], K[fitted])
         for k, v in out_i.items():
             out[k][i] = v
     r = lambda k: out[k].reshape(batch + out[k].shape[1:])  # noqa: E731
     th, sd = r("theta"), r("sd")
-    return AllanFit(taus=taus, ms=m, avar=av, avar_sigma=allan_variance_sigma(av, m, n), fitted=fitted,
-                    white=th[..., 0], bias_instability=th[..., 1], rate_rw=th[..., 2], white_sigma=sd[..., 0],
-                    bias_instability_sigma=sd[..., 1], rate_rw_sigma=sd[..., 2], resolved=r("res").astype(bool),
-                    upper=r("up"), tau_floor=r("floor"), chi2=r("chi2"), dt=float(dt), n=int(n))
+    return AllanFit(
+        taus=taus,
+        ms=m,
+        avar=av,
+        avar_sigma=allan_variance_sigma(av, m, n),
+        fitted=fitted,
+        white=th[..., 0],
+        bias_instability=th[..., 1],
+        rate_rw=th[..., 2],
+        white_sigma=sd[..., 0],
+        bias_instability_sigma=sd[..., 1],
+        rate_rw_sigma=sd[..., 2],
+        resolved=r("res").astype(bool),
+        upper=r("up"),
+        tau_floor=r("floor"),
+        chi2=r("chi2"),
+        dt=float(dt),
+        n=int(n),
+    )
 
 
 def uniform_rates(t, rates, dt=None):
@@ -389,12 +408,19 @@ def imu_noise_from_allan(gyro: AllanFit, accel: AllanFit, *, reduce=None):
 
     def gm(f: AllanFit):
         b = pick(f, 1)
-        s = FLICKER_AVAR ** 0.5 * np.asarray(b) / GM_PEAK_ADEV
+        s = FLICKER_AVAR**0.5 * np.asarray(b) / GM_PEAK_ADEV
         T = np.asarray(f.tau_floor) / GM_PEAK_TAU
         return (s, T) if reduce is None else (float(s), float(reduce(T)))
 
     gs, gT = gm(gyro)
     as_, aT = gm(accel)
-    return ImuNoise(gyro_arw=pick(gyro, 0), accel_vrw=pick(accel, 0), gyro_bias_instability=gs, gyro_bias_tau=gT,
-                    accel_bias_instability=as_, accel_bias_tau=aT, gyro_bias_rw=pick(gyro, 2),
-                    accel_bias_rw=pick(accel, 2))
+    return ImuNoise(
+        gyro_arw=pick(gyro, 0),
+        accel_vrw=pick(accel, 0),
+        gyro_bias_instability=gs,
+        gyro_bias_tau=gT,
+        accel_bias_instability=as_,
+        accel_bias_tau=aT,
+        gyro_bias_rw=pick(gyro, 2),
+        accel_bias_rw=pick(accel, 2),
+    )

@@ -32,10 +32,12 @@ def quat_mul_c(p, q):
     """Hamilton product on component tuples (w, x, y, z) of same-shape arrays (structure of arrays)."""
     pw, px, py, pz = p
     qw, qx, qy, qz = q
-    return (pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw)
+    return (
+        pw * qw - px * qx - py * qy - pz * qz,
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+    )
 
 
 def quat_mul(p, q):
@@ -74,22 +76,54 @@ def quat_rotate(q, v):
 def quat_to_dcm(q):
     """Unit quaternion -> DCM (..., 3, 3); for q_bn this is C_bn (body -> nav)."""
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return jnp.stack([
-        jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return jnp.stack(
+        [
+            jnp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            jnp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 def dcm_to_quat(C):
     """DCM -> unit quaternion with w >= 0 (branch-free Shepperd-style selection)."""
     tr = C[..., 0, 0] + C[..., 1, 1] + C[..., 2, 2]
-    cands = jnp.stack([
-        jnp.stack([1 + tr, C[..., 2, 1] - C[..., 1, 2], C[..., 0, 2] - C[..., 2, 0], C[..., 1, 0] - C[..., 0, 1]], -1),
-        jnp.stack([C[..., 2, 1] - C[..., 1, 2], 1 + 2 * C[..., 0, 0] - tr, C[..., 0, 1] + C[..., 1, 0], C[..., 0, 2] + C[..., 2, 0]], -1),
-        jnp.stack([C[..., 0, 2] - C[..., 2, 0], C[..., 0, 1] + C[..., 1, 0], 1 + 2 * C[..., 1, 1] - tr, C[..., 1, 2] + C[..., 2, 1]], -1),
-        jnp.stack([C[..., 1, 0] - C[..., 0, 1], C[..., 0, 2] + C[..., 2, 0], C[..., 1, 2] + C[..., 2, 1], 1 + 2 * C[..., 2, 2] - tr], -1),
-    ], -2)  # row i has 4 q_i q_j (up to sign), largest diagonal is the best conditioned
+    cands = jnp.stack(
+        [
+            jnp.stack(
+                [1 + tr, C[..., 2, 1] - C[..., 1, 2], C[..., 0, 2] - C[..., 2, 0], C[..., 1, 0] - C[..., 0, 1]], -1
+            ),
+            jnp.stack(
+                [
+                    C[..., 2, 1] - C[..., 1, 2],
+                    1 + 2 * C[..., 0, 0] - tr,
+                    C[..., 0, 1] + C[..., 1, 0],
+                    C[..., 0, 2] + C[..., 2, 0],
+                ],
+                -1,
+            ),
+            jnp.stack(
+                [
+                    C[..., 0, 2] - C[..., 2, 0],
+                    C[..., 0, 1] + C[..., 1, 0],
+                    1 + 2 * C[..., 1, 1] - tr,
+                    C[..., 1, 2] + C[..., 2, 1],
+                ],
+                -1,
+            ),
+            jnp.stack(
+                [
+                    C[..., 1, 0] - C[..., 0, 1],
+                    C[..., 0, 2] + C[..., 2, 0],
+                    C[..., 1, 2] + C[..., 2, 1],
+                    1 + 2 * C[..., 2, 2] - tr,
+                ],
+                -1,
+            ),
+        ],
+        -2,
+    )  # row i has 4 q_i q_j (up to sign), largest diagonal is the best conditioned
     diag = jnp.stack([1 + tr, 1 + 2 * C[..., 0, 0] - tr, 1 + 2 * C[..., 1, 1] - tr, 1 + 2 * C[..., 2, 2] - tr], -1)
     i = jnp.argmax(diag, axis=-1)
     q = jnp.take_along_axis(cands, i[..., None, None], axis=-2)[..., 0, :]

@@ -63,7 +63,8 @@ All functions are pure JAX (jit / vmap / grad), single-point shapes (batch with 
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -97,13 +98,32 @@ IDX18 = ErrorStateIndex(slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), sli
 IDX15 = ErrorStateIndex(slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), None, slice(12, 15))
 
 #: Names of the 18 error states, in order.
-STATE_NAMES18 = ("phi_E", "phi_N", "phi_U", "dV_E", "dV_N", "dV_U", "dlat", "dlon", "dh",
-                 "eps_bx", "eps_by", "eps_bz", "eps_rx", "eps_ry", "eps_rz", "nabla_x", "nabla_y", "nabla_z")
+STATE_NAMES18 = (
+    "phi_E",
+    "phi_N",
+    "phi_U",
+    "dV_E",
+    "dV_N",
+    "dV_U",
+    "dlat",
+    "dlon",
+    "dh",
+    "eps_bx",
+    "eps_by",
+    "eps_bz",
+    "eps_rx",
+    "eps_ry",
+    "eps_rz",
+    "nabla_x",
+    "nabla_y",
+    "nabla_z",
+)
 #: Names of the 15 error states, in order.
 STATE_NAMES15 = STATE_NAMES18[:12] + STATE_NAMES18[15:]
 #: Layout of the 21-state vector [phi, dV, dpos, eps_b, nabla, s_g, s_a].
-IDX21 = ErrorStateIndex(slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), None, slice(12, 15),
-                        slice(15, 18), slice(18, 21))
+IDX21 = ErrorStateIndex(
+    slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), None, slice(12, 15), slice(15, 18), slice(18, 21)
+)
 #: Names of the 21 error states, in order.
 STATE_NAMES21 = STATE_NAMES15 + ("s_gx", "s_gy", "s_gz", "s_ax", "s_ay", "s_az")
 
@@ -162,23 +182,29 @@ def nav_error_F(pos, v_n, f_n, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=
     w_in = w_ie + w_en
 
     # d w_en / d v_n  (= d w_in / d v_n)
-    dwen_dv = jnp.stack([
-        jnp.stack([z, -1.0 / RMh, z]),
-        jnp.stack([1.0 / RNh, z, z]),
-        jnp.stack([tL / RNh, z, z]),
-    ])
+    dwen_dv = jnp.stack(
+        [
+            jnp.stack([z, -1.0 / RMh, z]),
+            jnp.stack([1.0 / RNh, z, z]),
+            jnp.stack([tL / RNh, z, z]),
+        ]
+    )
     # d w_ie / d[lat, lon, h]
-    dwie_dp = jnp.stack([
-        jnp.stack([z, z, z]),
-        jnp.stack([-w * sL, z, z]),
-        jnp.stack([w * cL, z, z]),
-    ])
+    dwie_dp = jnp.stack(
+        [
+            jnp.stack([z, z, z]),
+            jnp.stack([-w * sL, z, z]),
+            jnp.stack([w * cL, z, z]),
+        ]
+    )
     # d w_en / d[lat, lon, h]
-    dwen_dp = jnp.stack([
-        jnp.stack([vn * dRM / RMh**2, z, vn / RMh**2]),
-        jnp.stack([-ve * dRN / RNh**2, z, -ve / RNh**2]),
-        jnp.stack([ve / (RNh * cL * cL) - ve * tL * dRN / RNh**2, z, -ve * tL / RNh**2]),
-    ])
+    dwen_dp = jnp.stack(
+        [
+            jnp.stack([vn * dRM / RMh**2, z, vn / RMh**2]),
+            jnp.stack([-ve * dRN / RNh**2, z, -ve / RNh**2]),
+            jnp.stack([ve / (RNh * cL * cL) - ve * tL * dRN / RNh**2, z, -ve * tL / RNh**2]),
+        ]
+    )
     dg_dlat, dg_dh = jax.jacfwd(normal_gravity, argnums=(0, 1))(lat, h, ellipsoid)
     # g_n = [0, 0, -gamma(lat, h)]
     dg_dp = jnp.stack([jnp.stack([z, z, z]), jnp.stack([z, z, z]), jnp.stack([-dg_dlat, z, -dg_dh])])
@@ -191,16 +217,20 @@ def nav_error_F(pos, v_n, f_n, *, ellipsoid: Ellipsoid = WGS84, earth_rate_sign=
     F_vv = -skew(2.0 * w_ie + w_en) + V @ dwen_dv
     F_vp = V @ (2.0 * dwie_dp + dwen_dp) + dg_dp
     F_pa = jnp.zeros((3, 3), dtype)
-    F_pv = jnp.stack([
-        jnp.stack([z, 1.0 / RMh, z]),
-        jnp.stack([1.0 / (RNh * cL), z, z]),
-        jnp.stack([z, z, jnp.ones((), dtype)]),
-    ])
-    F_pp = jnp.stack([
-        jnp.stack([-vn * dRM / RMh**2, z, -vn / RMh**2]),
-        jnp.stack([ve / (RNh * cL) * (tL - dRN / RNh), z, -ve / (RNh**2 * cL)]),
-        jnp.stack([z, z, z]),
-    ])
+    F_pv = jnp.stack(
+        [
+            jnp.stack([z, 1.0 / RMh, z]),
+            jnp.stack([1.0 / (RNh * cL), z, z]),
+            jnp.stack([z, z, jnp.ones((), dtype)]),
+        ]
+    )
+    F_pp = jnp.stack(
+        [
+            jnp.stack([-vn * dRM / RMh**2, z, -vn / RMh**2]),
+            jnp.stack([ve / (RNh * cL) * (tL - dRN / RNh), z, -ve / (RNh**2 * cL)]),
+            jnp.stack([z, z, z]),
+        ]
+    )
     return jnp.block([[F_aa, F_av, F_ap], [F_va, F_vv, F_vp], [F_pa, F_pv, F_pp]])
 
 
@@ -235,11 +265,15 @@ def _Qc18(noise: ImuNoise):
     """Qc (9, 9) of W = [w_g, w_b, w_a] (S0 eq. 19): diag(ARW^2, 2 sigma^2 / tau, VRW^2) (x3 each), with the
     gyro bias instability as the Markov drift's sigma and its correlation time as tau."""
     dtype = jnp.result_type(noise.gyro_arw, noise.accel_vrw, noise.gyro_bias_instability, noise.gyro_bias_tau, float)
-    return jnp.diag(jnp.concatenate([
-        jnp.square(_vec3(noise.gyro_arw, dtype)),
-        markov_psd(_vec3(noise.gyro_bias_instability, dtype), _vec3(noise.gyro_bias_tau, dtype)),
-        jnp.square(_vec3(noise.accel_vrw, dtype)),
-    ]))
+    return jnp.diag(
+        jnp.concatenate(
+            [
+                jnp.square(_vec3(noise.gyro_arw, dtype)),
+                markov_psd(_vec3(noise.gyro_bias_instability, dtype), _vec3(noise.gyro_bias_tau, dtype)),
+                jnp.square(_vec3(noise.accel_vrw, dtype)),
+            ]
+        )
+    )
 
 
 def markov_psd(sigma, tau):
@@ -299,12 +333,18 @@ def _Qc21(noise: ImuNoise):
         tau = v(tau)
         return jnp.where(jnp.isinf(tau), 0.0, 2.0 * jnp.square(v(sigma)) / jnp.where(jnp.isinf(tau), 1.0, tau))
 
-    return jnp.diag(jnp.concatenate([
-        jnp.square(v(noise.gyro_arw)), jnp.square(v(noise.accel_vrw)),
-        gm(noise.gyro_bias_instability, noise.gyro_bias_tau) + jnp.square(v(noise.gyro_bias_rw)),
-        gm(noise.accel_bias_instability, noise.accel_bias_tau) + jnp.square(v(noise.accel_bias_rw)),
-        jnp.square(v(noise.gyro_sf_rw)), jnp.square(v(noise.accel_sf_rw)),
-    ]))
+    return jnp.diag(
+        jnp.concatenate(
+            [
+                jnp.square(v(noise.gyro_arw)),
+                jnp.square(v(noise.accel_vrw)),
+                gm(noise.gyro_bias_instability, noise.gyro_bias_tau) + jnp.square(v(noise.gyro_bias_rw)),
+                gm(noise.accel_bias_instability, noise.accel_bias_tau) + jnp.square(v(noise.accel_bias_rw)),
+                jnp.square(v(noise.gyro_sf_rw)),
+                jnp.square(v(noise.accel_sf_rw)),
+            ]
+        )
+    )
 
 
 def discretize_van_loan(F, G, Qc, dt):
@@ -500,8 +540,20 @@ class ErrorModel:
         dtype = jnp.result_type(noise.gyro_bias_tau, noise.accel_bias_tau, float)
         return jnp.concatenate([_vec3(noise.gyro_bias_tau, dtype), _vec3(noise.accel_bias_tau, dtype)])
 
-    def P0(self, pos, *, att, vel, pos_enu, gyro_bias=0.0, accel_bias=0.0, gyro_markov=0.0, gyro_scale=0.0,
-           accel_scale=0.0, odo_scale=0.0):
+    def P0(
+        self,
+        pos,
+        *,
+        att,
+        vel,
+        pos_enu,
+        gyro_bias=0.0,
+        accel_bias=0.0,
+        gyro_markov=0.0,
+        gyro_scale=0.0,
+        accel_scale=0.0,
+        odo_scale=0.0,
+    ):
         """Diagonal initial covariance (n, n) from 1-sigma values (SI; scalars or (3,)).
 
         Args:
@@ -519,18 +571,27 @@ class ErrorModel:
         v = lambda x: _vec3(x, dtype)  # noqa: E731
         lat, h = pos[0], pos[2]
         pe = v(pos_enu)
-        dpos = jnp.stack([pe[1] / (meridian_radius(lat) + h),
-                          pe[0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)), pe[2]])
-        blocks = dict(phi=v(att), dv=v(vel), dpos=dpos, eps_b=v(gyro_bias), eps_r=v(gyro_markov),
-                      nabla=v(accel_bias), s_g=v(gyro_scale), s_a=v(accel_scale),
-                      s_odo=jnp.reshape(jnp.asarray(odo_scale, dtype), (1,)))
+        dpos = jnp.stack(
+            [pe[1] / (meridian_radius(lat) + h), pe[0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)), pe[2]]
+        )
+        blocks = dict(
+            phi=v(att),
+            dv=v(vel),
+            dpos=dpos,
+            eps_b=v(gyro_bias),
+            eps_r=v(gyro_markov),
+            nabla=v(accel_bias),
+            s_g=v(gyro_scale),
+            s_a=v(accel_scale),
+            s_odo=jnp.reshape(jnp.asarray(odo_scale, dtype), (1,)),
+        )
         sd = jnp.zeros(self.n, dtype)
         for name, sl in self.idx._asdict().items():
             if sl is not None:
                 sd = sd.at[sl].set(blocks[name])
         return jnp.diag(sd * sd)
 
-    def drop(self, states, noises, idx: ErrorStateIndex) -> "ErrorModel":
+    def drop(self, states, noises, idx: ErrorStateIndex) -> ErrorModel:
         """The model without some states and noise inputs.
 
         F loses the states' rows (their dynamics) and columns (the kept states then take them as
@@ -555,11 +616,17 @@ class ErrorModel:
         def build_Qc(noise):
             return _take(_take(parent.build_Qc(noise), rn, 0), rn, 1)
 
-        return ErrorModel(names=tuple(self.names[i] for i in keep),
-                          noise_names=tuple(self.noise_names[i] for i in nkeep), idx=idx, build_F=build_F,
-                          build_G=build_G, build_Qc=build_Qc, bias_gm=self.bias_gm)
+        return ErrorModel(
+            names=tuple(self.names[i] for i in keep),
+            noise_names=tuple(self.noise_names[i] for i in nkeep),
+            idx=idx,
+            build_F=build_F,
+            build_G=build_G,
+            build_Qc=build_Qc,
+            bias_gm=self.bias_gm,
+        )
 
-    def with_odometer_scale(self) -> "ErrorModel":
+    def with_odometer_scale(self) -> ErrorModel:
         """The model with one more state appended: the odometer scale-factor error s_odo (dimensionless).
 
         An odometer reads s_meas = (1 + k) v_fwd; s_odo = k - k_applied is a random constant
@@ -581,26 +648,52 @@ class ErrorModel:
         def build_G(C_bn):
             return jnp.pad(parent.build_G(C_bn), ((0, 1), (0, 0)))
 
-        return ErrorModel(names=self.names + ("s_odo",), noise_names=self.noise_names,
-                          idx=self.idx._replace(s_odo=slice(n, n + 1)), build_F=build_F, build_G=build_G,
-                          build_Qc=self.build_Qc, bias_gm=self.bias_gm)
+        return ErrorModel(
+            names=self.names + ("s_odo",),
+            noise_names=self.noise_names,
+            idx=self.idx._replace(s_odo=slice(n, n + 1)),
+            build_F=build_F,
+            build_G=build_G,
+            build_Qc=self.build_Qc,
+            bias_gm=self.bias_gm,
+        )
 
 
 #: Names of the 9 noise inputs of the 18-state model (S0 eq. 19).
 NOISE_NAMES18 = ("w_gx", "w_gy", "w_gz", "w_bx", "w_by", "w_bz", "w_ax", "w_ay", "w_az")
 
 #: The 18-state model of S0 eqs. (18)-(19).
-ERROR_MODEL_18 = ErrorModel(names=STATE_NAMES18, noise_names=NOISE_NAMES18, idx=IDX18, build_F=_F18, build_G=_G18,
-                            build_Qc=_Qc18)
+ERROR_MODEL_18 = ErrorModel(
+    names=STATE_NAMES18, noise_names=NOISE_NAMES18, idx=IDX18, build_F=_F18, build_G=_G18, build_Qc=_Qc18
+)
 #: The 15-state model: the 18-state one without the gyro Markov drift eps_r and its driving noise w_b.
 ERROR_MODEL_15 = ERROR_MODEL_18.drop(STATE_NAMES18[12:15], NOISE_NAMES18[3:6], IDX15)
 
 #: Names of the 18 noise inputs of the 21-state model.
-NOISE_NAMES21 = ("w_gx", "w_gy", "w_gz", "w_ax", "w_ay", "w_az", "w_bgx", "w_bgy", "w_bgz", "w_bax", "w_bay", "w_baz",
-                 "w_sgx", "w_sgy", "w_sgz", "w_sax", "w_say", "w_saz")
+NOISE_NAMES21 = (
+    "w_gx",
+    "w_gy",
+    "w_gz",
+    "w_ax",
+    "w_ay",
+    "w_az",
+    "w_bgx",
+    "w_bgy",
+    "w_bgz",
+    "w_bax",
+    "w_bay",
+    "w_baz",
+    "w_sgx",
+    "w_sgy",
+    "w_sgz",
+    "w_sax",
+    "w_say",
+    "w_saz",
+)
 #: The 21-state model: Gauss-Markov / random-walk biases and scale factors (module docstring).
-ERROR_MODEL_21 = ErrorModel(names=STATE_NAMES21, noise_names=NOISE_NAMES21, idx=IDX21, build_F=_F21, build_G=_G21,
-                            build_Qc=_Qc21, bias_gm=True)
+ERROR_MODEL_21 = ErrorModel(
+    names=STATE_NAMES21, noise_names=NOISE_NAMES21, idx=IDX21, build_F=_F21, build_G=_G21, build_Qc=_Qc21, bias_gm=True
+)
 #: The 21-state model without the scale factors: 15 states [phi, dV, dpos, eps_b, nabla] with Gauss-Markov /
 #: random-walk biases (tau (6,)), noise [w_g, w_a, w_bg, w_ba] (12).
 ERROR_MODEL_15GM = ERROR_MODEL_21.drop(STATE_NAMES21[15:], NOISE_NAMES21[12:], IDX15)
@@ -621,7 +714,24 @@ def error_model_for(n_states: int) -> ErrorModel:
 
 
 __all__ = [
-    "ERROR_MODEL_15", "ERROR_MODEL_15GM", "ERROR_MODEL_18", "ERROR_MODEL_21", "ErrorModel", "ErrorStateIndex",
-    "IDX15", "IDX18", "IDX21", "NOISE_NAMES18", "NOISE_NAMES21", "STATE_NAMES15", "STATE_NAMES18", "STATE_NAMES21",
-    "discretize_series", "discretize_taylor", "discretize_van_loan", "error_model_for", "markov_psd", "nav_error_F",
+    "ERROR_MODEL_15",
+    "ERROR_MODEL_15GM",
+    "ERROR_MODEL_18",
+    "ERROR_MODEL_21",
+    "ErrorModel",
+    "ErrorStateIndex",
+    "IDX15",
+    "IDX18",
+    "IDX21",
+    "NOISE_NAMES18",
+    "NOISE_NAMES21",
+    "STATE_NAMES15",
+    "STATE_NAMES18",
+    "STATE_NAMES21",
+    "discretize_series",
+    "discretize_taylor",
+    "discretize_van_loan",
+    "error_model_for",
+    "markov_psd",
+    "nav_error_F",
 ]

@@ -17,7 +17,7 @@ errors inside +-3 sigma (expected 99.73 % per component for a consistent Gaussia
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -72,9 +72,23 @@ def _interp(t_new, t, y, *, angle=False):
     return wrap_angle(out) if angle else out
 
 
-def trajectory_errors(t_sol, pos_sol, v_sol, rpy_sol, t_ref, pos_ref, v_ref=None, rpy_ref=None, *, cov_pos_enu=None,
-                      sig_vel=None, sig_att=None, windows=None, at: str = "sparser",
-                      max_gap: Optional[float] = None) -> TrajectoryErrors:
+def trajectory_errors(
+    t_sol,
+    pos_sol,
+    v_sol,
+    rpy_sol,
+    t_ref,
+    pos_ref,
+    v_ref=None,
+    rpy_ref=None,
+    *,
+    cov_pos_enu=None,
+    sig_vel=None,
+    sig_att=None,
+    windows=None,
+    at: str = "sparser",
+    max_gap: float | None = None,
+) -> TrajectoryErrors:
     """Errors of a solution against a reference at common epochs (module docstring).
 
     Args:
@@ -100,8 +114,14 @@ def trajectory_errors(t_sol, pos_sol, v_sol, rpy_sol, t_ref, pos_ref, v_ref=None
     v_ref = nan(M) if v_ref is None else np.asarray(v_ref, float)
     rpy_sol = nan(N) if rpy_sol is None else np.asarray(rpy_sol, float)
     rpy_ref = nan(M) if rpy_ref is None else np.asarray(rpy_ref, float)
-    for name, a, n in (("pos_sol", pos_sol, N), ("v_sol", v_sol, N), ("rpy_sol", rpy_sol, N), ("pos_ref", pos_ref, M),
-                       ("v_ref", v_ref, M), ("rpy_ref", rpy_ref, M)):
+    for name, a, n in (
+        ("pos_sol", pos_sol, N),
+        ("v_sol", v_sol, N),
+        ("rpy_sol", rpy_sol, N),
+        ("pos_ref", pos_ref, M),
+        ("v_ref", v_ref, M),
+        ("rpy_ref", rpy_ref, M),
+    ):
         if a.shape != (n, 3):
             raise ValueError(f"{name} must have shape ({n}, 3), got {a.shape}")
     for name, t in (("t_sol", t_sol), ("t_ref", t_ref)):
@@ -114,8 +134,11 @@ def trajectory_errors(t_sol, pos_sol, v_sol, rpy_sol, t_ref, pos_ref, v_ref=None
     sa = nan(N) if sig_att is None else np.asarray(sig_att, float)
     lo, hi = max(t_sol[0], t_ref[0]), min(t_sol[-1], t_ref[-1])
     if at == "sparser":
-        at = "solution" if np.count_nonzero((t_sol >= lo) & (t_sol <= hi)) <= np.count_nonzero(
-            (t_ref >= lo) & (t_ref <= hi)) else "reference"
+        at = (
+            "solution"
+            if np.count_nonzero((t_sol >= lo) & (t_sol <= hi)) <= np.count_nonzero((t_ref >= lo) & (t_ref <= hi))
+            else "reference"
+        )
     if at not in ("solution", "reference"):
         raise ValueError(f"at must be 'solution', 'reference' or 'sparser', got {at!r}")
     t_at, t_in = (t_sol, t_ref) if at == "solution" else (t_ref, t_sol)
@@ -151,8 +174,19 @@ def trajectory_errors(t_sol, pos_sol, v_sol, rpy_sol, t_ref, pos_ref, v_ref=None
     if windows is not None:
         for k, (a, b) in enumerate(np.asarray(windows, float).reshape(-1, 2)):
             win[(te >= a) & (te < b)] = k
-    return TrajectoryErrors(t=te, pos_enu=e_pos, vel_enu=vs - vr, att=e_att, sig_pos_enu=sp, sig_vel=svv,
-                            sig_att=saa, nees_pos=nees, window=win, n_dropped=int(np.count_nonzero(~ok)), at=at)
+    return TrajectoryErrors(
+        t=te,
+        pos_enu=e_pos,
+        vel_enu=vs - vr,
+        att=e_att,
+        sig_pos_enu=sp,
+        sig_vel=svv,
+        sig_att=saa,
+        nees_pos=nees,
+        window=win,
+        n_dropped=int(np.count_nonzero(~ok)),
+        at=at,
+    )
 
 
 def _rms(x, *, finite_only: bool = True):
@@ -193,15 +227,16 @@ def _block(e: TrajectoryErrors, sel) -> dict:
         out[f"{c}_max_abs_rad"] = _max(np.abs(a[:, j]))
     nees = e.nees_pos[sel]
     out["nees_pos_mean"] = float(np.nanmean(nees)) if np.isfinite(nees).any() else float("nan")
-    out["share_nees_pos_within_3_sigma"] = (float(np.mean(nees[np.isfinite(nees)] <= NEES3_99_73))
-                                            if np.isfinite(nees).any() else float("nan"))
+    out["share_nees_pos_within_3_sigma"] = (
+        float(np.mean(nees[np.isfinite(nees)] <= NEES3_99_73)) if np.isfinite(nees).any() else float("nan")
+    )
     out["share_pos_within_3_sigma"] = _share(p, e.sig_pos_enu[sel])
     out["share_vel_within_3_sigma"] = _share(v, e.sig_vel[sel])
     out["share_att_within_3_sigma"] = _share(a, e.sig_att[sel])
     return out
 
 
-def error_statistics(e: TrajectoryErrors, n_windows: Optional[int] = None) -> dict:
+def error_statistics(e: TrajectoryErrors, n_windows: int | None = None) -> dict:
     """Whole-run and in-outage statistics and the outage protocol of :class:`TrajectoryErrors`.
 
     Returns a dict (SI; unit in each key): ``all`` and ``outages`` (:func:`_block` of the epochs:
@@ -221,18 +256,34 @@ def error_statistics(e: TrajectoryErrors, n_windows: Optional[int] = None) -> di
         if s.any():
             m3[k], mh[k] = float(np.max(d3[s])), float(np.max(dh[s]))
     scored = np.isfinite(m3)
-    return {"n_epochs": int(e.t.size), "n_dropped_epochs": int(e.n_dropped), "scored_at": e.at,
-            "all": _block(e, np.ones(e.t.size, bool)), "outages": _block(e, e.window >= 0),
-            "outage_protocol": {"n_windows": W, "n_scored_windows": int(scored.sum()),
-                                "max_3d_drift_m": m3.tolist(), "max_h_drift_m": mh.tolist(),
-                                "rms_of_max_3d_drift_m": _rms(m3[scored]) if scored.any() else float("nan"),
-                                "mean_of_max_3d_drift_m": float(np.mean(m3[scored])) if scored.any() else float("nan"),
-                                "rms_of_max_h_drift_m": _rms(mh[scored]) if scored.any() else float("nan")}}
+    return {
+        "n_epochs": int(e.t.size),
+        "n_dropped_epochs": int(e.n_dropped),
+        "scored_at": e.at,
+        "all": _block(e, np.ones(e.t.size, bool)),
+        "outages": _block(e, e.window >= 0),
+        "outage_protocol": {
+            "n_windows": W,
+            "n_scored_windows": int(scored.sum()),
+            "max_3d_drift_m": m3.tolist(),
+            "max_h_drift_m": mh.tolist(),
+            "rms_of_max_3d_drift_m": _rms(m3[scored]) if scored.any() else float("nan"),
+            "mean_of_max_3d_drift_m": float(np.mean(m3[scored])) if scored.any() else float("nan"),
+            "rms_of_max_h_drift_m": _rms(mh[scored]) if scored.any() else float("nan"),
+        },
+    }
 
 
 # ----------------------------------------------------------------------------- GNSS outage protocol
-def outage_windows(t_start: float, t_end: float, *, first_s: float = 40.0, outage_s: float = 15.0,
-                   gap_s: float = 45.0, end_margin_s: float = 30.0) -> np.ndarray:
+def outage_windows(
+    t_start: float,
+    t_end: float,
+    *,
+    first_s: float = 40.0,
+    outage_s: float = 15.0,
+    gap_s: float = 45.0,
+    end_margin_s: float = 30.0,
+) -> np.ndarray:
     """(K, 2) simulated GNSS outage windows [a, b), s, of the outage protocol.
 
     The first starts ``first_s`` after ``t_start`` (the filter's convergence); GNSS is back for
@@ -256,7 +307,7 @@ def training_windows(windows, t_end: float, outage_s: float) -> np.ndarray:
     """
     w = np.asarray(windows, float).reshape(-1, 2)
     out = []
-    for (a0, b0), (a1, _) in zip(w[:-1], w[1:]):
+    for (_, b0), (a1, _) in zip(w[:-1], w[1:]):
         L = min(outage_s, a1 - b0)
         mid = 0.5 * (b0 + a1)
         if L > 1.0:
@@ -310,14 +361,15 @@ class OutageScores(NamedTuple):
     err_sm: Any
     withheld: Any
     runtime_s: float
-    figure: Optional[str]
+    figure: str | None
     n_nonfinite_nav: int
     sig_fwd: Any = None
     sig_sm: Any = None
 
 
-def score_outages(t, err_f, err_s, fixed, withheld, outages, *, runtime_s=float("nan"), n_nonfinite=0,
-                  sig_f=None, sig_s=None) -> OutageScores:
+def score_outages(
+    t, err_f, err_s, fixed, withheld, outages, *, runtime_s=float("nan"), n_nonfinite=0, sig_f=None, sig_s=None
+) -> OutageScores:
     """Per-window and overall horizontal error statistics (m) at the fixed epochs inside the outages.
 
     Args:
@@ -343,12 +395,27 @@ def score_outages(t, err_f, err_s, fixed, withheld, outages, *, runtime_s=float(
             st["fr"][k], st["sr"][k] = rms(e_f[s]), rms(e_s[s])
     sc = withheld & fixed
     return OutageScores(
-        windows=outages, n_ref=n_ref, fwd_max=st["fm"], sm_max=st["sm"], fwd_rms=st["fr"], sm_rms=st["sr"],
-        fwd_rms_all=rms(e_f[sc]), sm_rms_all=rms(e_s[sc]),
+        windows=outages,
+        n_ref=n_ref,
+        fwd_max=st["fm"],
+        sm_max=st["sm"],
+        fwd_rms=st["fr"],
+        sm_rms=st["sr"],
+        fwd_rms_all=rms(e_f[sc]),
+        sm_rms_all=rms(e_s[sc]),
         fwd_max_mean=float(np.nanmean(st["fm"])) if np.any(n_ref) else float("nan"),
         sm_max_mean=float(np.nanmean(st["sm"])) if np.any(n_ref) else float("nan"),
-        fwd_rms_outside=rms(e_f[~withheld & fixed]), t=t, err_fwd=e_f, err_sm=e_s, withheld=withheld,
-        runtime_s=runtime_s, figure=None, n_nonfinite_nav=n_nonfinite, sig_fwd=sig_f, sig_sm=sig_s)
+        fwd_rms_outside=rms(e_f[~withheld & fixed]),
+        t=t,
+        err_fwd=e_f,
+        err_sm=e_s,
+        withheld=withheld,
+        runtime_s=runtime_s,
+        figure=None,
+        n_nonfinite_nav=n_nonfinite,
+        sig_fwd=sig_f,
+        sig_sm=sig_s,
+    )
 
 
 # ----------------------------------------------------------------------------- sigmas from error covariances
@@ -387,6 +454,6 @@ def attitude_sigmas(covs, heading, idx) -> np.ndarray:
     e, n, u = range(idx.phi.start, idx.phi.start + 3)
     f = np.stack([np.sin(heading), np.cos(heading)], -1)  # forward in (east, north)
     r = np.stack([np.cos(heading), -np.sin(heading)], -1)  # right
-    T = P[:, e:n + 1, e:n + 1]
+    T = P[:, e : n + 1, e : n + 1]
     var = lambda w: np.einsum("mi,mij,mj->m", w, T, w)  # noqa: E731
     return np.sqrt(np.clip(np.stack([var(f), var(r), P[:, u, u]], -1), 0.0, None))

@@ -37,8 +37,9 @@ their normalised innovation squared against a chi-square quantile (``gate=``, :c
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import partial
-from typing import Any, NamedTuple, Optional, Sequence
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -61,6 +62,7 @@ from jaxnav.filters import (
 from jaxnav.geodesy import WGS84, Ellipsoid, check_float64
 from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat
 from jaxnav.ins.error_model import ERROR_MODEL_18, ErrorModel, discretize_taylor, discretize_van_loan
+from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows, predict_gnss_pv  # noqa: F401
 from jaxnav.ins.mechanization import (
     ImuSample,
     MechParams,
@@ -74,12 +76,24 @@ from jaxnav.ins.mechanization import (
     mech_step,
 )
 from jaxnav.ins.noise import ImuNoise
-from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows, predict_gnss_pv  # noqa: F401
-
 
 #: per-epoch outputs that :func:`loosely_coupled` can save
-LC_OUTPUTS = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs",
-              "nis", "factors", "noise", "valid", "gated", "gnss_nis")
+LC_OUTPUTS = (
+    "nav",
+    "biases",
+    "covs",
+    "pred_covs",
+    "Phi",
+    "corrections",
+    "innovations",
+    "innov_covs",
+    "nis",
+    "factors",
+    "noise",
+    "valid",
+    "gated",
+    "gnss_nis",
+)
 
 
 class PVMeasurements(NamedTuple):
@@ -130,8 +144,19 @@ def _floor_sigmas(c, floor):
     return jnp.where(jnp.eye(3, dtype=bool), jnp.maximum(c, floor**2), c)
 
 
-def gnss_measurements(t, pos, vel, pos_cov, vel_cov, *, use=None, use_vel=None, lever=(0.0, 0.0, 0.0),
-                      pos_sigma_floor=0.0, vel_sigma_floor=0.0) -> PVMeasurements:
+def gnss_measurements(
+    t,
+    pos,
+    vel,
+    pos_cov,
+    vel_cov,
+    *,
+    use=None,
+    use_vel=None,
+    lever=(0.0, 0.0, 0.0),
+    pos_sigma_floor=0.0,
+    vel_sigma_floor=0.0,
+) -> PVMeasurements:
     """:class:`PVMeasurements` of M GNSS fixes: R = blockdiag(position covariance, velocity covariance).
 
     The standard deviations are floored at ``pos_sigma_floor`` / ``vel_sigma_floor`` with the
@@ -155,9 +180,11 @@ def gnss_measurements(t, pos, vel, pos_cov, vel_cov, *, use=None, use_vel=None, 
     pc = jnp.broadcast_to(jnp.asarray(pos_cov, jnp.float64), (M, 3, 3)) if jnp.shape(pos_cov)[-2:] == (3, 3) else None
     vc = jnp.broadcast_to(jnp.asarray(vel_cov, jnp.float64), (M, 3, 3)) if jnp.shape(vel_cov)[-2:] == (3, 3) else None
     if pos.shape != (M, 3) or vel.shape != (M, 3) or pc is None or vc is None or lever.shape not in ((3,), (M, 3)):
-        raise ValueError(f"gnss_measurements(): pos {pos.shape}, vel {vel.shape}, pos_cov {jnp.shape(pos_cov)}, vel_cov "
-                         f"{jnp.shape(vel_cov)}, lever {lever.shape} do not fit {M} epochs: (M, 3), (M, 3), (M, 3, 3) or "
-                         f"(3, 3), the same, (3,) or (M, 3)")
+        raise ValueError(
+            f"gnss_measurements(): pos {pos.shape}, vel {vel.shape}, pos_cov {jnp.shape(pos_cov)}, vel_cov "
+            f"{jnp.shape(vel_cov)}, lever {lever.shape} do not fit {M} epochs: (M, 3), (M, 3), (M, 3, 3) or "
+            f"(3, 3), the same, (3,) or (M, 3)"
+        )
     use = jnp.ones(M, bool) if use is None else jnp.asarray(use, bool)
     use_vel = use if use_vel is None else jnp.asarray(use_vel, bool)
     R = jnp.zeros((M, 6, 6))
@@ -165,12 +192,12 @@ def gnss_measurements(t, pos, vel, pos_cov, vel_cov, *, use=None, use_vel=None, 
     R = R.at[:, 3:, 3:].set(_floor_sigmas(jnp.where(jnp.isfinite(vc), vc, 1.0), vel_sigma_floor))
     fin = jnp.isfinite(vel)
     mask = jnp.concatenate([jnp.broadcast_to(use[:, None], (M, 3)), use_vel[:, None] & fin], axis=1)
-    return PVMeasurements(t=t, pos=pos, vel=jnp.where(fin, vel, 0.0), R=R, mask=mask,
-                          lever=jnp.broadcast_to(lever, (M, 3)))
+    return PVMeasurements(
+        t=t, pos=pos, vel=jnp.where(fin, vel, 0.0), R=R, mask=mask, lever=jnp.broadcast_to(lever, (M, 3))
+    )
 
 
-def lc_params(model: ErrorModel, noise: ImuNoise, pos0, *, att, vel, pos_enu, odo_scale=0.0,
-              R_scale=1.0) -> LCParams:
+def lc_params(model: ErrorModel, noise: ImuNoise, pos0, *, att, vel, pos_enu, odo_scale=0.0, R_scale=1.0) -> LCParams:
     """:class:`LCParams` of an error model from the IMU's noise and the initial navigation sigmas.
 
     P0 (:meth:`ErrorModel.P0`): the navigation sigmas given here; gyro and accelerometer biases from
@@ -187,9 +214,18 @@ def lc_params(model: ErrorModel, noise: ImuNoise, pos0, *, att, vel, pos_enu, od
     Returns:
       :class:`LCParams`; array leaves, so ``vmap``/``grad`` reach the noise and sigmas.
     """
-    P0 = model.P0(pos0, att=att, vel=vel, pos_enu=pos_enu, gyro_bias=noise.gyro_bias_initial,
-                  accel_bias=noise.accel_bias_initial, gyro_markov=noise.gyro_bias_instability,
-                  gyro_scale=noise.gyro_sf, accel_scale=noise.accel_sf, odo_scale=odo_scale)
+    P0 = model.P0(
+        pos0,
+        att=att,
+        vel=vel,
+        pos_enu=pos_enu,
+        gyro_bias=noise.gyro_bias_initial,
+        accel_bias=noise.accel_bias_initial,
+        gyro_markov=noise.gyro_bias_instability,
+        gyro_scale=noise.gyro_sf,
+        accel_scale=noise.accel_sf,
+        odo_scale=odo_scale,
+    )
     return LCParams(P0=P0, Qc=model.Qc(noise), tau_markov=model.tau(noise), R_scale=R_scale)
 
 
@@ -295,12 +331,15 @@ def segment_imu(t_imu, t_meas, dt_imu) -> Segments:
     if np.any(np.diff(t_imu) <= 0):
         raise ValueError(f"IMU times are not strictly increasing (index {int(np.argmax(np.diff(t_imu) <= 0)) + 1})")
     if np.any(np.diff(t_meas) <= 0):
-        raise ValueError(f"measurement times are not strictly increasing (index {int(np.argmax(np.diff(t_meas) <= 0)) + 1})")
+        raise ValueError(
+            f"measurement times are not strictly increasing (index {int(np.argmax(np.diff(t_meas) <= 0)) + 1})"
+        )
     t_start = t_imu[0] - np.broadcast_to(np.asarray(dt_imu, float), t_imu.shape)[0]
     if t_meas[0] <= t_start or t_meas[-1] > t_imu[-1] + 1e-9 or t_meas[0] > t_imu[-1]:
         raise ValueError(
             f"measurement epochs [{t_meas[0]:.6f}, {t_meas[-1]:.6f}] s are not inside the IMU span "
-            f"({t_start:.6f}, {t_imu[-1]:.6f}] s; trim the measurements to the IMU data")
+            f"({t_start:.6f}, {t_imu[-1]:.6f}] s; trim the measurements to the IMU data"
+        )
     ends = np.searchsorted(t_imu, t_meas + 1e-9, side="right")  # samples with t_imu <= t_meas
     starts = np.concatenate([[0], ends[:-1]])
     counts = ends - starts
@@ -387,8 +426,18 @@ class LCSave(NamedTuple):
         ``nav_every = 1`` and k dividing the samples per epoch interval.
     """
 
-    epochs: tuple = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "nis", "factors",
-                     "valid")
+    epochs: tuple = (
+        "nav",
+        "biases",
+        "covs",
+        "pred_covs",
+        "Phi",
+        "corrections",
+        "innovations",
+        "nis",
+        "factors",
+        "valid",
+    )
     imu_every: int = 0
 
 
@@ -455,8 +504,7 @@ def _decay_gm(biases: SensorBiases, T, tau_b):
     return biases._replace(gyro=biases.gyro * jnp.exp(-T / tau_b[:3]), accel=biases.accel * jnp.exp(-T / tau_b[3:]))
 
 
-def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipsoid, hold_height, imu_every,
-                       tau_b=None):
+def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipsoid, hold_height, imu_every, tau_b=None):
     """The IMU samples of one epoch interval, one :func:`mech_step` each, with the sensor-error correction.
 
     Args:
@@ -473,25 +521,31 @@ def _propagate_samples(mech: MechState, biases: SensorBiases, rows, tau, ellipso
     scale = biases.gyro_scale is not None
 
     def step(c, x):
-        (mech, biases, sums, T, w_last), (dth_raw, dv_raw, dt, use) = c, x
+        (mech, biases, sums, T, _), (dth_raw, dv_raw, dt, use) = c, x
         dth, dvc = _correct(dth_raw, dv_raw, dt, biases, biases.markov)
-        new_mech, nav = mech_step(mech, ImuSample(dth, dvc, dt), mparams, ellipsoid=ellipsoid,
-                                  hold_height=hold_height)
+        new_mech, nav = mech_step(mech, ImuSample(dth, dvc, dt), mparams, ellipsoid=ellipsoid, hold_height=hold_height)
         C = quat_to_dcm(nav.q_bn)
-        sums = _Sums(sums.pos + nav.pos * dt, sums.v + nav.v_n * dt, sums.f + C @ dvc, sums.C + C * dt,
-                     sums.Cw + C * dth[None, :] if scale else None, sums.Cf + C * dvc[None, :] if scale else None)
+        sums = _Sums(
+            sums.pos + nav.pos * dt,
+            sums.v + nav.v_n * dt,
+            sums.f + C @ dvc,
+            sums.C + C * dt,
+            sums.Cw + C * dth[None, :] if scale else None,
+            sums.Cf + C * dvc[None, :] if scale else None,
+        )
         new = (new_mech, biases._replace(markov=biases.markov * jnp.exp(-dt / tau)), sums, T + dt, dth / dt)
         return _where_tree(use, new, c), (nav if imu_every else None)
 
     init = (mech, biases, _zero_sums(dtype, scale), jnp.zeros((), dtype), jnp.zeros(3, dtype))
     (mech, biases, sums, T, w_last), navs = jax.lax.scan(step, init, rows)
     if imu_every:
-        navs = jax.tree_util.tree_map(lambda a: a[imu_every - 1::imu_every], navs)
+        navs = jax.tree_util.tree_map(lambda a: a[imu_every - 1 :: imu_every], navs)
     return _Propagated(mech, _decay_gm(biases, T, tau_b), sums, T, w_last, None), navs
 
 
-def _propagate_blocks(mech: MechState, biases: SensorBiases, G_prev, rows, tau, M: int, ellipsoid, hold_height,
-                      tau_b=None):
+def _propagate_blocks(
+    mech: MechState, biases: SensorBiases, G_prev, rows, tau, M: int, ellipsoid, hold_height, tau_b=None
+):
     """The IMU samples of one epoch interval by the two-speed mechanization (:func:`jaxnav.ins.mechanize`'s
     ``nav_every``), with the sensor-error correction and F's sums.
 
@@ -537,18 +591,28 @@ def _propagate_blocks(mech: MechState, biases: SensorBiases, G_prev, rows, tau, 
         Cf = sums.Cf + C0 @ x[3] if scale else None
         return _Sums(sums.pos + fr.pos_mid * T, sums.v + fr.v_mid * T, sums.f + C0 @ x[0], sums.C + C0 @ x[1], Cw, Cf)
 
-    two, sums, _ = _scan_blocks(_TwoSpeed(mech.nav, mech.a_prev, G_prev), blk, 1.0, ellipsoid, hold_height,
-                                acc=_zero_sums(dtype, scale), accumulate=add, xs=xs, skip_empty=True)
+    two, sums, _ = _scan_blocks(
+        _TwoSpeed(mech.nav, mech.a_prev, G_prev),
+        blk,
+        1.0,
+        ellipsoid,
+        hold_height,
+        acc=_zero_sums(dtype, scale),
+        accumulate=add,
+        xs=xs,
+        skip_empty=True,
+    )
     last = jnp.maximum(jnp.sum(use) - 1, 0)
     flags = _imu_flags(dth, dvc, jnp.where(use, dt, 1.0), series=True)
-    new_mech = MechState(nav=two.nav, dtheta_prev=dth[last], dv_prev=dvc[last], a_prev=two.a_prev,
-                         status=mech.status | flags)
+    new_mech = MechState(
+        nav=two.nav, dtheta_prev=dth[last], dv_prev=dvc[last], a_prev=two.a_prev, status=mech.status | flags
+    )
     T = jnp.sum(dtu)
     new_biases = _decay_gm(biases._replace(markov=biases.markov * jnp.exp(-T / tau)), T, tau_b)
     return _Propagated(new_mech, new_biases, sums, T, dth[last] / dt[last], two.G)
 
 
-def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, how: "LCDiscretization"):
+def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, how: LCDiscretization):
     """Phi and Qd of one epoch interval (S0 eqs. (1), (8)) from F at the interval's time averages.
 
     Returns:
@@ -623,9 +687,12 @@ def _stack(parts):
     """One measurement from several :class:`MeasRows`: rows concatenated, R block-diagonal."""
     if len(parts) == 1:
         return parts[0]
-    return MeasRows(z=jnp.concatenate([r.z for r in parts]), H=jnp.concatenate([r.H for r in parts]),
-                    R=jax.scipy.linalg.block_diag(*[r.R for r in parts]),
-                    mask=jnp.concatenate([r.mask for r in parts]))
+    return MeasRows(
+        z=jnp.concatenate([r.z for r in parts]),
+        H=jnp.concatenate([r.H for r in parts]),
+        R=jax.scipy.linalg.block_diag(*[r.R for r in parts]),
+        mask=jnp.concatenate([r.mask for r in parts]),
+    )
 
 
 def _feedback(p: _Propagated, kf: FilterState, idx, flag) -> _Carry:
@@ -655,7 +722,7 @@ class _CoreInputs(NamedTuple):
     rows: tuple  # (dtheta (M, K, 3), dv (M, K, 3), dt (M, K), use (M, K) bool): raw IMU samples per interval
     t_last: Any  # (M,) end time of the last IMU sample before each epoch
     meas: PVMeasurements
-    aid_epochs: Optional[_AidEpochs]
+    aid_epochs: _AidEpochs | None
     aid_params: tuple
     gate_thresholds: Any  # (7,) chi-square quantiles by dof, or None without gating
 
@@ -677,10 +744,12 @@ def _propagate(carry: _Carry, rows, tau, tau_b, opts: _CoreOptions):
     """The epoch interval's IMU samples: per sample, or by blocks with ``nav_every > 1``."""
     pr = opts.propagation
     if pr.nav_every > 1:
-        return _propagate_blocks(carry.mech, carry.biases, carry.G_prev, rows, tau, pr.nav_every, opts.ellipsoid,
-                                 pr.hold_height, tau_b), None
-    return _propagate_samples(carry.mech, carry.biases, rows, tau, opts.ellipsoid, pr.hold_height,
-                              opts.save.imu_every, tau_b)
+        return _propagate_blocks(
+            carry.mech, carry.biases, carry.G_prev, rows, tau, pr.nav_every, opts.ellipsoid, pr.hold_height, tau_b
+        ), None
+    return _propagate_samples(
+        carry.mech, carry.biases, rows, tau, opts.ellipsoid, pr.hold_height, opts.save.imu_every, tau_b
+    )
 
 
 @partial(jax.jit, static_argnames=("opts",))
@@ -692,9 +761,11 @@ def _lc_core(inputs: _CoreInputs, params: LCParams, inflation, estimator, opts: 
     tau = jnp.full(3, jnp.inf, dtype) if model.bias_gm else tau_all  # the Markov drift's (none with GM biases)
     tau_b = tau_all if model.bias_gm else None
     Qc, R_scale = jnp.asarray(params.Qc, dtype), jnp.asarray(params.R_scale, dtype)
-    fparams = FilterParams(model=LinearGaussian(None, None, None, None, None),
-                           inflation=NoInflation() if inflation is None else inflation,
-                           estimator=NoEstimator() if estimator is None else estimator)
+    fparams = FilterParams(
+        model=LinearGaussian(None, None, None, None, None),
+        inflation=NoInflation() if inflation is None else inflation,
+        estimator=NoEstimator() if estimator is None else estimator,
+    )
     gate = inputs.gate_thresholds is not None
     z0, z3 = jnp.zeros((), dtype), jnp.zeros(3, dtype)
 
@@ -703,13 +774,15 @@ def _lc_core(inputs: _CoreInputs, params: LCParams, inflation, estimator, opts: 
         p, navs = _propagate(carry, rows, tau, tau_b, opts)
         Phi, Qd, flag = _discretise(model, p, tau_all, Qc, opts.ellipsoid, opts.discretization)
         w_mean, T_mean = (z3, z0) if ae is None or ae.still is None else _mean_rate(rows, ae.still, carry.biases)
-        ctx = MeasContext(nav=p.mech.nav, w_ib_b=p.w_last, w_mean_b=w_mean, T_mean=T_mean, dtx=t_meas - t_nav,
-                          biases=p.biases)
+        ctx = MeasContext(
+            nav=p.mech.nav, w_ib_b=p.w_last, w_mean_b=w_mean, T_mean=T_mean, dtx=t_meas - t_nav, biases=p.biases
+        )
         gnss = _measure(ctx, m, R_scale, model.n, opts.ellipsoid)
         gated, gnss_nis, gate_run = jnp.zeros((), bool), z0, carry.gate_run
         if gate:
-            gnss, gated, gnss_nis, gate_run = _gate(gnss, Phi, Qd, carry.kf.P, carry.gate_run,
-                                                    inputs.gate_thresholds, opts.gate_max_run)
+            gnss, gated, gnss_nis, gate_run = _gate(
+                gnss, Phi, Qd, carry.kf.P, carry.gate_run, inputs.gate_thresholds, opts.gate_max_run
+            )
             flag = flag | jnp.where(gated, _status.GNSS_GATED, 0).astype(jnp.int32)
         parts = [gnss]
         for i, am in enumerate(opts.aid_models):
@@ -718,14 +791,32 @@ def _lc_core(inputs: _CoreInputs, params: LCParams, inflation, estimator, opts: 
         z, H, R, mask = _stack(parts)
         # x is zero after every feedback; the literal zero lets XLA drop the products F x and H x
         kf_prior = carry.kf._replace(x=jnp.zeros(model.n, dtype))
-        kf, info = filter_step(kf_prior, StepInput(z=z, mask=mask, F=Phi, H=H, Q=Qd, R=R), fparams,
-                               save=_STEP_OUTPUTS, check_finite=opts.check_finite)
-        new = _feedback(p, kf, model.idx, flag)._replace(n_gated=carry.n_gated + gated.astype(jnp.int32),
-                                                         gate_run=gate_run)
-        allv = dict(nav=new.mech.nav, biases=new.biases, covs=kf.P, pred_covs=info.pred_covs, Phi=Phi,
-                    corrections=kf.x, innovations=info.innovations, innov_covs=info.innov_covs, nis=info.nis,
-                    factors=info.factors, noise=info.noise, valid=info.valid, gated=gated,
-                    gnss_nis=gnss_nis if gate else None)
+        kf, info = filter_step(
+            kf_prior,
+            StepInput(z=z, mask=mask, F=Phi, H=H, Q=Qd, R=R),
+            fparams,
+            save=_STEP_OUTPUTS,
+            check_finite=opts.check_finite,
+        )
+        new = _feedback(p, kf, model.idx, flag)._replace(
+            n_gated=carry.n_gated + gated.astype(jnp.int32), gate_run=gate_run
+        )
+        allv = dict(
+            nav=new.mech.nav,
+            biases=new.biases,
+            covs=kf.P,
+            pred_covs=info.pred_covs,
+            Phi=Phi,
+            corrections=kf.x,
+            innovations=info.innovations,
+            innov_covs=info.innov_covs,
+            nis=info.nis,
+            factors=info.factors,
+            noise=info.noise,
+            valid=info.valid,
+            gated=gated,
+            gnss_nis=gnss_nis if gate else None,
+        )
         return new, (LCEpochs(t=t_meas, t_nav=t_nav, **{k: allv[k] for k in save.epochs}), navs)
 
     mech0 = MechState(nav=inputs.nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3, status=jnp.zeros((), jnp.int32))
@@ -739,10 +830,17 @@ def _lc_core(inputs: _CoreInputs, params: LCParams, inflation, estimator, opts: 
     carry0 = _Carry(mech0, inputs.biases0, kf0, G0, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
     xs = (inputs.rows, inputs.meas.t, inputs.t_last, inputs.meas, inputs.aid_epochs)
     final, (ep, navs) = jax.lax.scan(epoch, carry0, xs)
-    return LCResult(epochs=ep, final_nav=final.mech.nav, final_biases=final.biases, loglik=final.kf.loglik,
-                    n_nonfinite=final.kf.n_nonfinite, n_skipped=final.kf.n_skipped,
-                    status=final.kf.status | final.mech.status, imu_nav=navs if save.imu_every else None,
-                    n_gated=final.n_gated)
+    return LCResult(
+        epochs=ep,
+        final_nav=final.mech.nav,
+        final_biases=final.biases,
+        loglik=final.kf.loglik,
+        n_nonfinite=final.kf.n_nonfinite,
+        n_skipped=final.kf.n_skipped,
+        status=final.kf.status | final.mech.status,
+        imu_nav=navs if save.imu_every else None,
+        n_gated=final.n_gated,
+    )
 
 
 def chi2_quantile(prob: float, dof: int) -> float:
@@ -812,16 +910,25 @@ def _merge_epochs(t_imu, meas: PVMeasurements, active):
     src = np.where(row >= 0, row, fill)
     has = jnp.asarray(row >= 0)
     take = lambda a: jnp.asarray(a)[src]  # noqa: E731
-    merged = PVMeasurements(t=t_all, pos=take(meas.pos), vel=jnp.where(has[:, None], take(meas.vel), 0.0),
-                            R=take(meas.R), mask=take(meas.mask) & has[:, None],
-                            lever=jnp.where(has[:, None], take(meas.lever), 0.0))
+    merged = PVMeasurements(
+        t=t_all,
+        pos=take(meas.pos),
+        vel=jnp.where(has[:, None], take(meas.vel), 0.0),
+        R=take(meas.R),
+        mask=take(meas.mask) & has[:, None],
+        lever=jnp.where(has[:, None], take(meas.lever), 0.0),
+    )
     return merged, row, sample
 
 
 def _check_options(model, gate, save: LCSave, propagation: LCPropagation, discretization: LCDiscretization):
     """ValueError for options of the wrong type or out of range."""
-    for name, v, cls in (("error_model", model, ErrorModel), ("save", save, LCSave),
-                         ("propagation", propagation, LCPropagation), ("discretization", discretization, LCDiscretization)):
+    for name, v, cls in (
+        ("error_model", model, ErrorModel),
+        ("save", save, LCSave),
+        ("propagation", propagation, LCPropagation),
+        ("discretization", discretization, LCDiscretization),
+    ):
         if not isinstance(v, cls):
             raise ValueError(f"{name} must be an {cls.__name__}, got {type(v).__name__}")
     if gate is not None and not isinstance(gate, LCGate):
@@ -851,14 +958,20 @@ def _check_shapes(model: ErrorModel, N: int, dtheta, dv, meas: PVMeasurements, p
             raise ValueError(f"meas.{name} has shape {jnp.shape(getattr(meas, name))}; expected {shp}")
     n, p = model.n, model.p
     if jnp.shape(params.P0) != (n, n) or jnp.shape(params.Qc) != (p, p):
-        raise ValueError(f"params.P0 {jnp.shape(params.P0)} / Qc {jnp.shape(params.Qc)} must be "
-                         f"({n}, {n}) / ({p}, {p}) for the {n}-state model")
+        raise ValueError(
+            f"params.P0 {jnp.shape(params.P0)} / Qc {jnp.shape(params.Qc)} must be "
+            f"({n}, {n}) / ({p}, {p}) for the {n}-state model"
+        )
     if jnp.ndim(params.tau_markov) > 0 and jnp.shape(params.tau_markov) not in ((3,), (model.tau_size,)):
-        raise ValueError(f"params.tau_markov has shape {jnp.shape(params.tau_markov)}; expected () or "
-                         f"({model.tau_size},) for the {n}-state model")
+        raise ValueError(
+            f"params.tau_markov has shape {jnp.shape(params.tau_markov)}; expected () or "
+            f"({model.tau_size},) for the {n}-state model"
+        )
     if jnp.ndim(params.tau_markov) > 0 and jnp.shape(params.tau_markov)[0] != model.tau_size:
-        raise ValueError(f"params.tau_markov has shape {jnp.shape(params.tau_markov)}; the model with Gauss-Markov "
-                         f"biases needs ({model.tau_size},) = [gyro bias taus (3), accelerometer bias taus (3)]")
+        raise ValueError(
+            f"params.tau_markov has shape {jnp.shape(params.tau_markov)}; the model with Gauss-Markov "
+            f"biases needs ({model.tau_size},) = [gyro bias taus (3), accelerometer bias taus (3)]"
+        )
 
 
 def _thin_aids(aids, N: int, dt_imu):
@@ -870,8 +983,9 @@ def _thin_aids(aids, N: int, dt_imu):
             raise ValueError(f"aids must be Aid records (jaxnav.ins.measurements), got {type(a).__name__}")
         act = np.ones(N, bool) if a.active is None else np.asarray(a.active)
         if act.shape != (N,) or act.dtype != bool:
-            raise ValueError(f"aids[{i}] ({a.model.name}): active must be a ({N},) bool array, got "
-                             f"{act.dtype} {act.shape}")
+            raise ValueError(
+                f"aids[{i}] ({a.model.name}): active must be a ({N},) bool array, got {act.dtype} {act.shape}"
+            )
         raw.append(act)
         if a.rate_hz is not None:
             k = max(1, int(round(1.0 / (a.rate_hz * dtm))))
@@ -888,36 +1002,58 @@ def _aid_epochs(aids, N: int, raw, thinned, mean_aid, sample, seg: Segments) -> 
     for i, a in enumerate(aids):
         for leaf in jax.tree_util.tree_leaves(a.data):
             if jnp.shape(leaf)[:1] != (N,):
-                raise ValueError(f"aids[{i}] ({a.model.name}): data leaves must have {N} rows (one per "
-                                 f"IMU sample), got {jnp.shape(leaf)}")
-    data = tuple(None if a.data is None else jax.tree_util.tree_map(lambda x: jnp.asarray(x)[sample], a.data)
-                 for a in aids)
+                raise ValueError(
+                    f"aids[{i}] ({a.model.name}): data leaves must have {N} rows (one per "
+                    f"IMU sample), got {jnp.shape(leaf)}"
+                )
+    data = tuple(
+        None if a.data is None else jax.tree_util.tree_map(lambda x: jnp.asarray(x)[sample], a.data) for a in aids
+    )
     active = jnp.asarray(np.stack([t[sample] for t in thinned], axis=-1))
     still = None if mean_aid is None else jnp.asarray(raw[mean_aid][seg.idx] & seg.use)
     return _AidEpochs(data=data, active=active, still=still)
 
 
-def _initial_biases(model: ErrorModel, biases0: Optional[SensorBiases], dtype) -> SensorBiases:
+def _initial_biases(model: ErrorModel, biases0: SensorBiases | None, dtype) -> SensorBiases:
     """``biases0`` (default zeros) with exactly the optional fields the model has (zeros where not given)."""
     z3 = jnp.zeros(3, dtype)
     b = SensorBiases(z3, z3, z3) if biases0 is None else biases0
     if model.scale_factors:
-        b = b._replace(gyro_scale=z3 if b.gyro_scale is None else b.gyro_scale,
-                       accel_scale=z3 if b.accel_scale is None else b.accel_scale)
+        b = b._replace(
+            gyro_scale=z3 if b.gyro_scale is None else b.gyro_scale,
+            accel_scale=z3 if b.accel_scale is None else b.accel_scale,
+        )
     else:
         b = b._replace(gyro_scale=None, accel_scale=None)
     if model.idx.s_odo is None:
         return b._replace(odo_scale=None)
-    return b._replace(odo_scale=jnp.zeros(1, dtype) if b.odo_scale is None
-                      else jnp.reshape(jnp.asarray(b.odo_scale, dtype), (1,)))
+    return b._replace(
+        odo_scale=jnp.zeros(1, dtype) if b.odo_scale is None else jnp.reshape(jnp.asarray(b.odo_scale, dtype), (1,))
+    )
 
 
-def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, params: LCParams, *,
-                    dt_imu=None, biases0: Optional[SensorBiases] = None, error_model: ErrorModel = ERROR_MODEL_18,
-                    aids: Sequence[Aid] = (), gate: Optional[LCGate] = None, inflation=None, estimator=None,
-                    save: LCSave = LCSave(), propagation: LCPropagation = LCPropagation(),
-                    discretization: LCDiscretization = LCDiscretization(), ellipsoid: Ellipsoid = WGS84,
-                    check_finite: bool = True, max_sigma: float = 1e3) -> LCResult:
+def loosely_coupled(
+    nav0: NavState,
+    t_imu,
+    dtheta,
+    dv,
+    meas: PVMeasurements,
+    params: LCParams,
+    *,
+    dt_imu=None,
+    biases0: SensorBiases | None = None,
+    error_model: ErrorModel = ERROR_MODEL_18,
+    aids: Sequence[Aid] = (),
+    gate: LCGate | None = None,
+    inflation=None,
+    estimator=None,
+    save: LCSave = LCSave(),
+    propagation: LCPropagation = LCPropagation(),
+    discretization: LCDiscretization = LCDiscretization(),
+    ellipsoid: Ellipsoid = WGS84,
+    check_finite: bool = True,
+    max_sigma: float = 1e3,
+) -> LCResult:
     """Loosely coupled INS/GNSS filter with feedback correction (S0 experiment, eqs. (4)-(19)).
 
     Args:
@@ -955,8 +1091,10 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     _check_shapes(model, N, dtheta, dv, meas, params)
     check_float64(nav0.pos, meas.pos, what="absolute positions")
     if isinstance(t_imu, jax.core.Tracer) or isinstance(meas.t, jax.core.Tracer):
-        raise ValueError("t_imu and meas.t must be concrete arrays (they set the scan's shapes); close over "
-                         "them instead of passing them through jit/vmap")
+        raise ValueError(
+            "t_imu and meas.t must be concrete arrays (they set the scan's shapes); close over "
+            "them instead of passing them through jit/vmap"
+        )
     t_imu = np.asarray(t_imu, dtype=float)
     if dt_imu is None:
         d = np.diff(t_imu)
@@ -980,13 +1118,26 @@ def loosely_coupled(nav0: NavState, t_imu, dtheta, dv, meas: PVMeasurements, par
     dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (N,))
     # the IMU samples of every epoch interval, (M, K, ...); padded samples get dt = 1 and are skipped by ``use``
     rows = (jnp.asarray(dtheta)[seg.idx], jnp.asarray(dv)[seg.idx], jnp.where(seg.use, dt_all[seg.idx], 1.0), seg.use)
-    inputs = _CoreInputs(nav0=nav0, biases0=_initial_biases(model, biases0, dtype), rows=rows, t_last=seg.t_last,
-                         meas=meas._replace(t=jnp.asarray(meas.t, jnp.float64)), aid_epochs=aid_epochs,
-                         aid_params=tuple(a.params for a in aids), gate_thresholds=thresholds)
-    opts = _CoreOptions(model=model, save=save._replace(epochs=tuple(save.epochs), imu_every=int(save.imu_every)),
-                        propagation=propagation, discretization=discretization,
-                        gate_max_run=10 if gate is None else int(gate.max_run),
-                        aid_models=tuple(a.model for a in aids), ellipsoid=ellipsoid, check_finite=check_finite)
+    inputs = _CoreInputs(
+        nav0=nav0,
+        biases0=_initial_biases(model, biases0, dtype),
+        rows=rows,
+        t_last=seg.t_last,
+        meas=meas._replace(t=jnp.asarray(meas.t, jnp.float64)),
+        aid_epochs=aid_epochs,
+        aid_params=tuple(a.params for a in aids),
+        gate_thresholds=thresholds,
+    )
+    opts = _CoreOptions(
+        model=model,
+        save=save._replace(epochs=tuple(save.epochs), imu_every=int(save.imu_every)),
+        propagation=propagation,
+        discretization=discretization,
+        gate_max_run=10 if gate is None else int(gate.max_run),
+        aid_models=tuple(a.model for a in aids),
+        ellipsoid=ellipsoid,
+        check_finite=check_finite,
+    )
     res = _lc_core(inputs, params, inflation, estimator, opts)
     return res._replace(epochs=res.epochs._replace(gnss_row=gnss_row))
 

@@ -33,8 +33,12 @@ def horizontal_fix_nll(nav, covs, t_nav, t_fix, pos_fix, R_h, lever_b, pos0, idx
       idx: :class:`jaxnav.ins.error_model.ErrorStateIndex` of the covariances (``dpos`` = dlat, dlon, dh).
     """
     M = jnp.shape(t_fix)[0]
-    for name, a, shp in (("covs", covs, None), ("t_nav", t_nav, (M,)), ("pos_fix", pos_fix, (M, 3)),
-                         ("R_h", R_h, (M, 2, 2))):
+    for name, a, shp in (
+        ("covs", covs, None),
+        ("t_nav", t_nav, (M,)),
+        ("pos_fix", pos_fix, (M, 3)),
+        ("R_h", R_h, (M, 2, 2)),
+    ):
         if (shp is not None and jnp.shape(a) != shp) or (shp is None and jnp.shape(a)[0] != M):
             raise ValueError(f"horizontal_fix_nll: {name} has shape {jnp.shape(a)}, expected {shp or (M, 'n', 'n')}")
     ilat, ilon = idx.dpos.start, idx.dpos.start + 1
@@ -45,5 +49,8 @@ def horizontal_fix_nll(nav, covs, t_nav, t_fix, pos_fix, R_h, lever_b, pos0, idx
     sc = jnp.abs(curvilinear_to_enu(nav.pos, jnp.ones(3)))  # metres per (rad, rad, m)
     var = jnp.stack([covs[:, ilon, ilon] * sc[:, 0] ** 2, covs[:, ilat, ilat] * sc[:, 1] ** 2], -1)
     S = R_h + jax.vmap(jnp.diag)(var)
-    return 0.5 * (jnp.einsum("mi,mi->m", e, jnp.linalg.solve(S, e[..., None])[..., 0])
-                  + jnp.linalg.slogdet(S)[1] + 2 * jnp.log(2 * jnp.pi))
+    return 0.5 * (
+        jnp.einsum("mi,mi->m", e, jnp.linalg.solve(S, e[..., None])[..., 0])
+        + jnp.linalg.slogdet(S)[1]
+        + 2 * jnp.log(2 * jnp.pi)
+    )

@@ -46,7 +46,8 @@ its gyro-bias term; tested against autodiff of the nonlinear measurements in
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, NamedTuple, Optional
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -121,7 +122,7 @@ class Aid(NamedTuple):
     active: Any = None
     data: Any = None
     params: Any = None
-    rate_hz: Optional[float] = None
+    rate_hz: float | None = None
 
 
 def _block(idx_slice, n, rows, block, dtype):
@@ -393,8 +394,13 @@ def nhc(active=None, *, sigma=(0.1, 0.1), C_vb=None, lever_b=(0.0, 0.0, 0.0), ra
       rate_hz: constraint epochs per second (default 2: on a simulated car with 60 s outages 2 Hz and 10 Hz
         bounded the drift equally, 4.0 m vs 4.3 m, at 0.56x the run time).
     """
-    return Aid(NHC, _mask(active, "active"), None,
-               VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))
+    return Aid(
+        NHC,
+        _mask(active, "active"),
+        None,
+        VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")),
+        _rate(rate_hz),
+    )
 
 
 def odometer(speed, *, sigma=0.1, C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=None, active=None) -> Aid:
@@ -410,8 +416,9 @@ def odometer(speed, *, sigma=0.1, C_vb=None, lever_b=(0.0, 0.0, 0.0), rate_hz=No
     if sp.ndim != 1:
         raise ValueError(f"speed must be 1-D (one value per IMU sample), got {sp.shape}")
     act = np.isfinite(np.asarray(speed, float)) if active is None else _mask(active, "active")
-    return Aid(ODOMETER, act, sp,
-               VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz))
+    return Aid(
+        ODOMETER, act, sp, VehicleParams(jnp.asarray(sigma, float), _C(C_vb), _v3(lever_b, "lever_b")), _rate(rate_hz)
+    )
 
 
 def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active=None, default_sigma=0.01) -> Aid:
@@ -433,10 +440,31 @@ def heading(heading, *, sigma=0.01, axis_b=(0.0, 1.0, 0.0), rate_hz=None, active
     sg = jnp.asarray(sigma, float)
     if sg.shape != hd.shape:
         raise ValueError(f"sigma must be a scalar or have the shape of heading {hd.shape}, got {sg.shape}")
-    return Aid(HEADING, act, (hd, sg), HeadingParams(jnp.asarray(default_sigma, float), _v3(axis_b, "axis_b")),
-               _rate(rate_hz))
+    return Aid(
+        HEADING, act, (hd, sg), HeadingParams(jnp.asarray(default_sigma, float), _v3(axis_b, "axis_b")), _rate(rate_hz)
+    )
 
 
-__all__ = ["Aid", "GNSS_PV", "GnssData", "HEADING", "HeadingParams", "MeasContext", "MeasRows", "MeasurementModel",
-           "NHC", "ODOMETER", "VehicleParams", "ZARU", "ZUPT", "ZaruParams", "ZuptParams", "heading", "predict_gnss_pv",
-           "nhc", "odometer", "zaru", "zupt"]
+__all__ = [
+    "Aid",
+    "GNSS_PV",
+    "GnssData",
+    "HEADING",
+    "HeadingParams",
+    "MeasContext",
+    "MeasRows",
+    "MeasurementModel",
+    "NHC",
+    "ODOMETER",
+    "VehicleParams",
+    "ZARU",
+    "ZUPT",
+    "ZaruParams",
+    "ZuptParams",
+    "heading",
+    "predict_gnss_pv",
+    "nhc",
+    "odometer",
+    "zaru",
+    "zupt",
+]

@@ -171,12 +171,19 @@ def _imu_flags(dth, dv, dt, series=False):
     bad_dt = ~jnp.all(jnp.isfinite(dt) & (dt > 0))
     flags = jnp.where(bad_in, _status.NONFINITE_IMU, 0) | jnp.where(bad_dt, _status.BAD_IMU_TIME, 0)
     if series:
-        flags = flags | jnp.where(jnp.any(r2 > np.pi ** 2), _status.IMU_INCREMENT_TOO_LARGE, 0)
+        flags = flags | jnp.where(jnp.any(r2 > np.pi**2), _status.IMU_INCREMENT_TOO_LARGE, 0)
     return flags.astype(jnp.int32)
 
 
-def mech_step(state: MechState, imu: ImuSample, params: MechParams = MechParams(), *,
-              ellipsoid: Ellipsoid = WGS84, coning: bool = True, hold_height: bool = False):
+def mech_step(
+    state: MechState,
+    imu: ImuSample,
+    params: MechParams = MechParams(),
+    *,
+    ellipsoid: Ellipsoid = WGS84,
+    coning: bool = True,
+    hold_height: bool = False,
+):
     """Integrate one IMU sample (S3 class 2 steps 1-11; two-sample coning/sculling).
 
     phi = dtheta + 1/12 dtheta_prev x dtheta (coning);
@@ -195,12 +202,14 @@ def mech_step(state: MechState, imu: ImuSample, params: MechParams = MechParams(
       (new state, new :class:`NavState`).
     """
     dth, dv, dt = imu.dtheta, imu.dv, imu.dt
-    phi, dv_b = _coning_sculling(jnp.unstack(dth), jnp.unstack(dv), jnp.unstack(state.dtheta_prev),
-                                 jnp.unstack(state.dv_prev), coning)
+    phi, dv_b = _coning_sculling(
+        jnp.unstack(dth), jnp.unstack(dv), jnp.unstack(state.dtheta_prev), jnp.unstack(state.dv_prev), coning
+    )
     blk = _Block(dq=rv_to_quat(jnp.stack(phi)), S=jnp.stack(dv_b)[None], T=dt)
     new_nav, a_new, _ = _nav_update(state.nav, state.a_prev, blk, params.earth_rate_sign, ellipsoid, hold_height)
-    new = MechState(nav=new_nav, dtheta_prev=dth, dv_prev=dv, a_prev=a_new,
-                    status=state.status | _imu_flags(dth, dv, dt))
+    new = MechState(
+        nav=new_nav, dtheta_prev=dth, dv_prev=dv, a_prev=a_new, status=state.status | _imu_flags(dth, dv, dt)
+    )
     return new, new_nav
 
 
@@ -251,9 +260,11 @@ def _body_blocks(dtheta, dv, dt, dth_prev, dv_prev, M: int, coning: bool, prefix
     c = tau - 0.5 * dt
     ck = (None, c, c * c, c * c * c)
     mom = [[ui if k is None else k * ui for ui in u] for k in ck]  # [k][axis] (nb, M)
-    blk = _Block(dq=jnp.stack([b[:, -1] for b in B], axis=-1),
-                 S=jnp.stack([jnp.stack([m.sum(axis=1) for m in row], axis=-1) for row in mom], axis=1),
-                 T=tau[:, -1])
+    blk = _Block(
+        dq=jnp.stack([b[:, -1] for b in B], axis=-1),
+        S=jnp.stack([jnp.stack([m.sum(axis=1) for m in row], axis=-1) for row in mom], axis=1),
+        T=tau[:, -1],
+    )
     if not prefix:
         return blk, None
     pre = _Prefix(B=B, S=tuple(tuple(jnp.cumsum(m, axis=1) for m in row) for row in mom), tau=tau)
@@ -299,8 +310,19 @@ def _two_speed_start(nav: NavState, a_prev, earth_rate_sign, ellipsoid) -> _TwoS
     return _TwoSpeed(nav, a_prev, gravity_minus_coriolis(e, nav.v_n))
 
 
-def _scan_blocks(carry: _TwoSpeed, blk: _Block, earth_rate_sign, ellipsoid, hold_height, *, emit=None, acc=None,
-                 accumulate=None, xs=None, skip_empty=False):
+def _scan_blocks(
+    carry: _TwoSpeed,
+    blk: _Block,
+    earth_rate_sign,
+    ellipsoid,
+    hold_height,
+    *,
+    emit=None,
+    acc=None,
+    accumulate=None,
+    xs=None,
+    skip_empty=False,
+):
     """The two-speed block driver: one :func:`_nav_update` per block of samples, a ``lax.scan``.
 
     Used by :func:`mechanize` (``nav_every``) and by :func:`jaxnav.ins.loosely_coupled`
@@ -366,8 +388,10 @@ def check_imu(dtheta, dv, dt, t=None):
     for name, a in (("dtheta", dtheta), ("dv", dv)):
         bad = ~np.isfinite(a).all(axis=1)
         if bad.any():
-            raise ValueError(f"{name} has a NaN/inf IMU sample at index {int(np.argmax(bad))} "
-                             "(mechanization cannot skip samples; fill or cut the gap)")
+            raise ValueError(
+                f"{name} has a NaN/inf IMU sample at index {int(np.argmax(bad))} "
+                "(mechanization cannot skip samples; fill or cut the gap)"
+            )
     dts = np.broadcast_to(dt, (N,))
     if not (np.isfinite(dts).all() and (dts > 0).all()):
         raise ValueError(f"dt must be finite and > 0; bad at index {int(np.argmax(~(np.isfinite(dts) & (dts > 0))))}")
@@ -378,7 +402,9 @@ def check_imu(dtheta, dv, dt, t=None):
         d = np.diff(t)
         if (d <= 0).any():
             i = int(np.argmax(d <= 0))
-            raise ValueError(f"IMU time is not increasing at index {i + 1}: t[{i}] = {t[i]!r}, t[{i + 1}] = {t[i + 1]!r}")
+            raise ValueError(
+                f"IMU time is not increasing at index {i + 1}: t[{i}] = {t[i]!r}, t[{i + 1}] = {t[i + 1]!r}"
+            )
         med = np.median(d) if d.size else 0.0
         if d.size and (d > 1.5 * med).any():
             i = int(np.argmax(d > 1.5 * med))
@@ -386,15 +412,17 @@ def check_imu(dtheta, dv, dt, t=None):
 
 
 @partial(jax.jit, static_argnames=("ellipsoid", "save_every", "coning", "kind", "hold_height", "nav_every"))
-def _mechanize(nav0, dtheta, dv, dt, earth_rate_sign, a0, ellipsoid, save_every, coning, kind, hold_height,
-               nav_every=1):
+def _mechanize(
+    nav0, dtheta, dv, dt, earth_rate_sign, a0, ellipsoid, save_every, coning, kind, hold_height, nav_every=1
+):
     N = dtheta.shape[0]
     dt = jnp.broadcast_to(jnp.asarray(dt, nav0.v_n.dtype), (N,))
     if kind == "rates":
         dtheta, dv = dtheta * dt[:, None], dv * dt[:, None]
     z3 = jnp.zeros(3, nav0.v_n.dtype)
-    init = MechState(nav=nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3 if a0 is None else a0,
-                     status=jnp.zeros((), jnp.int32))
+    init = MechState(
+        nav=nav0, dtheta_prev=z3, dv_prev=z3, a_prev=z3 if a0 is None else a0, status=jnp.zeros((), jnp.int32)
+    )
     params = MechParams(earth_rate_sign=earth_rate_sign)
     if nav_every > 1:
         return _mechanize_blocks(init, dtheta, dv, dt, params, ellipsoid, save_every, coning, hold_height, nav_every)
@@ -428,8 +456,9 @@ def _mechanize_blocks(init: MechState, dtheta, dv, dt, params, ellipsoid, save_e
     at_ends = save_every % M == 0  # then N % M == 0 too (N % save_every == 0 is checked)
     sign = params.earth_rate_sign
     status = init.status | _imu_flags(dtheta, dv, dt, series=True)
-    blk, pre = _body_blocks(dtheta[:nb * M], dv[:nb * M], dt[:nb * M], init.dtheta_prev, init.dv_prev, M, coning,
-                            prefix=not at_ends)
+    blk, pre = _body_blocks(
+        dtheta[: nb * M], dv[: nb * M], dt[: nb * M], init.dtheta_prev, init.dv_prev, M, coning, prefix=not at_ends
+    )
 
     run = partial(_scan_blocks, earth_rate_sign=sign, ellipsoid=ellipsoid, hold_height=hold_height)
     carry = _two_speed_start(init.nav, init.a_prev, sign, ellipsoid)
@@ -446,7 +475,7 @@ def _mechanize_blocks(init: MechState, dtheta, dv, dt, params, ellipsoid, save_e
         end, _, navs = run(carry, blk, emit=lambda start, new, fr: new)
     else:
         end, _, (starts, frames) = run(carry, blk, emit=lambda start, new, fr: (start, fr))
-        navs = _between(starts, frames, pre, dt[:nb * M].reshape(nb, M), hold_height, ellipsoid)
+        navs = _between(starts, frames, pre, dt[: nb * M].reshape(nb, M), hold_height, ellipsoid)
         navs = jax.tree_util.tree_map(lambda a: a.reshape((nb * M,) + a.shape[2:]), navs)
         if r:
             n = nb * M
@@ -455,7 +484,7 @@ def _mechanize_blocks(init: MechState, dtheta, dv, dt, params, ellipsoid, save_e
             tail = _between(start, fr, tp, dt[n:][None], hold_height, ellipsoid)
             tail = jax.tree_util.tree_map(lambda a: a[0], tail)
             navs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), navs, tail)
-        navs = jax.tree_util.tree_map(lambda a: a[save_every - 1::save_every], navs)
+        navs = jax.tree_util.tree_map(lambda a: a[save_every - 1 :: save_every], navs)
     final = MechState(nav=end.nav, dtheta_prev=dtheta[-1], dv_prev=dv[-1], a_prev=end.a_prev, status=status)
     return MechResult(nav=navs, final=final, status=status)
 
@@ -479,9 +508,22 @@ def _prepare(nav0, dtheta, dv, dt, t, save_every, validate, nav_every=1):
         check_imu(dtheta, dv, dt, t)
 
 
-def mechanize(nav0: NavState, dtheta, dv, dt, *, t=None, kind: str = "increments", a0=None,
-              ellipsoid: Ellipsoid = WGS84, save_every: int = 1, coning: bool = True,
-              hold_height: bool = False, validate: bool = True, nav_every: int = 1) -> MechResult:
+def mechanize(
+    nav0: NavState,
+    dtheta,
+    dv,
+    dt,
+    *,
+    t=None,
+    kind: str = "increments",
+    a0=None,
+    ellipsoid: Ellipsoid = WGS84,
+    save_every: int = 1,
+    coning: bool = True,
+    hold_height: bool = False,
+    validate: bool = True,
+    nav_every: int = 1,
+) -> MechResult:
     """Forward strapdown mechanization over N IMU samples (S3 class 2), a ``lax.scan`` of :func:`mech_step`.
 
     Args:
@@ -515,13 +557,38 @@ def mechanize(nav0: NavState, dtheta, dv, dt, *, t=None, kind: str = "increments
     if kind not in ("increments", "rates"):
         raise ValueError(f"kind must be 'increments' or 'rates', got {kind!r}")
     _prepare(nav0, dtheta, dv, dt, t, save_every, validate, nav_every)
-    return _mechanize(nav0, jnp.asarray(dtheta), jnp.asarray(dv), dt, 1.0, a0, ellipsoid, save_every, coning,
-                      kind, hold_height, int(nav_every))
+    return _mechanize(
+        nav0,
+        jnp.asarray(dtheta),
+        jnp.asarray(dv),
+        dt,
+        1.0,
+        a0,
+        ellipsoid,
+        save_every,
+        coning,
+        kind,
+        hold_height,
+        int(nav_every),
+    )
 
 
-def mechanize_backward(nav_end: NavState, dtheta, dv, dt, *, t=None, kind: str = "increments", a0=None,
-                       ellipsoid: Ellipsoid = WGS84, save_every: int = 1, coning: bool = True,
-                       hold_height: bool = False, validate: bool = True, nav_every: int = 1) -> MechResult:
+def mechanize_backward(
+    nav_end: NavState,
+    dtheta,
+    dv,
+    dt,
+    *,
+    t=None,
+    kind: str = "increments",
+    a0=None,
+    ellipsoid: Ellipsoid = WGS84,
+    save_every: int = 1,
+    coning: bool = True,
+    hold_height: bool = False,
+    validate: bool = True,
+    nav_every: int = 1,
+) -> MechResult:
     """Reverse (backward) navigation exactly as S3 class 3.
 
     Starts from the forward solution's end state with the velocity negated, reads the samples in
@@ -547,7 +614,19 @@ def mechanize_backward(nav_end: NavState, dtheta, dv, dt, *, t=None, kind: str =
     dvr = jnp.asarray(dv)[::-1]
     dtr = dt if jnp.ndim(dt) == 0 else jnp.asarray(dt)[::-1]
     nav0 = nav_end._replace(v_n=-jnp.asarray(nav_end.v_n))
-    res = _mechanize(nav0, dth, dvr, dtr, -1.0, None if a0 is None else jnp.asarray(a0),
-                     ellipsoid, save_every, coning, kind, hold_height, int(nav_every))
+    res = _mechanize(
+        nav0,
+        dth,
+        dvr,
+        dtr,
+        -1.0,
+        None if a0 is None else jnp.asarray(a0),
+        ellipsoid,
+        save_every,
+        coning,
+        kind,
+        hold_height,
+        int(nav_every),
+    )
     navs = NavState(q_bn=res.nav.q_bn[::-1], v_n=-res.nav.v_n[::-1], pos=res.nav.pos[::-1])
     return MechResult(nav=navs, final=res.final, status=res.status)

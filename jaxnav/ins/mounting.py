@@ -66,8 +66,12 @@ def mounting_from_rpy(roll, pitch, yaw) -> np.ndarray:
 
 def mounting_from_rpy_deg(roll_deg, pitch_deg, yaw_deg) -> np.ndarray:
     """:func:`mounting_from_rpy` with the angles in degrees (config key ``mounting_rpy_deg``)."""
-    return _rz_ry_rx(*(math.radians(_angle(a, n)) for a, n in
-                       ((roll_deg, "roll_deg"), (pitch_deg, "pitch_deg"), (yaw_deg, "yaw_deg"))))
+    return _rz_ry_rx(
+        *(
+            math.radians(_angle(a, n))
+            for a, n in ((roll_deg, "roll_deg"), (pitch_deg, "pitch_deg"), (yaw_deg, "yaw_deg"))
+        )
+    )
 
 
 def mounting_from_groves(roll, pitch, yaw) -> np.ndarray:
@@ -88,8 +92,12 @@ def mounting_from_groves(roll, pitch, yaw) -> np.ndarray:
 
 def mounting_from_groves_deg(roll_deg, pitch_deg, yaw_deg) -> np.ndarray:
     """:func:`mounting_from_groves` with the angles in degrees."""
-    return mounting_from_groves(*(math.radians(_angle(a, n)) for a, n in
-                                  ((roll_deg, "roll_deg"), (pitch_deg, "pitch_deg"), (yaw_deg, "yaw_deg"))))
+    return mounting_from_groves(
+        *(
+            math.radians(_angle(a, n))
+            for a, n in ((roll_deg, "roll_deg"), (pitch_deg, "pitch_deg"), (yaw_deg, "yaw_deg"))
+        )
+    )
 
 
 def mounting_from_dcm(C, *, tol: float = 1e-6) -> np.ndarray:
@@ -114,8 +122,10 @@ def mounting_from_dcm(C, *, tol: float = 1e-6) -> np.ndarray:
         raise ValueError(f"a mounting DCM must be orthonormal: max |C^T C - I| = {err:.3g} > {tol:g}")
     det = float(np.linalg.det(a))
     if abs(det - 1.0) > tol:
-        raise ValueError(f"a mounting DCM must be a rotation (det +1), got det = {det:.6g} (a reflection: an axis "
-                         "is flipped, e.g. left instead of right)")
+        raise ValueError(
+            f"a mounting DCM must be a rotation (det +1), got det = {det:.6g} (a reflection: an axis "
+            "is flipped, e.g. left instead of right)"
+        )
     return a
 
 

@@ -88,12 +88,23 @@ class ImuNoise(NamedTuple):
 NOISE_GRADES = ("consumer", "industrial", "tactical", "navigation")
 
 
-def imu_noise_from_datasheet(*, arw_deg_per_sqrt_h, vrw_mps_per_sqrt_h, gyro_bias_instability_deg_per_h=0.0,
-                             gyro_bias_tau_s=3600.0, accel_bias_instability_mg=0.0, accel_bias_tau_s=3600.0,
-                             gyro_bias_rw_deg_per_h_per_sqrt_h=0.0, accel_bias_rw_mps2_per_sqrt_h=0.0,
-                             gyro_bias_initial_deg_per_h=0.0, accel_bias_initial_mg=0.0, gyro_sf_ppm=0.0,
-                             accel_sf_ppm=0.0, gyro_sf_rw_ppm_per_sqrt_h=0.0,
-                             accel_sf_rw_ppm_per_sqrt_h=0.0) -> ImuNoise:
+def imu_noise_from_datasheet(
+    *,
+    arw_deg_per_sqrt_h,
+    vrw_mps_per_sqrt_h,
+    gyro_bias_instability_deg_per_h=0.0,
+    gyro_bias_tau_s=3600.0,
+    accel_bias_instability_mg=0.0,
+    accel_bias_tau_s=3600.0,
+    gyro_bias_rw_deg_per_h_per_sqrt_h=0.0,
+    accel_bias_rw_mps2_per_sqrt_h=0.0,
+    gyro_bias_initial_deg_per_h=0.0,
+    accel_bias_initial_mg=0.0,
+    gyro_sf_ppm=0.0,
+    accel_sf_ppm=0.0,
+    gyro_sf_rw_ppm_per_sqrt_h=0.0,
+    accel_sf_rw_ppm_per_sqrt_h=0.0,
+) -> ImuNoise:
     """:class:`ImuNoise` from datasheet units (the edge: configs, CLI).
 
     Args (keyword only; edge units in the names): ARW deg/sqrt(h); VRW m/s/sqrt(h); gyro bias
@@ -105,14 +116,20 @@ def imu_noise_from_datasheet(*, arw_deg_per_sqrt_h, vrw_mps_per_sqrt_h, gyro_bia
     Raises:
       ValueError: for a negative or non-finite value, or a non-positive correlation time.
     """
-    vals = dict(arw_deg_per_sqrt_h=arw_deg_per_sqrt_h, vrw_mps_per_sqrt_h=vrw_mps_per_sqrt_h,
-                gyro_bias_instability_deg_per_h=gyro_bias_instability_deg_per_h,
-                accel_bias_instability_mg=accel_bias_instability_mg,
-                gyro_bias_rw_deg_per_h_per_sqrt_h=gyro_bias_rw_deg_per_h_per_sqrt_h,
-                accel_bias_rw_mps2_per_sqrt_h=accel_bias_rw_mps2_per_sqrt_h,
-                gyro_bias_initial_deg_per_h=gyro_bias_initial_deg_per_h, accel_bias_initial_mg=accel_bias_initial_mg,
-                gyro_sf_ppm=gyro_sf_ppm, accel_sf_ppm=accel_sf_ppm, gyro_sf_rw_ppm_per_sqrt_h=gyro_sf_rw_ppm_per_sqrt_h,
-                accel_sf_rw_ppm_per_sqrt_h=accel_sf_rw_ppm_per_sqrt_h)
+    vals = dict(
+        arw_deg_per_sqrt_h=arw_deg_per_sqrt_h,
+        vrw_mps_per_sqrt_h=vrw_mps_per_sqrt_h,
+        gyro_bias_instability_deg_per_h=gyro_bias_instability_deg_per_h,
+        accel_bias_instability_mg=accel_bias_instability_mg,
+        gyro_bias_rw_deg_per_h_per_sqrt_h=gyro_bias_rw_deg_per_h_per_sqrt_h,
+        accel_bias_rw_mps2_per_sqrt_h=accel_bias_rw_mps2_per_sqrt_h,
+        gyro_bias_initial_deg_per_h=gyro_bias_initial_deg_per_h,
+        accel_bias_initial_mg=accel_bias_initial_mg,
+        gyro_sf_ppm=gyro_sf_ppm,
+        accel_sf_ppm=accel_sf_ppm,
+        gyro_sf_rw_ppm_per_sqrt_h=gyro_sf_rw_ppm_per_sqrt_h,
+        accel_sf_rw_ppm_per_sqrt_h=accel_sf_rw_ppm_per_sqrt_h,
+    )
     for k, v in vals.items():
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ValueError(f"{k} must be a finite number >= 0, got {v!r}")
@@ -159,21 +176,54 @@ def imu_noise_to_datasheet(noise: ImuNoise) -> dict:
 
 
 _PRESETS = {  # edge units, see the module table
-    "consumer": dict(arw_deg_per_sqrt_h=0.5, vrw_mps_per_sqrt_h=0.1, gyro_bias_instability_deg_per_h=10.0,
-                     accel_bias_instability_mg=0.1, gyro_bias_tau_s=300.0, accel_bias_tau_s=300.0,
-                     gyro_bias_initial_deg_per_h=1000.0, accel_bias_initial_mg=30.0, gyro_sf_ppm=5000.0,
-                     accel_sf_ppm=5000.0),
-    "industrial": dict(arw_deg_per_sqrt_h=0.15, vrw_mps_per_sqrt_h=0.04, gyro_bias_instability_deg_per_h=3.0,
-                       accel_bias_instability_mg=0.03, gyro_bias_tau_s=600.0, accel_bias_tau_s=600.0,
-                       gyro_bias_initial_deg_per_h=50.0, accel_bias_initial_mg=3.0, gyro_sf_ppm=1000.0,
-                       accel_sf_ppm=1000.0),
-    "tactical": dict(arw_deg_per_sqrt_h=0.05, vrw_mps_per_sqrt_h=0.02, gyro_bias_instability_deg_per_h=1.0,
-                     accel_bias_instability_mg=0.02, gyro_bias_tau_s=1800.0, accel_bias_tau_s=1800.0,
-                     gyro_bias_initial_deg_per_h=3.0, accel_bias_initial_mg=1.0, gyro_sf_ppm=300.0, accel_sf_ppm=300.0),
-    "navigation": dict(arw_deg_per_sqrt_h=0.002, vrw_mps_per_sqrt_h=0.005, gyro_bias_instability_deg_per_h=0.005,
-                       accel_bias_instability_mg=0.01, gyro_bias_tau_s=3600.0, accel_bias_tau_s=3600.0,
-                       gyro_bias_initial_deg_per_h=0.01, accel_bias_initial_mg=0.025, gyro_sf_ppm=5.0,
-                       accel_sf_ppm=50.0),
+    "consumer": dict(
+        arw_deg_per_sqrt_h=0.5,
+        vrw_mps_per_sqrt_h=0.1,
+        gyro_bias_instability_deg_per_h=10.0,
+        accel_bias_instability_mg=0.1,
+        gyro_bias_tau_s=300.0,
+        accel_bias_tau_s=300.0,
+        gyro_bias_initial_deg_per_h=1000.0,
+        accel_bias_initial_mg=30.0,
+        gyro_sf_ppm=5000.0,
+        accel_sf_ppm=5000.0,
+    ),
+    "industrial": dict(
+        arw_deg_per_sqrt_h=0.15,
+        vrw_mps_per_sqrt_h=0.04,
+        gyro_bias_instability_deg_per_h=3.0,
+        accel_bias_instability_mg=0.03,
+        gyro_bias_tau_s=600.0,
+        accel_bias_tau_s=600.0,
+        gyro_bias_initial_deg_per_h=50.0,
+        accel_bias_initial_mg=3.0,
+        gyro_sf_ppm=1000.0,
+        accel_sf_ppm=1000.0,
+    ),
+    "tactical": dict(
+        arw_deg_per_sqrt_h=0.05,
+        vrw_mps_per_sqrt_h=0.02,
+        gyro_bias_instability_deg_per_h=1.0,
+        accel_bias_instability_mg=0.02,
+        gyro_bias_tau_s=1800.0,
+        accel_bias_tau_s=1800.0,
+        gyro_bias_initial_deg_per_h=3.0,
+        accel_bias_initial_mg=1.0,
+        gyro_sf_ppm=300.0,
+        accel_sf_ppm=300.0,
+    ),
+    "navigation": dict(
+        arw_deg_per_sqrt_h=0.002,
+        vrw_mps_per_sqrt_h=0.005,
+        gyro_bias_instability_deg_per_h=0.005,
+        accel_bias_instability_mg=0.01,
+        gyro_bias_tau_s=3600.0,
+        accel_bias_tau_s=3600.0,
+        gyro_bias_initial_deg_per_h=0.01,
+        accel_bias_initial_mg=0.025,
+        gyro_sf_ppm=5.0,
+        accel_sf_ppm=50.0,
+    ),
 }
 
 

@@ -55,8 +55,8 @@ def _shift_sum(x, before: int, after: int):
     N = x.shape[0]
     before, after = min(before, N), min(after, N - 1)
     c = jnp.concatenate([jnp.zeros((1,) + x.shape[1:], x.dtype), jnp.cumsum(x, 0)], 0)  # (N + 1,)
-    hi = jnp.concatenate([c[after + 1:], jnp.repeat(c[-1:], after, axis=0)], 0)  # c[min(n + after + 1, N)]
-    lo = jnp.concatenate([jnp.repeat(c[:1], before, axis=0), c[:N - before]], 0)  # c[max(n - before, 0)]
+    hi = jnp.concatenate([c[after + 1 :], jnp.repeat(c[-1:], after, axis=0)], 0)  # c[min(n + after + 1, N)]
+    lo = jnp.concatenate([jnp.repeat(c[:1], before, axis=0), c[: N - before]], 0)  # c[max(n - before, 0)]
     n = jnp.arange(N)
     cnt = jnp.minimum(n + after + 1, N) - jnp.maximum(n - before, 0)
     return hi - lo, cnt
@@ -83,15 +83,15 @@ def _full_sum(x, window: int):
     if N <= window:
         return jnp.repeat(c[-1:], N, axis=0), jnp.full((N,), float(N), x.dtype)
     b, a = window // 2, window - 1 - window // 2
-    hi = jnp.concatenate([jnp.repeat(c[window:window + 1], b, axis=0), c[window:], jnp.repeat(c[-1:], a, axis=0)], 0)
-    lo = jnp.concatenate([jnp.repeat(c[:1], b, axis=0), c[:N - window + 1], jnp.repeat(c[N - window:N - window + 1], a,
-                                                                                       axis=0)], 0)
+    hi = jnp.concatenate([jnp.repeat(c[window : window + 1], b, axis=0), c[window:], jnp.repeat(c[-1:], a, axis=0)], 0)
+    lo = jnp.concatenate(
+        [jnp.repeat(c[:1], b, axis=0), c[: N - window + 1], jnp.repeat(c[N - window : N - window + 1], a, axis=0)], 0
+    )
     return hi - lo, jnp.full((N,), float(window), x.dtype)
 
 
 @partial(jax.jit, static_argnames=("window", "edges"))
-def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20,
-                   edges: str = "clamp"):
+def shoe_statistic(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20, edges: str = "clamp"):
     """SHOE GLRT statistic T_n per sample (module docstring; Skog et al. 2010).
 
     With ``params.g`` NaN the gravity magnitude is replaced by its maximum-likelihood estimate
@@ -136,8 +136,9 @@ def _min_run(d, m: int):
 
 
 @partial(jax.jit, static_argnames=("window", "min_samples"))
-def detect_standstill(f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20,
-                      min_samples: int = 1):
+def detect_standstill(
+    f_b, w_b, params: StandstillParams = StandstillParams(), *, window: int = 20, min_samples: int = 1
+):
     """Boolean standstill flag per IMU sample: SHOE T_n < threshold, runs shorter than ``min_samples`` dropped.
 
     Args:
@@ -211,8 +212,14 @@ def detection_scores(detected, truth) -> DetectionScores:
         raise ValueError(f"detected {d.shape} and truth {s.shape} must have the same shape")
     tp, fp = int(np.sum(d & s)), int(np.sum(d & ~s))
     fn, tn = int(np.sum(~d & s)), int(np.sum(~d & ~s))
-    return DetectionScores(precision=tp / (tp + fp) if tp + fp else float("nan"),
-                           recall=tp / (tp + fn) if tp + fn else float("nan"), tp=tp, fp=fp, fn=fn, tn=tn)
+    return DetectionScores(
+        precision=tp / (tp + fp) if tp + fp else float("nan"),
+        recall=tp / (tp + fn) if tp + fn else float("nan"),
+        tp=tp,
+        fp=fp,
+        fn=fn,
+        tn=tn,
+    )
 
 
 #: platform presets of the standstill detector: SHOE window (s), shortest standstill kept (s), the
@@ -246,8 +253,9 @@ def gnss_speed_test(t, pos_enu, vel_enu, R, pos_ok, vel_ok):
     M = t.size
     p, v, R = np.asarray(pos_enu, float), np.asarray(vel_enu, float), np.asarray(R, float)
     if p.shape != (M, 3) or v.shape != (M, 3) or R.shape != (M, 6, 6):
-        raise ValueError(f"t {t.shape}, pos_enu {p.shape}, vel_enu {v.shape}, R {R.shape}: need (M,), (M, 3), (M, 3), "
-                         "(M, 6, 6)")
+        raise ValueError(
+            f"t {t.shape}, pos_enu {p.shape}, vel_enu {v.shape}, R {R.shape}: need (M,), (M, 3), (M, 3), (M, 6, 6)"
+        )
     pos_ok = np.asarray(pos_ok, bool) & np.all(np.isfinite(p), 1)
     vel_ok = np.asarray(vel_ok, bool) & np.all(np.isfinite(v), 1)
     vv, C = np.full((M, 3), np.nan), np.full((M, 3, 3), np.nan)
@@ -362,10 +370,25 @@ class CheckedStandstill(NamedTuple):
     imu_only_scores: DetectionScores
 
 
-def gnss_checked_standstill(t, f_b, w_b, *, sigma_a: float, sigma_w: float, platform: str = "car",
-                            static_s: float = 0.0, window=None, min_s=None, threshold="auto",
-                            fallback_threshold: float = 60.0, t_gnss=None, q_gnss=None, k_moving: float = 3.0,
-                            max_gap_s: float = 1.5, rate_hz=None) -> CheckedStandstill:
+def gnss_checked_standstill(
+    t,
+    f_b,
+    w_b,
+    *,
+    sigma_a: float,
+    sigma_w: float,
+    platform: str = "car",
+    static_s: float = 0.0,
+    window=None,
+    min_s=None,
+    threshold="auto",
+    fallback_threshold: float = 60.0,
+    t_gnss=None,
+    q_gnss=None,
+    k_moving: float = 3.0,
+    max_gap_s: float = 1.5,
+    rate_hz=None,
+) -> CheckedStandstill:
     """Standstill per IMU sample: SHOE GLRT, a threshold from the quiet periods, and a GNSS check (host side).
 
     Gravity for the test is the mean |f| over the first ``static_s`` seconds (absorbs a scale error).
@@ -399,13 +422,16 @@ def gnss_checked_standstill(t, f_b, w_b, *, sigma_a: float, sigma_w: float, plat
     window = int(window) if window is not None else max(1, int(round(pf["window_s"] * rate)))
     min_s = float(pf["min_s"] if min_s is None else min_s)
     m = max(1, int(round(min_s * rate)))
-    stat = np.asarray(shoe_statistic(f, w, StandstillParams(sigma_a=sigma_a, sigma_w=sigma_w, threshold=1.0, g=g),
-                                     window=window))
+    stat = np.asarray(
+        shoe_statistic(f, w, StandstillParams(sigma_a=sigma_a, sigma_w=sigma_w, threshold=1.0, g=g), window=window)
+    )
     N = t.size
     moving, static, covered = np.zeros(N, bool), np.zeros(N, bool), np.zeros(N, bool)
     gnss = t_gnss is not None
     if gnss:
-        moving, static, covered = gnss_motion_labels(t, t_gnss, q_gnss, k_moving=k_moving, max_gap_s=max(max_gap_s, 0.3))
+        moving, static, covered = gnss_motion_labels(
+            t, t_gnss, q_gnss, k_moving=k_moving, max_gap_s=max(max_gap_s, 0.3)
+        )
     quiet = (static | st) & ~moving
     if threshold == "auto":
         gamma = quiet_threshold(stat, quiet, margin=pf["margin"], min_samples=m)
@@ -422,8 +448,22 @@ def gnss_checked_standstill(t, f_b, w_b, *, sigma_a: float, sigma_w: float, plat
     if pf["need_gnss_static"] and gnss and static.any():
         kept = runs_touching(det, static)
         unconfirmed, det = det & ~kept, kept
-    return CheckedStandstill(detected=det, stat=stat, raw=raw, moving=moving, static=static, covered=covered,
-                             vetoed=vetoed, unconfirmed=unconfirmed, threshold=float(gamma), threshold_source=source,
-                             quiet_samples=int(np.count_nonzero(quiet)), window=window, min_samples=m, min_s=min_s,
-                             g=g, scores=detection_scores(det[covered], static[covered]),
-                             imu_only_scores=detection_scores(raw[covered], static[covered]))
+    return CheckedStandstill(
+        detected=det,
+        stat=stat,
+        raw=raw,
+        moving=moving,
+        static=static,
+        covered=covered,
+        vetoed=vetoed,
+        unconfirmed=unconfirmed,
+        threshold=float(gamma),
+        threshold_source=source,
+        quiet_samples=int(np.count_nonzero(quiet)),
+        window=window,
+        min_samples=m,
+        min_s=min_s,
+        g=g,
+        scores=detection_scores(det[covered], static[covered]),
+        imu_only_scores=detection_scores(raw[covered], static[covered]),
+    )

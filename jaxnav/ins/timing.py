@@ -22,7 +22,8 @@ t_gnss = t_imu + offset (an IMU that time-tags its samples 0.15 s late has offse
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, NamedTuple, Optional
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -65,8 +66,19 @@ def _central(x, t):
     return d
 
 
-def estimate_time_offset(t_imu, w_b, t_gnss, v_enu=None, *, llh=None, f_b=None, up_b=None,
-                         max_offset_s: float = 1.0, step_s: float = 0.005, min_speed: float = 2.0) -> TimeOffset:
+def estimate_time_offset(
+    t_imu,
+    w_b,
+    t_gnss,
+    v_enu=None,
+    *,
+    llh=None,
+    f_b=None,
+    up_b=None,
+    max_offset_s: float = 1.0,
+    step_s: float = 0.005,
+    min_speed: float = 2.0,
+) -> TimeOffset:
     """Estimate the IMU-GNSS time offset by correlating the yaw rate with the GNSS course rate.
 
     1. Yaw rate r_I = w_b . u (counter-clockwise about up); u the body up axis: ``up_b``, else the
@@ -150,8 +162,10 @@ def estimate_time_offset(t_imu, w_b, t_gnss, v_enu=None, *, llh=None, f_b=None, 
     ok &= (t_g - span >= t_imu[0]) & (t_g + span <= t_imu[-1])
     idx = np.flatnonzero(ok)
     if idx.size < 10:
-        raise ValueError(f"only {idx.size} usable GNSS epochs (moving faster than {min_speed} m/s inside the IMU "
-                         "span); need at least 10 with turns")
+        raise ValueError(
+            f"only {idx.size} usable GNSS epochs (moving faster than {min_speed} m/s inside the IMU "
+            "span); need at least 10 with turns"
+        )
     y = chi_dot[idx]
 
     def imu_rate(tau):
@@ -191,9 +205,17 @@ def estimate_time_offset(t_imu, w_b, t_gnss, v_enu=None, *, llh=None, f_b=None, 
     s2 = float(res @ res) / max(idx.size - 3, 1)
     J = coef[0] * (dx - dx.mean())  # d(model)/d tau, with the intercept profiled out
     sigma = math.sqrt(s2 / float(J @ J)) if float(J @ J) > 0 else math.inf
-    return TimeOffset(offset_s=tau, sigma_s=sigma, corr=corr(x), n_epochs=int(idx.size),
-                      turn_rate_rms=float(np.sqrt(np.mean(y**2))), at_bound=bool(at_bound), lags_s=lags,
-                      corr_curve=cc, source=source)
+    return TimeOffset(
+        offset_s=tau,
+        sigma_s=sigma,
+        corr=corr(x),
+        n_epochs=int(idx.size),
+        turn_rate_rms=float(np.sqrt(np.mean(y**2))),
+        at_bound=bool(at_bound),
+        lags_s=lags,
+        corr_curve=cc,
+        source=source,
+    )
 
 
 #: fewest GNSS epochs the likelihood search needs inside the IMU span at every trial offset
@@ -214,7 +236,7 @@ def parabola_peak(x, ll) -> tuple[float, float]:
     j = int(np.nanargmax(ll))
     best, sigma = float(x[j]), float("nan")
     if 0 < j < len(x) - 1:
-        y0, y1, y2 = ll[j - 1:j + 2]
+        y0, y1, y2 = ll[j - 1 : j + 2]
         den = y0 - 2 * y1 + y2
         h = x[1] - x[0]
         if den < 0:
@@ -242,8 +264,12 @@ def offset_search_epochs(t_gnss, t_imu, span: float, windows=None) -> dict:
     for a, b in np.asarray(() if windows is None else windows, float).reshape(-1, 2):
         withheld |= (gt >= a - span) & (gt < b + span)
     use = inside & ~withheld
-    return {"use": use, "n_used": int(use.sum()), "n_dropped_at_span_edges": int((reach & ~inside).sum()),
-            "n_withheld": int((inside & withheld).sum())}
+    return {
+        "use": use,
+        "n_used": int(use.sum()),
+        "n_dropped_at_span_edges": int((reach & ~inside).sum()),
+        "n_withheld": int((inside & withheld).sum()),
+    }
 
 
 class LikelihoodOffset(NamedTuple):
@@ -263,9 +289,16 @@ class LikelihoodOffset(NamedTuple):
     fine_loglik: Any
 
 
-def likelihood_time_offset(loglik: Callable[[float], float], span: float, *, guess: float = 0.0,
-                           coarse_step: float = 0.05, fine_step: float = 0.01, fine_half: float = 0.05,
-                           progress: Optional[Callable[[str], Any]] = None) -> LikelihoodOffset:
+def likelihood_time_offset(
+    loglik: Callable[[float], float],
+    span: float,
+    *,
+    guess: float = 0.0,
+    coarse_step: float = 0.05,
+    fine_step: float = 0.01,
+    fine_half: float = 0.05,
+    progress: Callable[[str], Any] | None = None,
+) -> LikelihoodOffset:
     """IMU-GNSS time offset maximising a filter's innovation log-likelihood over grids around a first guess.
 
     ``loglik(offset)`` (s -> log-likelihood of a run with the IMU times shifted by ``offset``) is
@@ -276,8 +309,9 @@ def likelihood_time_offset(loglik: Callable[[float], float], span: float, *, gue
     (:func:`offset_search_epochs`). ``loglik`` may be called again with the same offset: memoise it
     when a run is expensive. All times in s; ``progress`` takes one line of text, or None.
     """
-    coarse = np.union1d(np.round(np.arange(-span, span + 1e-9, coarse_step), 6),
-                        [round(guess, 6)] if abs(guess) <= span else [])
+    coarse = np.union1d(
+        np.round(np.arange(-span, span + 1e-9, coarse_step), 6), [round(guess, 6)] if abs(guess) <= span else []
+    )
     for k, off in enumerate(coarse):
         loglik(off)
         if progress and (k % 10 == 0 or k == len(coarse) - 1):
@@ -287,12 +321,21 @@ def likelihood_time_offset(loglik: Callable[[float], float], span: float, *, gue
     fine = fine[np.abs(fine) <= span + 1e-9]
     ll = np.array([loglik(o) for o in fine])
     best, sigma = parabola_peak(fine, ll)
-    return LikelihoodOffset(offset_s=best, sigma_s=sigma, at_edge=bool(abs(best) >= span - 0.01), fine_s=fine,
-                            fine_loglik=ll)
+    return LikelihoodOffset(
+        offset_s=best, sigma_s=sigma, at_edge=bool(abs(best) >= span - 0.01), fine_s=fine, fine_loglik=ll
+    )
 
 
-def clock_drift(loglik: Callable[[float, float], float], offset: float, t_gnss, span: float, *,
-                step_o: float = 0.01, step_c: float = 0.02, widen_hint: str = "widen the search span") -> dict:
+def clock_drift(
+    loglik: Callable[[float, float], float],
+    offset: float,
+    t_gnss,
+    span: float,
+    *,
+    step_o: float = 0.01,
+    step_c: float = 0.02,
+    widen_hint: str = "widen the search span",
+) -> dict:
     """IMU clock drift by the innovation likelihood of a linear clock error.
 
     The IMU times become t + o + c (t - t_ref) / T (t_ref the middle, T the span of the GNSS epochs
@@ -332,22 +375,26 @@ def clock_drift(loglik: Callable[[float, float], float], offset: float, t_gnss, 
         if not all(ok(*y) for y in pts):
             return {"note": f"not estimated: the clock model reaches the edge of the search span; {widen_hint}"}
         u = np.array([((y[0] - x[0]) / step_o, (y[1] - x[1]) / step_c) for y in pts])
-        A = np.column_stack([np.ones(len(pts)), u[:, 0], u[:, 1], 0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1],
-                             0.5 * u[:, 1] ** 2])
+        A = np.column_stack(
+            [np.ones(len(pts)), u[:, 0], u[:, 1], 0.5 * u[:, 0] ** 2, u[:, 0] * u[:, 1], 0.5 * u[:, 1] ** 2]
+        )
         coef = np.linalg.solve(A, np.array([ll(y) for y in pts]))
         H = np.array([[coef[3], coef[4]], [coef[4], coef[5]]])
         if not np.all(np.linalg.eigvalsh(H) < 0):  # not concave here: step to the best stencil point
             up = max(pts, key=ll)
             if up == x:
-                return {"note": "not estimated: the likelihood has no maximum in offset and drift (too little "
-                                "dynamics)"}
+                return {
+                    "note": "not estimated: the likelihood has no maximum in offset and drift (too little dynamics)"
+                }
             x = up
             continue
         du = np.linalg.solve(H, -coef[1:3])  # the maximum, in grid steps from x
         if np.all(np.abs(du) <= 1.0):
             break
-        x = key(x[0] + float(np.clip(np.round(du[0]), -5, 5)) * step_o,
-                x[1] + float(np.clip(np.round(du[1]), -5, 5)) * step_c)
+        x = key(
+            x[0] + float(np.clip(np.round(du[0]), -5, 5)) * step_o,
+            x[1] + float(np.clip(np.round(du[1]), -5, 5)) * step_c,
+        )
     else:
         return {"note": "not estimated: the Newton steps did not settle"}
     est = np.array(x) + S @ du
@@ -358,19 +405,35 @@ def clock_drift(loglik: Callable[[float, float], float], offset: float, t_gnss, 
     wins = []
     for h in (tg < t_ref, tg >= t_ref):
         f = (float(np.mean(tg[h])) - t_ref) / T
-        wins.append({"t_start_s": float(tg[h][0]), "t_end_s": float(tg[h][-1]), "t_mean_s": float(np.mean(tg[h])),
-                     "n_epochs": int(h.sum()), "offset_s": o + c * f,
-                     "sigma_s": float(np.sqrt(max(cov[0, 0] + 2 * f * cov[0, 1] + f * f * cov[1, 1], 0.0)))})
+        wins.append(
+            {
+                "t_start_s": float(tg[h][0]),
+                "t_end_s": float(tg[h][-1]),
+                "t_mean_s": float(np.mean(tg[h])),
+                "n_epochs": int(h.sum()),
+                "offset_s": o + c * f,
+                "sigma_s": float(np.sqrt(max(cov[0, 0] + 2 * f * cov[0, 1] + f * f * cov[1, 1], 0.0))),
+            }
+        )
     sig = bool(abs(c) > DRIFT_SIGMAS * sc and abs(c) > DRIFT_MIN_CHANGE_S)
-    out = {"method": "innovation log-likelihood of a linear clock error t + o + c (t - t_mid) / T: Newton steps "
-                     f"on a {step_o * 1e3:g} ms x {step_c * 1e3:g} ms grid, quadratic through six points around the "
-                     "best (sigmas from its curvature, optimistic as the offset's); windows: the model's offset at "
-                     "each half's mean epoch",
-           "offset_mid_s": o, "change_s": c, "change_sigma_s": sc, "drift_s_per_s": c / T,
-           "drift_sigma_s_per_s": sc / T, "windows": wins, "significant": sig}
+    out = {
+        "method": "innovation log-likelihood of a linear clock error t + o + c (t - t_mid) / T: Newton steps "
+        f"on a {step_o * 1e3:g} ms x {step_c * 1e3:g} ms grid, quadratic through six points around the "
+        "best (sigmas from its curvature, optimistic as the offset's); windows: the model's offset at "
+        "each half's mean epoch",
+        "offset_mid_s": o,
+        "change_s": c,
+        "change_sigma_s": sc,
+        "drift_s_per_s": c / T,
+        "drift_sigma_s_per_s": sc / T,
+        "windows": wins,
+        "significant": sig,
+    }
     if sig:
-        out["warning"] = (f"the IMU-GNSS time offset changes over the run by {c * 1e3:+.0f} +- {sc * 1e3:.0f} ms "
-                          f"({c / T * 1e6:+.0f} +- {sc / T * 1e6:.0f} ppm clock drift: {wins[0]['offset_s']:+.3f} s in "
-                          f"the first half, {wins[1]['offset_s']:+.3f} s in the second); one offset fits neither end: "
-                          "re-tag the IMU (e.g. from GNSS time pulses) or process shorter pieces")
+        out["warning"] = (
+            f"the IMU-GNSS time offset changes over the run by {c * 1e3:+.0f} +- {sc * 1e3:.0f} ms "
+            f"({c / T * 1e6:+.0f} +- {sc / T * 1e6:.0f} ppm clock drift: {wins[0]['offset_s']:+.3f} s in "
+            f"the first half, {wins[1]['offset_s']:+.3f} s in the second); one offset fits neither end: "
+            "re-tag the IMU (e.g. from GNSS time pulses) or process shorter pieces"
+        )
     return out

@@ -10,15 +10,27 @@ with a reason); :func:`provenance` is the block every command's ``results.json``
 """
 
 from jaxnav._config import load_toml, loads_toml  # the one TOML parser sits below every layer (sim reads scenarios)
-from jaxnav.io._errors import ReaderError
-from jaxnav.io._json import json_ready, write_json
-from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
+from jaxnav.io._csv import read_csv_gnss, read_csv_imu, read_csv_series
 from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_pbo_pos, read_tenv3, year_to_seconds
+from jaxnav.io._errors import ReaderError
 from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, read_rtklib_imu, read_rtklib_tag
+from jaxnav.io._json import json_ready, write_json
+from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
+from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
 from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
 from jaxnav.io._rtklib import GPS_EPOCH, PosSolution, read_pos
-from jaxnav.io._stop_list import read_stop_list, write_stop_list
+from jaxnav.io._solution_files import (
+    TRAJECTORY_COLUMNS,
+    NavSolution,
+    Track,
+    gpst_iso,
+    write_geojson,
+    write_kml,
+    write_pos,
+    write_trajectory_csv,
+)
 from jaxnav.io._steps_file import STEP_KINDS, KnownStep, date_to_epoch, parse_postseismic, read_steps_file
+from jaxnav.io._stop_list import read_stop_list, write_stop_list
 from jaxnav.io._survey_files import (
     ControlPoints,
     EpochLog,
@@ -30,21 +42,64 @@ from jaxnav.io._survey_files import (
     write_epoch_log,
     write_levelling,
 )
-from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
-from jaxnav.io._csv import read_csv_gnss, read_csv_imu, read_csv_series
 from jaxnav.io._truth import TruthTrajectory, read_csv_truth, read_kfgins_truth
-from jaxnav.io._solution_files import (TRAJECTORY_COLUMNS, NavSolution, Track, gpst_iso, write_geojson, write_kml,
-                                       write_pos, write_trajectory_csv)
 
-__all__ = ["GPS_EPOCH", "ImuLog", "PosSolution", "STANDARD_GRAVITY", "TimeTags", "read_pos", "read_rtklib_imu",
-           "read_rtklib_tag", "ControlPoints", "EpochLog", "Levelling", "read_control_points", "read_epoch_log",
-           "read_levelling", "write_control_points", "write_epoch_log", "write_levelling", "load_toml",
-           "loads_toml",
-           "imu_increments", "RTK_RESULT_COLUMNS", "write_rtk_results", "read_stop_list", "write_stop_list",
-           "ReaderError", "json_ready", "write_json",
-           "provenance", "git_commit", "utc_now", "files_snapshot", "files_written",
-           "read_kfgins_imu", "read_kfgins_gnss", "read_kfgins_odometer", "read_csv_imu", "read_csv_gnss",
-           "read_csv_series", "TruthTrajectory", "read_kfgins_truth", "read_csv_truth",
-           "STEP_KINDS", "KnownStep", "date_to_epoch", "parse_postseismic", "read_steps_file"]
-__all__ += ["TRAJECTORY_COLUMNS", "NavSolution", "Track", "gpst_iso", "write_geojson", "write_kml", "write_pos",
-            "write_trajectory_csv"]
+__all__ = [
+    "GPS_EPOCH",
+    "ImuLog",
+    "PosSolution",
+    "STANDARD_GRAVITY",
+    "TimeTags",
+    "read_pos",
+    "read_rtklib_imu",
+    "read_rtklib_tag",
+    "ControlPoints",
+    "EpochLog",
+    "Levelling",
+    "read_control_points",
+    "read_epoch_log",
+    "read_levelling",
+    "write_control_points",
+    "write_epoch_log",
+    "write_levelling",
+    "load_toml",
+    "loads_toml",
+    "imu_increments",
+    "RTK_RESULT_COLUMNS",
+    "write_rtk_results",
+    "read_stop_list",
+    "write_stop_list",
+    "ReaderError",
+    "json_ready",
+    "write_json",
+    "provenance",
+    "git_commit",
+    "utc_now",
+    "files_snapshot",
+    "files_written",
+    "read_kfgins_imu",
+    "read_kfgins_gnss",
+    "read_kfgins_odometer",
+    "read_csv_imu",
+    "read_csv_gnss",
+    "read_csv_series",
+    "TruthTrajectory",
+    "read_kfgins_truth",
+    "read_csv_truth",
+    "STEP_KINDS",
+    "KnownStep",
+    "date_to_epoch",
+    "parse_postseismic",
+    "read_steps_file",
+]
+__all__ += [
+    "TRAJECTORY_COLUMNS",
+    "NavSolution",
+    "Track",
+    "gpst_iso",
+    "write_geojson",
+    "write_kml",
+    "write_pos",
+    "write_trajectory_csv",
+]
+__all__ += ["DailySeries", "read_col", "read_daily", "read_neu", "read_pbo_pos", "read_tenv3", "year_to_seconds"]

@@ -88,8 +88,7 @@ def _times(c, tcols, tscale, path, lines):
     return out
 
 
-def read_csv_imu(path, columns: dict, units: dict | None = None, *, delimiter=",", comment="#",
-                 header=None) -> ImuLog:
+def read_csv_imu(path, columns: dict, units: dict | None = None, *, delimiter=",", comment="#", header=None) -> ImuLog:
     """Read an IMU log from a CSV (or blank-separated, ``delimiter=None``) table with a column map.
 
     Args:
@@ -139,8 +138,17 @@ def read_csv_imu(path, columns: dict, units: dict | None = None, *, delimiter=",
     return make_imu_log(path, t, g, a, lines, skipped, "csv")
 
 
-def read_csv_gnss(path, columns: dict, units: dict | None = None, *, delimiter=",", comment="#", header=None,
-                  quality: int = 1, sigma_m=None) -> PosSolution:
+def read_csv_gnss(
+    path,
+    columns: dict,
+    units: dict | None = None,
+    *,
+    delimiter=",",
+    comment="#",
+    header=None,
+    quality: int = 1,
+    sigma_m=None,
+) -> PosSolution:
     """Read GNSS positions (and velocities) from a CSV table with a column map.
 
     Args:
@@ -158,8 +166,28 @@ def read_csv_gnss(path, columns: dict, units: dict | None = None, *, delimiter="
       ReaderError: FILE:LINE for a malformed line or an impossible value.
     """
     what = "read_csv_gnss"
-    allowed = ("t", "week", "tow", "lat", "lon", "h", "sd_e", "sd_n", "sd_u", "sd_d", "ve", "vn", "vu", "vd",
-               "sd_ve", "sd_vn", "sd_vu", "sd_vd", "q", "ns")
+    allowed = (
+        "t",
+        "week",
+        "tow",
+        "lat",
+        "lon",
+        "h",
+        "sd_e",
+        "sd_n",
+        "sd_u",
+        "sd_d",
+        "ve",
+        "vn",
+        "vu",
+        "vd",
+        "sd_ve",
+        "sd_vn",
+        "sd_vu",
+        "sd_vd",
+        "q",
+        "ns",
+    )
     _check_map(columns, allowed, what)
     tcols = _time_columns(columns, what)
     for k in ("lat", "lon", "h"):
@@ -218,8 +246,9 @@ _HEADING = {"rad": 1.0, "deg": _u.DEG}
 _SERIES = {"speed": ("speed",), "heading": ("heading", "sigma")}
 
 
-def read_csv_series(path, columns: dict, units: dict | None = None, *, kind: str = "speed", delimiter=",",
-                    comment="#", header=None) -> dict:
+def read_csv_series(
+    path, columns: dict, units: dict | None = None, *, kind: str = "speed", delimiter=",", comment="#", header=None
+) -> dict:
     """Read a time series that aids the filter (wheel speed, heading) from a CSV table with a column map.
 
     Args:

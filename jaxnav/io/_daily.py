@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pathlib
 import re
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -57,11 +57,11 @@ class DailySeries(NamedTuple):
     cov: np.ndarray
     origin: np.ndarray
     llh: np.ndarray
-    reference_velocity: Optional[Any] = None
-    reference_velocity_sigma: Optional[Any] = None
+    reference_velocity: Any | None = None
+    reference_velocity_sigma: Any | None = None
     n_masked: int = 0
-    xyz: Optional[Any] = None
-    cov_xyz: Optional[Any] = None
+    xyz: Any | None = None
+    cov_xyz: Any | None = None
 
 
 def year_to_seconds(year):
@@ -120,8 +120,9 @@ def _masked_positions(enu, sig, lines, path, limits, corr=None):
     return sig, corr, int(miss.sum())
 
 
-_MONTHS = {m: i + 1 for i, m in enumerate(("JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT",
-                                              "NOV", "DEC"))}
+_MONTHS = {
+    m: i + 1 for i, m in enumerate(("JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT", "NOV", "DEC"))
+}
 _MJD_GPS0 = 44244.0  # MJD of the GPS time origin, 1980-01-06
 #: largest antenna height (tenv3 column ``_ant(m)``) accepted, m
 ANTENNA_HEIGHT_MAX_M = 100.0
@@ -153,8 +154,12 @@ def _check_mjd_agrees(mjd_date, mjd, lines, path, what, tol_days=DATE_TOLERANCE_
     bad = np.flatnonzero(~(np.abs(mjd_date - mjd) <= tol_days))
     if bad.size:
         i = int(bad[0])
-        raise _err(path, lines[i], f"{what} disagrees with the {ref} {float(mjd[i]):.4f} by more than "
-                                   f"{tol_days:.4g} {unit} (a corrupted date or time)")
+        raise _err(
+            path,
+            lines[i],
+            f"{what} disagrees with the {ref} {float(mjd[i]):.4f} by more than "
+            f"{tol_days:.4g} {unit} (a corrupted date or time)",
+        )
 
 
 def _check_field_count(w, expected, first, path, lineno, names):
@@ -174,8 +179,11 @@ def _check_increasing(t, lines, path):
     bad = np.flatnonzero(~(d > 0))
     if bad.size:
         i = int(bad[0]) + 1
-        raise _err(path, lines[i], f"time {float(t[i])!r} does not increase (previous epoch {float(t[i - 1])!r}, "
-                                   f"line {lines[i - 1]})")
+        raise _err(
+            path,
+            lines[i],
+            f"time {float(t[i])!r} does not increase (previous epoch {float(t[i - 1])!r}, line {lines[i - 1]})",
+        )
 
 
 def _cov(sig, corr=None):
@@ -227,12 +235,18 @@ def read_tenv3(path) -> DailySeries:
             if len(w) in (20, 23):
                 first = first or (len(w), lineno)  # the header names the columns every record has
             continue  # header line
-        first = _check_field_count(w, (20, 23), first, path, lineno, "site YYMMMDD yyyy.yyyy MJD week d reflon "
-                                   "e0 east n0 north u0 up ant sig_e sig_n sig_u corr_en corr_eu corr_nu "
-                                   "[latitude longitude height]")
+        first = _check_field_count(
+            w,
+            (20, 23),
+            first,
+            path,
+            lineno,
+            "site YYMMMDD yyyy.yyyy MJD week d reflon "
+            "e0 east n0 north u0 up ant sig_e sig_n sig_u corr_en corr_eu corr_nu "
+            "[latitude longitude height]",
+        )
         station = station or w[0]
-        rows.append(_floats(w[2:20] + (w[20:23] if len(w) == 23 else ["nan"] * 3), path, lineno,
-                            "the numeric columns"))
+        rows.append(_floats(w[2:20] + (w[20:23] if len(w) == 23 else ["nan"] * 3), path, lineno, "the numeric columns"))
         m = re.fullmatch(r"(\d\d)([A-Za-z]{3})(\d\d)", w[1])
         d = None
         if m and m.group(2).upper() in _MONTHS:
@@ -256,16 +270,21 @@ def read_tenv3(path) -> DailySeries:
         bad = np.flatnonzero(~(raw[:, 2] * 7.0 + raw[:, 3] == np.floor(mjd - _MJD_GPS0)) | ~(np.abs(raw[:, 3]) <= 6))
     if bad.size:
         i = int(bad[0])
-        raise _err(path, lines[i], f"GPS week {raw[i, 2]!r} and day {raw[i, 3]!r} disagree with the MJD "
-                                   f"{float(mjd[i]):.4f} (a corrupted date)")
+        raise _err(
+            path,
+            lines[i],
+            f"GPS week {raw[i, 2]!r} and day {raw[i, 3]!r} disagree with the MJD "
+            f"{float(mjd[i]):.4f} (a corrupted date)",
+        )
     _check_column(raw[:, 4], lines, path, -360.0, 360.0, "reference longitude", " deg")
     _check_column(a[:, 8], lines, path, -ANTENNA_HEIGHT_MAX_M, ANTENNA_HEIGHT_MAX_M, "antenna height", " m")
     t = (mjd - _MJD_J2000) * 86400.0
     _check_increasing(t, lines, path)
     e, n, u = a[:, 2] + a[:, 3], a[:, 4] + a[:, 5], a[:, 6] + a[:, 7]
     enu = np.stack([e, n, u], axis=1)
-    sig, corr, n_masked = _masked_positions(enu, a[:, 9:12], lines, path,
-                                            (PLANE_MAX_M, PLANE_MAX_M, max(map(abs, HEIGHT_RANGE_M))), a[:, 12:15])
+    sig, corr, n_masked = _masked_positions(
+        enu, a[:, 9:12], lines, path, (PLANE_MAX_M, PLANE_MAX_M, max(map(abs, HEIGHT_RANGE_M))), a[:, 12:15]
+    )
     for j, name, lim in ((15, "latitude", 90.0), (16, "longitude", 360.0)):
         bad = np.flatnonzero(~np.isnan(a[:, j]) & ~(np.abs(a[:, j]) <= lim))
         if bad.size:
@@ -279,8 +298,18 @@ def read_tenv3(path) -> DailySeries:
     origin = enu[int(np.argmax(ok))].copy()  # the first complete epoch
     lon = (a[:, 16] + 180.0) % 360.0 - 180.0
     llh = np.stack([a[:, 15] * DEG, lon * DEG, a[:, 17]], axis=1)
-    return DailySeries(station=station, path=str(path), fmt="tenv3", t=t, year=year, enu=enu - origin,
-                       cov=_cov(sig, corr), origin=origin, llh=llh, n_masked=n_masked)
+    return DailySeries(
+        station=station,
+        path=str(path),
+        fmt="tenv3",
+        t=t,
+        year=year,
+        enu=enu - origin,
+        cov=_cov(sig, corr),
+        origin=origin,
+        llh=llh,
+        n_masked=n_masked,
+    )
 
 
 _SLOPE = re.compile(r"slope\s*1:\s*([-+0-9.eE]+)\s*\+/-\s*([-+0-9.eE]+)\s*m/yr")
@@ -334,11 +363,19 @@ def read_neu(path) -> DailySeries:
     _check_column(a[:, 2], lines, path, 1.0, 366.0, "day of year (column 3)")
     bad = np.flatnonzero((a[:, 1] != np.round(a[:, 1])) | (a[:, 2] != np.round(a[:, 2])))
     if bad.size:
-        raise _err(path, lines[int(bad[0])], f"year {a[bad[0], 1]!r} and day of year {a[bad[0], 2]!r} "
-                                             "must be whole numbers")
-    _check_mjd_agrees(a[:, 1] + (a[:, 2] - 0.5) / 365.25, year, lines, path,
-                      "the year and day of year (columns 2, 3)", DATE_TOLERANCE_DAYS / 365.25, "decimal year",
-                      "years")
+        raise _err(
+            path, lines[int(bad[0])], f"year {a[bad[0], 1]!r} and day of year {a[bad[0], 2]!r} must be whole numbers"
+        )
+    _check_mjd_agrees(
+        a[:, 1] + (a[:, 2] - 0.5) / 365.25,
+        year,
+        lines,
+        path,
+        "the year and day of year (columns 2, 3)",
+        DATE_TOLERANCE_DAYS / 365.25,
+        "decimal year",
+        "years",
+    )
     t = year_to_seconds(year)
     _check_increasing(t, lines, path)
     enu = a[:, [4, 3, 5]]
@@ -348,10 +385,20 @@ def read_neu(path) -> DailySeries:
         ref = np.array([slopes[c][0] for c in "enu"]) / YEAR
         ref_s = np.array([slopes[c][1] for c in "enu"]) / YEAR
     station = re.match(r"[A-Za-z0-9]{4}", path.name)
-    return DailySeries(station=(station.group(0) if station else path.stem).upper(), path=str(path), fmt="neu",
-                       t=t, year=year, enu=enu, cov=_cov(sig), origin=np.zeros(3),
-                       llh=np.full((len(t), 3), np.nan), reference_velocity=ref, reference_velocity_sigma=ref_s,
-                       n_masked=n_masked)
+    return DailySeries(
+        station=(station.group(0) if station else path.stem).upper(),
+        path=str(path),
+        fmt="neu",
+        t=t,
+        year=year,
+        enu=enu,
+        cov=_cov(sig),
+        origin=np.zeros(3),
+        llh=np.full((len(t), 3), np.nan),
+        reference_velocity=ref,
+        reference_velocity_sigma=ref_s,
+        n_masked=n_masked,
+    )
 
 
 _COL_NAMES = {"ns": 1, "ew": 0, "ud": 2}
@@ -391,8 +438,15 @@ def read_col(path) -> DailySeries:
             need = ["year", "ns", "ew", "ud", "sns", "sew", "sud"]
             missing = [k for k in need if k not in idx]
             if missing:
-                names = {"year": "Decimal-Year", "ns": "NS(unit)", "ew": "EW(unit)", "ud": "UD(unit)",
-                         "sns": "sigma-NS(unit)", "sew": "sigma-EW(unit)", "sud": "sigma-UD(unit)"}
+                names = {
+                    "year": "Decimal-Year",
+                    "ns": "NS(unit)",
+                    "ew": "EW(unit)",
+                    "ud": "UD(unit)",
+                    "sns": "sigma-NS(unit)",
+                    "sew": "sigma-EW(unit)",
+                    "sud": "sigma-UD(unit)",
+                }
                 raise _err(path, hline, f"header lacks the column(s) {[names[k] for k in missing]}")
             continue
         if len(w) != len(header):
@@ -409,9 +463,18 @@ def read_col(path) -> DailySeries:
     enu = np.stack([a[:, idx[k]] * scale[k] for k in ("ew", "ns", "ud")], axis=1)
     sig = np.stack([a[:, idx[k]] * scale[k] for k in ("sew", "sns", "sud")], axis=1)
     sig, _, n_masked = _masked_positions(enu, sig, lines, path, (PLANE_MAX_M,) * 3)
-    return DailySeries(station=path.name.split("_")[0].split(".")[0].upper(), path=str(path), fmt="col", t=t,
-                       year=year, enu=enu, cov=_cov(sig), origin=np.zeros(3), llh=np.full((len(t), 3), np.nan),
-                       n_masked=n_masked)
+    return DailySeries(
+        station=path.name.split("_")[0].split(".")[0].upper(),
+        path=str(path),
+        fmt="col",
+        t=t,
+        year=year,
+        enu=enu,
+        cov=_cov(sig),
+        origin=np.zeros(3),
+        llh=np.full((len(t), 3), np.nan),
+        n_masked=n_masked,
+    )
 
 
 _PBO_TITLE = "PBO Station Position Time Series"
@@ -447,8 +510,12 @@ def read_pbo_pos(path) -> DailySeries:
         if first:
             first = False
             if not s.startswith(_PBO_TITLE):
-                raise _err(path, lineno, f"not an EarthScope/PBO daily .pos file: the first line should be "
-                                         f"'{_PBO_TITLE}' (an RTKLIB solution .pos goes to `jaxnav rtk`)")
+                raise _err(
+                    path,
+                    lineno,
+                    f"not an EarthScope/PBO daily .pos file: the first line should be "
+                    f"'{_PBO_TITLE}' (an RTKLIB solution .pos goes to `jaxnav rtk`)",
+                )
             continue
         if not s:
             continue
@@ -459,8 +526,14 @@ def read_pbo_pos(path) -> DailySeries:
                 in_header = not s.startswith("*")
             continue
         w = s.split()
-        first_rec = _check_field_count(w, (25,), first_rec, path, lineno, "YYYYMMDD HHMMSS MJD X Y Z Sx Sy Sz "
-                                       "Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su Rne Rnu Reu Soln")
+        first_rec = _check_field_count(
+            w,
+            (25,),
+            first_rec,
+            path,
+            lineno,
+            "YYYYMMDD HHMMSS MJD X Y Z Sx Sy Sz Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su Rne Rnu Reu Soln",
+        )
         rows.append(_floats(w[2:24], path, lineno, "the numeric fields"))
         dd, hh = w[0], w[1]
         d = None
@@ -490,8 +563,9 @@ def read_pbo_pos(path) -> DailySeries:
     xyz = a[:, 1:4]
     bad = np.flatnonzero(~np.all(np.abs(xyz) <= PLANE_MAX_M, axis=1))
     if bad.size:
-        raise _err(path, lines[int(bad[0])], f"X, Y, Z = {xyz[bad[0]].tolist()} m are not finite or beyond "
-                                             f"{PLANE_MAX_M:g} m")
+        raise _err(
+            path, lines[int(bad[0])], f"X, Y, Z = {xyz[bad[0]].tolist()} m are not finite or beyond {PLANE_MAX_M:g} m"
+        )
     sxyz, cxyz, _ = _masked_positions(np.zeros_like(xyz), a[:, 4:7], lines, path, (1.0,) * 3, a[:, 7:10])
     for j, name, lim in ((10, "latitude", 90.0), (11, "longitude", 360.0)):
         bad = np.flatnonzero(~(np.abs(a[:, j]) <= lim))
@@ -503,9 +577,20 @@ def read_pbo_pos(path) -> DailySeries:
     lon = (a[:, 11] + 180.0) % 360.0 - 180.0
     llh = np.stack([a[:, 10] * DEG, lon * DEG, a[:, 12]], axis=1)
     year = T0_YEAR + t / YEAR
-    return DailySeries(station=station or path.name[:4].upper(), path=str(path), fmt="pbo", t=t, year=year,
-                       enu=enu, cov=_cov(sig, corr), origin=np.zeros(3), llh=llh, n_masked=n_masked, xyz=xyz,
-                       cov_xyz=_cov(sxyz, cxyz))
+    return DailySeries(
+        station=station or path.name[:4].upper(),
+        path=str(path),
+        fmt="pbo",
+        t=t,
+        year=year,
+        enu=enu,
+        cov=_cov(sig, corr),
+        origin=np.zeros(3),
+        llh=llh,
+        n_masked=n_masked,
+        xyz=xyz,
+        cov_xyz=_cov(sxyz, cxyz),
+    )
 
 
 def read_daily(path) -> DailySeries:
@@ -518,6 +603,5 @@ def read_daily(path) -> DailySeries:
     path = pathlib.Path(path)
     readers = {".tenv3": read_tenv3, ".neu": read_neu, ".col": read_col, ".pos": read_pbo_pos}
     if path.suffix.lower() not in readers:
-        raise ReaderError(path, None, f"unknown daily-series format {path.suffix!r}; expected one of "
-                                      f"{sorted(readers)}")
+        raise ReaderError(path, None, f"unknown daily-series format {path.suffix!r}; expected one of {sorted(readers)}")
     return readers[path.suffix.lower()](path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Iterator, Optional
+from collections.abc import Iterator
 
 #: the largest |latitude| a file may give, deg
 LAT_MAX_DEG = 90.0
@@ -24,7 +24,7 @@ class ReaderError(ValueError):
     """A file a reader cannot use; ``str()`` is ``"FILE:LINE: message"`` (``"FILE: message"`` for the
     file as a whole). Attributes: ``path`` (str), ``line`` (1-based int or None), ``reason`` (the message)."""
 
-    def __init__(self, path, line: Optional[int], reason: str):
+    def __init__(self, path, line: int | None, reason: str):
         self.path, self.line, self.reason = os.fspath(path), line, reason
         where = self.path if line is None else f"{self.path}:{line}"
         super().__init__(f"{where}: {reason}")

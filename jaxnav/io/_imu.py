@@ -124,8 +124,12 @@ def _decode_tag_records(buf, path, fpos_bytes):
     rec = 4 + fpos_bytes
     n = (len(buf) - TAG_DATA_START) // rec
     if (len(buf) - TAG_DATA_START) % rec:
-        raise ReaderError(path, None, f"{len(buf) - TAG_DATA_START} bytes of records is not a whole number of "
-                                      f"{rec}-byte (uint32 tick, uint{8 * fpos_bytes} position) records")
+        raise ReaderError(
+            path,
+            None,
+            f"{len(buf) - TAG_DATA_START} bytes of records is not a whole number of "
+            f"{rec}-byte (uint32 tick, uint{8 * fpos_bytes} position) records",
+        )
     dt = np.dtype([("tick", "<u4"), ("fpos", "<u4" if fpos_bytes == 4 else "<u8")])
     r = np.frombuffer(buf, dtype=dt, count=n, offset=TAG_DATA_START)
     tick, fpos = r["tick"].astype(np.int64), r["fpos"].astype(np.int64)
@@ -133,16 +137,24 @@ def _decode_tag_records(buf, path, fpos_bytes):
         bad = np.flatnonzero(np.diff(a) < 0)
         if bad.size:
             k = int(bad[0]) + 1
-            raise ReaderError(path, None, f"record {k} (file offset {TAG_DATA_START + k * rec}): {name} {a[k]} is "
-                                          f"smaller than the previous {a[k - 1]}; not a {rec}-byte-record RTKLIB "
-                                          "tag file")
+            raise ReaderError(
+                path,
+                None,
+                f"record {k} (file offset {TAG_DATA_START + k * rec}): {name} {a[k]} is "
+                f"smaller than the previous {a[k - 1]}; not a {rec}-byte-record RTKLIB "
+                "tag file",
+            )
     gap = np.diff(tick)
     bad = np.flatnonzero(gap > TAG_GAP_MAX_MS)
     if bad.size:
         k = int(bad[0]) + 1
-        raise ReaderError(path, None, f"record {k} (file offset {TAG_DATA_START + k * rec}): tick {tick[k]} ms is "
-                                      f"{gap[k - 1] / 1e3:g} s after the previous {tick[k - 1]} ms, more than "
-                                      f"{TAG_GAP_MAX_MS / 1e3:g} s (a wrapped or corrupted tick)")
+        raise ReaderError(
+            path,
+            None,
+            f"record {k} (file offset {TAG_DATA_START + k * rec}): tick {tick[k]} ms is "
+            f"{gap[k - 1] / 1e3:g} s after the previous {tick[k - 1]} ms, more than "
+            f"{TAG_GAP_MAX_MS / 1e3:g} s (a wrapped or corrupted tick)",
+        )
     return tick, fpos
 
 
@@ -164,21 +176,27 @@ def read_rtklib_tag(path, *, fpos_bytes=None) -> TimeTags:
     path = pathlib.Path(path)
     buf = path.read_bytes()
     if not buf.startswith(TAG_HEADER_MAGIC):
-        raise ReaderError(path, None, f"not an RTKLIB time-tag file (header {buf[:20]!r} does not start with "
-                                      f"{TAG_HEADER_MAGIC.decode()!r})")
+        raise ReaderError(
+            path,
+            None,
+            f"not an RTKLIB time-tag file (header {buf[:20]!r} does not start with {TAG_HEADER_MAGIC.decode()!r})",
+        )
     if len(buf) < TAG_DATA_START:
         raise ReaderError(path, None, f"{len(buf)} bytes is shorter than the {TAG_DATA_START}-byte tag header")
     if len(buf) == TAG_DATA_START:
         raise ReaderError(path, None, "no time-tag records after the header (an empty log)")
-    version = buf[len(TAG_HEADER_MAGIC):TAG_HEADER_LEN].split(b"\0", 1)[0].decode("ascii", "replace").strip()
+    version = buf[len(TAG_HEADER_MAGIC) : TAG_HEADER_LEN].split(b"\0", 1)[0].decode("ascii", "replace").strip()
     tick_f, time_s = struct.unpack_from("<II", buf, TAG_HEADER_LEN)
     (frac,) = struct.unpack_from("<d", buf, TAG_HEADER_LEN + 8)
     if not (0.0 <= frac < 1.0):
         raise ReaderError(path, None, f"start-time fraction {frac!r} at offset 68 is not in [0, 1)")
     t_start = time_s - GPS_EPOCH_UNIX + frac
     if not GPST_RANGE_S[0] <= t_start <= GPST_RANGE_S[1]:
-        raise ReaderError(path, None, f"start time {time_s} (offset 64, GPST counted like Unix time) is before "
-                                      "1980-01-06 or after 2100")
+        raise ReaderError(
+            path,
+            None,
+            f"start time {time_s} (offset 64, GPST counted like Unix time) is before 1980-01-06 or after 2100",
+        )
     if fpos_bytes is not None:
         if fpos_bytes not in (4, 8):
             raise ValueError(f"fpos_bytes must be 4 or 8, not {fpos_bytes!r}")
@@ -193,8 +211,15 @@ def read_rtklib_tag(path, *, fpos_bytes=None) -> TimeTags:
                 errors.append(exc.reason)
         else:
             raise ReaderError(path, None, " / ".join(errors))
-    return TimeTags(path=str(path), version=version, tick_f=int(tick_f), t_start=float(t_start),
-                    tick=tick, fpos=fpos, fpos_bytes=fpos_bytes)
+    return TimeTags(
+        path=str(path),
+        version=version,
+        tick_f=int(tick_f),
+        t_start=float(t_start),
+        tick=tick,
+        fpos=fpos,
+        fpos_bytes=fpos_bytes,
+    )
 
 
 def _parse_line(s, accel_scale=STANDARD_GRAVITY, gyro_scale=DEG):
@@ -218,8 +243,10 @@ def _parse_line(s, accel_scale=STANDARD_GRAVITY, gyro_scale=DEG):
         lim, scale = (ACCEL_MAX, accel_scale) if acc else (GYRO_MAX, gyro_scale)
         if abs(v * scale) > lim:
             what = "specific force" if acc else "angular rate"
-            return (f"{what} {'ax ay az gx gy gz'.split()[i]} = {v:g} ({v * scale:g} {'m/s^2' if acc else 'rad/s'}) "
-                    f"exceeds {lim:g} {'m/s^2' if acc else 'rad/s'}: not a measurement")
+            return (
+                f"{what} {'ax ay az gx gy gz'.split()[i]} = {v:g} ({v * scale:g} {'m/s^2' if acc else 'rad/s'}) "
+                f"exceeds {lim:g} {'m/s^2' if acc else 'rad/s'}: not a measurement"
+            )
     if not 0 <= counter < COUNTER_MAX:
         return f"counter {words[6][:30].decode('ascii', 'replace')} outside [0, 2^62)"
     return vals, counter
@@ -255,8 +282,18 @@ def _envelope_clock(cs, arr, bin_s=1.0):
     return a, b
 
 
-def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel_scale=STANDARD_GRAVITY,
-                    gyro_scale=DEG, counter_unit=1e-3, bad_lines="raise", tag_fpos_bytes=None) -> ImuLog:
+def read_rtklib_imu(
+    csv_path,
+    tag_path=None,
+    *,
+    timing=None,
+    t_start=None,
+    accel_scale=STANDARD_GRAVITY,
+    gyro_scale=DEG,
+    counter_unit=1e-3,
+    bad_lines="raise",
+    tag_fpos_bytes=None,
+) -> ImuLog:
     """Read a raw ``ax,ay,az,gx,gy,gz,counter`` IMU log and its RTKLIB time tags.
 
     Lines: ``b"\\r"`` is stripped; blank lines are skipped. A malformed *first* or *last* line is
@@ -374,9 +411,13 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
         bad = np.flatnonzero(dc <= 0)
         if bad.size:
             k = int(bad[0]) + 1
-            raise ReaderError(csv_path, int(lineno[k]), f"counter {counter[k]} does not increase (previous "
-                                                        f"{counter[k - 1]} on line {lineno[k - 1]}); use "
-                                                        "timing='arrival' with a tag file")
+            raise ReaderError(
+                csv_path,
+                int(lineno[k]),
+                f"counter {counter[k]} does not increase (previous "
+                f"{counter[k - 1]} on line {lineno[k - 1]}); use "
+                "timing='arrival' with a tag file",
+            )
         cs = np.concatenate([[0], np.cumsum(dc)]) * counter_unit  # counter seconds since the first sample
 
     if tags is None:
@@ -394,14 +435,27 @@ def read_rtklib_imu(csv_path, tag_path=None, *, timing=None, t_start=None, accel
             read = tags.tick[np.searchsorted(tags.fpos, logged_ends)] * 1e-3
             off, rate = _envelope_clock(cs, read)
             if abs(rate - 1.0) > 0.01:
-                raise ReaderError(csv_path, None, f"the counter runs at {rate:.6g} x counter_unit={counter_unit} s "
-                                                  f"against the tag file {tags.path}; wrong counter_unit or not a "
-                                                  "counter")
+                raise ReaderError(
+                    csv_path,
+                    None,
+                    f"the counter runs at {rate:.6g} x counter_unit={counter_unit} s "
+                    f"against the tag file {tags.path}; wrong counter_unit or not a "
+                    "counter",
+                )
             t = t0 + off + rate * cs
 
-    return ImuLog(path=str(csv_path), t=t, f_b=a[:, :3] * accel_scale, w_b=a[:, 3:6] * gyro_scale,
-                  counter=counter, lineno=lineno, n_skipped_lines=len(skipped), skipped=tuple(skipped),
-                  timing=timing, t_start=float(t0))
+    return ImuLog(
+        path=str(csv_path),
+        t=t,
+        f_b=a[:, :3] * accel_scale,
+        w_b=a[:, 3:6] * gyro_scale,
+        counter=counter,
+        lineno=lineno,
+        n_skipped_lines=len(skipped),
+        skipped=tuple(skipped),
+        timing=timing,
+        t_start=float(t0),
+    )
 
 
 def imu_increments(imu: ImuLog, C_bs):

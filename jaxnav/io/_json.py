@@ -25,9 +25,11 @@ def _kind(v: float) -> str:
 
 
 #: the reason written for a single non-finite number when its producer gives none
-SCALAR_REASONS = {"nan": "not computed (nan): the data held nothing to compute it from",
-                  "inf": "infinite (inf): no finite value exists for these data",
-                  "-inf": "infinite (-inf): no finite value exists for these data"}
+SCALAR_REASONS = {
+    "nan": "not computed (nan): the data held nothing to compute it from",
+    "inf": "infinite (inf): no finite value exists for these data",
+    "-inf": "infinite (-inf): no finite value exists for these data",
+}
 
 
 def _convert(obj, counts):

@@ -70,8 +70,11 @@ def read_kfgins_imu(path, *, gps_week=None, n_columns: int = 7) -> ImuLog:
     if n_columns is None:
         n_columns = _first_record_fields(path)
         if n_columns not in (7, 8):
-            raise ReaderError(str(path), None, f"the first record has {n_columns} fields; a KF-GINS IMU file has 7 "
-                                               "(or 8 with the odometer)")
+            raise ReaderError(
+                str(path),
+                None,
+                f"the first record has {n_columns} fields; a KF-GINS IMU file has 7 (or 8 with the odometer)",
+            )
     if n_columns not in (7, 8):
         raise ValueError(f"n_columns must be 7 or 8, got {n_columns!r}")
     cols = {k: i for i, k in enumerate(("t", "dthx", "dthy", "dthz", "dvx", "dvy", "dvz"))}
@@ -135,10 +138,15 @@ def read_kfgins_gnss(path, *, gps_week=None, quality: int = 1) -> PosSolution:
             break
     if n is None:
         raise ReaderError(str(path), None, "no data records")
-    names = ("t", "lat", "lon", "h") + (("vn", "ve", "vd") if n == 13 else ()) + ("sdn", "sde", "sdd") + (
-        ("sdvn", "sdve", "sdvd") if n == 13 else ())
-    vals, lines = read_rows(path, {k: i for i, k in enumerate(names)}, delimiter=None, comment="#", header=False,
-                            n_fields=n)
+    names = (
+        ("t", "lat", "lon", "h")
+        + (("vn", "ve", "vd") if n == 13 else ())
+        + ("sdn", "sde", "sdd")
+        + (("sdvn", "sdve", "sdvd") if n == 13 else ())
+    )
+    vals, lines = read_rows(
+        path, {k: i for i, k in enumerate(names)}, delimiter=None, comment="#", header=False, n_fields=n
+    )
     c = {k: vals[:, i] for i, k in enumerate(names)}
     if not np.isfinite(quality) or quality != int(quality) or not 0 <= quality <= 7:
         raise ValueError(f"quality must be a whole number in [0, 7], got {quality!r}")
@@ -150,5 +158,6 @@ def read_kfgins_gnss(path, *, gps_week=None, quality: int = 1) -> PosSolution:
     if n == 13:
         v = np.stack([c["ve"], c["vn"], -c["vd"]], 1)
         sv = np.stack([c["sdve"], c["sdvn"], c["sdvd"]], 1)
-    return make_pos_solution(path, tt, c["lat"], c["lon"], c["h"], sd, v, sv,
-                             np.full(tt.size, int(quality)), None, lines)
+    return make_pos_solution(
+        path, tt, c["lat"], c["lon"], c["h"], sd, v, sv, np.full(tt.size, int(quality)), None, lines
+    )

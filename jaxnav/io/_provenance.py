@@ -23,23 +23,25 @@ import pathlib
 import platform
 import shlex
 import subprocess
+from collections.abc import Iterable
 from importlib import metadata
-from typing import Iterable, Optional
 
 _ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
-def git_commit(root=None) -> Optional[str]:
+def git_commit(root=None) -> str | None:
     """Short git commit of the jaxnav checkout (with ``+dirty`` for local changes to ``jaxnav/``),
     or None outside a checkout or without git."""
     root = pathlib.Path(root) if root is not None else _ROOT
     if not (root / ".git").exists():
         return None
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
-                             timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jaxnav"], cwd=root, capture_output=True,
-                               text=True, timeout=10).stdout.strip()
+        rev = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--", "jaxnav"], cwd=root, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return None
     return (rev + ("+dirty" if dirty else "")) or None
@@ -47,18 +49,24 @@ def git_commit(root=None) -> Optional[str]:
 
 def utc_now() -> str:
     """The current UTC time, ISO 8601 to the second (e.g. ``2026-01-31T12:00:00+00:00``)."""
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
-def _version(dist: str) -> Optional[str]:
+def _version(dist: str) -> str | None:
     try:
         return metadata.version(dist)
     except metadata.PackageNotFoundError:
         return None
 
 
-def provenance(*, argv: Optional[Iterable[str]] = None, options: Optional[dict] = None, config_file=None,
-               config=None, date_utc: Optional[str] = None) -> dict:
+def provenance(
+    *,
+    argv: Iterable[str] | None = None,
+    options: dict | None = None,
+    config_file=None,
+    config=None,
+    date_utc: str | None = None,
+) -> dict:
     """The provenance block (keys in the module docstring).
 
     Args:
@@ -69,12 +77,19 @@ def provenance(*, argv: Optional[Iterable[str]] = None, options: Optional[dict] 
     import jaxnav
 
     words = None if argv is None else [str(a) for a in argv]
-    return {"jaxnav_version": jaxnav.__version__, "git_commit": git_commit(),
-            "python_version": platform.python_version(), "jax_version": _version("jax"),
-            "date_utc": date_utc or utc_now(),
-            "command": None if words is None else shlex.join(["jaxnav", *words]), "argv": words,
-            "cwd": os.getcwd(), "options": options,
-            "config_file": None if config_file is None else str(config_file), "config": config}
+    return {
+        "jaxnav_version": jaxnav.__version__,
+        "git_commit": git_commit(),
+        "python_version": platform.python_version(),
+        "jax_version": _version("jax"),
+        "date_utc": date_utc or utc_now(),
+        "command": None if words is None else shlex.join(["jaxnav", *words]),
+        "argv": words,
+        "cwd": os.getcwd(),
+        "options": options,
+        "config_file": None if config_file is None else str(config_file),
+        "config": config,
+    }
 
 
 def files_snapshot(folder) -> dict:
@@ -93,7 +108,7 @@ def files_snapshot(folder) -> dict:
     return snap
 
 
-def files_written(folder, before: Optional[dict], since_ns: int) -> list:
+def files_written(folder, before: dict | None, since_ns: int) -> list:
     """Files under ``folder`` created or changed since the snapshot ``before`` (:func:`files_snapshot`;
     None: no snapshot) or modified at or after ``since_ns`` (``time.time_ns()``): sorted paths relative
     to ``folder``."""

@@ -23,11 +23,33 @@ import pathlib
 from jaxnav.units import CM, MM
 
 RTK_RESULT_COLUMNS = (
-    "point", "n_epochs", "x_m", "y_m", "h_m", "H_ellipsoidal_m", "m_x_mm", "m_y_mm", "m_h_mm",
-    "raw_x_m", "raw_y_m", "raw_h_m", "raw_m_x_mm", "raw_m_y_mm", "raw_m_h_mm",
-    "formal_m_x_mm", "formal_m_y_mm", "formal_m_h_mm",
-    "terminal_x_m", "terminal_y_m", "terminal_h_m", "h_level_m", "d_filtered_cm", "d_terminal_cm",
-    "sigma_x_mm", "sigma_y_mm", "sigma_h_mm",
+    "point",
+    "n_epochs",
+    "x_m",
+    "y_m",
+    "h_m",
+    "H_ellipsoidal_m",
+    "m_x_mm",
+    "m_y_mm",
+    "m_h_mm",
+    "raw_x_m",
+    "raw_y_m",
+    "raw_h_m",
+    "raw_m_x_mm",
+    "raw_m_y_mm",
+    "raw_m_h_mm",
+    "formal_m_x_mm",
+    "formal_m_y_mm",
+    "formal_m_h_mm",
+    "terminal_x_m",
+    "terminal_y_m",
+    "terminal_h_m",
+    "h_level_m",
+    "d_filtered_cm",
+    "d_terminal_cm",
+    "sigma_x_mm",
+    "sigma_y_mm",
+    "sigma_h_mm",
 )
 
 #: what each column is (the ``# columns:`` comment lines say the same)
@@ -48,8 +70,9 @@ def _f(v, scale=1.0, fmt=".4f"):
     return "" if not math.isfinite(v) else format(v / scale, fmt)
 
 
-def write_rtk_results(path, names, result, h_level, *, sigma=None, sigma_method="", crs="", zone="",
-                      height_system="") -> pathlib.Path:
+def write_rtk_results(
+    path, names, result, h_level, *, sigma=None, sigma_method="", crs="", zone="", height_system=""
+) -> pathlib.Path:
     """Write the S2 per-point results (:class:`jaxnav.survey.RtkResult`, as numpy) as CSV.
 
     Args:
@@ -64,24 +87,38 @@ def write_rtk_results(path, names, result, h_level, *, sigma=None, sigma_method=
     """
     res = result
     path = pathlib.Path(path)
-    head = [f"jaxnav rtk: per-point results of the S2 pipeline, one row a point ({len(names)} points)",
-            f"crs: {crs or 'not given'}", f"zone: {zone or 'not given'}",
-            f"height system: {height_system or 'not given'}", "time system: GPST",
-            f"sigma method: {sigma_method or 'not computed'}",
-            "units: suffix _m metres, _mm millimetres, _cm centimetres; n_epochs a count; an empty field is "
-            "not finite or not available",
-            *(f"columns: {m}" for m in RTK_RESULT_MEANING)]
+    head = [
+        f"jaxnav rtk: per-point results of the S2 pipeline, one row a point ({len(names)} points)",
+        f"crs: {crs or 'not given'}",
+        f"zone: {zone or 'not given'}",
+        f"height system: {height_system or 'not given'}",
+        "time system: GPST",
+        f"sigma method: {sigma_method or 'not computed'}",
+        "units: suffix _m metres, _mm millimetres, _cm centimetres; n_epochs a count; an empty field is "
+        "not finite or not available",
+        *(f"columns: {m}" for m in RTK_RESULT_MEANING),
+    ]
     with path.open("w", newline="") as fh:
         for line in head:
             fh.write("# " + " ".join(str(line).split()) + "\n")
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(RTK_RESULT_COLUMNS)
         for i, name in enumerate(names):
-            w.writerow([name, int(res.n[i]), *(_f(v) for v in res.xyh[i]), _f(res.H[i]),
-                        *(_f(v, MM, ".3f") for v in res.precision[i]), *(_f(v) for v in res.raw_xyh[i]),
-                        *(_f(v, MM, ".3f") for v in res.raw_precision[i]),
-                        *(_f(v, MM, ".3f") for v in res.formal_precision[i]),
-                        *(_f(v) for v in res.terminal_xyh[i]), _f(h_level[i]),
-                        _f(res.xyh[i, 2] - h_level[i], CM, ".3f"), _f(res.terminal_xyh[i, 2] - h_level[i], CM, ".3f"),
-                        *((_f(v, MM, ".3f") for v in sigma[i]) if sigma is not None else ("", "", ""))])
+            w.writerow(
+                [
+                    name,
+                    int(res.n[i]),
+                    *(_f(v) for v in res.xyh[i]),
+                    _f(res.H[i]),
+                    *(_f(v, MM, ".3f") for v in res.precision[i]),
+                    *(_f(v) for v in res.raw_xyh[i]),
+                    *(_f(v, MM, ".3f") for v in res.raw_precision[i]),
+                    *(_f(v, MM, ".3f") for v in res.formal_precision[i]),
+                    *(_f(v) for v in res.terminal_xyh[i]),
+                    _f(h_level[i]),
+                    _f(res.xyh[i, 2] - h_level[i], CM, ".3f"),
+                    _f(res.terminal_xyh[i, 2] - h_level[i], CM, ".3f"),
+                    *((_f(v, MM, ".3f") for v in sigma[i]) if sigma is not None else ("", "", "")),
+                ]
+            )
     return path

@@ -84,20 +84,39 @@ def _parse_time(words, path, lineno):
                 raise ValueError(f"seconds of week {words[1]} outside [0, 604800)")
             sec = week * SECONDS_PER_WEEK + tow
     except (ValueError, IndexError, OverflowError) as exc:
-        raise ReaderError(path, lineno,
-                          f"cannot read the GPST time from {' '.join(words[:2])[:60]!r} ({exc})") from None
+        raise ReaderError(
+            path, lineno, f"cannot read the GPST time from {' '.join(words[:2])[:60]!r} ({exc})"
+        ) from None
     if not GPST_RANGE_S[0] <= sec <= GPST_RANGE_S[1]:
         raise ReaderError(path, lineno, f"GPST time {' '.join(words[:2])[:60]!r} is before 1980-01-06 or after 2100")
     return sec, 2
 
 
 #: per-column checks of a record: (low, high) after reading, in the file's units
-_COLUMN_RANGES = {"latitude(deg)": (-90.0, 90.0), "longitude(deg)": (-360.0, 360.0), "height(m)": HEIGHT_RANGE_M,
-                  "Q": Q_RANGE, "ns": (0, 1000), "sdn(m)": (0.0, 1e4), "sde(m)": (0.0, 1e4), "sdu(m)": (0.0, 1e4),
-                  "sdne(m)": (-1e4, 1e4), "sdeu(m)": (-1e4, 1e4), "sdun(m)": (-1e4, 1e4), "age(s)": (-1e6, 1e6),
-                  "ratio": (0.0, 1e9), "ve(m/s)": (-1e4, 1e4), "vn(m/s)": (-1e4, 1e4), "vu(m/s)": (-1e4, 1e4),
-                  "sdvn": (0.0, 1e4), "sdve": (0.0, 1e4), "sdvu": (0.0, 1e4), "sdvne": (-1e4, 1e4),
-                  "sdveu": (-1e4, 1e4), "sdvun": (-1e4, 1e4)}
+_COLUMN_RANGES = {
+    "latitude(deg)": (-90.0, 90.0),
+    "longitude(deg)": (-360.0, 360.0),
+    "height(m)": HEIGHT_RANGE_M,
+    "Q": Q_RANGE,
+    "ns": (0, 1000),
+    "sdn(m)": (0.0, 1e4),
+    "sde(m)": (0.0, 1e4),
+    "sdu(m)": (0.0, 1e4),
+    "sdne(m)": (-1e4, 1e4),
+    "sdeu(m)": (-1e4, 1e4),
+    "sdun(m)": (-1e4, 1e4),
+    "age(s)": (-1e6, 1e6),
+    "ratio": (0.0, 1e9),
+    "ve(m/s)": (-1e4, 1e4),
+    "vn(m/s)": (-1e4, 1e4),
+    "vu(m/s)": (-1e4, 1e4),
+    "sdvn": (0.0, 1e4),
+    "sdve": (0.0, 1e4),
+    "sdvu": (0.0, 1e4),
+    "sdvne": (-1e4, 1e4),
+    "sdveu": (-1e4, 1e4),
+    "sdvun": (-1e4, 1e4),
+}
 
 
 def _check_record(vals, header, path, lineno):
@@ -141,15 +160,17 @@ def read_pos(path) -> PosSolution:
         if s.startswith("%"):
             if "GPST" in s and ("latitude" in s or "x-ecef" in s):
                 if "x-ecef" in s:
-                    raise ReaderError(path, lineno, "ECEF (x-ecef) solutions are not supported; "
-                                                    "write the solution with lat/lon/height output")
+                    raise ReaderError(
+                        path,
+                        lineno,
+                        "ECEF (x-ecef) solutions are not supported; write the solution with lat/lon/height output",
+                    )
                 header = s.lstrip("%").split()
                 missing = [c for c in ("latitude(deg)", "longitude(deg)", "height(m)", "Q") if c not in header]
                 if missing:
                     raise ReaderError(path, lineno, f"the header line lacks the column(s) {missing}")
                 if header[0] != "GPST" or len(set(header)) != len(header):
-                    raise ReaderError(path, lineno, "the header line must start with GPST and name each "
-                                                    "column once")
+                    raise ReaderError(path, lineno, "the header line must start with GPST and name each column once")
             continue
         if header is None:
             raise ReaderError(path, lineno, "data before the '%  GPST latitude(deg) ...' header line")
@@ -166,8 +187,12 @@ def read_pos(path) -> PosSolution:
         _check_record(nums, header, path, lineno)
         rows.append([t] + nums)
         if len(rows) > 1 and not t > rows[-2][0]:
-            raise ReaderError(path, lineno, f"time {' '.join(words[:2])} is not after the previous "
-                                            f"record's (line {linenos[-1]}); epochs must increase")
+            raise ReaderError(
+                path,
+                lineno,
+                f"time {' '.join(words[:2])} is not after the previous "
+                f"record's (line {linenos[-1]}); epochs must increase",
+            )
         linenos.append(lineno)
     if header is None:
         raise ReaderError(path, None, "no '%  GPST latitude(deg) ...' header line found")
@@ -179,12 +204,22 @@ def read_pos(path) -> PosSolution:
     def get(name, default=math.nan):
         return a[:, col[name]] if name in col else np.full(len(a), default)
 
-    cov = _cov_enu(get("sdn(m)"), get("sde(m)"), get("sdu(m)"), get("sdne(m)", 0.0), get("sdeu(m)", 0.0),
-                   get("sdun(m)", 0.0))
+    cov = _cov_enu(
+        get("sdn(m)"), get("sde(m)"), get("sdu(m)"), get("sdne(m)", 0.0), get("sdeu(m)", 0.0), get("sdun(m)", 0.0)
+    )
     v = np.stack([get("ve(m/s)"), get("vn(m/s)"), get("vu(m/s)")], axis=1)
     vcov = _cov_enu(get("sdvn"), get("sdve"), get("sdvu"), get("sdvne"), get("sdveu"), get("sdvun"))
     return PosSolution(
-        path=str(path), t=a[:, 0], lat=np.radians(get("latitude(deg)")), lon=np.radians(get("longitude(deg)")),
-        h=get("height(m)"), q=get("Q").astype(int), ns=get("ns").astype(int), cov_enu=cov,
-        age=get("age(s)"), ratio=get("ratio"), v_enu=v, vcov_enu=vcov,
+        path=str(path),
+        t=a[:, 0],
+        lat=np.radians(get("latitude(deg)")),
+        lon=np.radians(get("longitude(deg)")),
+        h=get("height(m)"),
+        q=get("Q").astype(int),
+        ns=get("ns").astype(int),
+        cov_enu=cov,
+        age=get("age(s)"),
+        ratio=get("ratio"),
+        v_enu=v,
+        vcov_enu=vcov,
     )

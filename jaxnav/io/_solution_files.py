@@ -12,7 +12,8 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import pathlib
-from typing import Any, NamedTuple, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -20,11 +21,28 @@ from jaxnav.io._rtklib import GPS_EPOCH
 
 #: trajectory CSV columns with their units (the header says the same)
 TRAJECTORY_COLUMNS = (
-    ("gpst_s", "s"), ("gpst_iso", "GPST"), ("lat_deg", "deg"), ("lon_deg", "deg"), ("h_m", "m"),
-    ("ve_m_s", "m/s"), ("vn_m_s", "m/s"), ("vu_m_s", "m/s"), ("roll_deg", "deg"), ("pitch_deg", "deg"),
-    ("heading_deg", "deg"), ("sigma_e_m", "m"), ("sigma_n_m", "m"), ("sigma_u_m", "m"), ("sigma_ve_m_s", "m/s"),
-    ("sigma_vn_m_s", "m/s"), ("sigma_vu_m_s", "m/s"), ("sigma_tilt_e_deg", "deg"), ("sigma_tilt_n_deg", "deg"),
-    ("sigma_heading_deg", "deg"), ("gnss_used", "0/1"))
+    ("gpst_s", "s"),
+    ("gpst_iso", "GPST"),
+    ("lat_deg", "deg"),
+    ("lon_deg", "deg"),
+    ("h_m", "m"),
+    ("ve_m_s", "m/s"),
+    ("vn_m_s", "m/s"),
+    ("vu_m_s", "m/s"),
+    ("roll_deg", "deg"),
+    ("pitch_deg", "deg"),
+    ("heading_deg", "deg"),
+    ("sigma_e_m", "m"),
+    ("sigma_n_m", "m"),
+    ("sigma_u_m", "m"),
+    ("sigma_ve_m_s", "m/s"),
+    ("sigma_vn_m_s", "m/s"),
+    ("sigma_vu_m_s", "m/s"),
+    ("sigma_tilt_e_deg", "deg"),
+    ("sigma_tilt_n_deg", "deg"),
+    ("sigma_heading_deg", "deg"),
+    ("gnss_used", "0/1"),
+)
 
 
 class NavSolution(NamedTuple):
@@ -61,9 +79,9 @@ class Track(NamedTuple):
 
     name: str
     pos: Any
-    properties: Optional[dict] = None
-    color: Optional[str] = None
-    width: Optional[float] = None
+    properties: dict | None = None
+    color: str | None = None
+    width: float | None = None
     clamp_to_ground: bool = False
 
 
@@ -99,17 +117,27 @@ def write_trajectory_csv(path, sol: NavSolution, *, title: str) -> pathlib.Path:
     t = np.asarray(sol.t, float)
     path = pathlib.Path(path)
     with path.open("w", encoding="utf-8") as f:
-        f.write(f"# {title}; time GPST, WGS-84 geodetic, ellipsoidal height;\n"
-                "# attitude of the forward-right-down vehicle frame (roll, pitch, heading clockwise from north);\n"
-                "# sigma_tilt_e/n and sigma_heading are 1-sigma misalignments about east, north and up;\n"
-                "# units: " + ", ".join(f"{n} [{u}]" for n, u in TRAJECTORY_COLUMNS) + "\n")
+        f.write(
+            f"# {title}; time GPST, WGS-84 geodetic, ellipsoidal height;\n"
+            "# attitude of the forward-right-down vehicle frame (roll, pitch, heading clockwise from north);\n"
+            "# sigma_tilt_e/n and sigma_heading are 1-sigma misalignments about east, north and up;\n"
+            "# units: " + ", ".join(f"{n} [{u}]" for n, u in TRAJECTORY_COLUMNS) + "\n"
+        )
         f.write(",".join(n for n, _ in TRAJECTORY_COLUMNS) + "\n")
         for k in range(M):
-            row = [f"{t[k]:.3f}", gpst_iso(t[k]), f"{math.degrees(pos[k, 0]):.9f}",
-                   f"{math.degrees(pos[k, 1]):.9f}", f"{pos[k, 2]:.4f}",
-                   *(f"{x:.4f}" for x in v[k]), *(f"{x:.4f}" for x in rpy[k]),
-                   *(f"{x:.4f}" for x in se[k]), *(f"{x:.4f}" for x in sv[k]), *(f"{x:.4f}" for x in sa[k]),
-                   str(int(used[k]))]
+            row = [
+                f"{t[k]:.3f}",
+                gpst_iso(t[k]),
+                f"{math.degrees(pos[k, 0]):.9f}",
+                f"{math.degrees(pos[k, 1]):.9f}",
+                f"{pos[k, 2]:.4f}",
+                *(f"{x:.4f}" for x in v[k]),
+                *(f"{x:.4f}" for x in rpy[k]),
+                *(f"{x:.4f}" for x in se[k]),
+                *(f"{x:.4f}" for x in sv[k]),
+                *(f"{x:.4f}" for x in sa[k]),
+                str(int(used[k])),
+            ]
             f.write(",".join(row) + "\n")
     return path
 
@@ -128,18 +156,22 @@ def write_pos(path, sol: NavSolution, *, comments: Sequence[tuple[str, str]] = (
         for key, value in comments:
             f.write(f"% {key:<10}: {value}\n")
         f.write("% Q         : GNSS quality used at the epoch (0: inertial only)\n")
-        f.write("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
-                "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)      sdvn     sdve     sdvu"
-                "    sdvne    sdveu    sdvun\n")
+        f.write(
+            "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+            "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio    vn(m/s)    ve(m/s)    vu(m/s)      sdvn     sdve     sdvu"
+            "    sdvne    sdveu    sdvun\n"
+        )
         for k in range(M):
             tt = gpst_iso(t[k], date_sep="/", sep=" ")
             e, n, u = se[k]
             ve, vn, vu = v[k]
             sve, svn, svu = sv[k]
-            f.write(f"{tt} {math.degrees(pos[k, 0]):14.9f} {math.degrees(pos[k, 1]):14.9f} "
-                    f"{pos[k, 2]:10.4f} {int(q[k]):3d} {0:3d} {n:8.4f} {e:8.4f} {u:8.4f} {0:8.4f} {0:8.4f} "
-                    f"{0:8.4f} {0:6.2f} {0:6.1f} {vn:10.5f} {ve:10.5f} {vu:10.5f} {svn:9.5f} {sve:9.5f} {svu:9.5f} "
-                    f"{0:8.5f} {0:8.5f} {0:8.5f}\n")
+            f.write(
+                f"{tt} {math.degrees(pos[k, 0]):14.9f} {math.degrees(pos[k, 1]):14.9f} "
+                f"{pos[k, 2]:10.4f} {int(q[k]):3d} {0:3d} {n:8.4f} {e:8.4f} {u:8.4f} {0:8.4f} {0:8.4f} "
+                f"{0:8.4f} {0:6.2f} {0:6.1f} {vn:10.5f} {ve:10.5f} {vu:10.5f} {svn:9.5f} {sve:9.5f} {svu:9.5f} "
+                f"{0:8.5f} {0:8.5f} {0:8.5f}\n"
+            )
     return path
 
 
@@ -152,8 +184,12 @@ def write_geojson(path, tracks: Sequence[Track]) -> pathlib.Path:
     ``name`` and the track's own; strict JSON (a NaN raises ValueError)."""
     import geojson
 
-    feats = [geojson.Feature(geometry=geojson.LineString(_lonlath(tr.pos)),
-                             properties={"name": tr.name, **(tr.properties or {})}) for tr in tracks]
+    feats = [
+        geojson.Feature(
+            geometry=geojson.LineString(_lonlath(tr.pos)), properties={"name": tr.name, **(tr.properties or {})}
+        )
+        for tr in tracks
+    ]
     path = pathlib.Path(path)
     path.write_text(geojson.dumps(geojson.FeatureCollection(feats), allow_nan=False) + "\n", encoding="utf-8")
     return path

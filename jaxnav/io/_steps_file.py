@@ -24,7 +24,7 @@ from __future__ import annotations
 import datetime as _dt
 import os
 import re
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 from jaxnav.io._errors import ReaderError, text_lines
 from jaxnav.monitoring._trajectory import POSTSEISMIC_FORMS  # the module, not the package
@@ -75,7 +75,7 @@ def date_to_epoch(text: str) -> float:
     return (y - 2000.0) * YEAR
 
 
-def _ngl_epoch(text: str) -> Optional[float]:
+def _ngl_epoch(text: str) -> float | None:
     m = _NGL_DATE.fullmatch(text.upper())
     if m is None or m.group(2) not in _MONTHS:
         return None
@@ -97,15 +97,17 @@ def parse_postseismic(text: str) -> tuple:
     form, _, tau = text.strip().partition(":")
     form = form.lower()
     if form not in POSTSEISMIC_FORMS or not tau:
-        raise ValueError(f"post-seismic term {text[:40]!r}: expected log:TAU_DAYS, exp:TAU_DAYS, log:estimate or "
-                         "exp:estimate")
+        raise ValueError(
+            f"post-seismic term {text[:40]!r}: expected log:TAU_DAYS, exp:TAU_DAYS, log:estimate or exp:estimate"
+        )
     if tau.strip().lower() in ("estimate", "est", "free"):
         return form, None
     try:
         v = float(tau)
     except ValueError:
-        raise ValueError(f"post-seismic term {text[:40]!r}: time constant {tau[:40]!r} is not a number of days "
-                         "(or 'estimate')") from None
+        raise ValueError(
+            f"post-seismic term {text[:40]!r}: time constant {tau[:40]!r} is not a number of days (or 'estimate')"
+        ) from None
     if not 0.0 < v <= 1e5:
         raise ValueError(f"post-seismic term {text[:40]!r}: time constant must be in (0, 1e5] days")
     return form, v * DAY
@@ -145,8 +147,12 @@ def read_steps_file(path) -> list:
         terms = []
         for extra in w[3:]:
             if kind != "earthquake":
-                raise ReaderError(p, lineno, f"post-seismic term {extra[:40]!r} on a step of kind {kind!r}: only "
-                                             "earthquake steps take post-seismic terms")
+                raise ReaderError(
+                    p,
+                    lineno,
+                    f"post-seismic term {extra[:40]!r} on a step of kind {kind!r}: only "
+                    "earthquake steps take post-seismic terms",
+                )
             try:
                 terms.append(parse_postseismic(extra))
             except ValueError as exc:

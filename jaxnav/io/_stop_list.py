@@ -25,9 +25,11 @@ def write_stop_list(path, stops: StopList) -> None:
     for i in range(len(stops.t_start)):
         lat, lon, h = stops.pos[i]
         s = stops.sigma[i]
-        lines.append(f"{stops.name[i]}, {STOP_KINDS[stops.kind[i]]}, {stops.t_start[i]:.4f}, {stops.t_end[i]:.4f}, "
-                     f"{units.rad_to_deg(lat):.11f}, {units.rad_to_deg(lon):.11f}, {h:.4f}, "
-                     f"{s[0]:.4f}, {s[1]:.4f}, {s[2]:.4f}")
+        lines.append(
+            f"{stops.name[i]}, {STOP_KINDS[stops.kind[i]]}, {stops.t_start[i]:.4f}, {stops.t_end[i]:.4f}, "
+            f"{units.rad_to_deg(lat):.11f}, {units.rad_to_deg(lon):.11f}, {h:.4f}, "
+            f"{s[0]:.4f}, {s[1]:.4f}, {s[2]:.4f}"
+        )
     with open(path, "w", encoding="utf-8") as f:
         f.write("\n".join(lines) + "\n")
 
@@ -64,10 +66,13 @@ def read_stop_list(path) -> StopList:
         t0, t1 = nums[0], nums[1]
         if not (math.isfinite(t0) and math.isfinite(t1) and t1 > t0 and max(abs(t0), abs(t1)) <= 1e10):
             raise ReaderError(p, lineno, f"stop {name!r} needs finite t_end > t_start (|t| <= 1e10 s), got {t0}, {t1}")
-        lat, lon, h = (nums[2:5] if len(nums) >= 5 else [math.nan] * 3)
+        lat, lon, h = nums[2:5] if len(nums) >= 5 else [math.nan] * 3
         sig = nums[5:8] if len(nums) == 8 else [0.01, 0.01, 0.01]
-        for v, what, lo, hi in ((lat, "lat_deg", -90.0, 90.0), (lon, "lon_deg", -360.0, 360.0),
-                                (h, "h_m", *HEIGHT_RANGE_M)):
+        for v, what, lo, hi in (
+            (lat, "lat_deg", -90.0, 90.0),
+            (lon, "lon_deg", -360.0, 360.0),
+            (h, "h_m", *HEIGHT_RANGE_M),
+        ):
             if not math.isnan(v) and not lo <= v <= hi:
                 raise ReaderError(p, lineno, f"{what} = {v:g} is not finite or outside [{lo:g}, {hi:g}]")
         for v, what in zip(sig, ("sigma_e_m", "sigma_n_m", "sigma_u_m")):
@@ -75,8 +80,12 @@ def read_stop_list(path) -> StopList:
                 raise ReaderError(p, lineno, f"{what} = {v:g} must be positive, finite and <= {SIGMA_MAX_M:g} m")
         need = {"known_coordinate": (lat, lon, h), "known_position": (lat, lon), "levelling": (h,)}.get(kind, ())
         if any(not math.isfinite(v) for v in need):
-            raise ReaderError(p, lineno, f"a {kind} stop needs its known coordinates "
-                                         f"(lat_deg, lon_deg, h_m), got {cols[4:7] if len(cols) > 4 else 'none'}")
+            raise ReaderError(
+                p,
+                lineno,
+                f"a {kind} stop needs its known coordinates "
+                f"(lat_deg, lon_deg, h_m), got {cols[4:7] if len(cols) > 4 else 'none'}",
+            )
         rows.append((name, STOP_KINDS.index(kind), t0, t1, units.deg_to_rad(lat), units.deg_to_rad(lon), h, *sig))
     if not rows:
         raise ReaderError(p, None, "no stops in the file")

@@ -113,11 +113,15 @@ def _rows(path, required, alternatives=None):
         if header is None:
             header = row
             cols = {name: i for i, name in enumerate(header)}
-            missing = [c for c in required if c not in cols
-                       and not (c in alternatives and all(a in cols for a in alternatives[c]))]
+            missing = [
+                c
+                for c in required
+                if c not in cols and not (c in alternatives and all(a in cols for a in alternatives[c]))
+            ]
             if missing:
-                raise ReaderError(path, lineno, f"header lacks column(s) {missing}; "
-                                                f"expected {list(required)}, found {header}"[:300])
+                raise ReaderError(
+                    path, lineno, f"header lacks column(s) {missing}; expected {list(required)}, found {header}"[:300]
+                )
             if len(set(header)) != len(header):
                 raise ReaderError(path, lineno, f"header names a column twice: {header}"[:300])
             continue
@@ -147,8 +151,15 @@ def _float(text, path, lineno, name, allow_empty=False, *, missing=False, lo=-ma
 
 
 #: ranges of the numeric columns (file units: m, deg)
-_LIMITS = {"x": (-PLANE_MAX_M, PLANE_MAX_M), "y": (-PLANE_MAX_M, PLANE_MAX_M), "h": HEIGHT_RANGE_M,
-           "B": (-90.0, 90.0), "L": (-360.0, 360.0), "H": HEIGHT_RANGE_M, "height": HEIGHT_RANGE_M}
+_LIMITS = {
+    "x": (-PLANE_MAX_M, PLANE_MAX_M),
+    "y": (-PLANE_MAX_M, PLANE_MAX_M),
+    "h": HEIGHT_RANGE_M,
+    "B": (-90.0, 90.0),
+    "L": (-360.0, 360.0),
+    "H": HEIGHT_RANGE_M,
+    "height": HEIGHT_RANGE_M,
+}
 #: the largest |time| in seconds accepted (about 300 years from any origin)
 TIME_MAX_S = 1e10
 
@@ -160,8 +171,9 @@ def _time(text, path, lineno):
         t = None
     if t is not None:
         if not (math.isfinite(t) and abs(t) <= TIME_MAX_S):
-            raise ReaderError(path, lineno, f"column 'time': {text[:40]!r} is not a finite time within "
-                                            f"+-{TIME_MAX_S:g} s")
+            raise ReaderError(
+                path, lineno, f"column 'time': {text[:40]!r} is not a finite time within +-{TIME_MAX_S:g} s"
+            )
         return t
     try:
         d = _dt.datetime.fromisoformat(text)
@@ -169,8 +181,9 @@ def _time(text, path, lineno):
             d = d.replace(tzinfo=None) - d.utcoffset()
         return (d - GPS_EPOCH).total_seconds()
     except (ValueError, OverflowError):
-        raise ReaderError(path, lineno, f"column 'time': {text[:40]!r} is neither seconds nor an ISO-8601 "
-                                        "date-time") from None
+        raise ReaderError(
+            path, lineno, f"column 'time': {text[:40]!r} is neither seconds nor an ISO-8601 date-time"
+        ) from None
 
 
 def read_epoch_log(path) -> EpochLog:
@@ -196,21 +209,33 @@ def read_epoch_log(path) -> EpochLog:
         t = _time(r["time"], path, lineno)
         if name != last:
             if name in seen:
-                raise ReaderError(path, lineno, f"point {name!r} continues after other points (its epochs "
-                                                f"began on line {seen[name][0]}); keep each point's epochs in "
-                                                "one block")
+                raise ReaderError(
+                    path,
+                    lineno,
+                    f"point {name!r} continues after other points (its epochs "
+                    f"began on line {seen[name][0]}); keep each point's epochs in "
+                    "one block",
+                )
             seen[name] = (lineno, t)
         elif not t > seen[name][1]:
-            raise ReaderError(path, lineno, f"time {r['time']} of point {name!r} is not after the previous "
-                                            f"epoch's (times must increase within a point)")
+            raise ReaderError(
+                path,
+                lineno,
+                f"time {r['time']} of point {name!r} is not after the previous "
+                f"epoch's (times must increase within a point)",
+            )
         seen[name] = (seen[name][0], t)
         last = name
-        vals = [_float(r[c], path, lineno, c, missing=True, lo=_LIMITS[c][0], hi=_LIMITS[c][1])
-                for c in ("x", "y", "h", "B", "L", "H")]
+        vals = [
+            _float(r[c], path, lineno, c, missing=True, lo=_LIMITS[c][0], hi=_LIMITS[c][1])
+            for c in ("x", "y", "h", "B", "L", "H")
+        ]
         sig = dict(lo=0.0, hi=SIGMA_MAX_M, missing=True)
         if "sigma_x" in r and "sigma_y" in r:
-            sx, sy = _float(r["sigma_x"], path, lineno, "sigma_x", **sig), _float(r["sigma_y"], path, lineno,
-                                                                                   "sigma_y", **sig)
+            sx, sy = (
+                _float(r["sigma_x"], path, lineno, "sigma_x", **sig),
+                _float(r["sigma_y"], path, lineno, "sigma_y", **sig),
+            )
         else:
             sx = sy = _float(r["sigma_plane"], path, lineno, "sigma_plane", **sig) / math.sqrt(2.0)
         sh = _float(r["sigma_h"], path, lineno, "sigma_h", **sig)
@@ -222,10 +247,20 @@ def read_epoch_log(path) -> EpochLog:
         raise ReaderError(path, None, "no epochs after the header")
     a = np.array([rec[2:] for rec in recs], dtype=np.float64)
     n_masked = int(np.sum(np.any(np.isnan(a), axis=1)))
-    return EpochLog(path=str(path), point=np.array([rec[0] for rec in recs]),
-                    line=np.array([rec[1] for rec in recs]), t=a[:, 0], x=a[:, 1], y=a[:, 2], h=a[:, 3],
-                    lat=np.radians(a[:, 4]), lon=np.radians(a[:, 5]), H=a[:, 6], sigma=a[:, 7:10],
-                    n_masked=n_masked)
+    return EpochLog(
+        path=str(path),
+        point=np.array([rec[0] for rec in recs]),
+        line=np.array([rec[1] for rec in recs]),
+        t=a[:, 0],
+        x=a[:, 1],
+        y=a[:, 2],
+        h=a[:, 3],
+        lat=np.radians(a[:, 4]),
+        lon=np.radians(a[:, 5]),
+        H=a[:, 6],
+        sigma=a[:, 7:10],
+        n_masked=n_masked,
+    )
 
 
 def write_epoch_log(path, point, t, x, y, h, lat, lon, H, sigma) -> pathlib.Path:
@@ -244,9 +279,21 @@ def write_epoch_log(path, point, t, x, y, h, lat, lon, H, sigma) -> pathlib.Path
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(EPOCH_COLUMNS)
         for k in range(len(t)):
-            w.writerow([point[k], f"{t[k]:.3f}", f"{x[k]:.4f}", f"{y[k]:.4f}", f"{h[k]:.4f}",
-                        f"{math.degrees(lat[k]):.10f}", f"{math.degrees(lon[k]):.10f}", f"{H[k]:.4f}",
-                        f"{sigma[k, 0]:.4f}", f"{sigma[k, 1]:.4f}", f"{sigma[k, 2]:.4f}"])
+            w.writerow(
+                [
+                    point[k],
+                    f"{t[k]:.3f}",
+                    f"{x[k]:.4f}",
+                    f"{y[k]:.4f}",
+                    f"{h[k]:.4f}",
+                    f"{math.degrees(lat[k]):.10f}",
+                    f"{math.degrees(lon[k]):.10f}",
+                    f"{H[k]:.4f}",
+                    f"{sigma[k, 0]:.4f}",
+                    f"{sigma[k, 1]:.4f}",
+                    f"{sigma[k, 2]:.4f}",
+                ]
+            )
     return path
 
 
@@ -303,16 +350,25 @@ def read_control_points(path) -> ControlPoints:
     for lineno, r in _unique_points(path, _rows(path, CONTROL_COLUMNS)):
         names.append(r["point"])
         v = [_float(r[c], path, lineno, c, lo=_LIMITS[c][0], hi=_LIMITS[c][1]) for c in ("B", "L", "H")]
-        v += [_float(r[c], path, lineno, c, allow_empty=True, lo=_LIMITS[c][0], hi=_LIMITS[c][1])
-              for c in ("x", "y", "h")]
+        v += [
+            _float(r[c], path, lineno, c, allow_empty=True, lo=_LIMITS[c][0], hi=_LIMITS[c][1]) for c in ("x", "y", "h")
+        ]
         if (math.isnan(v[3])) != (math.isnan(v[4])):
             raise ReaderError(path, lineno, "give both x and y or neither")
         vals.append(v)
     if not names:
         raise ReaderError(path, None, "no points after the header")
     a = np.array(vals, dtype=np.float64)
-    return ControlPoints(path=str(path), point=np.array(names), lat=np.radians(a[:, 0]), lon=np.radians(a[:, 1]),
-                         H=a[:, 2], x=a[:, 3], y=a[:, 4], h=a[:, 5])
+    return ControlPoints(
+        path=str(path),
+        point=np.array(names),
+        lat=np.radians(a[:, 0]),
+        lon=np.radians(a[:, 1]),
+        H=a[:, 2],
+        x=a[:, 3],
+        y=a[:, 4],
+        h=a[:, 5],
+    )
 
 
 def write_control_points(path, point, lat, lon, H, x, y, h) -> pathlib.Path:
@@ -320,11 +376,22 @@ def write_control_points(path, point, lat, lon, H, x, y, h) -> pathlib.Path:
     path = pathlib.Path(path)
     fmt = lambda v, f: "" if not math.isfinite(v) else format(v, f)  # noqa: E731
     with path.open("w", encoding="utf-8", newline="") as fh:
-        fh.write("# control points (jaxnav S2 format): B L deg and H ellipsoidal height m (WGS-84); x north, y east "
-                 "m in the local grid and h normal height m (empty: not given)\n")
+        fh.write(
+            "# control points (jaxnav S2 format): B L deg and H ellipsoidal height m (WGS-84); x north, y east "
+            "m in the local grid and h normal height m (empty: not given)\n"
+        )
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(CONTROL_COLUMNS)
         for k in range(len(point)):
-            w.writerow([point[k], f"{math.degrees(lat[k]):.10f}", f"{math.degrees(lon[k]):.10f}", fmt(H[k], ".4f"),
-                        fmt(x[k], ".4f"), fmt(y[k], ".4f"), fmt(h[k], ".4f")])
+            w.writerow(
+                [
+                    point[k],
+                    f"{math.degrees(lat[k]):.10f}",
+                    f"{math.degrees(lon[k]):.10f}",
+                    fmt(H[k], ".4f"),
+                    fmt(x[k], ".4f"),
+                    fmt(y[k], ".4f"),
+                    fmt(h[k], ".4f"),
+                ]
+            )
     return path

@@ -75,8 +75,9 @@ def read_rows(path, columns: dict, *, delimiter, comment, header, n_fields=None)
                     c = columns[k]
                     if isinstance(c, str):
                         if c not in names:
-                            raise ReaderError(p, lineno, f"the header has no column {c!r} (for {k!r}); it has "
-                                                         f"{names[:20]}"[:300])
+                            raise ReaderError(
+                                p, lineno, f"the header has no column {c!r} (for {k!r}); it has {names[:20]}"[:300]
+                            )
                         idx.append(names.index(c))
                     else:
                         idx.append(int(c))
@@ -95,8 +96,9 @@ def read_rows(path, columns: dict, *, delimiter, comment, header, n_fields=None)
             try:
                 v = float(w)
             except (ValueError, OverflowError):
-                raise ReaderError(p, lineno, f"column {k!r} (field {i + 1}): cannot read {w[:40]!r} as a "
-                                             "number") from None
+                raise ReaderError(
+                    p, lineno, f"column {k!r} (field {i + 1}): cannot read {w[:40]!r} as a number"
+                ) from None
             if math.isinf(v):
                 raise ReaderError(p, lineno, f"column {k!r} (field {i + 1}) is {v} (not a finite number)")
             vals.append(v)
@@ -112,13 +114,21 @@ def check_times(t, linenos, path, *, what="time"):
     bad = np.flatnonzero(~((t >= GPST_RANGE_S[0]) & (t <= GPST_RANGE_S[1])))
     if bad.size:
         k = int(bad[0])
-        raise ReaderError(path, int(linenos[k]), f"{what} {t[k]:.6g} s is outside [0, {GPST_RANGE_S[1]:.6g}] s "
-                                                 "(GPST seconds since 1980, or seconds of week)")
+        raise ReaderError(
+            path,
+            int(linenos[k]),
+            f"{what} {t[k]:.6g} s is outside [0, {GPST_RANGE_S[1]:.6g}] s "
+            "(GPST seconds since 1980, or seconds of week)",
+        )
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         k = int(bad[0]) + 1
-        raise ReaderError(path, int(linenos[k]), f"{what} {t[k]:.9g} s is not after the previous record's "
-                                                 f"{t[k - 1]:.9g} s (line {int(linenos[k - 1])}); times must increase")
+        raise ReaderError(
+            path,
+            int(linenos[k]),
+            f"{what} {t[k]:.9g} s is not after the previous record's "
+            f"{t[k - 1]:.9g} s (line {int(linenos[k - 1])}); times must increase",
+        )
 
 
 #: the largest gap (s) across a week rollover that :func:`unwrap_week` accepts as one
@@ -161,11 +171,23 @@ def make_imu_log(path, t, w_b, f_b, linenos, skipped, timing) -> ImuLog:
         bad = np.flatnonzero(np.any(~(np.abs(a) <= lim), axis=1))
         if bad.size:
             k = int(bad[0])
-            raise ReaderError(path, int(linenos[k]), f"{name} {np.array2string(a[k], precision=4)} {unit} exceeds "
-                                                     f"{lim:g} {unit}: not a measurement")
-    return ImuLog(path=str(path), t=t, f_b=f_b, w_b=w_b, counter=np.arange(t.size, dtype=np.int64),
-                  lineno=linenos, n_skipped_lines=len(skipped), skipped=tuple(skipped), timing=timing,
-                  t_start=float(t[0]))
+            raise ReaderError(
+                path,
+                int(linenos[k]),
+                f"{name} {np.array2string(a[k], precision=4)} {unit} exceeds {lim:g} {unit}: not a measurement",
+            )
+    return ImuLog(
+        path=str(path),
+        t=t,
+        f_b=f_b,
+        w_b=w_b,
+        counter=np.arange(t.size, dtype=np.int64),
+        lineno=linenos,
+        n_skipped_lines=len(skipped),
+        skipped=tuple(skipped),
+        timing=timing,
+        t_start=float(t[0]),
+    )
 
 
 def increments_to_rates(t, dtheta, dv, path, linenos):
@@ -201,8 +223,11 @@ def make_pos_solution(path, t, lat_deg, lon_deg, h, sd_enu, v_enu, sd_venu, q, n
     t, lat_deg, lon_deg, h = t[keep], lat_deg[keep], lon_deg[keep], h[keep]
     sd_enu, linenos = sd_enu[keep], linenos[keep]
     check_times(t, linenos, p)
-    for name, a, lo, hi in (("latitude", lat_deg, -90.0, 90.0), ("longitude", lon_deg, -360.0, 360.0),
-                            ("height", h, *HEIGHT_RANGE_M)):
+    for name, a, lo, hi in (
+        ("latitude", lat_deg, -90.0, 90.0),
+        ("longitude", lon_deg, -360.0, 360.0),
+        ("height", h, *HEIGHT_RANGE_M),
+    ):
         bad = np.flatnonzero(~((a >= lo) & (a <= hi)))
         if bad.size:
             k = int(bad[0])
@@ -210,8 +235,11 @@ def make_pos_solution(path, t, lat_deg, lon_deg, h, sd_enu, v_enu, sd_venu, q, n
     bad = np.flatnonzero(np.any(~((sd_enu > 0) & (sd_enu <= SIGMA_MAX_M)), axis=1))
     if bad.size:
         k = int(bad[0])
-        raise ReaderError(p, int(linenos[k]), f"position standard deviations {sd_enu[k].tolist()} m must be positive "
-                                              f"and <= {SIGMA_MAX_M:g} m")
+        raise ReaderError(
+            p,
+            int(linenos[k]),
+            f"position standard deviations {sd_enu[k].tolist()} m must be positive and <= {SIGMA_MAX_M:g} m",
+        )
     R = t.size
     cov = np.zeros((R, 3, 3))
     for i in range(3):
@@ -233,8 +261,11 @@ def make_pos_solution(path, t, lat_deg, lon_deg, h, sd_enu, v_enu, sd_venu, q, n
             bad = np.flatnonzero(~vm & np.any(~((sv > 0) & (sv <= 1e4)), axis=1))
             if bad.size:
                 k = int(bad[0])
-                raise ReaderError(p, int(linenos[k]), f"velocity standard deviations {sv[k].tolist()} m/s must be "
-                                                      "positive and <= 1e4 m/s")
+                raise ReaderError(
+                    p,
+                    int(linenos[k]),
+                    f"velocity standard deviations {sv[k].tolist()} m/s must be positive and <= 1e4 m/s",
+                )
             vcov[:] = 0.0
             for i in range(3):
                 vcov[:, i, i] = np.where(vm, np.nan, sv[:, i] ** 2)
@@ -246,6 +277,18 @@ def make_pos_solution(path, t, lat_deg, lon_deg, h, sd_enu, v_enu, sd_venu, q, n
         if bad.size:
             k = int(bad[0])
             raise ReaderError(p, int(linenos[k]), f"{name} = {a[k]:g} is not a whole number in [{lo}, {hi}]")
-    return PosSolution(path=p, t=t, lat=np.radians(lat_deg), lon=np.radians(lon_deg), h=h, q=qq.astype(int),
-                       ns=nn.astype(int), cov_enu=cov, age=np.full(R, np.nan), ratio=np.full(R, np.nan), v_enu=v,
-                       vcov_enu=vcov, n_masked=n_masked)
+    return PosSolution(
+        path=p,
+        t=t,
+        lat=np.radians(lat_deg),
+        lon=np.radians(lon_deg),
+        h=h,
+        q=qq.astype(int),
+        ns=nn.astype(int),
+        cov_enu=cov,
+        age=np.full(R, np.nan),
+        ratio=np.full(R, np.nan),
+        v_enu=v,
+        vcov_enu=vcov,
+        n_masked=n_masked,
+    )

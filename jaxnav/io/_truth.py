@@ -52,8 +52,11 @@ def _make(path, t, lat, lon, h, v, rpy, lines) -> TruthTrajectory:
     """Checked :class:`TruthTrajectory` (times increase; positions, velocities and angles possible)."""
     p = str(path)
     check_times(t, lines, p)
-    for name, a, lo, hi in (("latitude", np.degrees(lat), -90.0, 90.0), ("longitude", np.degrees(lon), -360.0, 360.0),
-                            ("height", h, *HEIGHT_RANGE_M)):
+    for name, a, lo, hi in (
+        ("latitude", np.degrees(lat), -90.0, 90.0),
+        ("longitude", np.degrees(lon), -360.0, 360.0),
+        ("height", h, *HEIGHT_RANGE_M),
+    ):
         bad = np.flatnonzero(~((a >= lo) & (a <= hi)))
         if bad.size:
             k = int(bad[0])
@@ -81,8 +84,9 @@ def read_kfgins_truth(path) -> TruthTrajectory:
         impossible value.
     """
     names = ("week", "sow", "lat", "lon", "h", "vn", "ve", "vd", "roll", "pitch", "yaw")
-    vals, lines = read_rows(path, {k: i for i, k in enumerate(names)}, delimiter=None, comment="#", header=False,
-                            n_fields=11)
+    vals, lines = read_rows(
+        path, {k: i for i, k in enumerate(names)}, delimiter=None, comment="#", header=False, n_fields=11
+    )
     c = {k: vals[:, i] for i, k in enumerate(names)}
     bad = np.flatnonzero(np.any(np.isnan(vals), axis=1))
     if bad.size:
@@ -93,8 +97,9 @@ def read_kfgins_truth(path) -> TruthTrajectory:
     return _make(path, t, c["lat"] * _u.DEG, c["lon"] * _u.DEG, c["h"], v, rpy, lines)
 
 
-def read_csv_truth(path, columns: dict, units: dict | None = None, *, delimiter=",", comment="#",
-                   header=None) -> TruthTrajectory:
+def read_csv_truth(
+    path, columns: dict, units: dict | None = None, *, delimiter=",", comment="#", header=None
+) -> TruthTrajectory:
     """Read a reference trajectory from a CSV table with a column map (module docstring).
 
     Args:
@@ -132,8 +137,9 @@ def read_csv_truth(path, columns: dict, units: dict | None = None, *, delimiter=
         raise ValueError(f"{what}: unknown unit keys {sorted(extra)} (known: t, angle)")
     tu, au = (units or {}).get("t", "s"), (units or {}).get("angle", "deg")
     if tu not in _TIME or au not in _ANGLE:
-        raise ValueError(f"{what}: units t must be one of {list(_TIME)} and angle one of {list(_ANGLE)}, "
-                         f"got t={tu!r}, angle={au!r}")
+        raise ValueError(
+            f"{what}: units t must be one of {list(_TIME)} and angle one of {list(_ANGLE)}, got t={tu!r}, angle={au!r}"
+        )
     keys = list(columns)
     vals, lines = read_rows(path, {k: columns[k] for k in keys}, delimiter=delimiter, comment=comment, header=header)
     c = {k: vals[:, i] for i, k in enumerate(keys)}

@@ -8,7 +8,7 @@ the filter and the RTS smoother give the velocity and its standard deviation.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -20,7 +20,7 @@ from jaxnav.units import MM, YEAR
 
 #: default grid of velocity random-walk PSDs searched by maximum likelihood, m^2/s^3
 #: ((1e-3 .. 100 mm/yr per sqrt(yr))^2 / yr)
-PSD_GRID = ((np.geomspace(1e-3, 100.0, 16) * MM / YEAR) ** 2 / YEAR)
+PSD_GRID = (np.geomspace(1e-3, 100.0, 16) * MM / YEAR) ** 2 / YEAR
 
 
 class StationVelocity(NamedTuple):
@@ -49,8 +49,8 @@ class StationVelocity(NamedTuple):
     sigma_ar1: jax.Array
     ls_velocity: jax.Array
     ls_sigma: jax.Array
-    reference_velocity: Optional[Any]
-    reference_sigma: Optional[Any]
+    reference_velocity: Any | None
+    reference_sigma: Any | None
     accel_psd: jax.Array
     t: jax.Array
     smoothed_velocity: jax.Array
@@ -147,11 +147,22 @@ def station_velocity(series, *, psd_grid=PSD_GRID, sigma_vel0=1e-6) -> StationVe
     res = series.enu - (np.asarray(r0.x_final[:3]) + (series.t - series.t[-1])[:, None] * vel)
     if psd_grid is None:  # the long-term velocity only
         return StationVelocity(
-            station=series.station, n=len(series.t), span_years=float((series.t[-1] - series.t[0]) / YEAR),
-            velocity=vel, sigma=sig, sigma_ar1=sig * _ar1_factor(res, sig_xyz), ls_velocity=ls, ls_sigma=ls_s,
-            reference_velocity=series.reference_velocity, reference_sigma=series.reference_velocity_sigma,
-            accel_psd=None, t=np.asarray(series.t), smoothed_velocity=None, smoothed_sigma=None,
-            loglik_grid=None, residuals=res,
+            station=series.station,
+            n=len(series.t),
+            span_years=float((series.t[-1] - series.t[0]) / YEAR),
+            velocity=vel,
+            sigma=sig,
+            sigma_ar1=sig * _ar1_factor(res, sig_xyz),
+            ls_velocity=ls,
+            ls_sigma=ls_s,
+            reference_velocity=series.reference_velocity,
+            reference_sigma=series.reference_velocity_sigma,
+            accel_psd=None,
+            t=np.asarray(series.t),
+            smoothed_velocity=None,
+            smoothed_sigma=None,
+            loglik_grid=None,
+            residuals=res,
         )
     ll = np.asarray(_loglik_grid(t, cov * jnp.eye(3), z, jnp.asarray(psd_grid)))
     psd = np.asarray(psd_grid)[np.argmax(ll, axis=0)]
@@ -159,12 +170,22 @@ def station_velocity(series, *, psd_grid=PSD_GRID, sigma_vel0=1e-6) -> StationVe
     rf = jf.kalman_filter(model, x0, P0, z, save=_SAVE)
     sm = jf.rts_smoother(model, rf, save=("means", "covs"))
     return StationVelocity(
-        station=series.station, n=len(series.t), span_years=float((series.t[-1] - series.t[0]) / YEAR),
-        velocity=vel, sigma=sig, sigma_ar1=sig * _ar1_factor(res, sig_xyz), ls_velocity=ls, ls_sigma=ls_s,
-        reference_velocity=series.reference_velocity, reference_sigma=series.reference_velocity_sigma,
-        accel_psd=psd, t=np.asarray(series.t), smoothed_velocity=np.asarray(sm.means[:, 3:]),
+        station=series.station,
+        n=len(series.t),
+        span_years=float((series.t[-1] - series.t[0]) / YEAR),
+        velocity=vel,
+        sigma=sig,
+        sigma_ar1=sig * _ar1_factor(res, sig_xyz),
+        ls_velocity=ls,
+        ls_sigma=ls_s,
+        reference_velocity=series.reference_velocity,
+        reference_sigma=series.reference_velocity_sigma,
+        accel_psd=psd,
+        t=np.asarray(series.t),
+        smoothed_velocity=np.asarray(sm.means[:, 3:]),
         smoothed_sigma=np.sqrt(np.asarray(jnp.diagonal(sm.covs, axis1=-2, axis2=-1)[:, 3:])),
-        loglik_grid=ll, residuals=res,
+        loglik_grid=ll,
+        residuals=res,
     )
 
 

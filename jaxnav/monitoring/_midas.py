@@ -108,8 +108,14 @@ def midas_velocity(t_years, x, steps=(), *, tolerance: float = 0.001, empirical_
         kept = v[np.abs(v - m) < 2.0 * sig] if sig > 0 else v
         vel = np.median(kept)
         sig2 = MAD_TO_SIGMA * np.median(np.abs(kept - vel))
-        out[:, c] = (vel, empirical_factor * MEDIAN_EFFICIENCY * sig2 / np.sqrt(kept.size / 4.0), v.size,
-                     kept.size, sig2)
-    res = MidasVelocity(velocity=out[0], sigma=out[1], pairs=out[2].astype(int), pairs_kept=out[3].astype(int),
-                        slope_sigma=out[4])
+        out[:, c] = (
+            vel,
+            empirical_factor * MEDIAN_EFFICIENCY * sig2 / np.sqrt(kept.size / 4.0),
+            v.size,
+            kept.size,
+            sig2,
+        )
+    res = MidasVelocity(
+        velocity=out[0], sigma=out[1], pairs=out[2].astype(int), pairs_kept=out[3].astype(int), slope_sigma=out[4]
+    )
     return MidasVelocity(*(a[0] for a in res)) if one else res

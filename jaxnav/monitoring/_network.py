@@ -7,7 +7,7 @@ x, y, H in S1); measurements L_k = B X_k + Delta_k are the stacked positions.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -50,8 +50,9 @@ def network_model(n_stations: int, dt, *, sigma, accel_var) -> LinearGaussian:
     I_S = jnp.eye(S)
     sig = _per_station(sigma, S, "sigma").reshape(-1)
     q = _per_station(accel_var, S, "accel_var").reshape(-1)
-    return LinearGaussian(F=jnp.kron(I_S, one.F), H=jnp.kron(I_S, one.H), Q=jnp.diag(q), R=jnp.diag(sig**2),
-                          G=jnp.kron(I_S, one.G))
+    return LinearGaussian(
+        F=jnp.kron(I_S, one.F), H=jnp.kron(I_S, one.H), Q=jnp.diag(q), R=jnp.diag(sig**2), G=jnp.kron(I_S, one.G)
+    )
 
 
 def network_model_irregular(t, cov, *, accel_psd, dt_min=1.0) -> LinearGaussian:
@@ -146,8 +147,9 @@ class Forecast(NamedTuple):
     status: jax.Array
 
 
-def forecast(model: LinearGaussian, x0, P0, zs, *, estimator=None, inflation=None, mask=None,
-             uncertainty: bool = True) -> Forecast:
+def forecast(
+    model: LinearGaussian, x0, P0, zs, *, estimator=None, inflation=None, mask=None, uncertainty: bool = True
+) -> Forecast:
     """Run one filter of the family over a network series and return forecasts (S1 eqs. (7)-(11)).
 
     The standard filter is ``estimator=None``; S1's adaptive filter is
@@ -187,13 +189,23 @@ def forecast(model: LinearGaussian, x0, P0, zs, *, estimator=None, inflation=Non
         mk = jnp.asarray(mask, bool)
         mk = jnp.broadcast_to(mk[:, None], (T, m)) if mk.ndim == 1 else mk
         dev = jnp.where(mk.reshape(T, S, 3), dev, jnp.nan)
-    return Forecast(forecast=pred[:, :, 0], filtered=mean[:, :, 0], velocity=mean[:, :, 1],
-                    velocity_sigma=vsig, forecast_sigma=psig,
-                    deviation=dev, factors=r.factors, noise=r.noise, loglik=r.loglik, status=r.status)
+    return Forecast(
+        forecast=pred[:, :, 0],
+        filtered=mean[:, :, 0],
+        velocity=mean[:, :, 1],
+        velocity_sigma=vsig,
+        forecast_sigma=psig,
+        deviation=dev,
+        factors=r.factors,
+        noise=r.noise,
+        loglik=r.loglik,
+        status=r.status,
+    )
 
 
-def s1_filters(*, window: int = 30, horizon: int = 10, floor_rel=1.0, robust: bool = False,
-               k0=2.0, k1=4.5, c0=1.0, c1=3.0) -> dict:
+def s1_filters(
+    *, window: int = 30, horizon: int = 10, floor_rel=1.0, robust: bool = False, k0=2.0, k1=4.5, c0=1.0, c1=3.0
+) -> dict:
     """The filters compared in S1 (and robust variants) as :func:`forecast` keyword sets.
 
     * "standard": the classic filter (S1 eqs. (7)-(11));
@@ -223,7 +235,7 @@ def s1_filters(*, window: int = 30, horizon: int = 10, floor_rel=1.0, robust: bo
     return out
 
 
-def outlier_flags(noise) -> Optional[Any]:
+def outlier_flags(noise) -> Any | None:
     """(T, m) bool outlier flags from a forecast's ``noise`` (IGG-III alone or in a chain), else None."""
     if isinstance(noise, jf.RobustInfo):
         return noise.rejected

@@ -122,8 +122,9 @@ def _fit(d: float, n: int, per_decade: float, one_minus_phi: float):
     return r, w, float(np.max(np.abs(approx / gamma - 1.0)))
 
 
-def gauss_markov_sum(d: float, n: int, *, per_decade: float = 1.5,
-                     one_minus_phi: float = GGM_ONE_MINUS_PHI) -> GaussMarkovSum:
+def gauss_markov_sum(
+    d: float, n: int, *, per_decade: float = 1.5, one_minus_phi: float = GGM_ONE_MINUS_PHI
+) -> GaussMarkovSum:
     """Approximate the GGM power-law autocovariance over ``n`` daily lags by a sum of AR(1) processes.
 
     Args:

@@ -8,8 +8,9 @@ import jax.numpy as jnp
 from jaxnav.units import DAY, YEAR
 
 
-def simulate_powerlaw_series(key, n_days: int, *, rate, sigma_white, amplitude, kappa=-1.0, random_walk=0.0,
-                             annual=0.0, gap_fraction=0.0):
+def simulate_powerlaw_series(
+    key, n_days: int, *, rate, sigma_white, amplitude, kappa=-1.0, random_walk=0.0, annual=0.0, gap_fraction=0.0
+):
     """One daily series: rate x t + annual cosine + white + power-law (+ random walk) noise, with gaps.
 
     The power-law noise is the fractionally integrated white noise of Williams (2003, J. Geod. 76,

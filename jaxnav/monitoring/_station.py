@@ -11,15 +11,15 @@ from __future__ import annotations
 
 import datetime as _dt
 from functools import partial
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxnav.monitoring._trajectory import (
-    COMPONENTS,
     AT_BOUND_TOL,
+    COMPONENTS,
     POSTSEISMIC_FORMS,
     component_loglik,
     design_matrix,
@@ -76,6 +76,7 @@ def _running_median(day, r, window_days):
     win = np.lib.stride_tricks.sliding_window_view(g, 2 * window_days + 1)[day]
     with np.errstate(all="ignore"):
         import warnings as _w
+
         with _w.catch_warnings():
             _w.simplefilter("ignore", RuntimeWarning)
             return np.nanmedian(win, axis=1)
@@ -98,14 +99,26 @@ def _day_index(series):
     base = np.array([(_dt.date(int(y), 1, 1) - _dt.date(2000, 1, 1)).days for y in yr], np.int64)
     cal = base + doy0
     cal = cal - cal[0]
+
     def dups(d):
         return int(np.sum(np.diff(d) <= 0))
+
     return cal if dups(cal) < dups(jul) and np.all(np.diff(cal) >= 0) else jul
 
 
-def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 5.0, sigma_max_m=None,
-                    residual_k: float = 5.0, window_days: int = 15, max_passes: int = 10, poly_degree: int = 1,
-                    postseismic=()) -> Screening:
+def screen_outliers(
+    series,
+    *,
+    steps=(),
+    periods_days=(),
+    sigma_factor: float = 5.0,
+    sigma_max_m=None,
+    residual_k: float = 5.0,
+    window_days: int = 15,
+    max_passes: int = 10,
+    poly_degree: int = 1,
+    postseismic=(),
+) -> Screening:
     """Reject days with implausible formal sigmas and values far from the trajectory (per component).
 
     1. Sigma test: a component whose formal sigma exceeds ``sigma_factor`` x the median formal
@@ -139,11 +152,24 @@ def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 
     keep = present & ~bad_sig
     records = []
     for i, c in zip(*np.nonzero(bad_sig)):
-        records.append(dict(index=int(i), date=iso_date(t[i]), decimal_year=float(decimal_year(t[i])),
-                            component=COMPONENTS[c], reason="sigma", value_m=float(y[i, c]),
-                            sigma_m=float(sig[i, c]), residual_m=None, threshold_m=float(lim[c])))
-    A = design_matrix(t, steps=steps, periods_days=periods_days, poly_degree=poly_degree,
-                      postseismic=postseismic).A if len(t) > 1 else np.ones((len(t), 1))
+        records.append(
+            dict(
+                index=int(i),
+                date=iso_date(t[i]),
+                decimal_year=float(decimal_year(t[i])),
+                component=COMPONENTS[c],
+                reason="sigma",
+                value_m=float(y[i, c]),
+                sigma_m=float(sig[i, c]),
+                residual_m=None,
+                threshold_m=float(lim[c]),
+            )
+        )
+    A = (
+        design_matrix(t, steps=steps, periods_days=periods_days, poly_degree=poly_degree, postseismic=postseismic).A
+        if len(t) > 1
+        else np.ones((len(t), 1))
+    )
     day = _day_index(series)
     res_lim = np.full(3, np.nan)
     for c in range(3):
@@ -163,14 +189,26 @@ def screen_outliers(series, *, steps=(), periods_days=(), sigma_factor: float = 
             if not out.any():
                 break
             for i in np.flatnonzero(out):
-                records.append(dict(index=int(i), date=iso_date(t[i]), decimal_year=float(decimal_year(t[i])),
-                                    component=COMPONENTS[c], reason="residual", value_m=float(y[i, c]),
-                                    sigma_m=float(sig[i, c]), residual_m=float(hp[i] - m * sig[i, c]),
-                                    threshold_m=float(residual_k * s * sig[i, c])))
+                records.append(
+                    dict(
+                        index=int(i),
+                        date=iso_date(t[i]),
+                        decimal_year=float(decimal_year(t[i])),
+                        component=COMPONENTS[c],
+                        reason="residual",
+                        value_m=float(y[i, c]),
+                        sigma_m=float(sig[i, c]),
+                        residual_m=float(hp[i] - m * sig[i, c]),
+                        threshold_m=float(residual_k * s * sig[i, c]),
+                    )
+                )
             keep[:, c] &= ~out
     records.sort(key=lambda d: (d["index"], COMPONENTS.index(d["component"])))
-    counts = {"sigma": int(bad_sig.sum()), "residual": sum(1 for d in records if d["reason"] == "residual"),
-              "missing": int((~present).sum())}
+    counts = {
+        "sigma": int(bad_sig.sum()),
+        "residual": sum(1 for d in records if d["reason"] == "residual"),
+        "missing": int((~present).sum()),
+    }
     return Screening(keep=keep, records=records, counts=counts, sigma_limit_m=lim, residual_limit_m=res_lim)
 
 
@@ -207,12 +245,12 @@ def daily_grid(series, keep=None, *, bucket: int = GRID_BUCKET) -> DailyGrid:
     first[1:] = day[1:] != day[:-1]
     vals = np.where(ok, series.enu, np.nan)
     y[day[first]] = vals[first]
-    return DailyGrid(t=t[0] + np.arange(T) * DAY, y=y, valid=np.isfinite(y), n_days=n,
-                     duplicates=int((~first).sum()))
+    return DailyGrid(t=t[0] + np.arange(T) * DAY, y=y, valid=np.isfinite(y), n_days=n, duplicates=int((~first).sum()))
 
 
-def fit_series_batch(y, valid, A, spec, scale, *, random_walk: bool = True, reml: bool = True,
-                     iterations: int = 40, chunk=None):
+def fit_series_batch(
+    y, valid, A, spec, scale, *, random_walk: bool = True, reml: bool = True, iterations: int = 40, chunk=None
+):
     """Fit many series at once: one ``jax.vmap`` of :func:`fit_component` over the leading axis.
 
     ``chunk`` (an int) runs the vmap over chunks of that many series in turn
@@ -229,10 +267,28 @@ def fit_series_batch(y, valid, A, spec, scale, *, random_walk: bool = True, reml
     th0, lo, hi = start_and_box(np.asarray(scale), kappa=spec.kappa, random_walk=random_walk)
     est = spec.kappa is None
     r, W, dg, Aj = jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid), jnp.asarray(A)
-    one = lambda yy, vv, t0, l, h: fit_component(yy, vv, Aj, r, W, dg, t0, l, h, estimate_kappa=est,  # noqa: E731
-                                                 random_walk=random_walk, reml=reml, iterations=iterations)
-    args = (jnp.where(jnp.asarray(valid), jnp.asarray(y), 0.0), jnp.asarray(valid), jnp.asarray(th0),
-            jnp.asarray(lo), jnp.asarray(hi))
+    one = lambda yy, vv, t0, l, h: fit_component(
+        yy,
+        vv,
+        Aj,
+        r,
+        W,
+        dg,
+        t0,
+        l,
+        h,
+        estimate_kappa=est,  # noqa: E731
+        random_walk=random_walk,
+        reml=reml,
+        iterations=iterations,
+    )
+    args = (
+        jnp.where(jnp.asarray(valid), jnp.asarray(y), 0.0),
+        jnp.asarray(valid),
+        jnp.asarray(th0),
+        jnp.asarray(lo),
+        jnp.asarray(hi),
+    )
     if chunk is None:
         return jax.vmap(one)(*args)
     return _chunked(one, args, int(chunk))
@@ -296,7 +352,7 @@ class StationFit(NamedTuple):
     A: jax.Array
     gm_max_rel_error: float
     step_gains: jax.Array = ()
-    residual_trend: Optional[jax.Array] = None
+    residual_trend: jax.Array | None = None
     poly_degree: int = 1
     postseismic: tuple = ()
 
@@ -333,8 +389,11 @@ TAU_PER_DECADE = 10
 @partial(jax.jit, static_argnames=("estimate_kappa", "random_walk"))
 def _loglik_over_designs(theta, y, valid, As, r, W, d_grid, *, estimate_kappa, random_walk):
     """ML log-likelihood of one component at fixed noise for each design of a stack (G, T, k) -> (G,)."""
-    return jax.vmap(lambda A: component_loglik(theta, y, valid, A, r, W, d_grid, estimate_kappa=estimate_kappa,
-                                               random_walk=random_walk, reml=False))(As)
+    return jax.vmap(
+        lambda A: component_loglik(
+            theta, y, valid, A, r, W, d_grid, estimate_kappa=estimate_kappa, random_walk=random_walk, reml=False
+        )
+    )(As)
 
 
 def profile_tau(grid: DailyGrid, build, j: int, theta, spec, *, random_walk: bool, tau_max=None):
@@ -357,7 +416,7 @@ def profile_tau(grid: DailyGrid, build, j: int, theta, spec, *, random_walk: boo
       (tau s, (lo s, hi s), at_edge bool, ln tau grid (G,), summed ln L (G,)).
     """
     n = grid.n_days
-    span = (grid.t[n - 1] - grid.t[0])
+    span = grid.t[n - 1] - grid.t[0]
     tau_max = 2.0 * span if tau_max is None else float(tau_max)
     G = max(int(np.ceil(np.log10(tau_max / TAU_MIN) * TAU_PER_DECADE)) + 1, 3)
     ln_tau = np.linspace(np.log(TAU_MIN), np.log(tau_max), G)
@@ -366,16 +425,26 @@ def profile_tau(grid: DailyGrid, build, j: int, theta, spec, *, random_walk: boo
     ll = np.zeros(G)
     for c in range(3):
         y = jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0))
-        ll += np.asarray(_loglik_over_designs(jnp.asarray(theta[c]), y, jnp.asarray(grid.valid[:, c]), As,
-                                              jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid),
-                                              estimate_kappa=est, random_walk=random_walk))
+        ll += np.asarray(
+            _loglik_over_designs(
+                jnp.asarray(theta[c]),
+                y,
+                jnp.asarray(grid.valid[:, c]),
+                As,
+                jnp.asarray(spec.r),
+                jnp.asarray(spec.W),
+                jnp.asarray(spec.d_grid),
+                estimate_kappa=est,
+                random_walk=random_walk,
+            )
+        )
     i = int(np.nanargmax(ll))
     at_edge = i in (0, G - 1)
     best = ln_tau[i]
     h = ln_tau[1] - ln_tau[0]
     half = np.inf
     if not at_edge:  # vertex of the parabola through the best point and its neighbours (uniform grid)
-        v0, v1, v2 = ll[i - 1:i + 2]
+        v0, v1, v2 = ll[i - 1 : i + 2]
         curv = v2 - 2.0 * v1 + v0
         if curv < 0:
             best = float(np.clip(ln_tau[i] - 0.5 * h * (v2 - v0) / curv, ln_tau[i - 1], ln_tau[i + 1]))
@@ -402,7 +471,7 @@ def _amplitude(beta, cov, i):
     c, s = beta[..., i], beta[..., i + 1]
     a = np.hypot(c, s)
     j = np.stack([c, s], axis=-1) / np.maximum(a, 1e-300)[..., None]
-    sub = cov[..., i:i + 2, i:i + 2]
+    sub = cov[..., i : i + 2, i : i + 2]
     var = np.einsum("...i,...ij,...j->...", j, sub, j)
     return a, np.sqrt(np.maximum(var, 0.0)), np.arctan2(s, c)
 
@@ -426,12 +495,11 @@ def step_penalty(grid: DailyGrid) -> float:
     Schwarz (1978): a model term is worth adding when it raises 2 ln L by more than ln(n) per
     parameter; for a 3-year daily series 4 ln(3300) = 32, for 10 years 4 ln(11000) = 37.
     """
-    n = int(np.asarray(grid.valid)[:grid.n_days].sum())
+    n = int(np.asarray(grid.valid)[: grid.n_days].sum())
     return 4.0 * float(np.log(max(n, 2)))
 
 
-def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_days: int = 7,
-                 threshold=None):
+def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_days: int = 7, threshold=None):
     """Best single step epoch under the fitted noise (likelihood-ratio scan), or None.
 
     For candidate epochs every ``spacing_days`` days (30 days from either end; then every day
@@ -458,8 +526,11 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
     est = spec.kappa is None
     per_comp = []
     for c in range(3):
-        args = (jnp.asarray(fit.theta[c]), jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0)),
-                jnp.asarray(grid.valid[:, c]))
+        args = (
+            jnp.asarray(fit.theta[c]),
+            jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0)),
+            jnp.asarray(grid.valid[:, c]),
+        )
         per_comp.append(args)
 
     def scan(cand):
@@ -467,18 +538,20 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
         stat = np.zeros(cand.size)
         for th, yy, v in per_comp:
             allA = jnp.asarray(np.concatenate([A, S], axis=1))
-            yt, At, _ = _whitened(th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W),
-                                  jnp.asarray(spec.d_grid), est, random_walk)
+            yt, At, _ = _whitened(
+                th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid), est, random_walk
+            )
             yt, At = np.asarray(yt), np.asarray(At)
-            X, Sw = At[:, :A.shape[1]], At[:, A.shape[1]:]
+            X, Sw = At[:, : A.shape[1]], At[:, A.shape[1] :]
             Q, _ = np.linalg.qr(X)
             e = yt - Q @ (Q.T @ yt)
             Sp = Sw - Q @ (Q.T @ Sw)
             num = (Sp.T @ e) ** 2
             den = np.sum(Sp * Sp, axis=0)
             # a candidate the design already holds (a known step's epoch) adds nothing
-            stat += np.where(den > 1e-9 * np.maximum(np.sum(Sw * Sw, axis=0), 1e-300), num / np.maximum(den, 1e-300),
-                             0.0)
+            stat += np.where(
+                den > 1e-9 * np.maximum(np.sum(Sw * Sw, axis=0), 1e-300), num / np.maximum(den, 1e-300), 0.0
+            )
         return stat
 
     stat = scan(cand)
@@ -497,7 +570,7 @@ def period_amplitudes(fit: StationFit) -> dict:
     out = {}
     for i, nm in enumerate(fit.design_names):
         if nm.startswith("period_") and nm.endswith("_cos"):
-            out[nm[len("period_"):-len("_cos")]] = _amplitude(fit.noise.beta, fit.noise.beta_cov, i)
+            out[nm[len("period_") : -len("_cos")]] = _amplitude(fit.noise.beta, fit.noise.beta_cov, i)
     return out
 
 
@@ -510,8 +583,8 @@ def polynomial_terms(fit: StationFit) -> dict:
     out = {}
     for i, nm in enumerate(fit.design_names):
         if nm.startswith("poly_"):
-            p = int(nm[len("poly_"):])
-            out[p] = (fit.noise.beta[:, i] / YEAR ** p, np.sqrt(fit.noise.beta_cov[:, i, i]) / YEAR ** p)
+            p = int(nm[len("poly_") :])
+            out[p] = (fit.noise.beta[:, i] / YEAR**p, np.sqrt(fit.noise.beta_cov[:, i, i]) / YEAR**p)
     return out
 
 
@@ -539,10 +612,24 @@ def residual_trend(grid: DailyGrid, A, beta):
     return out
 
 
-def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: bool = True, reml: bool = True,
-                screen: bool = True, sigma_factor: float = 5.0, residual_k: float = 5.0,
-                per_decade: float = 1.5, iterations: int = 40, periods_days=(), warn_steps=None,
-                poly_degree: int = 1, postseismic=()) -> StationFit:
+def fit_station(
+    series,
+    *,
+    steps=(),
+    detect: int = 0,
+    kappa=-1.0,
+    random_walk: bool = True,
+    reml: bool = True,
+    screen: bool = True,
+    sigma_factor: float = 5.0,
+    residual_k: float = 5.0,
+    per_decade: float = 1.5,
+    iterations: int = 40,
+    periods_days=(),
+    warn_steps=None,
+    poly_degree: int = 1,
+    postseismic=(),
+) -> StationFit:
     """Velocity, its uncertainty under coloured noise, seasonal terms, steps and outliers of one station.
 
     Args:
@@ -586,54 +673,83 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
     gains = [np.nan] * len(steps)
     t = np.asarray(series.t, float)
     if len(t) < 2 or (t[-1] - t[0]) / DAY < 60:
-        raise ValueError(f"{series.station}: the series spans {(t[-1] - t[0]) / DAY if len(t) > 1 else 0:.0f} days; "
-                         "a trajectory with seasonal terms needs at least 60")
-    scr = screen_outliers(series, steps=steps, periods_days=periods_days, sigma_factor=sigma_factor,
-                          residual_k=residual_k, poly_degree=poly_degree,
-                          postseismic=[(te, f, tau) for (te, f, _), tau in zip(post, taus)]) if screen else \
-        Screening(keep=np.isfinite(series.enu), records=[], counts={"sigma": 0, "residual": 0,
-                                                                      "missing": int((~np.isfinite(series.enu)).sum())},
-                  sigma_limit_m=np.full(3, np.nan), residual_limit_m=np.full(3, np.nan))
+        raise ValueError(
+            f"{series.station}: the series spans {(t[-1] - t[0]) / DAY if len(t) > 1 else 0:.0f} days; "
+            "a trajectory with seasonal terms needs at least 60"
+        )
+    scr = (
+        screen_outliers(
+            series,
+            steps=steps,
+            periods_days=periods_days,
+            sigma_factor=sigma_factor,
+            residual_k=residual_k,
+            poly_degree=poly_degree,
+            postseismic=[(te, f, tau) for (te, f, _), tau in zip(post, taus)],
+        )
+        if screen
+        else Screening(
+            keep=np.isfinite(series.enu),
+            records=[],
+            counts={"sigma": 0, "residual": 0, "missing": int((~np.isfinite(series.enu)).sum())},
+            sigma_limit_m=np.full(3, np.nan),
+            residual_limit_m=np.full(3, np.nan),
+        )
+    )
     grid = daily_grid(series, scr.keep)
     spec = noise_spec(grid.n_days, kappa=kappa, per_decade=per_decade)
     warnings = []
     t_ref = 0.5 * (grid.t[0] + grid.t[grid.n_days - 1])
     for te, _, _ in post:
         if not grid.t[0] < te < grid.t[grid.n_days - 1]:
-            raise ValueError(f"{series.station}: post-seismic epoch {decimal_year(te):.4f} is outside the series "
-                             f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})")
+            raise ValueError(
+                f"{series.station}: post-seismic epoch {decimal_year(te):.4f} is outside the series "
+                f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})"
+            )
 
     def design(step_list, tau_list):
-        return design_matrix(grid.t, steps=sorted(step_list), t_ref=t_ref, periods_days=periods_days,
-                             poly_degree=poly_degree,
-                             postseismic=[(te, f, tau) for (te, f, _), tau in zip(post, tau_list)])
+        return design_matrix(
+            grid.t,
+            steps=sorted(step_list),
+            t_ref=t_ref,
+            periods_days=periods_days,
+            poly_degree=poly_degree,
+            postseismic=[(te, f, tau) for (te, f, _), tau in zip(post, tau_list)],
+        )
 
     tau_passes = 0
     while True:
         for ts in steps:
             if not grid.t[0] < ts <= grid.t[grid.n_days - 1]:
-                raise ValueError(f"{series.station}: step epoch {decimal_year(ts):.4f} is outside the series "
-                                 f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})")
+                raise ValueError(
+                    f"{series.station}: step epoch {decimal_year(ts):.4f} is outside the series "
+                    f"({decimal_year(grid.t[0]):.4f} .. {decimal_year(grid.t[grid.n_days - 1]):.4f})"
+                )
         D = design(steps, taus)
         A = D.A
         nvalid = grid.valid.sum(axis=0)
         if np.any(nvalid < A.shape[1] + 10):
-            raise ValueError(f"{series.station}: {nvalid.tolist()} valid days per component, fewer than the "
-                             f"{A.shape[1]} model terms + 10")
+            raise ValueError(
+                f"{series.station}: {nvalid.tolist()} valid days per component, fewer than the "
+                f"{A.shape[1]} model terms + 10"
+            )
         scale = []
         for c in range(3):
             k = grid.valid[:, c]
             b = np.linalg.lstsq(A[k], grid.y[k, c], rcond=None)[0]
             scale.append(max(float(robust_scale(grid.y[k, c] - A[k] @ b)), 1e-6))
-        fit = fit_series_batch(grid.y.T, grid.valid.T, A, spec, np.array(scale), random_walk=random_walk, reml=reml,
-                               iterations=iterations)
+        fit = fit_series_batch(
+            grid.y.T, grid.valid.T, A, spec, np.array(scale), random_walk=random_walk, reml=reml, iterations=iterations
+        )
         fit = jax.tree_util.tree_map(np.asarray, fit)
         if estimate_tau and tau_passes < 3:  # profile each estimated tau under the noise just fitted
             tau_passes += 1
             moved = False
             for j in estimate_tau:
+
                 def build(tau, j=j):
                     return design(steps, [tau if k == j else taus[k] for k in range(len(taus))]).A
+
                 tau_new, rng, edge, _, _ = profile_tau(grid, build, j, fit.theta, spec, random_walk=random_walk)
                 tau_info[j] = (rng, edge)
                 if abs(np.log(tau_new / taus[j])) > 0.02:
@@ -647,16 +763,19 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
         if found is None:
             break
         if limit:
-            warnings.append(f"a further step at {iso_date(found[0])} would raise 2 ln L by {found[1]:.0f}, more "
-                            f"than the BIC penalty {step_penalty(grid):.0f}; not added (detection limit {detect}): "
-                            "the model misfits")
+            warnings.append(
+                f"a further step at {iso_date(found[0])} would raise 2 ln L by {found[1]:.0f}, more "
+                f"than the BIC penalty {step_penalty(grid):.0f}; not added (detection limit {detect}): "
+                "the model misfits"
+            )
             break
         steps.append(found[0])
         tau_passes = 0
         sources.append("detected")
         gains.append(found[1])
-        warnings.append(f"step detected at {iso_date(found[0])} (2 ln L gain {found[1]:.0f} > BIC penalty "
-                        f"{step_penalty(grid):.0f})")
+        warnings.append(
+            f"step detected at {iso_date(found[0])} (2 ln L gain {found[1]:.0f} > BIC penalty {step_penalty(grid):.0f})"
+        )
     order = np.argsort(steps) if steps else np.array([], int)
     steps_sorted = np.array(steps)[order] if steps else np.zeros(0)
     sources = tuple(np.array(sources)[order].tolist()) if steps else ()
@@ -688,36 +807,78 @@ def fit_station(series, *, steps=(), detect: int = 0, kappa=-1.0, random_walk: b
             else:
                 bounds = f"[{np.exp(lo) * 1e3:.3g}, {np.exp(hi) * 1e3:.3g}] mm"
             if j == 2 and edge == "lower":
-                warnings.append(f"{comp}: random walk at the lower bound of its box {bounds}: not resolved "
-                                f"by these data (effectively zero)")
+                warnings.append(
+                    f"{comp}: random walk at the lower bound of its box {bounds}: not resolved "
+                    f"by these data (effectively zero)"
+                )
             else:
-                warnings.append(f"{comp}: {lab[j]} estimate at the {edge} bound of its box {bounds} "
-                                f"(within {AT_BOUND_TOL} in ln units): the estimate is limited by the box")
+                warnings.append(
+                    f"{comp}: {lab[j]} estimate at the {edge} bound of its box {bounds} "
+                    f"(within {AT_BOUND_TOL} in ln units): the estimate is limited by the box"
+                )
     terms = []
     for j, (te, form, tau) in enumerate(post):
         i = names.index(f"postseismic_{j}_{form}")
         rng, edge = tau_info[j]
         if edge:
-            warnings.append(f"post-seismic {form} term after {iso_date(te)}: the best time constant lies at the end of "
-                            f"the searched range ({taus[j] / DAY:.3g} days): not resolved by these data")
-        terms.append(PostseismicTerm(epoch=te, form=form, tau=taus[j], estimated=tau is None,
-                                     tau_range=np.array(rng, float), tau_at_edge=bool(edge), amplitude=beta[:, i],
-                                     amplitude_sigma=np.sqrt(cov[:, i, i])))
+            warnings.append(
+                f"post-seismic {form} term after {iso_date(te)}: the best time constant lies at the end of "
+                f"the searched range ({taus[j] / DAY:.3g} days): not resolved by these data"
+            )
+        terms.append(
+            PostseismicTerm(
+                epoch=te,
+                form=form,
+                tau=taus[j],
+                estimated=tau is None,
+                tau_range=np.array(rng, float),
+                tau_at_edge=bool(edge),
+                amplitude=beta[:, i],
+                amplitude_sigma=np.sqrt(cov[:, i, i]),
+            )
+        )
     r_rate = residual_trend(grid, A, beta)
     kap = fit.theta[:, 3]
-    model = ("white + power-law (GGM, 1-phi = 6.9e-6, kappa " + ("estimated" if kappa is None else f"{kappa:g}")
-             + ")" + (" + random walk" if random_walk else "") + f", {'REML' if reml else 'ML'}")
+    model = (
+        "white + power-law (GGM, 1-phi = 6.9e-6, kappa "
+        + ("estimated" if kappa is None else f"{kappa:g}")
+        + ")"
+        + (" + random walk" if random_walk else "")
+        + f", {'REML' if reml else 'ML'}"
+    )
     return StationFit(
-        station=series.station, path=series.path, fmt=series.fmt,
-        velocity=beta[:, 1] / YEAR, velocity_sigma=np.sqrt(cov[:, 1, 1]) / YEAR,
+        station=series.station,
+        path=series.path,
+        fmt=series.fmt,
+        velocity=beta[:, 1] / YEAR,
+        velocity_sigma=np.sqrt(cov[:, 1, 1]) / YEAR,
         velocity_sigma_white=_white_sigma(A, np.where(grid.valid, grid.y, 0.0), grid.valid) / YEAR,
-        offset=beta[:, 0], t_ref=D.t_ref,
-        annual_amplitude=a1, annual_amplitude_sigma=a1s, annual_phase=p1,
-        semiannual_amplitude=a2, semiannual_amplitude_sigma=a2s, semiannual_phase=p2,
-        steps=steps_sorted, step_sizes=beta[:, js] if js else np.zeros((3, 0)),
-        step_sigmas=np.sqrt(cov[:, js, js]) if js else np.zeros((3, 0)), step_sources=sources,
-        white_sigma=np.exp(fit.theta[:, 0]), kappa=kap, powerlaw_amplitude=powerlaw_amplitude(fit.theta),
-        random_walk=random_walk_amplitude(fit.theta) if random_walk else np.zeros(3), noise=fit, model=model,
-        warnings=warnings, screening=scr, grid=grid, design_names=names, A=A,
-        gm_max_rel_error=spec.max_rel_error, step_gains=gains, residual_trend=r_rate / YEAR,
-        poly_degree=int(poly_degree), postseismic=tuple(terms))
+        offset=beta[:, 0],
+        t_ref=D.t_ref,
+        annual_amplitude=a1,
+        annual_amplitude_sigma=a1s,
+        annual_phase=p1,
+        semiannual_amplitude=a2,
+        semiannual_amplitude_sigma=a2s,
+        semiannual_phase=p2,
+        steps=steps_sorted,
+        step_sizes=beta[:, js] if js else np.zeros((3, 0)),
+        step_sigmas=np.sqrt(cov[:, js, js]) if js else np.zeros((3, 0)),
+        step_sources=sources,
+        white_sigma=np.exp(fit.theta[:, 0]),
+        kappa=kap,
+        powerlaw_amplitude=powerlaw_amplitude(fit.theta),
+        random_walk=random_walk_amplitude(fit.theta) if random_walk else np.zeros(3),
+        noise=fit,
+        model=model,
+        warnings=warnings,
+        screening=scr,
+        grid=grid,
+        design_names=names,
+        A=A,
+        gm_max_rel_error=spec.max_rel_error,
+        step_gains=gains,
+        residual_trend=r_rate / YEAR,
+        poly_degree=int(poly_degree),
+        postseismic=tuple(terms),
+    )

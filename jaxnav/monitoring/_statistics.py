@@ -10,7 +10,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import jax
-
 import jax.numpy as jnp
 
 #: S1 Tables 3-5 thresholds in the order x (north), y (east), H (up), m
@@ -73,9 +72,13 @@ def period_statistics(dev, period: int, thresholds=S1_THRESHOLDS_XYH) -> PeriodS
     kP = jnp.maximum(jnp.sum(both, axis=1), 1)
     m_P = jnp.sqrt(jnp.sum(jnp.where(both, a[..., 0] ** 2 + a[..., 1] ** 2, 0.0), axis=1) / kP)
     return PeriodStatistics(
-        max_abs=jnp.max(a, axis=1), mean_abs=jnp.sum(a, axis=1) / nn,
-        share_under=jnp.sum(ok & (a < thr), axis=1) / nn, rms=jnp.sqrt(ms),
-        m_P=m_P, m_H=jnp.sqrt(ms[..., 2]), count=n[..., 2],
+        max_abs=jnp.max(a, axis=1),
+        mean_abs=jnp.sum(a, axis=1) / nn,
+        share_under=jnp.sum(ok & (a < thr), axis=1) / nn,
+        rms=jnp.sqrt(ms),
+        m_P=m_P,
+        m_H=jnp.sqrt(ms[..., 2]),
+        count=n[..., 2],
     )
 
 

@@ -97,8 +97,9 @@ def postseismic_column(t, epoch, form: str, tau):
     return np.log1p(dt) if form == "log" else -np.expm1(-dt)
 
 
-def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_days=(), poly_degree: int = 1,
-                  postseismic=()) -> Design:
+def design_matrix(
+    t, *, steps=(), seasonal: bool = True, t_ref=None, periods_days=(), poly_degree: int = 1, postseismic=()
+) -> Design:
     """Trajectory-model design matrix at epochs ``t`` (s since J2000).
 
     Columns in this order (Hector's design options): offset, rate, [annual, semi-annual], further
@@ -138,8 +139,10 @@ def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_day
     steps = np.atleast_1d(np.asarray(steps, float))
     for j, ts in enumerate(steps):
         if not (t[0] < ts <= t[-1]):
-            raise ValueError(f"step epoch {ts / YEAR + 2000.0:.4f} (decimal year) is outside the series "
-                             f"({t[0] / YEAR + 2000.0:.4f} .. {t[-1] / YEAR + 2000.0:.4f})")
+            raise ValueError(
+                f"step epoch {ts / YEAR + 2000.0:.4f} (decimal year) is outside the series "
+                f"({t[0] / YEAR + 2000.0:.4f} .. {t[-1] / YEAR + 2000.0:.4f})"
+            )
         cols.append((t >= ts).astype(float))
         names.append(f"step_{j}")
     if int(poly_degree) != poly_degree or poly_degree < 1:
@@ -149,8 +152,10 @@ def design_matrix(t, *, steps=(), seasonal: bool = True, t_ref=None, periods_day
         names.append(f"poly_{k}")
     for j, (te, form, tau) in enumerate(postseismic):
         if not (t[0] < te < t[-1]):
-            raise ValueError(f"post-seismic epoch {te / YEAR + 2000.0:.4f} (decimal year) is outside the series "
-                             f"({t[0] / YEAR + 2000.0:.4f} .. {t[-1] / YEAR + 2000.0:.4f})")
+            raise ValueError(
+                f"post-seismic epoch {te / YEAR + 2000.0:.4f} (decimal year) is outside the series "
+                f"({t[0] / YEAR + 2000.0:.4f} .. {t[-1] / YEAR + 2000.0:.4f})"
+            )
         cols.append(postseismic_column(t, te, form, tau))
         names.append(f"postseismic_{j}_{form}")
     return Design(A=np.stack(cols, axis=1), names=tuple(names), t_ref=t_ref, steps=steps)
@@ -281,8 +286,22 @@ def component_loglik(theta, y, valid, A, r, W, d_grid, *, estimate_kappa=False, 
 
 
 @partial(jax.jit, static_argnames=("estimate_kappa", "random_walk", "reml", "iterations"))
-def fit_component(y, valid, A, r, W, d_grid, theta0, lo, hi, *, estimate_kappa=False, random_walk=True,
-                  reml=True, iterations: int = 40) -> NoiseFit:
+def fit_component(
+    y,
+    valid,
+    A,
+    r,
+    W,
+    d_grid,
+    theta0,
+    lo,
+    hi,
+    *,
+    estimate_kappa=False,
+    random_walk=True,
+    reml=True,
+    iterations: int = 40,
+) -> NoiseFit:
     """Maximum-likelihood noise parameters and GLS trajectory of one component (vmappable).
 
     BFGS on -ln L_R with the exact gradient (through the Kalman-filter whitening), a fixed number
@@ -307,8 +326,9 @@ def fit_component(y, valid, A, r, W, d_grid, theta0, lo, hi, *, estimate_kappa=F
 
     def negll(u, base):
         th = base.at[idx].set(u)
-        return -component_loglik(th, y, valid, A, r, W, d_grid, estimate_kappa=estimate_kappa,
-                                 random_walk=random_walk, reml=reml)
+        return -component_loglik(
+            th, y, valid, A, r, W, d_grid, estimate_kappa=estimate_kappa, random_walk=random_walk, reml=reml
+        )
 
     vg = jax.value_and_grad(negll)
 
@@ -328,16 +348,22 @@ def fit_component(y, valid, A, r, W, d_grid, theta0, lo, hi, *, estimate_kappa=F
         rho = jnp.where(sy > 1e-12, 1.0 / sy, 0.0)
         V = jnp.eye(p) - rho * jnp.outer(s_, y_)
         H_upd = jnp.where(sy > 1e-12, V @ Hinv @ V.T + rho * jnp.outer(s_, s_), Hinv)
-        carry = (jnp.where(ok, u_new, u), jnp.where(ok, f_new, f), jnp.where(ok, g_new, g),
-                 jnp.where(ok, H_upd, Hinv), jnp.where(ok, jnp.minimum(1.0, alpha * 2.0), alpha * 0.25),
-                 n_acc + ok.astype(jnp.int32))
+        carry = (
+            jnp.where(ok, u_new, u),
+            jnp.where(ok, f_new, f),
+            jnp.where(ok, g_new, g),
+            jnp.where(ok, H_upd, Hinv),
+            jnp.where(ok, jnp.minimum(1.0, alpha * 2.0), alpha * 0.25),
+            n_acc + ok.astype(jnp.int32),
+        )
         return carry, None
 
     u0 = theta0[idx]
     f0, g0 = vg(u0, theta0)
     H0 = jnp.eye(p) / jnp.maximum(jnp.max(jnp.abs(g0)), 1.0)  # first step at most 1 in ln sigma
     (u, f, g, Hinv, _, n_acc), _ = jax.lax.scan(
-        step, (u0, f0, g0, H0, jnp.asarray(1.0), jnp.zeros((), jnp.int32)), None, length=iterations)
+        step, (u0, f0, g0, H0, jnp.asarray(1.0), jnp.zeros((), jnp.int32)), None, length=iterations
+    )
     th = theta0.at[idx].set(u)
     gfull = jnp.zeros(4).at[idx].set(g)
     Hfull = jnp.eye(4).at[idx[:, None], idx[None, :]].set(Hinv)
@@ -351,9 +377,22 @@ def fit_component(y, valid, A, r, W, d_grid, theta0, lo, hi, *, estimate_kappa=F
     Linv = jax.scipy.linalg.solve_triangular(L, jnp.eye(L.shape[0]), lower=True)
     beta_cov = Linv.T @ Linv
     res = jnp.where(valid, y - A @ beta, jnp.nan)
-    return NoiseFit(theta=th, lo=lo, hi=hi, at_lower=at_lower, at_upper=at_upper, free=free,
-                    theta_sigma=theta_sigma, beta=beta, beta_cov=beta_cov, loglik=ll, loglik_reml=llr,
-                    grad_norm=jnp.max(jnp.where(inner, jnp.abs(gfull), 0.0)), iterations=n_acc, residuals=res)
+    return NoiseFit(
+        theta=th,
+        lo=lo,
+        hi=hi,
+        at_lower=at_lower,
+        at_upper=at_upper,
+        free=free,
+        theta_sigma=theta_sigma,
+        beta=beta,
+        beta_cov=beta_cov,
+        loglik=ll,
+        loglik_reml=llr,
+        grad_norm=jnp.max(jnp.where(inner, jnp.abs(gfull), 0.0)),
+        iterations=n_acc,
+        residuals=res,
+    )
 
 
 class NoiseSpec(NamedTuple):
@@ -371,8 +410,9 @@ class NoiseSpec(NamedTuple):
     max_rel_error: float
 
 
-def noise_spec(n_days: int, *, kappa=-1.0, per_decade: float = 1.5,
-               one_minus_phi: float = GGM_ONE_MINUS_PHI) -> NoiseSpec:
+def noise_spec(
+    n_days: int, *, kappa=-1.0, per_decade: float = 1.5, one_minus_phi: float = GGM_ONE_MINUS_PHI
+) -> NoiseSpec:
     """The Gauss-Markov sum of the power-law noise for a series of ``n_days`` days.
 
     Args:
@@ -386,8 +426,9 @@ def noise_spec(n_days: int, *, kappa=-1.0, per_decade: float = 1.5,
     if not -2.0 < float(kappa) < 0.0:
         raise ValueError(f"spectral index kappa = {kappa!r} must lie in (-2, 0) (random walk is its own term)")
     gm = gauss_markov_sum(-0.5 * float(kappa), n_days, per_decade=per_decade, one_minus_phi=one_minus_phi)
-    return NoiseSpec(r=gm.r, W=gm.w[None], d_grid=np.array([-0.5 * float(kappa)]), kappa=float(kappa),
-                     max_rel_error=gm.max_rel_error)
+    return NoiseSpec(
+        r=gm.r, W=gm.w[None], d_grid=np.array([-0.5 * float(kappa)]), kappa=float(kappa), max_rel_error=gm.max_rel_error
+    )
 
 
 def start_and_box(scale, *, kappa=-1.0, random_walk=True):

@@ -25,6 +25,26 @@ from jaxnav.plot._rtk import plot_rtk
 from jaxnav.plot._save import FORMATS, figure_formats, save_figure
 from jaxnav.plot._tune import plot_sweep, plot_tune
 
-__all__ = ["plot_allan", "FORMATS", "figure_formats", "save_figure", "plot_sweep", "plot_tune", "plot_cadastral_errors", "plot_cadastral_route", "plot_stop_detection", "plot_ins_attitude", "plot_ins_biases",
-           "plot_ins_differences", "plot_standstill", "plot_time_offset_likelihood", "plot_truth_errors", "plot_rtk",
-           "plot_daily_velocity", "plot_s1_period", "plot_s1_statistics", "plot_station_fit", "plot_velocity_map"]
+__all__ = [
+    "plot_allan",
+    "FORMATS",
+    "figure_formats",
+    "save_figure",
+    "plot_sweep",
+    "plot_tune",
+    "plot_cadastral_errors",
+    "plot_cadastral_route",
+    "plot_stop_detection",
+    "plot_ins_attitude",
+    "plot_ins_biases",
+    "plot_ins_differences",
+    "plot_standstill",
+    "plot_time_offset_likelihood",
+    "plot_truth_errors",
+    "plot_rtk",
+    "plot_daily_velocity",
+    "plot_s1_period",
+    "plot_s1_statistics",
+    "plot_station_fit",
+    "plot_velocity_map",
+]

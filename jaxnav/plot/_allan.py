@@ -11,8 +11,24 @@ import numpy as np
 from jaxnav.plot._save import save_figure
 
 
-def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw, path, *, title: str,
-               adev_unit: str, white_label, bi_label, rrw_label, resolved=None, bounds=None) -> pathlib.Path:
+def plot_allan(
+    taus,
+    adev,
+    adev_sigma,
+    fitted,
+    white,
+    bias_instability,
+    rate_rw,
+    path,
+    *,
+    title: str,
+    adev_unit: str,
+    white_label,
+    bi_label,
+    rrw_label,
+    resolved=None,
+    bounds=None,
+) -> pathlib.Path:
     """Overlapping Allan deviation of three axes with error bars and the fitted slope lines.
 
     One panel per axis: the measured deviation (+-1 sigma, taus outside the fit hollow), white noise
@@ -37,8 +53,17 @@ def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw,
     hi = float(np.max(finite)) * 3 if finite.size else 1.0
     for c, a in enumerate(ax):
         d, s = np.asarray(adev[c], float), np.asarray(adev_sigma[c], float)
-        a.errorbar(taus[fitted], d[fitted], yerr=np.minimum(s[fitted], 0.999 * d[fitted]), fmt="o", ms=3,
-                   color="k", lw=0.8, capsize=2, label="Allan deviation +-1 sigma (fitted)")
+        a.errorbar(
+            taus[fitted],
+            d[fitted],
+            yerr=np.minimum(s[fitted], 0.999 * d[fitted]),
+            fmt="o",
+            ms=3,
+            color="k",
+            lw=0.8,
+            capsize=2,
+            label="Allan deviation +-1 sigma (fitted)",
+        )
         if np.any(~fitted):
             a.plot(taus[~fitted], d[~fitted], "o", ms=3, mfc="none", color="0.4", label="not fitted")
         fit = [float(white[c]), float(bias_instability[c]), float(rate_rw[c])]
@@ -49,14 +74,25 @@ def plot_allan(taus, adev, adev_sigma, fitted, white, bias_instability, rate_rw,
             if tt[0] <= 1.0 <= tt[-1]:
                 a.plot([1.0], [n], "s", color="C0", ms=6)
         if b > 0:
-            a.plot(tt, np.full_like(tt, math.sqrt(2 * math.log(2) / math.pi) * b), ls[1], color="C2",
-                   label=f"bias instability (0.664 B): {bi_label[c]}")
+            a.plot(
+                tt,
+                np.full_like(tt, math.sqrt(2 * math.log(2) / math.pi) * b),
+                ls[1],
+                color="C2",
+                label=f"bias instability (0.664 B): {bi_label[c]}",
+            )
         if k > 0:
             a.plot(tt, k * np.sqrt(tt / 3.0), ls[2], color="C3", label=f"rate random walk (slope +1/2): {rrw_label[c]}")
             if tt[0] <= 3.0 <= tt[-1]:
                 a.plot([3.0], [k], "s", color="C3", ms=6)
-        a.plot(tt, np.sqrt(fit[0]**2 / tt + 2 * math.log(2) / math.pi * fit[1]**2 + fit[2]**2 * tt / 3), "-", color="C1", lw=1.5,
-               label="sum of the fitted terms")
+        a.plot(
+            tt,
+            np.sqrt(fit[0] ** 2 / tt + 2 * math.log(2) / math.pi * fit[1] ** 2 + fit[2] ** 2 * tt / 3),
+            "-",
+            color="C1",
+            lw=1.5,
+            label="sum of the fitted terms",
+        )
         a.set_xscale("log")
         a.set_yscale("log")
         a.set_ylim(lo, hi)

@@ -2,20 +2,32 @@
 
 from __future__ import annotations
 
-
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import readable_ticks
 
-_KIND_STYLE = {0: ("s", "tab:red", "known coordinate"), 1: ("D", "tab:orange", "known position"),
-               2: ("^", "tab:purple", "levelling"), 3: ("o", "tab:gray", "ZUPT"), 4: ("*", "tab:green", "target")}
-_STAGE_COLOR = {"forward": "tab:red", "preprocessed": "tab:orange", "smoothed": "tab:blue", "fused": "tab:green",
-                "filtered": "tab:gray", "rts": "tab:purple"}
+_KIND_STYLE = {
+    0: ("s", "tab:red", "known coordinate"),
+    1: ("D", "tab:orange", "known position"),
+    2: ("^", "tab:purple", "levelling"),
+    3: ("o", "tab:gray", "ZUPT"),
+    4: ("*", "tab:green", "target"),
+}
+_STAGE_COLOR = {
+    "forward": "tab:red",
+    "preprocessed": "tab:orange",
+    "smoothed": "tab:blue",
+    "fused": "tab:green",
+    "filtered": "tab:gray",
+    "rts": "tab:purple",
+}
 
 
-def plot_cadastral_route(path, route_enu, stops_enu, kinds, names, *, estimates=None, target_errors=None,
-                         title="S3 cadastral survey"):
+def plot_cadastral_route(
+    path, route_enu, stops_enu, kinds, names, *, estimates=None, target_errors=None, title="S3 cadastral survey"
+):
     """Route (true and estimated, E/N metres), stops by kind, and target errors per stage.
 
     Args:
@@ -33,8 +45,7 @@ def plot_cadastral_route(path, route_enu, stops_enu, kinds, names, *, estimates=
     seen = set()
     for p, k, nm in zip(stops_enu, kinds, names):
         m, c, lab = _KIND_STYLE[int(k)]
-        ax.plot(p[0], p[1], m, color=c, ms=11 if k == 4 else 8, mec="k",
-                label=None if k in seen else lab)
+        ax.plot(p[0], p[1], m, color=c, ms=11 if k == 4 else 8, mec="k", label=None if k in seen else lab)
         seen.add(int(k))
         ax.annotate(nm, p, textcoords="offset points", xytext=(6, 6), fontsize=8)
     ax.set_xlabel("East, m")
@@ -102,8 +113,9 @@ def plot_cadastral_errors(path, errors, *, title="target errors over Monte Carlo
     return fig
 
 
-def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, title="stop detection", extra=None,
-                        true_label="true stop"):
+def plot_stop_detection(
+    path, t, statistic, threshold, detected, true=None, *, title="stop detection", extra=None, true_label="true stop"
+):
     """The detector's GLRT statistic over time, its threshold, the detected (and true) stop spans.
 
     The statistic T_k of :func:`jaxnav.survey.stance_statistic` (dimensionless, ~1 when static) is
@@ -137,8 +149,15 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
         ax.set_ylim(lo / 2, max(pos.max(), threshold) * 3)
     if true is not None:
         for i, (a, b) in enumerate(np.asarray(true, float).reshape(-1, 2)):  # along the top, in axes y units
-            ax.plot([a, b], [0.97, 0.97], color="tab:red", lw=5, solid_capstyle="butt",
-                    transform=ax.get_xaxis_transform(), label=true_label if i == 0 else None)
+            ax.plot(
+                [a, b],
+                [0.97, 0.97],
+                color="tab:red",
+                lw=5,
+                solid_capstyle="butt",
+                transform=ax.get_xaxis_transform(),
+                label=true_label if i == 0 else None,
+            )
     handles, labels = ax.get_legend_handles_labels()
     if extra is not None:
         ax2 = ax.twinx()
@@ -153,8 +172,14 @@ def plot_stop_detection(path, t, statistic, threshold, detected, true=None, *, t
     ax.grid(alpha=0.3, which="major")
     ax.set_title(title, fontsize=10)
     # outside the data, so that the legend hides no stop
-    ax.legend(handles, labels, fontsize=8, loc="upper left", bbox_to_anchor=(1.08 if extra is not None else 1.01, 1.0),
-              borderaxespad=0.0)
+    ax.legend(
+        handles,
+        labels,
+        fontsize=8,
+        loc="upper left",
+        bbox_to_anchor=(1.08 if extra is not None else 1.01, 1.0),
+        borderaxespad=0.0,
+    )
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
     plt.close(fig)

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pathlib
 
-
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import legend_below, readable_ticks, symlog_ticks
 
@@ -103,8 +103,9 @@ def plot_ins_attitude(t, fwd, sm, sig, windows, path, *, title: str) -> pathlib.
     return path
 
 
-def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title: str, gyro_sm=None,
-                    accel_sm=None) -> pathlib.Path:
+def plot_ins_biases(
+    t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title: str, gyro_sm=None, accel_sm=None
+) -> pathlib.Path:
     """Estimated gyro (deg/h) and accelerometer (mg) biases, body axes x/y/z (right, forward, up), +-1 sigma.
 
     Args:
@@ -114,8 +115,10 @@ def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title
     path = pathlib.Path(path)
     t0 = float(t[0])
     fig, ax = plt.subplots(1, 2, figsize=(13, 4.8), sharex=True)
-    for a, val, sig, sm, unit, what in ((ax[0], gyro, gyro_sig, gyro_sm, "deg/h", "gyro bias"),
-                                        (ax[1], accel, accel_sig, accel_sm, "mg", "accelerometer bias")):
+    for a, val, sig, sm, unit, what in (
+        (ax[0], gyro, gyro_sig, gyro_sm, "deg/h", "gyro bias"),
+        (ax[1], accel, accel_sig, accel_sm, "mg", "accelerometer bias"),
+    ):
         _shade_outages(a, windows, t0)
         for c, axis in enumerate(("x (right)", "y (forward)", "z (up)")):
             a.plot(t - t0, val[:, c], color=f"C{c}", lw=1, label=f"{axis}, forward +-1 sigma")
@@ -133,8 +136,9 @@ def plot_ins_biases(t, gyro, gyro_sig, accel, accel_sig, windows, path, *, title
     return path
 
 
-def plot_standstill(t, stat, threshold, detected, vetoed, t_gnss, speed, speed_sigma, windows, path, *,
-                    title: str, unconfirmed=None) -> pathlib.Path:
+def plot_standstill(
+    t, stat, threshold, detected, vetoed, t_gnss, speed, speed_sigma, windows, path, *, title: str, unconfirmed=None
+) -> pathlib.Path:
     """SHOE statistic with its threshold and the accepted standstills (top), GNSS speed with its sigma
     and the samples the GNSS check vetoed (bottom).
 
@@ -196,8 +200,14 @@ def plot_time_offset_likelihood(offsets, loglik, best, sigma, path, *, title: st
         s = np.ones(x.size, bool) if near is None else np.abs(x - best) <= near
         a.plot(1e3 * x[s], y[s], "o-", ms=3, lw=1, color="C0", label="trial offsets")
         if np.isfinite(sigma):
-            a.axvspan(1e3 * (best - sigma), 1e3 * (best + sigma), color="C1", alpha=0.25, lw=0,
-                      label=f"estimate +-1 sigma ({1e3 * best:+.1f} +- {1e3 * sigma:.1f} ms)")
+            a.axvspan(
+                1e3 * (best - sigma),
+                1e3 * (best + sigma),
+                color="C1",
+                alpha=0.25,
+                lw=0,
+                label=f"estimate +-1 sigma ({1e3 * best:+.1f} +- {1e3 * sigma:.1f} ms)",
+            )
         a.axvline(1e3 * best, color="C1", lw=1, label=None if np.isfinite(sigma) else f"estimate {1e3 * best:+.1f} ms")
         a.set_xlabel("time offset added to the IMU times, ms")
         a.set_ylabel("GNSS innovation log-likelihood")
@@ -221,9 +231,11 @@ def plot_truth_errors(err_fwd, err_sm, windows, path, *, title: str) -> pathlib.
     path = pathlib.Path(path)
     t0 = float(min(err_fwd.t[0], err_sm.t[0]))
     fig, ax = plt.subplots(3, 3, figsize=(15, 9), sharex=True)
-    rows = (("pos_enu", "sig_pos_enu", 1.0, "m", ("east", "north", "up"), "position"),
-            ("vel_enu", "sig_vel", 1.0, "m/s", ("east", "north", "up"), "velocity"),
-            ("att", "sig_att", 180.0 / np.pi, "deg", ("roll", "pitch", "heading"), ""))
+    rows = (
+        ("pos_enu", "sig_pos_enu", 1.0, "m", ("east", "north", "up"), "position"),
+        ("vel_enu", "sig_vel", 1.0, "m/s", ("east", "north", "up"), "velocity"),
+        ("att", "sig_att", 180.0 / np.pi, "deg", ("roll", "pitch", "heading"), ""),
+    )
     for r, (field, sfield, scale, unit, comps, what) in enumerate(rows):
         for c in range(3):
             a = ax[r, c]

@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import pathlib
 
-
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import legend_outside, readable_ticks
+from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
 
-COLORS = {"standard": "tab:gray", "adaptive": "tab:green", "standard_robust": "tab:red",
-          "adaptive_robust": "tab:blue", "yang_robust": "tab:purple"}
+COLORS = {
+    "standard": "tab:gray",
+    "adaptive": "tab:green",
+    "standard_robust": "tab:red",
+    "adaptive_robust": "tab:blue",
+    "yang_robust": "tab:purple",
+}
 AXES = ("east", "north", "up")
 
 
@@ -54,8 +58,10 @@ def plot_s1_period(series: dict, path, *, station: int = 0, skip: int = 60):
         ax[i + 1].set_ylabel(f"{name} forecast - truth, mm")
     legend_outside(ax[1], fontsize=7)
     ax[-1].set_xlabel("epoch (1 Hz), s from the period start")
-    ax[0].set_title(f"S1 on simulated station {station + 1}: Knothe subsidence episode (shaded), "
-                    "one-step forecasts X(k/k-1)", fontsize=10)
+    ax[0].set_title(
+        f"S1 on simulated station {station + 1}: Knothe subsidence episode (shaded), one-step forecasts X(k/k-1)",
+        fontsize=10,
+    )
     fig.tight_layout()
     return _save(fig, path)
 
@@ -84,8 +90,18 @@ def plot_s1_statistics(result: dict, path):
             x = np.arange(1, P + 1) - 0.4 + (j + 0.5) * width
             for s_ in range(S):
                 m = _STATION_MARKERS[s_] if S <= len(_STATION_MARKERS) else "o"
-                a.plot(x, v[:, s_], m, ls="none", ms=4, color=c, mec="k", mew=0.3, alpha=0.9,
-                       label=name if s_ == 0 else None)
+                a.plot(
+                    x,
+                    v[:, s_],
+                    m,
+                    ls="none",
+                    ms=4,
+                    color=c,
+                    mec="k",
+                    mew=0.3,
+                    alpha=0.9,
+                    label=name if s_ == 0 else None,
+                )
     if 1 < S <= len(_STATION_MARKERS):  # station key: grey markers
         for s_ in range(S):
             ax[0].plot([], [], _STATION_MARKERS[s_], ls="none", color="0.5", label=f"station {s_ + 1}")
@@ -105,8 +121,11 @@ def plot_s1_statistics(result: dict, path):
         readable_ticks(a, "y")
     legend_outside(ax[0], fontsize=7)
     ax[2].xaxis.get_major_locator().set_params(integer=True)
-    ax[0].set_title("Forecast precision per period: m_P, m_H (forecast - measurement, S1 Tables 1-2)\n"
-                    "and forecast - simulated truth (bottom)", fontsize=10)
+    ax[0].set_title(
+        "Forecast precision per period: m_P, m_H (forecast - measurement, S1 Tables 1-2)\n"
+        "and forecast - simulated truth (bottom)",
+        fontsize=10,
+    )
     fig.tight_layout()
     return _save(fig, path)
 
@@ -126,13 +145,19 @@ def plot_daily_velocity(series, velocity, path, *, forecasts=None):
         a = ax[i, 0]
         a.plot(yr, series.enu[:, i] / MM, ".", ms=1.5, color="0.6", label="daily position")
         fit = series.enu[:, i] - velocity.residuals[:, i]
-        a.plot(yr, fit / MM, "k-", lw=1,
-               label=f"CV filter: {velocity.velocity[i] / MM_PER_YEAR:+.2f} +- "
-                     f"{velocity.sigma_ar1[i] / MM_PER_YEAR:.2f} mm/yr")
+        a.plot(
+            yr,
+            fit / MM,
+            "k-",
+            lw=1,
+            label=f"CV filter: {velocity.velocity[i] / MM_PER_YEAR:+.2f} +- "
+            f"{velocity.sigma_ar1[i] / MM_PER_YEAR:.2f} mm/yr",
+        )
         if forecasts:
             for fname, f in forecasts.items():
-                a.plot(yr, np.asarray(f.forecast)[:, 0, i] / MM, lw=0.6, color=COLORS.get(fname),
-                       label=f"{fname} forecast")
+                a.plot(
+                    yr, np.asarray(f.forecast)[:, 0, i] / MM, lw=0.6, color=COLORS.get(fname), label=f"{fname} forecast"
+                )
         a.set_ylabel(f"{name}, mm")
         a.legend(fontsize=7, loc="best")
         b = ax[i, 1]
@@ -149,8 +174,13 @@ def plot_daily_velocity(series, velocity, path, *, forecasts=None):
         b.plot(yr, v, color="tab:blue", lw=1, label=f"RTS velocity, ML random walk {rw:.2g} mm/yr/sqrt(yr)")
         b.axhline(velocity.velocity[i] / MM_PER_YEAR, color="k", lw=1, ls="--", label="constant-velocity estimate")
         if velocity.reference_velocity is not None:
-            b.axhline(velocity.reference_velocity[i] / MM_PER_YEAR, color="tab:red", lw=1, ls=":",
-                      label="published (file header)")
+            b.axhline(
+                velocity.reference_velocity[i] / MM_PER_YEAR,
+                color="tab:red",
+                lw=1,
+                ls=":",
+                label="published (file header)",
+            )
         b.legend(fontsize=7, loc="best")
     ax[-1, 0].set_xlabel("year")
     ax[-1, 1].set_xlabel("year")
@@ -182,8 +212,12 @@ def _residual_psd(res_mm, valid, segments: int = 4):
     win = np.hanning(L)
     acc, k = 0.0, 0
     for s in range(0, n - L + 1, step):
-        seg = x[s:s + L] - np.mean(x[s:s + L][valid[s:s + L]]) * valid[s:s + L] if valid[s:s + L].any() else x[s:s + L]
-        share = max(valid[s:s + L].mean(), 1e-3)
+        seg = (
+            x[s : s + L] - np.mean(x[s : s + L][valid[s : s + L]]) * valid[s : s + L]
+            if valid[s : s + L].any()
+            else x[s : s + L]
+        )
+        share = max(valid[s : s + L].mean(), 1e-3)
         F = np.fft.rfft(seg * win)
         acc = acc + np.abs(F) ** 2 / (np.sum(win**2) * share)
         k += 1
@@ -212,8 +246,7 @@ def plot_station_fit(fit, path):
         y = np.where(v, g.y[:n, c], np.nan)
         off = np.nanmedian(y)
         ax[0, c].plot(yr, (y - off) / MM, ".", ms=1.5, color="0.55", label="daily position")
-        ax[0, c].plot(yr, (model[:, c] - off) / MM, "-", lw=1.0, color="tab:red",
-                      label="trajectory model")
+        ax[0, c].plot(yr, (model[:, c] - off) / MM, "-", lw=1.0, color="tab:red", label="trajectory model")
         rej = [d for d in fit.screening.records if d["component"] == name]
         if rej:
             ry = np.array([d["decimal_year"] for d in rej])
@@ -223,8 +256,7 @@ def plot_station_fit(fit, path):
             for a in ax[:2, c]:
                 a.axvline(2000.0 + ts / YEAR, color="tab:purple", lw=0.8, ls="--")
         vel, sd = fit.velocity[c] / MM_PER_YEAR, fit.velocity_sigma[c] / MM_PER_YEAR
-        ax[0, c].set_title(f"{fit.station} {name}: {vel:+.2f} +- {sd:.2f} mm/yr (95 %: +-{1.96 * sd:.2f})",
-                           fontsize=9)
+        ax[0, c].set_title(f"{fit.station} {name}: {vel:+.2f} +- {sd:.2f} mm/yr (95 %: +-{1.96 * sd:.2f})", fontsize=9)
         ax[0, c].set_ylabel(f"{name}, mm")
         leg = ax[0, c].legend(fontsize=7, loc="best")
         for h in leg.legend_handles:  # legible markers in the key (the daily dots are 1.5 pt)
@@ -241,8 +273,11 @@ def plot_station_fit(fit, path):
         kap = float(fit.kappa[c])
         amp = fit.powerlaw_amplitude[c] * YEAR ** (-kap / 4) / MM
         rw = fit.random_walk[c] * np.sqrt(YEAR) / MM
-        ax[2, c].set_title(f"white {fit.white_sigma[c] / MM:.2f} mm, power law {amp:.2f} mm/yr^{-kap / 4:.2f}\n"
-                           f"(kappa {kap:.2f}), random walk {rw:.2f} mm/sqrt(yr)", fontsize=8)
+        ax[2, c].set_title(
+            f"white {fit.white_sigma[c] / MM:.2f} mm, power law {amp:.2f} mm/yr^{-kap / 4:.2f}\n"
+            f"(kappa {kap:.2f}), random walk {rw:.2f} mm/sqrt(yr)",
+            fontsize=8,
+        )
         ax[2, c].set_xlabel("frequency, cycles/yr")
         ax[2, c].set_ylabel("PSD, mm^2/(cycle/yr)")
         ax[2, c].legend(fontsize=7)
@@ -282,8 +317,12 @@ def plot_velocity_map(stations: list, path, *, title: str = "Station velocities"
     coslat = np.cos(np.radians(lat.mean()))
     for s in st:
         dx, dy = s["ve"] * k / coslat, s["vn"] * k
-        ax.annotate("", xy=(s["lon_deg"] + dx, s["lat_deg"] + dy), xytext=(s["lon_deg"], s["lat_deg"]),
-                    arrowprops=dict(arrowstyle="-|>", color="tab:red", lw=1.5, shrinkA=0, shrinkB=0))
+        ax.annotate(
+            "",
+            xy=(s["lon_deg"] + dx, s["lat_deg"] + dy),
+            xytext=(s["lon_deg"], s["lat_deg"]),
+            arrowprops=dict(arrowstyle="-|>", color="tab:red", lw=1.5, shrinkA=0, shrinkB=0),
+        )
         c = s.get("corr_en", 0.0) or 0.0
         cov = np.array([[s["se"] ** 2, c * s["se"] * s["sn"]], [c * s["se"] * s["sn"], s["sn"] ** 2]])
         L = np.linalg.cholesky(cov + 1e-12 * np.eye(2))
@@ -298,8 +337,12 @@ def plot_velocity_map(stations: list, path, *, title: str = "Station velocities"
     ax.set_aspect(1.0 / coslat)
     ref = float(f"{vmax / 2:.0g}") if vmax >= 2 else round(vmax, 1) or 1.0
     x0, y0 = ax.get_xlim()[0] + 0.05 * np.ptp(ax.get_xlim()), ax.get_ylim()[0] + 0.06 * np.ptp(ax.get_ylim())
-    ax.annotate("", xy=(x0 + ref * k / coslat, y0), xytext=(x0, y0),
-                arrowprops=dict(arrowstyle="-|>", color="k", lw=1.5, shrinkA=0, shrinkB=0))
+    ax.annotate(
+        "",
+        xy=(x0 + ref * k / coslat, y0),
+        xytext=(x0, y0),
+        arrowprops=dict(arrowstyle="-|>", color="k", lw=1.5, shrinkA=0, shrinkB=0),
+    )
     ax.text(x0, y0 + 0.02 * np.ptp(ax.get_ylim()), f"{ref:g} mm/yr (ellipses: 95 %)", fontsize=9)
     ax.grid(True, lw=0.4, alpha=0.6)
     ax.set_xlabel("longitude (deg)")

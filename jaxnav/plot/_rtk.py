@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import pathlib
 
-
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxnav.units import CM, MM  # noqa: E402
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import legend_outside, readable_ticks
+from jaxnav.units import CM, MM  # noqa: E402
 
 
 def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015), sigma=None, title=None):
@@ -66,19 +65,29 @@ def plot_rtk(result, path, *, h_level=None, names=None, thresholds=(0.007, 0.015
     ax[a].plot(k, np.hypot(fp[:, 0], fp[:, 1]) / MM, "_", ms=10, mew=1.5, color="tab:red", label="from reported sigmas")
     if sigma is not None:
         sg = np.asarray(sigma, float)
-        ax[a].plot(k, np.hypot(sg[:, 0], sg[:, 1]) / MM, "^", ms=4, color="tab:orange",
-                   label="correlated epochs (acf_ess_segment)")
+        ax[a].plot(
+            k,
+            np.hypot(sg[:, 0], sg[:, 1]) / MM,
+            "^",
+            ms=4,
+            color="tab:orange",
+            label="correlated epochs (acf_ess_segment)",
+        )
     ax[a].set_title("Precision of each point's mean (log scale)")
     ax[a].set_ylabel("plane precision, mm")
     legend_outside(ax[a])
-    ax[a + 1].plot(k, np.asarray(result.raw_precision)[:, 2] / MM, "s", ms=4, color="tab:gray",
-                   label="conventional")
-    ax[a + 1].plot(k, np.asarray(result.precision)[:, 2] / MM, "o", ms=4, color="tab:blue",
-                   label="filtered")
+    ax[a + 1].plot(k, np.asarray(result.raw_precision)[:, 2] / MM, "s", ms=4, color="tab:gray", label="conventional")
+    ax[a + 1].plot(k, np.asarray(result.precision)[:, 2] / MM, "o", ms=4, color="tab:blue", label="filtered")
     ax[a + 1].plot(k, fp[:, 2] / MM, "_", ms=10, mew=1.5, color="tab:red", label="from reported sigmas")
     if sigma is not None:  # after the others: the same legend order as the plane panel
-        ax[a + 1].plot(k, np.asarray(sigma, float)[:, 2] / MM, "^", ms=4, color="tab:orange",
-                       label="correlated epochs (acf_ess_segment)")
+        ax[a + 1].plot(
+            k,
+            np.asarray(sigma, float)[:, 2] / MM,
+            "^",
+            ms=4,
+            color="tab:orange",
+            label="correlated epochs (acf_ess_segment)",
+        )
     ax[a].set_yscale("log")
     ax[a + 1].set_yscale("log")
     ax[a + 1].set_ylabel("height precision, mm")

@@ -28,7 +28,8 @@ def _log_ticks(lo, hi, most: int = 6):
             for m in subs:
                 v = float(f"{m * 10.0**k:.12g}")
                 if lo * (1 - 1e-9) <= v <= hi * (1 + 1e-9) and all(
-                        abs(np.log10(v / c)) >= gap * (1 - 1e-9) for c in chosen):
+                    abs(np.log10(v / c)) >= gap * (1 - 1e-9) for c in chosen
+                ):
                     chosen.append(v)
     if len(chosen) < 2:  # under a factor ~1.1: three values at 3 significant digits
         chosen = [float(f"{v:.3g}") for v in np.geomspace(lo, hi, 3)]
@@ -62,7 +63,7 @@ def symlog_ticks(ax, linthresh: float, which: str = "y", most: int = 7):
     """
     axis = getattr(ax, f"{which}axis")
     lo, hi = sorted(getattr(ax, f"get_{which}lim")())
-    pos = [linthresh * 10.0 ** k for k in range(0, 12) if linthresh * 10.0 ** k <= max(hi, -lo) * (1 + 1e-9)]
+    pos = [linthresh * 10.0**k for k in range(0, 12) if linthresh * 10.0**k <= max(hi, -lo) * (1 + 1e-9)]
     step = 1
     while 1 + 2 * len(pos[::step]) > most and step < len(pos):
         step += 1

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pathlib
 
-
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402

@@ -115,7 +115,11 @@ class CadastralScenario:
         for i, leg in enumerate(self.legs):
             if leg.kind not in _KINDS:
                 raise ScenarioError(f"legs[{i}].stop_kind must be one of {_KINDS}, got {leg.kind!r}")
-            need = 2 * self.accel_time + (self.turn_time if leg.turn else 0.0) + (2 * self.pitch_time if leg.slope else 0.0)
+            need = (
+                2 * self.accel_time
+                + (self.turn_time if leg.turn else 0.0)
+                + (2 * self.pitch_time if leg.slope else 0.0)
+            )
             if leg.walk < need + 1.0:
                 raise ScenarioError(f"legs[{i}].walk_s = {leg.walk} s is too short for its manoeuvres ({need} s + 1 s)")
             if leg.stop <= 0:
@@ -139,8 +143,10 @@ class CadastralScenario:
         rest = round((dur - 2 * q - n * half) * self.imu_rate_hz) / self.imu_rate_hz
         parts = [(q, 0.5)] + [(half, -1.0 if i % 2 == 0 else 1.0) for i in range(n)] + [(q, -0.5)]
         total = sum(p[0] for p in parts)
-        segs = [Segment(kind="general", duration=d, dpitch=sgn * self.gait_pitch, dspeed=dspeed * d / total)
-                for d, sgn in parts]
+        segs = [
+            Segment(kind="general", duration=d, dpitch=sgn * self.gait_pitch, dspeed=dspeed * d / total)
+            for d, sgn in parts
+        ]
         if rest > 0:
             segs.append(Segment(kind="cruise", duration=rest))
         return segs
@@ -148,8 +154,12 @@ class CadastralScenario:
     def _segments(self):
         segs = [Segment(kind="rest", duration=self.first_stop, label=self.first_name)]
         for leg in self.legs:
-            cruise = leg.walk - 2 * self.accel_time - (self.turn_time if leg.turn else 0.0) - \
-                (2 * self.pitch_time if leg.slope else 0.0)
+            cruise = (
+                leg.walk
+                - 2 * self.accel_time
+                - (self.turn_time if leg.turn else 0.0)
+                - (2 * self.pitch_time if leg.slope else 0.0)
+            )
             c1 = round(cruise / 2 * self.imu_rate_hz) / self.imu_rate_hz
             segs += self._gait(self.accel_time, self.speed)
             if leg.slope:
@@ -171,9 +181,16 @@ class CadastralScenario:
     def scenario_config(self) -> ScenarioConfig:
         """The equivalent :class:`jaxnav.sim.ScenarioConfig` (trajectory + IMU; GNSS unused)."""
         spec = TrajectorySpec(lat=self.lat, lon=self.lon, h=self.h, heading=self.heading, segments=self._segments())
-        return ScenarioConfig(trajectory=spec, duration=self.duration, imu_rate_hz=self.imu_rate_hz,
-                              gyro=self.grade.gyro, accel=self.grade.accel, initial_errors=self.grade.initial_errors,
-                              name="cadastral", description=f"S3 cadastral survey, {self.grade.name} IMU")
+        return ScenarioConfig(
+            trajectory=spec,
+            duration=self.duration,
+            imu_rate_hz=self.imu_rate_hz,
+            gyro=self.grade.gyro,
+            accel=self.grade.accel,
+            initial_errors=self.grade.initial_errors,
+            name="cadastral",
+            description=f"S3 cadastral survey, {self.grade.name} IMU",
+        )
 
 
 class SurveyTruth(NamedTuple):
@@ -286,52 +303,116 @@ def simulate_cadastral(scn: CadastralScenario, key, truth: SurveyTruth | None = 
     lat, h = jnp.asarray(truth.stop_pos)[:, 0], jnp.asarray(truth.stop_pos)[:, 2]
     from jaxnav.geodesy import meridian_radius, prime_vertical_radius
 
-    d = jnp.stack([e[:, 1] / (meridian_radius(lat) + h), e[:, 0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)),
-                   e[:, 2]], 1)
-    return CadastralRun(dtheta=dth + sg, dv=dv + sa, nav0=run.nav0, known_pos=kp + d, n_wild=ng + na,
-                        gyro_bias=run.errors.gyro_bias, accel_bias=run.errors.accel_bias)
+    d = jnp.stack(
+        [e[:, 1] / (meridian_radius(lat) + h), e[:, 0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)), e[:, 2]], 1
+    )
+    return CadastralRun(
+        dtheta=dth + sg,
+        dv=dv + sa,
+        nav0=run.nav0,
+        known_pos=kp + d,
+        n_wild=ng + na,
+        gyro_bias=run.errors.gyro_bias,
+        accel_bias=run.errors.accel_bias,
+    )
 
 
 # ------------------------------------------------------------------------------------------
 # TOML
 
-_SURVEY = [("lat_deg", units.DEG), ("lon_deg", units.DEG), ("height_m", 1.0), ("heading_deg", units.DEG),
-           ("speed_mps", 1.0), ("accel_s", 1.0), ("turn_s", 1.0), ("pitch_s", 1.0), ("first_stop_s", 1.0),
-           ("imu_rate_hz", 1.0), ("gait_hz", 1.0), ("gait_pitch_deg", units.DEG)]
-_SURVEY_ATTR = {"lat_deg": "lat", "lon_deg": "lon", "height_m": "h", "heading_deg": "heading", "speed_mps": "speed",
-                "accel_s": "accel_time", "turn_s": "turn_time", "pitch_s": "pitch_time", "first_stop_s": "first_stop",
-                "imu_rate_hz": "imu_rate_hz", "gait_hz": "gait_hz", "gait_pitch_deg": "gait_pitch"}
-_LEG = {"walk_s": ("walk", 1.0), "turn_deg": ("turn", units.DEG), "slope_deg": ("slope", units.DEG),
-        "stop_kind": ("kind", None), "stop_s": ("stop", 1.0), "name": ("name", None)}
+_SURVEY = [
+    ("lat_deg", units.DEG),
+    ("lon_deg", units.DEG),
+    ("height_m", 1.0),
+    ("heading_deg", units.DEG),
+    ("speed_mps", 1.0),
+    ("accel_s", 1.0),
+    ("turn_s", 1.0),
+    ("pitch_s", 1.0),
+    ("first_stop_s", 1.0),
+    ("imu_rate_hz", 1.0),
+    ("gait_hz", 1.0),
+    ("gait_pitch_deg", units.DEG),
+]
+_SURVEY_ATTR = {
+    "lat_deg": "lat",
+    "lon_deg": "lon",
+    "height_m": "h",
+    "heading_deg": "heading",
+    "speed_mps": "speed",
+    "accel_s": "accel_time",
+    "turn_s": "turn_time",
+    "pitch_s": "pitch_time",
+    "first_stop_s": "first_stop",
+    "imu_rate_hz": "imu_rate_hz",
+    "gait_hz": "gait_hz",
+    "gait_pitch_deg": "gait_pitch",
+}
+_LEG = {
+    "walk_s": ("walk", 1.0),
+    "turn_deg": ("turn", units.DEG),
+    "slope_deg": ("slope", units.DEG),
+    "stop_kind": ("kind", None),
+    "stop_s": ("stop", 1.0),
+    "name": ("name", None),
+}
 _WILD = {"prob": ("wild_prob", 1.0), "gyro_deg_per_s": ("wild_gyro", units.DEG), "accel_g": ("wild_accel", units.G0)}
-_KNOWN = {"known_coordinate_sigma_m": ("sigma_known", 1.0), "known_position_sigma_m": ("sigma_position", 1.0),
-          "levelling_sigma_m": ("sigma_levelling", 1.0)}
+_KNOWN = {
+    "known_coordinate_sigma_m": ("sigma_known", 1.0),
+    "known_position_sigma_m": ("sigma_position", 1.0),
+    "levelling_sigma_m": ("sigma_levelling", 1.0),
+}
 
 
 #: plausible range [lo, hi] of every numeric key of a cadastral TOML, in the key's (config) unit
 #: ("imu.gyro.*" holds for every grade); a value outside is refused naming the key (docs/api/survey.md)
 RANGES = {
-    "survey.lat_deg": (-90.0, 90.0), "survey.lon_deg": (-180.0, 360.0), "survey.height_m": (-500.0, 9000.0),
-    "survey.heading_deg": (-360.0, 360.0), "survey.speed_mps": (0.05, 10.0), "survey.accel_s": (0.05, 60.0),
-    "survey.turn_s": (0.05, 600.0), "survey.pitch_s": (0.05, 60.0), "survey.first_stop_s": (1.0, 3600.0),
-    "survey.imu_rate_hz": (10.0, 10000.0), "survey.gait_hz": (0.0, 10.0), "survey.gait_pitch_deg": (0.0, 30.0),
-    "legs.walk_s": (0.1, 36000.0), "legs.turn_deg": (-360.0, 360.0), "legs.slope_deg": (-45.0, 45.0),
+    "survey.lat_deg": (-90.0, 90.0),
+    "survey.lon_deg": (-180.0, 360.0),
+    "survey.height_m": (-500.0, 9000.0),
+    "survey.heading_deg": (-360.0, 360.0),
+    "survey.speed_mps": (0.05, 10.0),
+    "survey.accel_s": (0.05, 60.0),
+    "survey.turn_s": (0.05, 600.0),
+    "survey.pitch_s": (0.05, 60.0),
+    "survey.first_stop_s": (1.0, 3600.0),
+    "survey.imu_rate_hz": (10.0, 10000.0),
+    "survey.gait_hz": (0.0, 10.0),
+    "survey.gait_pitch_deg": (0.0, 30.0),
+    "legs.walk_s": (0.1, 36000.0),
+    "legs.turn_deg": (-360.0, 360.0),
+    "legs.slope_deg": (-45.0, 45.0),
     "legs.stop_s": (0.5, 3600.0),
-    "wild.prob": (0.0, 0.1), "wild.gyro_deg_per_s": (0.0, 1e4), "wild.accel_g": (0.0, 100.0),
-    "known_points.known_coordinate_sigma_m": (1e-5, 100.0), "known_points.known_position_sigma_m": (1e-5, 100.0),
+    "wild.prob": (0.0, 0.1),
+    "wild.gyro_deg_per_s": (0.0, 1e4),
+    "wild.accel_g": (0.0, 100.0),
+    "known_points.known_coordinate_sigma_m": (1e-5, 100.0),
+    "known_points.known_position_sigma_m": (1e-5, 100.0),
     "known_points.levelling_sigma_m": (1e-5, 100.0),
-    "imu.gyro.bias_deg_per_h": (0.0, 1e5), "imu.gyro.markov_deg_per_h": (0.0, 1e5),
-    "imu.gyro.markov_tau_s": (0.1, 1e7), "imu.gyro.arw_deg_per_sqrt_h": (0.0, 30.0),
-    "imu.gyro.scale_factor_ppm": (0.0, 1e5), "imu.gyro.saturation_deg_per_s": (1.0, 1e5),
+    "imu.gyro.bias_deg_per_h": (0.0, 1e5),
+    "imu.gyro.markov_deg_per_h": (0.0, 1e5),
+    "imu.gyro.markov_tau_s": (0.1, 1e7),
+    "imu.gyro.arw_deg_per_sqrt_h": (0.0, 30.0),
+    "imu.gyro.scale_factor_ppm": (0.0, 1e5),
+    "imu.gyro.saturation_deg_per_s": (1.0, 1e5),
     "imu.gyro.bandwidth_hz": (0.1, 1e4),
-    "imu.accel.bias_mg": (0.0, 1000.0), "imu.accel.markov_mg": (0.0, 1000.0), "imu.accel.markov_tau_s": (0.1, 1e7),
-    "imu.accel.vrw_ug_per_sqrt_hz": (0.0, 1e5), "imu.accel.scale_factor_ppm": (0.0, 1e5),
-    "imu.accel.saturation_g": (0.5, 1000.0), "imu.accel.bandwidth_hz": (0.1, 1e4),
-    "imu.initial_errors.attitude_arcsec": (0.0, 3.6e5), "imu.initial_errors.velocity_mps": (0.0, 100.0),
+    "imu.accel.bias_mg": (0.0, 1000.0),
+    "imu.accel.markov_mg": (0.0, 1000.0),
+    "imu.accel.markov_tau_s": (0.1, 1e7),
+    "imu.accel.vrw_ug_per_sqrt_hz": (0.0, 1e5),
+    "imu.accel.scale_factor_ppm": (0.0, 1e5),
+    "imu.accel.saturation_g": (0.5, 1000.0),
+    "imu.accel.bandwidth_hz": (0.1, 1e4),
+    "imu.initial_errors.attitude_arcsec": (0.0, 3.6e5),
+    "imu.initial_errors.velocity_mps": (0.0, 100.0),
     "imu.initial_errors.position_m": (0.0, 1e4),
-    "pipeline.meas_rate_hz": (0.01, 1000.0), "pipeline.margin_s": (0.0, 60.0), "pipeline.zupt_sigma_mps": (1e-5, 10.0),
-    "pipeline.outlier_k": (1.0, 100.0), "pipeline.lowpass_hz": (0.1, 1e4),
-    "pipeline.velocity_sigma0_mps": (1e-5, 100.0), "pipeline.position_sigma0_m": (1e-5, 1e4),
+    "pipeline.meas_rate_hz": (0.01, 1000.0),
+    "pipeline.margin_s": (0.0, 60.0),
+    "pipeline.zupt_sigma_mps": (1e-5, 10.0),
+    "pipeline.outlier_k": (1.0, 100.0),
+    "pipeline.lowpass_hz": (0.1, 1e4),
+    "pipeline.velocity_sigma0_mps": (1e-5, 100.0),
+    "pipeline.position_sigma0_m": (1e-5, 1e4),
 }
 
 
@@ -353,7 +434,7 @@ def _check_ranges(doc: Table):
         for k in leg.data:
             _plausible(leg, k, f"legs.{k}")
     imu = doc.table("imu")
-    for g in (imu.data if imu is not None else ()):
+    for g in imu.data if imu is not None else ():
         gt = imu.table(g)
         for sec in gt.data:
             t = gt.table(sec)
@@ -426,17 +507,20 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
         g = _read(gt.table("gyro") or Table({}, f"imu.{gname}.gyro", error=ScenarioError), _GYRO)
         a = _read(gt.table("accel") or Table({}, f"imu.{gname}.accel", error=ScenarioError), _ACCEL)
         ie = _read(gt.table("initial_errors") or Table({}, f"imu.{gname}.initial_errors", error=ScenarioError), _INIT)
-        grade = ImuGrade(name=gname, gyro=SensorErrorModel(**g), accel=SensorErrorModel(**a),
-                         initial_errors=InitialErrorConfig(**ie))
+        grade = ImuGrade(
+            name=gname, gyro=SensorErrorModel(**g), accel=SensorErrorModel(**a), initial_errors=InitialErrorConfig(**ie)
+        )
         out[gname] = CadastralScenario(grade=grade, **kw)
     for scn in list(out.values())[:1]:  # the route is the grades' common one: expand it once, here, so that a
-        c = scn.scenario_config()       # route the IMU rate cannot sample is refused with the file, not mid-run
+        c = scn.scenario_config()  # route the IMU rate cannot sample is refused with the file, not mid-run
         try:
             segment_table(c.trajectory, 1.0 / c.imu_rate_hz, c.duration)
         except ScenarioError as e:
-            raise ScenarioError(f"survey and legs: the route they describe is not valid at imu_rate_hz = "
-                                f"{c.imu_rate_hz:g}: {e} (lengthen accel_s, turn_s or pitch_s, or raise "
-                                f"imu_rate_hz)") from None
+            raise ScenarioError(
+                f"survey and legs: the route they describe is not valid at imu_rate_hz = "
+                f"{c.imu_rate_hz:g}: {e} (lengthen accel_s, turn_s or pitch_s, or raise "
+                f"imu_rate_hz)"
+            ) from None
     return out, dict(d.get("pipeline", {}))
 
 
@@ -445,8 +529,12 @@ def load_cadastral(path: str | os.PathLike | None = None) -> tuple[dict, dict]:
     try:
         if path is None:
             src = "cadastral.toml"
-            d = loads_toml(importlib.resources.files("jaxnav.sim").joinpath("scenarios/cadastral.toml")
-                           .read_text(encoding="utf-8"), source=src)
+            d = loads_toml(
+                importlib.resources.files("jaxnav.sim")
+                .joinpath("scenarios/cadastral.toml")
+                .read_text(encoding="utf-8"),
+                source=src,
+            )
         else:
             src = os.fspath(path)
             d = load_toml(path)
@@ -473,8 +561,10 @@ def short_survey(scn: CadastralScenario, n_legs: int = 4) -> CadastralScenario:
     if "target" not in kinds[: n_legs - 1]:
         first = next((i for i, k in enumerate(kinds[:-1]) if k == "target"), None)
         need = "no number of legs keeps one" if first is None else f"use at least {first + 2} legs"
-        raise ValueError(f"the first {n_legs} leg(s) end at no target point once the last stop becomes a known "
-                         f"point, so there is nothing to score; {need} (the survey has {len(kinds)})")
+        raise ValueError(
+            f"the first {n_legs} leg(s) end at no target point once the last stop becomes a known "
+            f"point, so there is nothing to score; {need} (the survey has {len(kinds)})"
+        )
     legs = list(scn.legs[:n_legs])
     legs[-1] = dataclasses.replace(legs[-1], kind="known_coordinate")
     return dataclasses.replace(scn, legs=tuple(legs))
@@ -524,7 +614,10 @@ def calibration_record(scn: CadastralScenario, key, n: int) -> CalibrationRecord
     hit_a = jax.random.bernoulli(k3, scn.wild_prob, (n, 3))
     sg = jnp.where(jax.random.bernoulli(k2, 0.5, (n, 3)), 1.0, -1.0)
     sa = jnp.where(jax.random.bernoulli(k4, 0.5, (n, 3)), 1.0, -1.0)
-    return CalibrationRecord(gyro=out[0][0] + jnp.where(hit_g, sg * scn.wild_gyro, 0.0),
-                             accel=out[1][0] + jnp.where(hit_a, sa * scn.wild_accel, 0.0),
-                             gyro_coloured=out[0][1], accel_coloured=out[1][1],
-                             n_wild=jnp.sum(hit_g) + jnp.sum(hit_a))
+    return CalibrationRecord(
+        gyro=out[0][0] + jnp.where(hit_g, sg * scn.wild_gyro, 0.0),
+        accel=out[1][0] + jnp.where(hit_a, sa * scn.wild_accel, 0.0),
+        gyro_coloured=out[0][1],
+        accel_coloured=out[1][1],
+        n_wild=jnp.sum(hit_g) + jnp.sum(hit_a),
+    )

@@ -31,10 +31,18 @@ def imu_noise(cfg) -> ImuNoise:
       cfg: :class:`ScenarioConfig`.
     """
     g, a = cfg.gyro, cfg.accel
-    return ImuNoise(gyro_arw=_v3(g.white), accel_vrw=_v3(a.white), gyro_bias_instability=_v3(g.markov_sigma),
-                    gyro_bias_tau=_v3(g.markov_tau), accel_bias_instability=_v3(a.markov_sigma),
-                    accel_bias_tau=_v3(a.markov_tau), gyro_bias_initial=_v3(g.bias_sigma),
-                    accel_bias_initial=_v3(a.bias_sigma), gyro_sf=_v3(g.scale_sigma), accel_sf=_v3(a.scale_sigma))
+    return ImuNoise(
+        gyro_arw=_v3(g.white),
+        accel_vrw=_v3(a.white),
+        gyro_bias_instability=_v3(g.markov_sigma),
+        gyro_bias_tau=_v3(g.markov_tau),
+        accel_bias_instability=_v3(a.markov_sigma),
+        accel_bias_tau=_v3(a.markov_tau),
+        gyro_bias_initial=_v3(g.bias_sigma),
+        accel_bias_initial=_v3(a.bias_sigma),
+        gyro_sf=_v3(g.scale_sigma),
+        accel_sf=_v3(a.scale_sigma),
+    )
 
 
 class LCInputs(NamedTuple):
@@ -68,7 +76,13 @@ def lc_inputs(cfg, run, *, t_imu=None, t_gnss=None, lever=None) -> LCInputs:
     t_imu = np.asarray(run.truth.t[1:]) if t_imu is None else t_imu
     gnss = run.gnss
     t = gnss.t if t_gnss is None else t_gnss
-    meas = gnss_measurements(t, gnss.pos, gnss.vel, jnp.diag(jnp.asarray(_v3(cfg.gnss.pos_sigma) ** 2)),
-                             jnp.diag(jnp.asarray(_v3(cfg.gnss.vel_sigma) ** 2)), use=gnss.valid,
-                             lever=jnp.zeros(3) if lever is None else lever)
+    meas = gnss_measurements(
+        t,
+        gnss.pos,
+        gnss.vel,
+        jnp.diag(jnp.asarray(_v3(cfg.gnss.pos_sigma) ** 2)),
+        jnp.diag(jnp.asarray(_v3(cfg.gnss.vel_sigma) ** 2)),
+        use=gnss.valid,
+        lever=jnp.zeros(3) if lever is None else lever,
+    )
     return LCInputs(run.nav0, t_imu, run.imu.dtheta, run.imu.dv, meas)

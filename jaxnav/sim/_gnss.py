@@ -81,8 +81,9 @@ class GnssEpochs(NamedTuple):
 def _multiple(x, dt, name):
     k = round(x / dt)
     if abs(k * dt - x) > 1e-9 * max(1.0, abs(x)):
-        raise ScenarioError(f"{name} = {x} s is not a whole number of IMU intervals ({dt} s): "
-                            "GNSS epochs must fall on IMU sample times")
+        raise ScenarioError(
+            f"{name} = {x} s is not a whole number of IMU intervals ({dt} s): GNSS epochs must fall on IMU sample times"
+        )
     return int(k)
 
 
@@ -125,8 +126,9 @@ class GnssData(NamedTuple):
     vel_error: jax.Array
 
 
-def simulate_gnss(key, cfg: GnssConfig, truth: Trajectory, epochs: GnssEpochs, origin,
-                  ellipsoid: Ellipsoid = WGS84) -> GnssData:
+def simulate_gnss(
+    key, cfg: GnssConfig, truth: Trajectory, epochs: GnssEpochs, origin, ellipsoid: Ellipsoid = WGS84
+) -> GnssData:
     """Draw GNSS fixes from the truth (jit/vmap-able; ``epochs`` is static host data).
 
     The noise is drawn in the local ENU frame at the true point and added to the geodetic
@@ -163,6 +165,14 @@ def simulate_gnss(key, cfg: GnssConfig, truth: Trajectory, epochs: GnssEpochs, o
     enu = jnp.stack(geodetic_to_enu(pos_m[:, 0], pos_m[:, 1], pos_m[:, 2], o[0], o[1], o[2], ellipsoid=ellipsoid), -1)
     nan = jnp.asarray(math.nan, dtype)
     gate = avail[:, None]
-    return GnssData(t=jnp.asarray(epochs.t, dtype), index=idx, pos=jnp.where(gate, pos_m, nan),
-                    enu=jnp.where(gate, enu, nan), vel=jnp.where(gate, vel_m, nan), valid=avail,
-                    outlier=out, pos_error=perr, vel_error=verr)
+    return GnssData(
+        t=jnp.asarray(epochs.t, dtype),
+        index=idx,
+        pos=jnp.where(gate, pos_m, nan),
+        enu=jnp.where(gate, enu, nan),
+        vel=jnp.where(gate, vel_m, nan),
+        valid=avail,
+        outlier=out,
+        pos_error=perr,
+        vel_error=verr,
+    )

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -69,9 +69,9 @@ class SensorDraw(NamedTuple):
     """
 
     bias: jax.Array
-    markov: Optional[jax.Array]
-    scale: Optional[jax.Array]
-    white: Optional[jax.Array]
+    markov: jax.Array | None
+    scale: jax.Array | None
+    white: jax.Array | None
 
 
 def _any(v):
@@ -147,10 +147,12 @@ def draw_sensor_errors(key, model: SensorErrorModel, n: int, dt, dtype=jnp.float
     small = jax.random.normal(kc, (2, 3), dtype)
     bias = jnp.asarray(model.bias_sigma, dtype) * small[0]
     scale = jnp.asarray(model.scale_sigma, dtype) * small[1] if _any(model.scale_sigma) else None
-    markov = (markov_ar1(km, n, dt, model.markov_sigma, model.markov_tau, dtype)
-              if _any(model.markov_sigma) else None)
-    white = (jnp.asarray(model.white, dtype) * jnp.sqrt(jnp.asarray(dt, dtype)) * jax.random.normal(kw, (n, 3), dtype)
-             if _any(model.white) else None)
+    markov = markov_ar1(km, n, dt, model.markov_sigma, model.markov_tau, dtype) if _any(model.markov_sigma) else None
+    white = (
+        jnp.asarray(model.white, dtype) * jnp.sqrt(jnp.asarray(dt, dtype)) * jax.random.normal(kw, (n, 3), dtype)
+        if _any(model.white)
+        else None
+    )
     return SensorDraw(bias=bias, markov=markov, scale=scale, white=white)
 
 

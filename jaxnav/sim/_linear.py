@@ -61,9 +61,18 @@ class CVScenario(NamedTuple):
     change: jax.Array
 
 
-def simulate_cv_scenario(key, *, T: int = 600, dt=1.0, sigma=0.003, accel_std=1e-5,
-                         change_start=0.4, change_len=0.1, change_accel=(2e-4, -1.5e-4, -4e-4),
-                         v0=(1e-3, -5e-4, -2e-3)) -> CVScenario:
+def simulate_cv_scenario(
+    key,
+    *,
+    T: int = 600,
+    dt=1.0,
+    sigma=0.003,
+    accel_std=1e-5,
+    change_start=0.4,
+    change_len=0.1,
+    change_accel=(2e-4, -1.5e-4, -4e-4),
+    v0=(1e-3, -5e-4, -2e-3),
+) -> CVScenario:
     """Simulate the S1/S2 constant-velocity model with an acceleration burst the model does not expect.
 
     Positions follow dxi/dt = lambda, dlambda/dt = Omega (S1 eq. (3)) with white acceleration of

@@ -129,8 +129,9 @@ def _enu_to_latlon(lat, lon, dn, de, ell):
     The radii are taken on the ellipsoid (h = 0): the heights of the area (~20 m) would change
     the cm-level offsets by ~3e-6 of their size.
     """
-    d = enu_to_curvilinear(jnp.stack([lat, lon, jnp.zeros_like(lat)], -1), jnp.stack([de, dn, jnp.zeros_like(de)], -1),
-                           ell)
+    d = enu_to_curvilinear(
+        jnp.stack([lat, lon, jnp.zeros_like(lat)], -1), jnp.stack([de, dn, jnp.zeros_like(de)], -1), ell
+    )
     return lat + d[..., 0], lon + d[..., 1]
 
 
@@ -152,7 +153,7 @@ def simulate_rtk_points(key, cfg: RtkPointsConfig = RtkPointsConfig()) -> RtkPoi
     flat = jax.random.normal(kn, (sum(sizes.values()),))
     draw, o = {}, 0
     for name, size in sizes.items():
-        draw[name] = flat[o:o + size]
+        draw[name] = flat[o : o + size]
         o += size
     x_c, y_c = cfg.center_x, cfg.center_y
     # survey points uniform over the square; control points of the connection survey spread
@@ -160,9 +161,9 @@ def simulate_rtk_points(key, cfg: RtkPointsConfig = RtkPointsConfig()) -> RtkPoi
     # a control network covers the area it serves; a ring alone would make the quadratic
     # surface singular, x^2 + y^2 = const)
     u = jax.random.uniform(ku, (2 * P + 2 * C,))
-    d_pts = (u[:2 * P].reshape(P, 2) - 0.5) * cfg.area
+    d_pts = (u[: 2 * P].reshape(P, 2) - 0.5) * cfg.area
     cell = jnp.stack([jnp.arange(C) // 3 - 1.0, jnp.arange(C) % 3 - 1.0], -1)
-    d_cp = (0.55 * cell + 0.3 * (u[2 * P:].reshape(C, 2) - 0.5)) * cfg.area
+    d_cp = (0.55 * cell + 0.3 * (u[2 * P :].reshape(C, 2) - 0.5)) * cfg.area
     d_all = jnp.concatenate([d_pts, d_cp])
     gk_all = jnp.stack([x_c + d_all[:, 0], y_c + d_all[:, 1]], -1)
     lat_all, lon_all = gauss_kruger_inverse(gk_all[:, 0], gk_all[:, 1], lon0=cfg.lon_cm, ellipsoid=ell)
@@ -209,8 +210,25 @@ def simulate_rtk_points(key, cfg: RtkPointsConfig = RtkPointsConfig()) -> RtkPoi
 
     nanT = lambda a: jnp.where(mask if a.ndim == 2 else mask[..., None], a, jnp.nan)  # noqa: E731
     return RtkPointsSim(
-        t=t, mask=mask, n=n, lat=nanT(la), lon=nanT(lo), H=nanT(H), sigma=nanT(sigma), xy_terminal=nanT(xy_term),
-        h_terminal=nanT(h_term), true_lat=lat, true_lon=lon, true_H=Ht, true_h=h, true_xy=xy_true,
-        true_zeta=zeta, h_level=h_level, control_lat=clat_m, control_lon=clon_m, control_H=cH + ce[:, 2],
-        control_xy=cxy, control_h=ch,
+        t=t,
+        mask=mask,
+        n=n,
+        lat=nanT(la),
+        lon=nanT(lo),
+        H=nanT(H),
+        sigma=nanT(sigma),
+        xy_terminal=nanT(xy_term),
+        h_terminal=nanT(h_term),
+        true_lat=lat,
+        true_lon=lon,
+        true_H=Ht,
+        true_h=h,
+        true_xy=xy_true,
+        true_zeta=zeta,
+        h_level=h_level,
+        control_lat=clat_m,
+        control_lon=clon_m,
+        control_H=cH + ce[:, 2],
+        control_xy=cxy,
+        control_h=ch,
     )

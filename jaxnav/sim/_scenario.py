@@ -15,16 +15,16 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from jaxnav import units
+from jaxnav._config import Table, load_toml, loads_toml
 from jaxnav.geodesy import WGS84, meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_mul, rv_to_quat
 from jaxnav.ins.mechanization import NavState
-from jaxnav._config import Table, load_toml, loads_toml
 from jaxnav.sim._gnss import GnssConfig, GnssData, gnss_epochs, simulate_gnss
 from jaxnav.sim._imu import SensorErrorModel, corrupt_increments
 from jaxnav.sim._trajectory import (
@@ -100,7 +100,7 @@ class ScenarioConfig:
         """(lat rad, lon rad, h m) of the local ENU frame: the start point."""
         return (self.trajectory.lat, self.trajectory.lon, self.trajectory.h)
 
-    def validate(self) -> "ScenarioConfig":
+    def validate(self) -> ScenarioConfig:
         """Check the host-side layout (segments fit, epochs on samples); return self."""
         tab = segment_table(self.trajectory, self.dt, self.duration)
         gnss_epochs(self.gnss, self.dt, tab.n_total)
@@ -139,10 +139,10 @@ class SensorErrors(NamedTuple):
 
     gyro_bias: jax.Array
     gyro_markov: jax.Array
-    gyro_scale: Optional[jax.Array]
+    gyro_scale: jax.Array | None
     accel_bias: jax.Array
-    accel_markov: Optional[jax.Array]
-    accel_scale: Optional[jax.Array]
+    accel_markov: jax.Array | None
+    accel_scale: jax.Array | None
 
 
 class InitialErrorDraw(NamedTuple):
@@ -194,9 +194,13 @@ def perturb_nav(nav: NavState, attitude, velocity, position_enu, ellipsoid=WGS84
     q_ins = rv2q(-phi) (x) q_true, i.e. C_bn^ins = (I - [phi x]) C_bn^true to first order.
     """
     lat, h = nav.pos[0], nav.pos[2]
-    dpos = jnp.stack([position_enu[1] / (meridian_radius(lat, ellipsoid) + h),
-                      position_enu[0] / ((prime_vertical_radius(lat, ellipsoid) + h) * jnp.cos(lat)),
-                      position_enu[2]])
+    dpos = jnp.stack(
+        [
+            position_enu[1] / (meridian_radius(lat, ellipsoid) + h),
+            position_enu[0] / ((prime_vertical_radius(lat, ellipsoid) + h) * jnp.cos(lat)),
+            position_enu[2],
+        ]
+    )
     return NavState(q_bn=quat_mul(rv_to_quat(-attitude), nav.q_bn), v_n=nav.v_n + velocity, pos=nav.pos + dpos)
 
 
@@ -218,8 +222,14 @@ def _simulate_random(key, truth: Trajectory, config: ScenarioConfig):
     init = InitialErrorDraw(*draw)
     nav_true = NavState(q_bn=truth.q_bn[0], v_n=truth.v_n[0], pos=truth.pos[0])
     nav0 = perturb_nav(nav_true, *draw)
-    errors = SensorErrors(gyro_bias=gd.bias, gyro_markov=gd.markov, gyro_scale=gd.scale,
-                          accel_bias=ad.bias, accel_markov=ad.markov, accel_scale=ad.scale)
+    errors = SensorErrors(
+        gyro_bias=gd.bias,
+        gyro_markov=gd.markov,
+        gyro_scale=gd.scale,
+        accel_bias=ad.bias,
+        accel_markov=ad.markov,
+        accel_scale=ad.scale,
+    )
     return dth, dv, gnss, errors, nav0, init
 
 
@@ -248,8 +258,10 @@ def simulate(config: ScenarioConfig, key, *, trajectory: Trajectory | None = Non
     truth = make_trajectory(config) if trajectory is None else trajectory
     n = int(round(config.duration * config.imu_rate_hz))
     if truth.dtheta.shape != (n, 3):
-        raise ValueError(f"trajectory has {truth.dtheta.shape[0]} IMU intervals but the config needs {n} "
-                         "(duration * imu_rate_hz): pass make_trajectory(config) for this config")
+        raise ValueError(
+            f"trajectory has {truth.dtheta.shape[0]} IMU intervals but the config needs {n} "
+            "(duration * imu_rate_hz): pass make_trajectory(config) for this config"
+        )
     dth, dv, gnss, errors, nav0, init = _simulate_random(key, truth, config=config)
     imu = ImuData(dt=truth.dt, dtheta=dth, dv=dv, dtheta_ideal=truth.dtheta, dv_ideal=truth.dv)
     return SimResult(truth=truth, imu=imu, gnss=gnss, errors=errors, nav0=nav0, initial_errors=init)
@@ -260,21 +272,30 @@ def simulate(config: ScenarioConfig, key, *, trajectory: Trajectory | None = Non
 
 # (toml key, attribute, factor to SI, kind)
 _START = [
-    ("lat_deg", "lat", units.DEG, "num"), ("lon_deg", "lon", units.DEG, "num"),
-    ("height_m", "h", 1.0, "num"), ("heading_deg", "heading", units.DEG, "num"),
-    ("pitch_deg", "pitch", units.DEG, "num"), ("roll_deg", "roll", units.DEG, "num"),
+    ("lat_deg", "lat", units.DEG, "num"),
+    ("lon_deg", "lon", units.DEG, "num"),
+    ("height_m", "h", 1.0, "num"),
+    ("heading_deg", "heading", units.DEG, "num"),
+    ("pitch_deg", "pitch", units.DEG, "num"),
+    ("roll_deg", "roll", units.DEG, "num"),
     ("speed_mps", "speed", 1.0, "num>=0"),
 ]
 _TIME = [
-    ("duration_s", "duration", 1.0, "num>0"), ("imu_rate_hz", "imu_rate_hz", 1.0, "num>0"),
+    ("duration_s", "duration", 1.0, "num>0"),
+    ("imu_rate_hz", "imu_rate_hz", 1.0, "num>0"),
     ("rk4_substeps", "rk4_substeps", 1, "int>=1"),
 ]
 _SEGMENT = [
-    ("kind", "kind", None, "str"), ("label", "label", None, "str"),
-    ("duration_s", "duration", 1.0, "num>=0"), ("hold_s", "hold", 1.0, "num>=0"),
-    ("dspeed_mps", "dspeed", 1.0, "num"), ("dheading_deg", "dheading", units.DEG, "num"),
-    ("dpitch_deg", "dpitch", units.DEG, "num"), ("droll_deg", "droll", units.DEG, "num"),
-    ("dv_enu_mps", "dv_enu", 1.0, "vec3"), ("sensed", "sensed", None, "bool"),
+    ("kind", "kind", None, "str"),
+    ("label", "label", None, "str"),
+    ("duration_s", "duration", 1.0, "num>=0"),
+    ("hold_s", "hold", 1.0, "num>=0"),
+    ("dspeed_mps", "dspeed", 1.0, "num"),
+    ("dheading_deg", "dheading", units.DEG, "num"),
+    ("dpitch_deg", "dpitch", units.DEG, "num"),
+    ("droll_deg", "droll", units.DEG, "num"),
+    ("dv_enu_mps", "dv_enu", 1.0, "vec3"),
+    ("sensed", "sensed", None, "bool"),
 ]
 _GYRO = [
     ("bias_deg_per_h", "bias_sigma", units.DEG_PER_HOUR, "vec3>=0"),
@@ -295,23 +316,33 @@ _ACCEL = [
     ("bandwidth_hz", "bandwidth", 1.0, "vec3>0"),
 ]
 _GNSS = [
-    ("rate_hz", "rate_hz", 1.0, "num>0"), ("first_epoch_s", "first_epoch", 1.0, "num>=0"),
-    ("pos_sigma_m", "pos_sigma", 1.0, "vec3>=0"), ("vel_sigma_mps", "vel_sigma", 1.0, "vec3>=0"),
-    ("outages_s", "outages", 1.0, "outages"), ("outlier_prob", "outlier_prob", 1.0, "prob"),
-    ("outlier_pos_m", "outlier_pos", 1.0, "num>=0"), ("outlier_vel_mps", "outlier_vel", 1.0, "num>=0"),
+    ("rate_hz", "rate_hz", 1.0, "num>0"),
+    ("first_epoch_s", "first_epoch", 1.0, "num>=0"),
+    ("pos_sigma_m", "pos_sigma", 1.0, "vec3>=0"),
+    ("vel_sigma_mps", "vel_sigma", 1.0, "vec3>=0"),
+    ("outages_s", "outages", 1.0, "outages"),
+    ("outlier_prob", "outlier_prob", 1.0, "prob"),
+    ("outlier_pos_m", "outlier_pos", 1.0, "num>=0"),
+    ("outlier_vel_mps", "outlier_vel", 1.0, "num>=0"),
 ]
 _INIT = [
     ("attitude_arcsec", "attitude", units.ARCSEC, "vec3>=0"),
-    ("velocity_mps", "velocity", 1.0, "vec3>=0"), ("position_m", "position", 1.0, "vec3>=0"),
+    ("velocity_mps", "velocity", 1.0, "vec3>=0"),
+    ("position_m", "position", 1.0, "vec3>=0"),
     ("mode", "mode", None, "str"),
 ]
 _TOP = [("name", "name", None, "str"), ("description", "description", None, "str")]
-_SECTIONS = {"time": _TIME, "start": _START, "gyro": _GYRO, "accel": _ACCEL, "gnss": _GNSS,
-             "initial_errors": _INIT}
+_SECTIONS = {"time": _TIME, "start": _START, "gyro": _GYRO, "accel": _ACCEL, "gnss": _GNSS, "initial_errors": _INIT}
 _REQUIRED = {"time": ("duration_s", "imu_rate_hz"), "start": ("lat_deg", "lon_deg", "height_m")}
 # which TOML change fields each segment kind accepts
-_SEG_FIELD = {"dspeed": "dspeed_mps", "dheading": "dheading_deg", "dpitch": "dpitch_deg", "droll": "droll_deg",
-              "dv_enu": "dv_enu_mps", "sensed": "sensed"}
+_SEG_FIELD = {
+    "dspeed": "dspeed_mps",
+    "dheading": "dheading_deg",
+    "dpitch": "dpitch_deg",
+    "droll": "droll_deg",
+    "dv_enu": "dv_enu_mps",
+    "sensed": "sensed",
+}
 
 
 def _is_num(x):
@@ -368,8 +399,10 @@ def scenario_from_dict(d: dict, *, validate: bool = True) -> ScenarioConfig:
     for name in _REQUIRED:
         if not doc.has(name):
             raise ScenarioError(f"[{name}] section is required")
-    sec = {name: _read(doc.table(name) or Table({}, name, error=ScenarioError), schema, _REQUIRED.get(name, ()))
-           for name, schema in _SECTIONS.items()}
+    sec = {
+        name: _read(doc.table(name) or Table({}, name, error=ScenarioError), schema, _REQUIRED.get(name, ()))
+        for name, schema in _SECTIONS.items()
+    }
     segs = []
     for st in doc.tables("segments"):
         s = _read(st, _SEGMENT, ("kind", "duration_s"))
@@ -384,10 +417,16 @@ def scenario_from_dict(d: dict, *, validate: bool = True) -> ScenarioConfig:
     spec = TrajectorySpec(segments=tuple(segs), **sec["start"])
     t = sec["time"]
     cfg = ScenarioConfig(
-        trajectory=spec, duration=t["duration"], imu_rate_hz=t["imu_rate_hz"],
-        rk4_substeps=t.get("rk4_substeps", 1), gyro=SensorErrorModel(**sec["gyro"]),
-        accel=SensorErrorModel(**sec["accel"]), gnss=GnssConfig(**sec["gnss"]),
-        initial_errors=InitialErrorConfig(**sec["initial_errors"]), **top)
+        trajectory=spec,
+        duration=t["duration"],
+        imu_rate_hz=t["imu_rate_hz"],
+        rk4_substeps=t.get("rk4_substeps", 1),
+        gyro=SensorErrorModel(**sec["gyro"]),
+        accel=SensorErrorModel(**sec["accel"]),
+        gnss=GnssConfig(**sec["gnss"]),
+        initial_errors=InitialErrorConfig(**sec["initial_errors"]),
+        **top,
+    )
     return cfg.validate() if validate else cfg
 
 

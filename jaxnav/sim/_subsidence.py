@@ -51,10 +51,20 @@ class SubsidenceConfig(NamedTuple):
     tau_common: jax.Array
 
 
-def subsidence_config(n_stations: int = 2, *, w_max=40 * MM, time_constant=600.0, onset=900.0,
-                      horizontal=(0.15, -0.25), v0=(0.0, 0.0, 0.0), sigma_white=(1.5 * MM, 1.5 * MM, 3.0 * MM),
-                      sigma_corr=(1.0 * MM, 1.0 * MM, 2.0 * MM), tau_corr=120.0,
-                      sigma_common=(0.5 * MM, 0.5 * MM, 1.0 * MM), tau_common=600.0) -> SubsidenceConfig:
+def subsidence_config(
+    n_stations: int = 2,
+    *,
+    w_max=40 * MM,
+    time_constant=600.0,
+    onset=900.0,
+    horizontal=(0.15, -0.25),
+    v0=(0.0, 0.0, 0.0),
+    sigma_white=(1.5 * MM, 1.5 * MM, 3.0 * MM),
+    sigma_corr=(1.0 * MM, 1.0 * MM, 2.0 * MM),
+    tau_corr=120.0,
+    sigma_common=(0.5 * MM, 0.5 * MM, 1.0 * MM),
+    tau_common=600.0,
+) -> SubsidenceConfig:
     """A :class:`SubsidenceConfig` with every station given the same values (broadcast to S).
 
     Args:
@@ -66,10 +76,16 @@ def subsidence_config(n_stations: int = 2, *, w_max=40 * MM, time_constant=600.0
     S = int(n_stations)
     f = lambda a, shape: jnp.broadcast_to(jnp.asarray(a, float), shape)  # noqa: E731
     return SubsidenceConfig(
-        w_max=f(w_max, (S,)), rate=1.0 / f(time_constant, (S,)), onset=f(onset, (S,)),
-        horizontal=f(horizontal, (S, 2)), v0=f(v0, (S, 3)), sigma_white=f(sigma_white, (3,)),
-        sigma_corr=f(sigma_corr, (3,)), tau_corr=jnp.asarray(tau_corr, float),
-        sigma_common=f(sigma_common, (3,)), tau_common=jnp.asarray(tau_common, float),
+        w_max=f(w_max, (S,)),
+        rate=1.0 / f(time_constant, (S,)),
+        onset=f(onset, (S,)),
+        horizontal=f(horizontal, (S, 2)),
+        v0=f(v0, (S, 3)),
+        sigma_white=f(sigma_white, (3,)),
+        sigma_corr=f(sigma_corr, (3,)),
+        tau_corr=jnp.asarray(tau_corr, float),
+        sigma_common=f(sigma_common, (3,)),
+        tau_common=jnp.asarray(tau_common, float),
     )
 
 

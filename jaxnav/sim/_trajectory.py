@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -151,8 +151,9 @@ class Segment:
         if any(self.dv_enu) and "dv_enu" not in allowed:
             raise ScenarioError(f"segment.dv_enu is not allowed for kind {self.kind!r} (allowed: {allowed})")
         if not self.sensed and "sensed" not in allowed:
-            raise ScenarioError("segment.sensed is only meaningful for 'velocity_step' and 'general' "
-                                f"(kind {self.kind!r})")
+            raise ScenarioError(
+                f"segment.sensed is only meaningful for 'velocity_step' and 'general' (kind {self.kind!r})"
+            )
 
 
 @dataclass(frozen=True)
@@ -241,8 +242,10 @@ def segment_table(spec: TrajectorySpec, dt: float, duration: float | None = None
     for i, s in enumerate(spec.segments):
         name = f"segments[{i}] ({s.kind}{', ' + s.label if s.label else ''})"
         if s.kind == "rest" and (abs(state[3]) > 1e-9 or np.any(np.abs(state[4:]) > 1e-9)):
-            raise ScenarioError(f"{name}: 'rest' needs the vehicle stopped, but speed is {state[3]} m/s "
-                                f"and pulse velocity {state[4:]} m/s")
+            raise ScenarioError(
+                f"{name}: 'rest' needs the vehicle stopped, but speed is {state[3]} m/s "
+                f"and pulse velocity {state[4:]} m/s"
+            )
         n = _n_intervals(s.duration, dt, f"{name}.duration")
         delta = np.array([s.dpitch, s.droll, -s.dheading, s.dspeed, *s.dv_enu])
         if n == 0 and np.any(delta != 0):
@@ -261,9 +264,15 @@ def segment_table(spec: TrajectorySpec, dt: float, duration: float | None = None
     if k == 0:
         raise ScenarioError("the trajectory is empty: give segments or a duration")
     cols = list(zip(*rows))
-    return SegmentTable(k0=np.array(cols[0], np.int64), n=np.array(cols[1], np.int64),
-                        start=np.stack(cols[2]), rate=np.stack(cols[3]),
-                        sensed=np.array(cols[4], bool), source=np.array(cols[5], np.int64), n_total=k)
+    return SegmentTable(
+        k0=np.array(cols[0], np.int64),
+        n=np.array(cols[1], np.int64),
+        start=np.stack(cols[2]),
+        rate=np.stack(cols[3]),
+        sensed=np.array(cols[4], bool),
+        source=np.array(cols[5], np.int64),
+        n_total=k,
+    )
 
 
 # ------------------------------------------------------------------------------------------
@@ -334,7 +343,7 @@ class Trajectory(NamedTuple):
     a_n: jax.Array
     dtheta: jax.Array
     dv: jax.Array
-    dv_unsensed: Optional[jax.Array]
+    dv_unsensed: jax.Array | None
     segment: jax.Array
 
 
@@ -405,8 +414,14 @@ def _build(start, rate, piece, local, pos0, dt, unsensed_mask, *, substeps, elli
 _build_jit = jax.jit(_build, static_argnames=("substeps", "ellipsoid", "with_unsensed"))
 
 
-def generate_trajectory(spec: TrajectorySpec, *, imu_rate_hz: float, duration: float | None = None,
-                        rk4_substeps: int = 1, ellipsoid: Ellipsoid = WGS84) -> Trajectory:
+def generate_trajectory(
+    spec: TrajectorySpec,
+    *,
+    imu_rate_hz: float,
+    duration: float | None = None,
+    rk4_substeps: int = 1,
+    ellipsoid: Ellipsoid = WGS84,
+) -> Trajectory:
     """Build the true trajectory and the ideal IMU increments (jitted; no Python loop over time).
 
     Args:
@@ -432,12 +447,31 @@ def generate_trajectory(spec: TrajectorySpec, *, imu_rate_hz: float, duration: f
     with_uns = bool(unsensed.any())
     mask = unsensed[piece].astype(np.float64)
     with jax.ensure_compile_time_eval():
-        out = _build_jit(jnp.asarray(tab.start), jnp.asarray(tab.rate), jnp.asarray(piece, jnp.int32),
-                         jnp.asarray(local, jnp.int32), jnp.asarray([spec.lat, spec.lon, spec.h], jnp.float64),
-                         jnp.asarray(dt, jnp.float64), jnp.asarray(mask),
-                         substeps=int(rk4_substeps), ellipsoid=ellipsoid, with_unsensed=with_uns)
+        out = _build_jit(
+            jnp.asarray(tab.start),
+            jnp.asarray(tab.rate),
+            jnp.asarray(piece, jnp.int32),
+            jnp.asarray(local, jnp.int32),
+            jnp.asarray([spec.lat, spec.lon, spec.h], jnp.float64),
+            jnp.asarray(dt, jnp.float64),
+            jnp.asarray(mask),
+            substeps=int(rk4_substeps),
+            ellipsoid=ellipsoid,
+            with_unsensed=with_uns,
+        )
         euler, q_bn, v_n, pos, a_n, dtheta, dv, dv_uns = out
         t = jnp.arange(tab.n_total + 1, dtype=jnp.float64) * dt
         seg = jnp.asarray(tab.source[piece], jnp.int32)
-    return Trajectory(t=t, dt=jnp.asarray(dt, jnp.float64), euler=euler, q_bn=q_bn, v_n=v_n, pos=pos, a_n=a_n,
-                      dtheta=dtheta, dv=dv, dv_unsensed=dv_uns, segment=seg)
+    return Trajectory(
+        t=t,
+        dt=jnp.asarray(dt, jnp.float64),
+        euler=euler,
+        q_bn=q_bn,
+        v_n=v_n,
+        pos=pos,
+        a_n=a_n,
+        dtheta=dtheta,
+        dv=dv,
+        dv_unsensed=dv_uns,
+        segment=seg,
+    )

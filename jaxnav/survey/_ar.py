@@ -108,7 +108,7 @@ def fit_ar(x, p: int, method: str = "yule_walker") -> ARFit:
         s2_ml = s2
     elif method == "ls":
         d = x - m
-        X = jnp.stack([d[p - i - 1:N - i - 1] for i in range(p)], axis=1)  # (N-p, p): lags 1..p
+        X = jnp.stack([d[p - i - 1 : N - i - 1] for i in range(p)], axis=1)  # (N-p, p): lags 1..p
         y = d[p:]
         A = X.T @ X
         L = cholesky(A)
@@ -162,8 +162,9 @@ def select_ar_order(x, max_order: int = 6, *, criterion: str = "bic", method: st
     aic, bic = (np.asarray(a) for a in _criteria(x, max_order, method))
     k = int(np.argmin(aic if criterion == "aic" else bic))
     best = fit_ar(x, k + 1, method)
-    return OrderSelection(order=k + 1, fit=best, orders=np.arange(1, max_order + 1), aic=aic, bic=bic,
-                          criterion=criterion)
+    return OrderSelection(
+        order=k + 1, fit=best, orders=np.arange(1, max_order + 1), aic=aic, bic=bic, criterion=criterion
+    )
 
 
 @partial(jax.jit, static_argnames=("max_order", "method"))
@@ -171,7 +172,7 @@ def _criteria(x, max_order, method):
     """AIC and BIC of every order 1..max_order in one compiled call (orders unrolled)."""
     if method == "ls":
         # a common estimation sample (the first max_order points dropped) keeps the likelihoods comparable
-        fits = [fit_ar.__wrapped__(x[max_order - p:], p, "ls") for p in range(1, max_order + 1)]
+        fits = [fit_ar.__wrapped__(x[max_order - p :], p, "ls") for p in range(1, max_order + 1)]
     elif method == "yule_walker":
         fits = [fit_ar.__wrapped__(x, p, method) for p in range(1, max_order + 1)]
     else:
@@ -271,8 +272,9 @@ def ar_kalman(y, phi, sigma2, R, *, smooth: bool = True) -> ARKalmanResult:
     model = ar_state_space(phi, sigma2, R)
     p = model.F.shape[0]
     P0 = ar_stationary_cov(phi, sigma2)
-    res = kalman_filter(model, jnp.zeros(p, y.dtype), P0, (y - m)[:, None],
-                        save=("means", "covs", "pred_means", "pred_covs"))
+    res = kalman_filter(
+        model, jnp.zeros(p, y.dtype), P0, (y - m)[:, None], save=("means", "covs", "pred_means", "pred_covs")
+    )
     if smooth:
         sm = rts_smoother(model, res)
         x, P = sm.means, sm.covs
@@ -299,8 +301,10 @@ def autocovariance_masked(x, mask, max_lag: int):
     x = jnp.asarray(x)
     mask = jnp.asarray(mask, bool)
     if x.ndim != 1 or x.shape != mask.shape or x.shape[0] <= max_lag:
-        raise ValueError(f"autocovariance_masked needs a 1-D series and mask of one shape, longer than "
-                         f"max_lag={max_lag}; got {x.shape} and {mask.shape}")
+        raise ValueError(
+            f"autocovariance_masked needs a 1-D series and mask of one shape, longer than "
+            f"max_lag={max_lag}; got {x.shape} and {mask.shape}"
+        )
     N = x.shape[0]
     m = mask.astype(x.dtype)
     n = jnp.maximum(jnp.sum(m), 1.0)

@@ -157,7 +157,7 @@ def zero_phase_lowpass(x, dt, cutoff_hz):
         raise ValueError(f"zero_phase_lowpass needs more than {pl} samples, got {N}")
     b, a = butter2_lowpass(cutoff_hz, 1.0 / dt)
     b, a = b.astype(x2.dtype), a.astype(x2.dtype)
-    ext = jnp.concatenate([2 * x2[:1] - x2[pl:0:-1], x2, 2 * x2[-1:] - x2[-2:-pl - 2:-1]], 0)
+    ext = jnp.concatenate([2 * x2[:1] - x2[pl:0:-1], x2, 2 * x2[-1:] - x2[-2 : -pl - 2 : -1]], 0)
     zi = _zi(b, a)
     y = _lfilter2(b, a, ext, zi[:, None] * ext[0][None, :])
     y = _lfilter2(b, a, y[::-1], zi[:, None] * y[-1][None, :])[::-1]
@@ -210,8 +210,18 @@ def _stats1(x):
     mu = 2.0 * n1 * n2 / nn + 1.0
     var = 2.0 * n1 * n2 * (2.0 * n1 * n2 - nn) / (nn**2 * (nn - 1.0))
     z = (runs - mu) / jnp.sqrt(var)
-    return SeriesStats(n=jnp.asarray(n), mean=m, var=m2 * n / (n - 1.0), skew=S, kurt=K, jb=jb,
-                       jb_p=jnp.exp(-jb / 2.0), runs=runs, runs_z=z, runs_p=erfc(jnp.abs(z) / math.sqrt(2.0)))
+    return SeriesStats(
+        n=jnp.asarray(n),
+        mean=m,
+        var=m2 * n / (n - 1.0),
+        skew=S,
+        kurt=K,
+        jb=jb,
+        jb_p=jnp.exp(-jb / 2.0),
+        runs=runs,
+        runs_z=z,
+        runs_p=erfc(jnp.abs(z) / math.sqrt(2.0)),
+    )
 
 
 @jax.jit
@@ -260,8 +270,9 @@ class PreprocessResult(NamedTuple):
 
 
 @partial(jax.jit, static_argnames=("lowpass", "block"))
-def preprocess_imu(dtheta, dv, dt, params: PreprocessParams = PreprocessParams(), *, lowpass: bool = True,
-                   block: int = 200) -> PreprocessResult:
+def preprocess_imu(
+    dtheta, dv, dt, params: PreprocessParams = PreprocessParams(), *, lowpass: bool = True, block: int = 200
+) -> PreprocessResult:
     """Clean IMU increments: wild-value rejection then zero-phase low-pass (S3 step 1).
 
     Works on the interval-mean rates dtheta/dt and dv/dt; the outputs are increments again.
@@ -284,5 +295,6 @@ def preprocess_imu(dtheta, dv, dt, params: PreprocessParams = PreprocessParams()
     if lowpass:
         w = zero_phase_lowpass(w, dt, params.cutoff_hz)
         f = zero_phase_lowpass(f, dt, params.cutoff_hz)
-    return PreprocessResult(dtheta=w * dt, dv=f * dt, gyro_flags=og.flags, accel_flags=oa.flags,
-                            n_rejected=og.n_rejected + oa.n_rejected)
+    return PreprocessResult(
+        dtheta=w * dt, dv=f * dt, gyro_flags=og.flags, accel_flags=oa.flags, n_rejected=og.n_rejected + oa.n_rejected
+    )

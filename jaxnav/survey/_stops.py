@@ -15,7 +15,6 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import jax
-
 import jax.numpy as jnp
 import numpy as np
 
@@ -56,8 +55,12 @@ def make_stop_list(t_start, t_end, kind, pos=None, sigma=None, name=None) -> Sto
     pos = np.full((K, 3), np.nan) if pos is None else np.asarray(pos, float)
     sigma = np.full((K, 3), 0.01) if sigma is None else np.asarray(sigma, float)
     name = tuple(f"P{i}" for i in range(K)) if name is None else tuple(name)
-    for nm, a, shp in (("t_end", t_end, (K,)), ("kind", kind, (K,)), ("pos", np.asarray(pos), (K, 3)),
-                       ("sigma", sigma, (K, 3))):
+    for nm, a, shp in (
+        ("t_end", t_end, (K,)),
+        ("kind", kind, (K,)),
+        ("pos", np.asarray(pos), (K, 3)),
+        ("sigma", sigma, (K, 3)),
+    ):
         if np.shape(a) != shp:
             raise ValueError(f"stop list: {nm} has shape {np.shape(a)}; expected {shp} for {K} stops")
     if len(name) != K:
@@ -78,8 +81,10 @@ def validate_stops(stops: StopList, t_first: float, t_last: float) -> None:
         raise ValueError("the stop list is empty")
     lo, hi = float(np.min(stops.t_start)), float(np.max(stops.t_end))
     if lo < t_first - 1e-9 or hi > t_last + 1e-9:
-        raise ValueError(f"the stop list spans [{lo:.3f}, {hi:.3f}] s but the IMU data spans [{t_first:.3f}, "
-                         f"{t_last:.3f}] s: the stop list does not match this data (time scale or file?)")
+        raise ValueError(
+            f"the stop list spans [{lo:.3f}, {hi:.3f}] s but the IMU data spans [{t_first:.3f}, "
+            f"{t_last:.3f}] s: the stop list does not match this data (time scale or file?)"
+        )
     if np.any(np.diff(stops.t_start) <= 0) or np.any(stops.t_start[1:] < stops.t_end[:-1]):
         i = int(np.argmax((np.diff(stops.t_start) <= 0) | (stops.t_start[1:] < stops.t_end[:-1])))
         raise ValueError(f"stops {stops.name[i]!r} and {stops.name[i + 1]!r} are not in time order or overlap")
@@ -88,8 +93,10 @@ def validate_stops(stops: StopList, t_first: float, t_last: float) -> None:
         if stops.kind[i] == KNOWN_COORDINATE:
             seen_known = True
         elif stops.kind[i] == TARGET and not seen_known:
-            raise ValueError(f"target point {stops.name[i]!r} (t = {stops.t_start[i]:.3f} s) has no known-coordinate "
-                             "point before it: forward navigation to a target starts at a known-coordinate point")
+            raise ValueError(
+                f"target point {stops.name[i]!r} (t = {stops.t_start[i]:.3f} s) has no known-coordinate "
+                "point before it: forward navigation to a target starts at a known-coordinate point"
+            )
 
 
 class DataClasses(NamedTuple):
@@ -138,8 +145,9 @@ def classify(stops: StopList, t_imu) -> DataClasses:
             nxt = i
     class3 = np.zeros(K, bool)
     class3[1:] = (stops.kind[1:] == TARGET) & known[:-1]
-    return DataClasses(sample_class=cls, stop_of_sample=stop_of, class3=class3, prev_known=prev_known,
-                       next_known=next_known)
+    return DataClasses(
+        sample_class=cls, stop_of_sample=stop_of, class3=class3, prev_known=prev_known, next_known=next_known
+    )
 
 
 # ------------------------------------------------------------------------------------------
@@ -178,8 +186,7 @@ def stance_statistic(f_b, w_b, params: DetectorParams = DetectorParams(), *, win
     Returns:
       (N,) statistic T_k (static where below the threshold).
     """
-    p = StandstillParams(sigma_a=params.sigma_a, sigma_w=params.sigma_g, threshold=params.threshold,
-                         g=params.gravity)
+    p = StandstillParams(sigma_a=params.sigma_a, sigma_w=params.sigma_g, threshold=params.threshold, g=params.gravity)
     return shoe_statistic(jnp.asarray(f_b), jnp.asarray(w_b), p, window=window, edges="shift")
 
 
@@ -201,7 +208,7 @@ def static_spans(static, t, *, min_duration: float = 2.0, min_gap: float = 0.5):
     a, b = runs(~s)
     for i0, i1 in zip(a, b):
         if i0 > 0 and i1 < len(s) - 1 and t[i1] - t_prev[i0] < min_gap:
-            s[i0:i1 + 1] = True
+            s[i0 : i1 + 1] = True
     a, b = runs(s)
     spans = [(t_prev[i0], t[i1]) for i0, i1 in zip(a, b) if t[i1] - t_prev[i0] >= min_duration]
     return np.array(spans, float).reshape(-1, 2)
@@ -215,8 +222,16 @@ class DetectionResult(NamedTuple):
     spans: Any
 
 
-def detect_stops(t, f_b, w_b, params: DetectorParams = DetectorParams(), *, window: int = 50,
-                 min_duration: float = 2.0, min_gap: float = 0.5) -> DetectionResult:
+def detect_stops(
+    t,
+    f_b,
+    w_b,
+    params: DetectorParams = DetectorParams(),
+    *,
+    window: int = 50,
+    min_duration: float = 2.0,
+    min_gap: float = 0.5,
+) -> DetectionResult:
     """Static/dynamic segmentation: GLRT statistic, threshold, then span clean-up (S3 step 2).
 
     Args:
@@ -228,8 +243,11 @@ def detect_stops(t, f_b, w_b, params: DetectorParams = DetectorParams(), *, wind
     """
     T = stance_statistic(jnp.asarray(f_b), jnp.asarray(w_b), params, window=window)
     static = np.asarray(T < params.threshold)
-    return DetectionResult(statistic=np.asarray(T), static=static,
-                           spans=static_spans(static, t, min_duration=min_duration, min_gap=min_gap))
+    return DetectionResult(
+        statistic=np.asarray(T),
+        static=static,
+        spans=static_spans(static, t, min_duration=min_duration, min_gap=min_gap),
+    )
 
 
 class MatchScore(NamedTuple):
@@ -273,6 +291,14 @@ def match_stops(detected, true, *, min_overlap: float = 0.5, t=None, static=None
         st = np.asarray(static, bool)
         sp = float((st & truth).sum() / max(st.sum(), 1))
         sr = float((st & truth).sum() / max(truth.sum(), 1))
-    return MatchScore(precision=nm / max(len(det), 1), recall=nm / max(len(tru), 1), n_true=len(tru),
-                      n_detected=len(det), n_matched=nm, sample_precision=sp, sample_recall=sr,
-                      start_error=np.array(se), end_error=np.array(ee))
+    return MatchScore(
+        precision=nm / max(len(det), 1),
+        recall=nm / max(len(tru), 1),
+        n_true=len(tru),
+        n_detected=len(det),
+        n_matched=nm,
+        sample_precision=sp,
+        sample_recall=sr,
+        start_error=np.array(se),
+        end_error=np.array(ee),
+    )

@@ -41,8 +41,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
-from jaxnav.ins.integration import LCParams, LCSave, PVMeasurements, loosely_coupled, smooth
 from jaxnav.ins.error_model import IDX18
+from jaxnav.ins.integration import LCParams, LCSave, PVMeasurements, loosely_coupled, smooth
 from jaxnav.ins.mechanization import ImuSample, MechParams, MechState, NavState, mech_step
 from jaxnav.survey._preprocess import PreprocessParams, preprocess_imu
 from jaxnav.survey._stops import (
@@ -148,16 +148,19 @@ def plan_survey(stops: StopList, t_imu, *, meas_rate_hz: float = 1.0, margin_s: 
     N = t.size
     K = len(stops.t_start)
     step = max(1, int(round(1.0 / (meas_rate_hz * dt))))
-    t_meas = t[step - 1::step]
+    t_meas = t[step - 1 :: step]
     M = t_meas.size
     eps = 1e-6 * dt
-    in_stop = (t_meas[:, None] >= stops.t_start[None, :] + margin_s - eps) & \
-              (t_meas[:, None] <= stops.t_end[None, :] - margin_s + eps)
+    in_stop = (t_meas[:, None] >= stops.t_start[None, :] + margin_s - eps) & (
+        t_meas[:, None] <= stops.t_end[None, :] - margin_s + eps
+    )
     meas_stop = np.where(in_stop.any(1), np.argmax(in_stop, 1), -1)
     for k in range(K):
         if not (meas_stop == k).any():
-            raise ValueError(f"stop {stops.name[k]!r} [{stops.t_start[k]:.2f}, {stops.t_end[k]:.2f}] s is too short "
-                             f"for a class-1 epoch at {meas_rate_hz} Hz with {margin_s} s margins")
+            raise ValueError(
+                f"stop {stops.name[k]!r} [{stops.t_start[k]:.2f}, {stops.t_end[k]:.2f}] s is too short "
+                f"for a class-1 epoch at {meas_rate_hz} Hz with {margin_s} s margins"
+            )
     mask = np.zeros((M, 6), bool)
     mask[:, 3:] = meas_stop[:, None] >= 0
     # a known coordinate is one observation per stop (its error is common to the stop's epochs):
@@ -180,7 +183,7 @@ def plan_survey(stops: StopList, t_imu, *, meas_rate_hz: float = 1.0, margin_s: 
     grid_idx = lambda tt: np.searchsorted(t_grid, tt - eps, side="left")  # noqa: E731
     fwd_reset = np.full(N, -1)
     bwd_reset = np.full(N, -1)
-    for r, k in enumerate(known):
+    for r, _k in enumerate(known):
         i = grid_idx(t_meas[kef[r]])  # state index of the forward reset
         if i < N:
             fwd_reset[i] = r
@@ -201,14 +204,33 @@ def plan_survey(stops: StopList, t_imu, *, meas_rate_hz: float = 1.0, margin_s: 
     stop_w = np.zeros((targets.size, E))
     for i, k in enumerate(targets):
         ep = np.flatnonzero(meas_stop == k)
-        stop_epochs[i, :ep.size] = ep
-        stop_w[i, :ep.size] = 1.0 / ep.size
-    return SurveyPlan(stops=stops, t_imu=t, dt=dt, t_meas=t_meas, meas_stop=meas_stop, meas_mask=mask,
-                      sample_epoch=sample_epoch, targets=targets, class3=cls.class3[targets], fwd_reset=fwd_reset,
-                      bwd_reset=bwd_reset, known=known, known_epoch_f=kef, known_epoch_b=keb, arrival=arrival,
-                      departure=departure, arr_epoch=arr_epoch, dep_epoch=dep_epoch, has_next=has_next,
-                      stop_epochs=stop_epochs, stop_epoch_w=stop_w, fwd_epoch_reset=fwd_epoch_reset,
-                      bwd_epoch_reset=bwd_epoch_reset)
+        stop_epochs[i, : ep.size] = ep
+        stop_w[i, : ep.size] = 1.0 / ep.size
+    return SurveyPlan(
+        stops=stops,
+        t_imu=t,
+        dt=dt,
+        t_meas=t_meas,
+        meas_stop=meas_stop,
+        meas_mask=mask,
+        sample_epoch=sample_epoch,
+        targets=targets,
+        class3=cls.class3[targets],
+        fwd_reset=fwd_reset,
+        bwd_reset=bwd_reset,
+        known=known,
+        known_epoch_f=kef,
+        known_epoch_b=keb,
+        arrival=arrival,
+        departure=departure,
+        arr_epoch=arr_epoch,
+        dep_epoch=dep_epoch,
+        has_next=has_next,
+        stop_epochs=stop_epochs,
+        stop_epoch_w=stop_w,
+        fwd_epoch_reset=fwd_epoch_reset,
+        bwd_epoch_reset=bwd_epoch_reset,
+    )
 
 
 def stop_measurements(plan: SurveyPlan, known_pos, zupt_sigma, nav_pos0) -> PVMeasurements:
@@ -231,8 +253,14 @@ def stop_measurements(plan: SurveyPlan, known_pos, zupt_sigma, nav_pos0) -> PVMe
     zs = jnp.asarray(zupt_sigma, pos.dtype)
     var = jnp.concatenate([jnp.asarray(sig**2), jnp.broadcast_to(zs**2, (M, 3))], 1)
     R = jax.vmap(jnp.diag)(var)
-    return PVMeasurements(t=plan.t_meas, pos=pos, vel=jnp.zeros((M, 3), pos.dtype), R=R,
-                          mask=jnp.asarray(plan.meas_mask), lever=jnp.zeros((M, 3), pos.dtype))
+    return PVMeasurements(
+        t=plan.t_meas,
+        pos=pos,
+        vel=jnp.zeros((M, 3), pos.dtype),
+        R=R,
+        mask=jnp.asarray(plan.meas_mask),
+        lever=jnp.zeros((M, 3), pos.dtype),
+    )
 
 
 def _strapdown_resets(nav_init: NavState, dtheta, dv, dt, reset, table: NavState, reset_attitude, sign):
@@ -259,8 +287,9 @@ def _strapdown_resets(nav_init: NavState, dtheta, dv, dt, reset, table: NavState
     return pos, final.status
 
 
-def strapdown_with_resets(nav0: NavState, dtheta, dv, dt, reset, table: NavState, *, reset_attitude: bool = True,
-                          backward: bool = False):
+def strapdown_with_resets(
+    nav0: NavState, dtheta, dv, dt, reset, table: NavState, *, reset_attitude: bool = True, backward: bool = False
+):
     """Pure strapdown restarted at known points, forward (S3 class 2) or reverse (S3 class 3).
 
     Forward: ``reset[i] = r >= 0`` replaces the state before sample i with row r of ``table``
@@ -287,8 +316,13 @@ def strapdown_with_resets(nav0: NavState, dtheta, dv, dt, reset, table: NavState
 
 def _reverse_inputs(nav_end, dtheta, dv, reset, table):
     """Inputs of the reverse run (S3 class 3): samples reversed, angular increments and velocities negated."""
-    return (nav_end._replace(v_n=-nav_end.v_n), -dtheta[::-1], dv[::-1], np.asarray(reset)[::-1],
-            table._replace(v_n=-table.v_n))
+    return (
+        nav_end._replace(v_n=-nav_end.v_n),
+        -dtheta[::-1],
+        dv[::-1],
+        np.asarray(reset)[::-1],
+        table._replace(v_n=-table.v_n),
+    )
 
 
 def propagate_covariances(Phi, pred_covs, covs, P0, reset_f, reset_b, table_P):
@@ -343,8 +377,7 @@ def _enu_var(P, pos):
     i = IDX18.dpos.start
     # the metres per unit of [dlat, dlon, dh] in E, N, U order
     s = curvilinear_to_enu(pos, jnp.ones_like(pos))
-    return jnp.stack([P[..., i + 1, i + 1] * s[..., 0] ** 2, P[..., i, i] * s[..., 1] ** 2,
-                      P[..., i + 2, i + 2]], -1)
+    return jnp.stack([P[..., i + 1, i + 1] * s[..., 0] ** 2, P[..., i, i] * s[..., 1] ** 2, P[..., i + 2, i + 2]], -1)
 
 
 class SurveyOutput(NamedTuple):
@@ -374,8 +407,18 @@ class SurveyOutput(NamedTuple):
     route: Any = None
 
 
-def process_survey(plan: SurveyPlan, nav0: NavState, dtheta, dv, known_pos, params: CadastralParams, *,
-                   preprocess: bool = True, lowpass: bool = True, return_route: bool = False) -> SurveyOutput:
+def process_survey(
+    plan: SurveyPlan,
+    nav0: NavState,
+    dtheta,
+    dv,
+    known_pos,
+    params: CadastralParams,
+    *,
+    preprocess: bool = True,
+    lowpass: bool = True,
+    return_route: bool = False,
+) -> SurveyOutput:
     """The S3 post-processing of one survey (steps 1-3; see the module docstring).
 
     Jit- and vmap-able in (nav0, dtheta, dv, known_pos, params); ``plan`` is static (closed over).
@@ -420,8 +463,16 @@ def process_survey(plan: SurveyPlan, nav0: NavState, dtheta, dv, known_pos, para
     # class 1: forward filter with the static observations + RTS smoothing
     meas = stop_measurements(plan, known_pos, params.zupt_sigma, nav0.pos)
     lcp = LCParams(P0=params.P0, Qc=params.Qc, tau_markov=params.tau_markov)
-    res = loosely_coupled(nav0, plan.t_imu, dth_p, dv_p, meas, lcp, dt_imu=dt,
-                          save=LCSave(("nav", "biases", "covs", "pred_covs", "Phi", "corrections")))
+    res = loosely_coupled(
+        nav0,
+        plan.t_imu,
+        dth_p,
+        dv_p,
+        meas,
+        lcp,
+        dt_imu=dt,
+        save=LCSave(("nav", "biases", "covs", "pred_covs", "Phi", "corrections")),
+    )
     nav_s, bias_s, covs_s = smooth(res)
     # compensation of the raw (preprocessed) data with the smoothed sensor errors
     se = np.asarray(plan.sample_epoch)
@@ -444,19 +495,27 @@ def process_survey(plan: SurveyPlan, nav0: NavState, dtheta, dv, known_pos, para
     stack = lambda *a: jax.tree_util.tree_map(lambda *x: jnp.stack(x), *a)  # noqa: E731
     fr = np.asarray(plan.fwd_reset)
     pos4, st4 = jax.vmap(_strapdown_resets, in_axes=(0, 0, 0, None, 0, 0, 0, 0))(
-        stack(nav0, nav0, nav0, rev[0]), stack(dtheta, dth_p, dth_c, rev[1]), stack(dv, dv_p, dv_c, rev[2]), dt,
-        jnp.asarray(np.stack([fr, fr, fr, rev[3]])), stack(tab_a, tab_a, tab_f, rev[4]),
-        jnp.array([False, False, True, True]), jnp.array([1.0, 1.0, 1.0, -1.0], dtype))
+        stack(nav0, nav0, nav0, rev[0]),
+        stack(dtheta, dth_p, dth_c, rev[1]),
+        stack(dv, dv_p, dv_c, rev[2]),
+        dt,
+        jnp.asarray(np.stack([fr, fr, fr, rev[3]])),
+        stack(tab_a, tab_a, tab_f, rev[4]),
+        jnp.array([False, False, True, True]),
+        jnp.array([1.0, 1.0, 1.0, -1.0], dtype),
+    )
     pos_a, pos_p, pos_b, pos_r = pos4[0], pos4[1], pos4[2], pos4[3][::-1]
 
     # covariances of the forward / reverse strapdown, for the fusion
     ep = res.epochs
     table_P = covs_s[ef]
     table_Pb = covs_s[eb]
-    Pf, _ = propagate_covariances(ep.Phi, ep.pred_covs, ep.covs, params.P0, plan.fwd_epoch_reset,
-                                  np.full_like(plan.bwd_epoch_reset, -1), table_P)
-    _, Pb = propagate_covariances(ep.Phi, ep.pred_covs, ep.covs, params.P0,
-                                  np.full_like(plan.fwd_epoch_reset, -1), plan.bwd_epoch_reset, table_Pb)
+    Pf, _ = propagate_covariances(
+        ep.Phi, ep.pred_covs, ep.covs, params.P0, plan.fwd_epoch_reset, np.full_like(plan.bwd_epoch_reset, -1), table_P
+    )
+    _, Pb = propagate_covariances(
+        ep.Phi, ep.pred_covs, ep.covs, params.P0, np.full_like(plan.fwd_epoch_reset, -1), plan.bwd_epoch_reset, table_Pb
+    )
     arr, dep = np.asarray(plan.arrival), np.asarray(plan.departure)
     fwd_a = at_states(pos_a, arr, nav0.pos)
     fwd_p = at_states(pos_p, arr, nav0.pos)
@@ -478,9 +537,19 @@ def process_survey(plan: SurveyPlan, nav0: NavState, dtheta, dv, known_pos, para
     targets = dict(forward=fwd_a, preprocessed=fwd_p, smoothed=fwd_b, fused=fused, filtered=filt, rts=rts)
     route = dict(forward=pos_a, smoothed=pos_b, backward=pos_r) if return_route else None
     status = res.status | jnp.bitwise_or.reduce(st4)
-    return SurveyOutput(targets=targets, sigma_forward=jnp.sqrt(vf), sigma_backward=jnp.sqrt(vb),
-                        weight_forward=w, backward=bwd, biases=bias_s, nav_smoothed=nav_s, nav_filtered=ep.nav,
-                        n_rejected=n_rej, status=status, route=route)
+    return SurveyOutput(
+        targets=targets,
+        sigma_forward=jnp.sqrt(vf),
+        sigma_backward=jnp.sqrt(vb),
+        weight_forward=w,
+        backward=bwd,
+        biases=bias_s,
+        nav_smoothed=nav_s,
+        nav_filtered=ep.nav,
+        n_rejected=n_rej,
+        status=status,
+        route=route,
+    )
 
 
 def target_errors(out: SurveyOutput, truth_pos):
@@ -501,11 +570,17 @@ def summarize_errors(errors: dict) -> dict:
         e = np.asarray(e)
         hz = np.hypot(e[..., 0], e[..., 1]).ravel()
         vt = np.abs(e[..., 2]).ravel()
-        out[s] = {"rms_h": float(np.sqrt(np.mean(hz**2))), "rms_v": float(np.sqrt(np.mean(vt**2))),
-                  "mean_h": float(hz.mean()), "mean_v": float(vt.mean()),
-                  "median_h": float(np.median(hz)), "median_v": float(np.median(vt)),
-                  "p95_h": float(np.percentile(hz, 95)), "p95_v": float(np.percentile(vt, 95)),
-                  "n": int(hz.size)}
+        out[s] = {
+            "rms_h": float(np.sqrt(np.mean(hz**2))),
+            "rms_v": float(np.sqrt(np.mean(vt**2))),
+            "mean_h": float(hz.mean()),
+            "mean_v": float(vt.mean()),
+            "median_h": float(np.median(hz)),
+            "median_v": float(np.median(vt)),
+            "p95_h": float(np.percentile(hz, 95)),
+            "p95_v": float(np.percentile(vt, 95)),
+            "n": int(hz.size),
+        }
     if "forward" in out:
         ref = out["forward"]
         for s in out:
@@ -514,14 +589,38 @@ def summarize_errors(errors: dict) -> dict:
     return out
 
 
-__all__ = ["STAGES", "STOP_KINDS", "CadastralParams", "cadastral_params", "SurveyOutput", "SurveyPlan", "enu_difference", "plan_survey",
-           "process_survey", "propagate_covariances", "stop_measurements", "strapdown_with_resets",
-           "summarize_errors", "target_errors"]
+__all__ = [
+    "STAGES",
+    "STOP_KINDS",
+    "CadastralParams",
+    "cadastral_params",
+    "SurveyOutput",
+    "SurveyPlan",
+    "enu_difference",
+    "plan_survey",
+    "process_survey",
+    "propagate_covariances",
+    "stop_measurements",
+    "strapdown_with_resets",
+    "summarize_errors",
+    "target_errors",
+]
 
 
-def cadastral_params(*, gyro_bias, gyro_markov, gyro_tau, gyro_arw, accel_bias, accel_vrw, attitude_sigma,
-                     velocity_sigma=0.01, position_sigma=0.005, zupt_sigma=0.005,
-                     pre: PreprocessParams = PreprocessParams()) -> CadastralParams:
+def cadastral_params(
+    *,
+    gyro_bias,
+    gyro_markov,
+    gyro_tau,
+    gyro_arw,
+    accel_bias,
+    accel_vrw,
+    attitude_sigma,
+    velocity_sigma=0.01,
+    position_sigma=0.005,
+    zupt_sigma=0.005,
+    pre: PreprocessParams = PreprocessParams(),
+) -> CadastralParams:
     """Class-1 filter parameters from a sensor specification (SI; scalars or (3,)).
 
     P0 = diag(attitude^2, velocity^2, position^2 (as lat/lon/h at the filter's scale: metres are
@@ -543,11 +642,21 @@ def cadastral_params(*, gyro_bias, gyro_markov, gyro_tau, gyro_arw, accel_bias, 
     v3 = lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float64), (3,))  # noqa: E731
     gm = jnp.maximum(v3(gyro_markov), jnp.maximum(0.01 * v3(gyro_bias), 1e-10))
     r = 6.4e6
-    P0 = jnp.diag(jnp.concatenate([v3(attitude_sigma) ** 2, v3(velocity_sigma) ** 2,
-                                   jnp.array([(position_sigma / r) ** 2, (position_sigma / r) ** 2, position_sigma ** 2]),
-                                   jnp.maximum(v3(gyro_bias), 1e-10) ** 2, gm ** 2,
-                                   jnp.maximum(v3(accel_bias), 1e-8) ** 2]))
-    Qc = ERROR_MODEL_18.Qc(ImuNoise(gyro_arw=v3(gyro_arw), accel_vrw=v3(accel_vrw), gyro_bias_instability=gm,
-                                    gyro_bias_tau=v3(gyro_tau)))
-    return CadastralParams(P0=P0, Qc=Qc, tau_markov=v3(gyro_tau), zupt_sigma=jnp.asarray(zupt_sigma, jnp.float64),
-                           pre=pre)
+    P0 = jnp.diag(
+        jnp.concatenate(
+            [
+                v3(attitude_sigma) ** 2,
+                v3(velocity_sigma) ** 2,
+                jnp.array([(position_sigma / r) ** 2, (position_sigma / r) ** 2, position_sigma**2]),
+                jnp.maximum(v3(gyro_bias), 1e-10) ** 2,
+                gm**2,
+                jnp.maximum(v3(accel_bias), 1e-8) ** 2,
+            ]
+        )
+    )
+    Qc = ERROR_MODEL_18.Qc(
+        ImuNoise(gyro_arw=v3(gyro_arw), accel_vrw=v3(accel_vrw), gyro_bias_instability=gm, gyro_bias_tau=v3(gyro_tau))
+    )
+    return CadastralParams(
+        P0=P0, Qc=Qc, tau_markov=v3(gyro_tau), zupt_sigma=jnp.asarray(zupt_sigma, jnp.float64), pre=pre
+    )

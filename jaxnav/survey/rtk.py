@@ -45,6 +45,7 @@ from jaxnav.geodesy import (
     similarity2d,
 )
 
+
 class RtkSeries(NamedTuple):
     """Epoch series of P points padded to T epochs (S2 "Input"); SI units.
 
@@ -150,8 +151,13 @@ def initial_values(t, z, sigma, mask) -> InitialValues:
     msig = jnp.sum(jnp.where(mask[:, None], sigma, 0.0), axis=0) / n
     D_xi0 = msig**2
     D_lam0 = 2.0 * D_xi0 / dt**2
-    return InitialValues(x0=jnp.concatenate([xi0, lam0]), P0=jnp.diag(jnp.concatenate([D_xi0, D_lam0])),
-                         D_omega=jnp.diag(4.0 * D_xi0 / dt**4), dt=dt, n=n)
+    return InitialValues(
+        x0=jnp.concatenate([xi0, lam0]),
+        P0=jnp.diag(jnp.concatenate([D_xi0, D_lam0])),
+        D_omega=jnp.diag(4.0 * D_xi0 / dt**4),
+        dt=dt,
+        n=n,
+    )
 
 
 def cv_series_model(t, sigma, mask, D_omega, *, center_offset=False) -> LinearGaussian:
@@ -201,8 +207,24 @@ def _to_reference(gk, transform, anomaly):
     return jnp.concatenate([xy_ref, (gk[..., 2] - zeta)[..., None]], axis=-1)
 
 
-def _one_point(t, lat, lon, H, sigma, mask, h_term, xy_term, lon0, q_scale, *, transform, anomaly, ellipsoid,
-               smoother, center_offset):
+def _one_point(
+    t,
+    lat,
+    lon,
+    H,
+    sigma,
+    mask,
+    h_term,
+    xy_term,
+    lon0,
+    q_scale,
+    *,
+    transform,
+    anomaly,
+    ellipsoid,
+    smoother,
+    center_offset,
+):
     x, y = gauss_kruger(lat, lon, lon0=lon0, ellipsoid=ellipsoid)
     z = jnp.stack([x, y, H], axis=-1)
     finite = jnp.all(jnp.isfinite(z), axis=-1) & jnp.all(jnp.isfinite(sigma), axis=-1)
@@ -228,11 +250,21 @@ def _one_point(t, lat, lon, H, sigma, mask, h_term, xy_term, lon0, q_scale, *, t
     Hmean, _ = _masked_mean_precision(filt[:, 2:], mask)
     nan = jnp.full_like(ep, jnp.nan)
     return RtkResult(
-        n=jnp.sum(mask), xyh=xyh, precision=prec, H=Hmean[0], raw_xyh=raw_xyh, raw_precision=raw_prec,
+        n=jnp.sum(mask),
+        xyh=xyh,
+        precision=prec,
+        H=Hmean[0],
+        raw_xyh=raw_xyh,
+        raw_precision=raw_prec,
         formal_precision=jnp.sqrt(jnp.sum(jnp.where(mask[:, None], sigma**2, 0.0), axis=0)) / jnp.sum(mask),
-        terminal_xyh=term_xyh, terminal_precision=term_prec, epochs=jnp.where(mask[:, None], ep, nan),
-        raw_epochs=jnp.where(mask[:, None], raw, nan), gk=z,
-        init=init._replace(x0=init.x0.at[:3].add(ref)), n_skipped=res.n_skipped, n_nonfinite=n_nonfinite,
+        terminal_xyh=term_xyh,
+        terminal_precision=term_prec,
+        epochs=jnp.where(mask[:, None], ep, nan),
+        raw_epochs=jnp.where(mask[:, None], raw, nan),
+        gk=z,
+        init=init._replace(x0=init.x0.at[:3].add(ref)),
+        n_skipped=res.n_skipped,
+        n_nonfinite=n_nonfinite,
         status=res.status,
     )
 
@@ -240,6 +272,7 @@ def _one_point(t, lat, lon, H, sigma, mask, h_term, xy_term, lon0, q_scale, *, t
 def _strong(tree):
     """Leaves as strongly typed arrays, so that Python scalars, weak-typed and NumPy inputs share
     one compilation of :func:`process_points`."""
+
     def conv(a):
         a = jnp.asarray(a)
         return jnp.array(a, dtype=a.dtype)  # an explicit dtype drops the weak type
@@ -247,9 +280,17 @@ def _strong(tree):
     return jax.tree_util.tree_map(conv, tree)
 
 
-def process_points(series: RtkSeries, *, lon0, transform: Similarity2D | None = None,
-                   anomaly: HeightAnomalyModel | None = None, ellipsoid: Ellipsoid = WGS84,
-                   smoother=False, center_offset=False, q_scale=1.0) -> RtkResult:
+def process_points(
+    series: RtkSeries,
+    *,
+    lon0,
+    transform: Similarity2D | None = None,
+    anomaly: HeightAnomalyModel | None = None,
+    ellipsoid: Ellipsoid = WGS84,
+    smoother=False,
+    center_offset=False,
+    q_scale=1.0,
+) -> RtkResult:
     """The S2 per-point pipeline for P points in one vmapped, jitted call (steps 1-4 of the module).
 
     Args:
@@ -299,22 +340,44 @@ def process_points(series: RtkSeries, *, lon0, transform: Similarity2D | None = 
 @partial(jax.jit, static_argnames=("ellipsoid",))
 def _process_points(series, lon0, q_scale, transform, anomaly, smoother, center_offset, *, ellipsoid):
     P, T = jnp.shape(series.t)
-    expect = dict(t=(P, T), lat=(P, T), lon=(P, T), H=(P, T), sigma=(P, T, 3), mask=(P, T), h_terminal=(P, T),
-                  xy_terminal=(P, T, 2))
+    expect = dict(
+        t=(P, T),
+        lat=(P, T),
+        lon=(P, T),
+        H=(P, T),
+        sigma=(P, T, 3),
+        mask=(P, T),
+        h_terminal=(P, T),
+        xy_terminal=(P, T, 2),
+    )
     bad = {k: jnp.shape(getattr(series, k)) for k, s in expect.items() if jnp.shape(getattr(series, k)) != s}
     if bad:
         raise ValueError(f"RtkSeries leaves have shapes {bad}; expected {expect}")
 
     def fn(*a):
-        return _one_point(*a[:10], transform=transform, anomaly=anomaly, ellipsoid=ellipsoid, smoother=a[10],
-                          center_offset=a[11])
+        return _one_point(
+            *a[:10], transform=transform, anomaly=anomaly, ellipsoid=ellipsoid, smoother=a[10], center_offset=a[11]
+        )
 
-    return jax.vmap(fn)(series.t, series.lat, series.lon, series.H, series.sigma, series.mask,
-                        series.h_terminal, series.xy_terminal, lon0, q_scale, smoother, center_offset)
+    return jax.vmap(fn)(
+        series.t,
+        series.lat,
+        series.lon,
+        series.H,
+        series.sigma,
+        series.mask,
+        series.h_terminal,
+        series.xy_terminal,
+        lon0,
+        q_scale,
+        smoother,
+        center_offset,
+    )
 
 
-def pack_points(point, t, lat, lon, H, sigma, *, h_terminal=None, xy_terminal=None, mask=None,
-                length: int | None = None):
+def pack_points(
+    point, t, lat, lon, H, sigma, *, h_terminal=None, xy_terminal=None, mask=None, length: int | None = None
+):
     """Group flat epoch arrays by point name (in order of appearance) into a padded :class:`RtkSeries`.
 
     Host side (numpy). A fixed ``length`` keeps one compiled pipeline for batches of different sizes.
@@ -330,16 +393,23 @@ def pack_points(point, t, lat, lon, H, sigma, *, h_terminal=None, xy_terminal=No
     """
     point = np.asarray(point)
     N = len(point)
-    arrs = dict(t=np.asarray(t, float), lat=np.asarray(lat, float), lon=np.asarray(lon, float),
-                H=np.asarray(H, float), sigma=np.asarray(sigma, float))
+    arrs = dict(
+        t=np.asarray(t, float),
+        lat=np.asarray(lat, float),
+        lon=np.asarray(lon, float),
+        H=np.asarray(H, float),
+        sigma=np.asarray(sigma, float),
+    )
     arrs["h_terminal"] = np.full(N, np.nan) if h_terminal is None else np.asarray(h_terminal, float)
     arrs["xy_terminal"] = np.full((N, 2), np.nan) if xy_terminal is None else np.asarray(xy_terminal, float)
     arrs["mask"] = np.ones(N, bool) if mask is None else np.asarray(mask, bool)
     bad = {k: v.shape for k, v in arrs.items() if v.shape[:1] != (N,)}
     if bad or arrs["sigma"].shape != (N, 3) or arrs["xy_terminal"].shape != (N, 2):
-        raise ValueError(f"pack_points: point has shape {point.shape}; other arrays "
-                         f"{ {k: v.shape for k, v in arrs.items()} } must have a leading {N} "
-                         "(sigma (N, 3), xy_terminal (N, 2))")
+        raise ValueError(
+            f"pack_points: point has shape {point.shape}; other arrays "
+            f"{ {k: v.shape for k, v in arrs.items()} } must have a leading {N} "
+            "(sigma (N, 3), xy_terminal (N, 2))"
+        )
     names, idx = [], {}
     for k, p in enumerate(point):
         if p not in idx:
@@ -355,11 +425,11 @@ def pack_points(point, t, lat, lon, H, sigma, *, h_terminal=None, xy_terminal=No
             rows = idx[p]
             if len(rows) > T:
                 raise ValueError(f"pack_points: point {p!r} has {len(rows)} epochs, more than length={T}")
-            b[i, :len(rows)] = a[rows]
+            b[i, : len(rows)] = a[rows]
             if key in ("t", "lat", "lon", "H") and len(rows) < T:
-                b[i, len(rows):] = a[rows[-1]]  # harmless finite padding
+                b[i, len(rows) :] = a[rows[-1]]  # harmless finite padding
             if key in ("sigma",) and len(rows) < T:
-                b[i, len(rows):] = 1.0
+                b[i, len(rows) :] = 1.0
         out[key] = b
     return np.array(names), RtkSeries(**out)
 
@@ -401,10 +471,16 @@ def compare_levelling(h, h_level, thresholds=(0.007, 0.010, 0.015)) -> Levelling
     d = (h - h_level)[np.isfinite(h - h_level)]
     thr = np.asarray(thresholds, float)
     cnt = np.array([(np.abs(d) <= x + 1e-12).sum() for x in thr])
-    return LevellingComparison(diff=h - h_level, max_abs=float(np.max(np.abs(d))), mean=float(np.mean(d)),
-                               std=float(np.std(d, ddof=1)) if d.size > 1 else float("nan"),
-                               rms=float(np.sqrt(np.mean(d**2))), thresholds=thr, count_within=cnt,
-                               share_within=cnt / max(d.size, 1))
+    return LevellingComparison(
+        diff=h - h_level,
+        max_abs=float(np.max(np.abs(d))),
+        mean=float(np.mean(d)),
+        std=float(np.std(d, ddof=1)) if d.size > 1 else float("nan"),
+        rms=float(np.sqrt(np.mean(d**2))),
+        thresholds=thr,
+        count_within=cnt,
+        share_within=cnt / max(d.size, 1),
+    )
 
 
 @partial(jax.jit, static_argnums=(3,))
@@ -426,8 +502,9 @@ class ConnectionModels(NamedTuple):
     anomaly: Any
 
 
-def connection_models(lat, lon, H, xy, h, *, lon0, ellipsoid: Ellipsoid = WGS84,
-                      surface: str = "auto") -> ConnectionModels:
+def connection_models(
+    lat, lon, H, xy, h, *, lon0, ellipsoid: Ellipsoid = WGS84, surface: str = "auto"
+) -> ConnectionModels:
     """Estimate the connection survey's models from control points (S2 step 3).
 
     The control points' WGS-84 (B, L) are projected with the same Gauss-Krüger settings as the
@@ -454,8 +531,9 @@ def connection_models(lat, lon, H, xy, h, *, lon0, ellipsoid: Ellipsoid = WGS84,
     transform = None
     if okp.any():
         if okp.sum() < 2:
-            raise ValueError(f"the plane similarity (4 parameters) needs at least 2 control points with x, y; "
-                             f"got {int(okp.sum())}")
+            raise ValueError(
+                f"the plane similarity (4 parameters) needs at least 2 control points with x, y; got {int(okp.sum())}"
+            )
         transform = estimate_similarity2d(src[okp], xy[okp])
     okh = np.isfinite(h)
     anomaly = None
@@ -466,8 +544,16 @@ def connection_models(lat, lon, H, xy, h, *, lon0, ellipsoid: Ellipsoid = WGS84,
 
 def series_from_simulation(sim) -> RtkSeries:
     """The :class:`RtkSeries` of a :class:`jaxnav.sim.RtkPointsSim` (what the terminal recorded)."""
-    return RtkSeries(t=sim.t, lat=sim.lat, lon=sim.lon, H=sim.H, sigma=sim.sigma, mask=sim.mask,
-                     h_terminal=sim.h_terminal, xy_terminal=sim.xy_terminal)
+    return RtkSeries(
+        t=sim.t,
+        lat=sim.lat,
+        lon=sim.lon,
+        H=sim.H,
+        sigma=sim.sigma,
+        mask=sim.mask,
+        h_terminal=sim.h_terminal,
+        xy_terminal=sim.xy_terminal,
+    )
 
 
 class MotionParams(NamedTuple):
@@ -530,8 +616,10 @@ def motion_segments(t, lat, lon, params: MotionParams = MotionParams()) -> Motio
     """
     t, lat, lon = (np.asarray(a, float) for a in (t, lat, lon))
     if not (t.ndim == 1 and t.shape == lat.shape == lon.shape and t.size >= 1):
-        raise ValueError(f"motion_segments: t, lat, lon must be (N,) arrays of one shape, N >= 1; got "
-                         f"{t.shape}, {lat.shape}, {lon.shape}")
+        raise ValueError(
+            f"motion_segments: t, lat, lon must be (N,) arrays of one shape, N >= 1; got "
+            f"{t.shape}, {lat.shape}, {lon.shape}"
+        )
     R = 6.371e6
     e = (lon - lon[0]) * R * np.cos(lat[0])
     n = (lat - lat[0]) * R
@@ -561,8 +649,16 @@ def motion_segments(t, lat, lon, params: MotionParams = MotionParams()) -> Motio
     return MotionSegments(segment=segment, moving=moving, short=short, speed=speed, n_segments=k)
 
 
-def windows_from_pos(sol, *, step: float = 2.0, window: int = 60, min_epochs: int = 30, fixed_only: bool = True,
-                     name: str | None = None, motion: MotionParams | None = MotionParams()):
+def windows_from_pos(
+    sol,
+    *,
+    step: float = 2.0,
+    window: int = 60,
+    min_epochs: int = 30,
+    fixed_only: bool = True,
+    name: str | None = None,
+    motion: MotionParams | None = MotionParams(),
+):
     """Cut an RTKLIB solution into S2-style point occupations, static epochs only (host side).
 
     First the series is split by :func:`motion_segments` (skipped with ``motion=None``): moving
@@ -591,8 +687,13 @@ def windows_from_pos(sol, *, step: float = 2.0, window: int = 60, min_epochs: in
     stem = name or pathlib.Path(sol.path).stem
     t = np.asarray(sol.t)
     if motion is None:
-        seg = MotionSegments(segment=np.zeros(len(t), int), moving=np.zeros(len(t), bool),
-                             short=np.zeros(len(t), bool), speed=np.full(len(t), np.nan), n_segments=1)
+        seg = MotionSegments(
+            segment=np.zeros(len(t), int),
+            moving=np.zeros(len(t), bool),
+            short=np.zeros(len(t), bool),
+            speed=np.full(len(t), np.nan),
+            n_segments=1,
+        )
     else:
         seg = motion_segments(t, sol.lat, sol.lon, motion)
     rel = t - t[0]
@@ -604,7 +705,7 @@ def windows_from_pos(sol, *, step: float = 2.0, window: int = 60, min_epochs: in
     for s in range(seg.n_segments):
         idx = np.flatnonzero(keep & (seg.segment == s))
         for start in range(0, len(idx), window):
-            sel = idx[start:start + window]
+            sel = idx[start : start + window]
             if len(sel) < min_epochs:
                 continue
             k += 1
@@ -618,11 +719,17 @@ def windows_from_pos(sol, *, step: float = 2.0, window: int = 60, min_epochs: in
             out["sigma"].append(sig[sel])
             out["mask"].append((np.asarray(sol.q)[sel] == 1) if fixed_only else np.ones(len(sel), bool))
     if not out["t"]:
-        raise ValueError(f"{sol.path}: no window of {min_epochs} epochs at {step} s in a static segment (file has "
-                         f"{len(t)} epochs, {int(seg.moving.sum())} moving, {seg.n_segments} static segment(s))")
+        raise ValueError(
+            f"{sol.path}: no window of {min_epochs} epochs at {step} s in a static segment (file has "
+            f"{len(t)} epochs, {int(seg.moving.sum())} moving, {seg.n_segments} static segment(s))"
+        )
     res = {k: (np.array(v) if k in ("point", "segment") else np.concatenate(v)) for k, v in out.items()}
-    res.update(n_epochs=int(len(t)), n_moving=int(seg.moving.sum()), n_short_static=int(seg.short.sum()),
-               n_segments=int(seg.n_segments))
+    res.update(
+        n_epochs=int(len(t)),
+        n_moving=int(seg.moving.sum()),
+        n_short_static=int(seg.short.sum()),
+        n_segments=int(seg.n_segments),
+    )
     return res
 
 
@@ -695,8 +802,10 @@ def point_sigmas(z, mask, grid, segment) -> PointSigmas:
     segment = np.asarray(segment)
     P, T = mask.shape
     if z.shape != (P, T, 3) or grid.shape != (P, T) or segment.shape != (P,):
-        raise ValueError(f"point_sigmas: z {z.shape}, mask {mask.shape}, grid {grid.shape}, segment "
-                         f"{segment.shape}; expected (P, T, 3), (P, T), (P, T), (P,)")
+        raise ValueError(
+            f"point_sigmas: z {z.shape}, mask {mask.shape}, grid {grid.shape}, segment "
+            f"{segment.shape}; expected (P, T, 3), (P, T), (P, T), (P,)"
+        )
     mask = mask & np.all(np.isfinite(z), axis=-1)
     sigma = np.full((P, 3), np.nan)
     naive = np.full((P, 3), np.nan)
@@ -731,8 +840,12 @@ def point_sigmas(z, mask, grid, segment) -> PointSigmas:
         w[:Pk] = mask[pts] / np.maximum(n, 1)[:, None]
         idx = np.zeros((Ppad, T), np.int64)
         idx[:Pk] = grid[pts] - g0
-        gam, v = (np.asarray(a) for a in _segment_variances(jnp.asarray(series_p), jnp.asarray(have_p),
-                                                              jnp.asarray(idx), jnp.asarray(w), max_lag))
+        gam, v = (
+            np.asarray(a)
+            for a in _segment_variances(
+                jnp.asarray(series_p), jnp.asarray(have_p), jnp.asarray(idx), jnp.asarray(w), max_lag
+            )
+        )
         v = v[:Pk]
         g0v = gam[:, 0][None, :]
         v = np.maximum(v, g0v / np.maximum(n, 1)[:, None])
@@ -740,11 +853,19 @@ def point_sigmas(z, mask, grid, segment) -> PointSigmas:
         sigma[pts] = np.where(ok, np.sqrt(np.where(ok, v, 1.0)), np.nan)
         n_eff[pts] = np.where(ok, g0v / np.where(ok, v, 1.0), np.nan)
         pos = gam[:, 0] > 0
-        lag1[pts] = (np.where(pos, gam[:, 1] / np.where(pos, gam[:, 0], 1.0), np.nan) if gam.shape[1] > 1
-                     else np.full(3, np.nan))[None, :]
+        lag1[pts] = (
+            np.where(pos, gam[:, 1] / np.where(pos, gam[:, 0], 1.0), np.nan) if gam.shape[1] > 1 else np.full(3, np.nan)
+        )[None, :]
         seg_n[pts], seg_p[pts] = int(have.sum()), len(pts)
         for p, k in zip(pts, n):
             if k > 1:
                 naive[p] = np.std(z[p][mask[p]], axis=0, ddof=1) / math.sqrt(k)
-    return PointSigmas(sigma=sigma, sigma_naive=naive, n_eff=n_eff, lag1=lag1, segment_epochs=seg_n,
-                       segment_points=seg_p, method=SIGMA_METHOD)
+    return PointSigmas(
+        sigma=sigma,
+        sigma_naive=naive,
+        n_eff=n_eff,
+        lag1=lag1,
+        segment_epochs=seg_n,
+        segment_points=seg_p,
+        method=SIGMA_METHOD,
+    )

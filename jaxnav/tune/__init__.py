@@ -27,17 +27,45 @@ function of array leaves:
 """
 
 from jaxnav.tune._bijectors import Bijector, Space, bijector, interval, log, positive, real, unit
-from jaxnav.tune._losses import innovation_nll, nees, nees_consistency, nis_consistency, rms
-from jaxnav.tune._lbfgs import minimize_lbfgs
 from jaxnav.tune._distributed import batch_mesh, initialize, is_writer, monte_carlo_mean
+from jaxnav.tune._lbfgs import minimize_lbfgs
+from jaxnav.tune._losses import innovation_nll, nees, nees_consistency, nis_consistency, rms
 from jaxnav.tune._montecarlo import Sharded, map_chunked, map_sharded, run_chunked
 from jaxnav.tune._optimize import TuneResult, forward_gradient, minimize, value_and_grad
 from jaxnav.tune._problems import cv_nll, simulate_cv_batch
 from jaxnav.tune._sweep import SweepResult, grid, sweep, table
 
 __all__ = [
-    "Bijector", "Sharded", "Space", "SweepResult", "TuneResult", "batch_mesh", "bijector", "cv_nll",
-    "forward_gradient", "grid", "initialize", "innovation_nll", "interval", "is_writer", "log", "map_chunked",
-    "map_sharded", "minimize", "minimize_lbfgs", "monte_carlo_mean", "nees", "nees_consistency", "nis_consistency",
-    "positive", "real", "rms", "run_chunked", "simulate_cv_batch", "sweep", "table", "unit", "value_and_grad",
+    "Bijector",
+    "Sharded",
+    "Space",
+    "SweepResult",
+    "TuneResult",
+    "batch_mesh",
+    "bijector",
+    "cv_nll",
+    "forward_gradient",
+    "grid",
+    "initialize",
+    "innovation_nll",
+    "interval",
+    "is_writer",
+    "log",
+    "map_chunked",
+    "map_sharded",
+    "minimize",
+    "minimize_lbfgs",
+    "monte_carlo_mean",
+    "nees",
+    "nees_consistency",
+    "nis_consistency",
+    "positive",
+    "real",
+    "rms",
+    "run_chunked",
+    "simulate_cv_batch",
+    "sweep",
+    "table",
+    "unit",
+    "value_and_grad",
 ]

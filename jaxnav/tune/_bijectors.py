@@ -8,7 +8,8 @@ attenuation factor b lives in (0, 1) (sigmoid), variances and noise scales in (0
 from __future__ import annotations
 
 import math
-from typing import Callable, Mapping, NamedTuple, Optional
+from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -84,7 +85,7 @@ class Space:
         initial value (their gradient is zeroed).
     """
 
-    def __init__(self, bijectors: Mapping, trainable: Optional[tuple] = None):
+    def __init__(self, bijectors: Mapping, trainable: tuple | None = None):
         self.bijectors = {k: bijector(v) for k, v in bijectors.items()}
         names = tuple(self.bijectors)
         trainable = names if trainable is None else tuple(trainable)

@@ -26,7 +26,7 @@ final sums of :func:`monte_carlo_mean` may differ (relative differences ~1e-16).
 from __future__ import annotations
 
 import os
-from typing import Callable, Optional, Sequence
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -39,7 +39,7 @@ ENV_NUM_PROCESSES = "JAX_NUM_PROCESSES"
 ENV_PROCESS_ID = "JAX_PROCESS_ID"
 
 
-def _env_int(name: str) -> Optional[int]:
+def _env_int(name: str) -> int | None:
     text = os.environ.get(name, "").strip()
     if not text:
         return None
@@ -56,8 +56,13 @@ def _check_coordinator(address: str) -> str:
     return f"{host}:{port}"
 
 
-def initialize(coordinator: Optional[str] = None, num_processes: Optional[int] = None,
-               process_id: Optional[int] = None, *, timeout_s: int = 300) -> int:
+def initialize(
+    coordinator: str | None = None,
+    num_processes: int | None = None,
+    process_id: int | None = None,
+    *,
+    timeout_s: int = 300,
+) -> int:
     """Join this process to a multi-process study (``jax.distributed.initialize``); call before any JAX work.
 
     Nothing is started when neither an argument nor one of the environment variables
@@ -89,12 +94,17 @@ def initialize(coordinator: Optional[str] = None, num_processes: Optional[int] =
     if process_id is not None and process_id < 0:
         raise ValueError(f"process id must be >= 0, got {process_id}")
     if process_id is not None and num_processes is not None and process_id >= num_processes:
-        raise ValueError(f"process id must be in 0 .. {num_processes - 1} (the number of processes - 1), "
-                         f"got {process_id}")
+        raise ValueError(
+            f"process id must be in 0 .. {num_processes - 1} (the number of processes - 1), got {process_id}"
+        )
     if not getattr(jax.config, "jax_cpu_collectives_implementation", None):  # older JAX: no default
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
-    jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id,
-                               initialization_timeout=int(timeout_s))
+    jax.distributed.initialize(
+        coordinator_address=coordinator,
+        num_processes=num_processes,
+        process_id=process_id,
+        initialization_timeout=int(timeout_s),
+    )
     return jax.process_count()
 
 
@@ -106,7 +116,7 @@ def is_writer() -> bool:
     return jax.process_index() == 0
 
 
-def batch_mesh(devices: Optional[Sequence] = None) -> Mesh:
+def batch_mesh(devices: Sequence | None = None) -> Mesh:
     """The 1-D mesh named "batch" over ``devices`` (default ``jax.devices()``: all processes' devices)."""
     return Mesh(np.asarray(list(jax.devices() if devices is None else devices)), ("batch",))
 
@@ -117,7 +127,7 @@ def spans_processes(mesh: Mesh) -> bool:
     return any(d.process_index != me for d in mesh.devices.flat)
 
 
-def monte_carlo_mean(fn: Callable, keys, *, devices: Optional[Sequence] = None) -> Callable:
+def monte_carlo_mean(fn: Callable, keys, *, devices: Sequence | None = None) -> Callable:
     """``params -> mean over k of fn(params, keys[k])`` with the runs sharded over all processes' devices.
 
     Inside a ``jax.jit`` (as in :func:`jaxnav.tune.minimize`, :func:`jaxnav.tune.minimize_lbfgs` or

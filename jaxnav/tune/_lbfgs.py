@@ -12,7 +12,8 @@ Algorithms 3.5-3.6, eq. (3.59)), written without branches.
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, Mapping, NamedTuple
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
 
 import jax
 import jax.flatten_util
@@ -60,9 +61,19 @@ def _cubic_min(a, fa, ga, b, fb, gb):
     return jnp.where(ok, jnp.clip(x, lo + 0.1 * w, hi - 0.1 * w), 0.5 * (a + b))
 
 
-def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals: int = 20, memory_size: int = 10,
-                   c1: float = 1e-4, c2: float = 0.9, ftol: float = 1e-4, gtol: float = 1e-10,
-                   mode: str = "auto") -> TuneResult:
+def minimize_lbfgs(
+    loss: Callable,
+    params0: Mapping,
+    space: Space,
+    *,
+    max_evals: int = 20,
+    memory_size: int = 10,
+    c1: float = 1e-4,
+    c2: float = 0.9,
+    ftol: float = 1e-4,
+    gtol: float = 1e-10,
+    mode: str = "auto",
+) -> TuneResult:
     """Minimise ``loss(params)`` by L-BFGS with a strong-Wolfe line search, one loss evaluation per scan step.
 
     Each step of the ``lax.scan`` evaluates the loss and its gradient (forward or reverse mode, see
@@ -94,7 +105,9 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
     u0 = space.unconstrain(params0)
     flat0, unravel = jax.flatten_util.ravel_pytree(u0)
     m = space.mask()  # one factor per parameter, broadcast over a vector parameter's elements
-    mask = jax.flatten_util.ravel_pytree({k: jnp.full(jnp.shape(v), m[k]) for k, v in u0.items()})[0].astype(flat0.dtype)
+    mask = jax.flatten_util.ravel_pytree({k: jnp.full(jnp.shape(v), m[k]) for k, v in u0.items()})[0].astype(
+        flat0.dtype
+    )
     vg_tree = value_and_grad(lambda u: loss(space.constrain(u)), mode=mode)
 
     def vg(x):
@@ -120,10 +133,17 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
         # the search does not depend on the loss's units (Nocedal & Wright Sec. 3.5); then 1
         norm = jnp.sqrt(jnp.dot(d, d))
         alpha0 = jnp.where((s.steps == 0) & (norm > 0.0), 1.0 / jnp.where(norm > 0.0, norm, 1.0), 1.0)
-        ls = _LS(alpha=alpha0.astype(dtype), lo=jnp.zeros((), dtype), f_lo=f, g_lo=slope, hi=inf, f_hi=inf,
-                 g_hi=inf, bracketed=jnp.zeros((), bool))
-        return _State(u=x, f=f, g=g, d=d, slope=slope, ls=ls, lbfgs=lbs, steps=s.steps + 1,
-                      done=s.done | conv)
+        ls = _LS(
+            alpha=alpha0.astype(dtype),
+            lo=jnp.zeros((), dtype),
+            f_lo=f,
+            g_lo=slope,
+            hi=inf,
+            f_hi=inf,
+            g_hi=inf,
+            bracketed=jnp.zeros((), bool),
+        )
+        return _State(u=x, f=f, g=g, d=d, slope=slope, ls=ls, lbfgs=lbs, steps=s.steps + 1, done=s.done | conv)
 
     def trial(s, f, dg, armijo):
         ls = s.ls
@@ -132,15 +152,19 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
         # high: [lo, a] brackets a minimum.  else: a is the new lo; if the slope turned
         # non-negative the old lo (or, bracketed, the end on the slope's side) becomes hi
         swap = ~high & jnp.where(ls.bracketed, dg * (ls.hi - ls.lo) >= 0.0, dg >= 0.0)
-        hi, f_hi, g_hi = (jnp.where(high, a, jnp.where(swap, ls.lo, ls.hi)),
-                          jnp.where(high, f, jnp.where(swap, ls.f_lo, ls.f_hi)),
-                          jnp.where(high, dg, jnp.where(swap, ls.g_lo, ls.g_hi)))
+        hi, f_hi, g_hi = (
+            jnp.where(high, a, jnp.where(swap, ls.lo, ls.hi)),
+            jnp.where(high, f, jnp.where(swap, ls.f_lo, ls.f_hi)),
+            jnp.where(high, dg, jnp.where(swap, ls.g_lo, ls.g_hi)),
+        )
         lo, f_lo, g_lo = (jnp.where(high, ls.lo, a), jnp.where(high, ls.f_lo, f), jnp.where(high, ls.g_lo, dg))
         bracketed = ls.bracketed | high | swap
         nxt = jnp.where(bracketed, _cubic_min(lo, f_lo, g_lo, hi, f_hi, g_hi), 2.0 * a)
         tiny = bracketed & (jnp.abs(hi - lo) * jnp.max(jnp.abs(s.d)) <= 1e-12 * (1.0 + jnp.max(jnp.abs(s.u))))
-        return s._replace(ls=_LS(alpha=nxt, lo=lo, f_lo=f_lo, g_lo=g_lo, hi=hi, f_hi=f_hi, g_hi=g_hi,
-                                 bracketed=bracketed), done=s.done | tiny)
+        return s._replace(
+            ls=_LS(alpha=nxt, lo=lo, f_lo=f_lo, g_lo=g_lo, hi=hi, f_hi=f_hi, g_hi=g_hi, bracketed=bracketed),
+            done=s.done | tiny,
+        )
 
     def step(s, _):
         x = s.u + s.ls.alpha * s.d
@@ -154,9 +178,17 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
 
     @jax.jit
     def run(flat0):
-        s0 = _State(u=flat0, f=inf, g=jnp.zeros_like(flat0), d=jnp.zeros_like(flat0), slope=jnp.zeros((), dtype),
-                    ls=_LS(jnp.zeros((), dtype), *(jnp.zeros((), dtype),) * 3, inf, inf, inf, jnp.zeros((), bool)),
-                    lbfgs=lb.init(flat0), steps=jnp.zeros((), jnp.int32), done=jnp.zeros((), bool))
+        s0 = _State(
+            u=flat0,
+            f=inf,
+            g=jnp.zeros_like(flat0),
+            d=jnp.zeros_like(flat0),
+            slope=jnp.zeros((), dtype),
+            ls=_LS(jnp.zeros((), dtype), *(jnp.zeros((), dtype),) * 3, inf, inf, inf, jnp.zeros((), bool)),
+            lbfgs=lb.init(flat0),
+            steps=jnp.zeros((), jnp.int32),
+            done=jnp.zeros((), bool),
+        )
         s, (fs, xs, gn, did) = jax.lax.scan(step, s0, None, length=max_evals)
         return s.u, s.f, fs, xs, gn, jnp.sum(did)
 
@@ -164,5 +196,13 @@ def minimize_lbfgs(loss: Callable, params0: Mapping, space: Space, *, max_evals:
     t_compile = time.perf_counter() - t0
     u, f, fs, xs, gn, n = jax.block_until_ready(compiled(flat0))
     path = jax.vmap(lambda x: space.constrain(unravel(x)))(xs)
-    return TuneResult(params=space.constrain(unravel(u)), loss=f, losses=fs, path=path, grad_norm=gn,
-                      n_evals=int(n), wall_time_s=time.perf_counter() - t0, compile_time_s=t_compile)
+    return TuneResult(
+        params=space.constrain(unravel(u)),
+        loss=f,
+        losses=fs,
+        path=path,
+        grad_norm=gn,
+        n_evals=int(n),
+        wall_time_s=time.perf_counter() - t0,
+        compile_time_s=t_compile,
+    )

@@ -12,7 +12,8 @@ from __future__ import annotations
 import time
 import weakref
 import zlib
-from typing import Any, Callable, NamedTuple, Optional, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -24,8 +25,9 @@ from jaxnav._progress import Progress, stage
 from jaxnav.tune._distributed import batch_mesh, is_writer, spans_processes
 
 
-def map_chunked(call: Callable, n: int, *, chunk: int, desc: str = "Monte Carlo", progress: bool = True,
-                unit: str = "run"):
+def map_chunked(
+    call: Callable, n: int, *, chunk: int, desc: str = "Monte Carlo", progress: bool = True, unit: str = "run"
+):
     """Evaluate ``call`` on index chunks of ``range(n)``, each padded to ``chunk``; gather on the host.
 
     Every call gets exactly ``chunk`` indices (the last chunk repeats index ``n - 1``), so a
@@ -48,7 +50,7 @@ def map_chunked(call: Callable, n: int, *, chunk: int, desc: str = "Monte Carlo"
         for s in range(0, n, chunk):
             m = min(chunk, n - s)
             idx = np.minimum(np.arange(s, s + chunk), n - 1)
-            outs.append(jax.tree_util.tree_map(lambda a: np.asarray(a)[:m], call(idx)))
+            outs.append(jax.tree_util.tree_map(lambda a, m=m: np.asarray(a)[:m], call(idx)))
             bar.update(m)
     return jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *outs)
 
@@ -73,9 +75,17 @@ class Sharded(NamedTuple):
     peak_bytes: int
 
 
-def map_sharded(fn: Callable, take: Callable, n: int, *, chunk: Optional[int] = None,
-                devices: Optional[Sequence] = None, desc: str = "Monte Carlo", progress: bool = True,
-                unit: str = "run") -> Sharded:
+def map_sharded(
+    fn: Callable,
+    take: Callable,
+    n: int,
+    *,
+    chunk: int | None = None,
+    devices: Sequence | None = None,
+    desc: str = "Monte Carlo",
+    progress: bool = True,
+    unit: str = "run",
+) -> Sharded:
     """``jax.vmap(fn)`` over n items in chunks, the batch axis sharded over ``devices`` of all processes.
 
     Each chunk's inputs ``take(idx)`` are placed on :func:`jaxnav.tune.batch_mesh` with the batch
@@ -124,18 +134,27 @@ def map_sharded(fn: Callable, take: Callable, n: int, *, chunk: Optional[int] = 
         stage("%s: compiling the batched computation (%d per call) before the first chunk", desc, chunk)
     compiled = _compiled(fn, place(first), devs, sh, out_sh)
     compile_time = time.perf_counter() - t0
-    values = map_chunked(lambda idx: compiled(*place(tuple(take(idx)))), n, chunk=chunk, desc=desc,
-                         progress=progress, unit=unit)
+    values = map_chunked(
+        lambda idx: compiled(*place(tuple(take(idx)))), n, chunk=chunk, desc=desc, progress=progress, unit=unit
+    )
     n_proc = len({d.process_index for d in devs})
-    return Sharded(values=values, compile_time_s=compile_time, n_devices=nd, n_processes=n_proc, chunk=chunk,
-                   peak_bytes=_peak_bytes(compiled))
+    return Sharded(
+        values=values,
+        compile_time_s=compile_time,
+        n_devices=nd,
+        n_processes=n_proc,
+        chunk=chunk,
+        peak_bytes=_peak_bytes(compiled),
+    )
 
 
 def _global(a, sh):
     """A host array as a global array on ``sh``: this process supplies the shards of its devices."""
     if jax.dtypes.issubdtype(getattr(a, "dtype", np.float64), jax.dtypes.prng_key):
-        raise ValueError("typed PRNG key arrays (jax.random.key) cannot be placed across processes; pass raw "
-                         "uint32 keys (jax.random.PRNGKey / jax.random.key_data)")
+        raise ValueError(
+            "typed PRNG key arrays (jax.random.key) cannot be placed across processes; pass raw "
+            "uint32 keys (jax.random.PRNGKey / jax.random.key_data)"
+        )
     a = np.asarray(a)
     return jax.make_array_from_callback(a.shape, sh, lambda index: a[index])
 
@@ -148,18 +167,24 @@ def _same_on_every_process(first, n, chunk):
     try:
         multihost_utils.assert_equal(np.asarray([n, chunk, crc], np.int64), fail_message="")
     except AssertionError:
-        raise ValueError(f"the processes of this study disagree on its items (n = {n}, chunk = {chunk}, "
-                         f"inputs crc32 {crc:#010x} here): every process must run the same command with "
-                         f"the same config and seeds") from None
+        raise ValueError(
+            f"the processes of this study disagree on its items (n = {n}, chunk = {chunk}, "
+            f"inputs crc32 {crc:#010x} here): every process must run the same command with "
+            f"the same config and seeds"
+        ) from None
 
 
-_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _compiled(fn, args, devices, sh, out_sh):
     """The compiled ``vmap(fn)`` for these shapes, devices and shardings, cached per ``fn``."""
-    sig = (tuple(d.id for d in devices), out_sh is not sh, jax.tree_util.tree_structure(args),
-           tuple((a.shape, a.dtype) for a in jax.tree_util.tree_leaves(args)))
+    sig = (
+        tuple(d.id for d in devices),
+        out_sh is not sh,
+        jax.tree_util.tree_structure(args),
+        tuple((a.shape, a.dtype) for a in jax.tree_util.tree_leaves(args)),
+    )
     try:
         per_fn = _CACHE.setdefault(fn, {})
     except TypeError:  # not weak-referenceable: no cache
@@ -180,8 +205,15 @@ def _peak_bytes(compiled) -> int:
         return -1
 
 
-def run_chunked(fn: Callable, keys, *, chunk: int = 16, desc: str = "Monte Carlo", progress: bool = True,
-                devices: Optional[Sequence] = None):
+def run_chunked(
+    fn: Callable,
+    keys,
+    *,
+    chunk: int = 16,
+    desc: str = "Monte Carlo",
+    progress: bool = True,
+    devices: Sequence | None = None,
+):
     """Apply ``jax.vmap(fn)`` to ``keys`` in chunks of ``chunk``, sharded over all devices, with a progress bar.
 
     The compiled function is reused for every chunk (the last one is padded to the same size),
@@ -198,5 +230,6 @@ def run_chunked(fn: Callable, keys, *, chunk: int = 16, desc: str = "Monte Carlo
       The pytree of numpy arrays with leading axis B (on every process).
     """
     B = keys.shape[0]
-    return map_sharded(fn, lambda idx: (keys[idx],), B, chunk=min(max(1, int(chunk)), B), devices=devices,
-                       desc=desc, progress=progress).values
+    return map_sharded(
+        fn, lambda idx: (keys[idx],), B, chunk=min(max(1, int(chunk)), B), devices=devices, desc=desc, progress=progress
+    ).values

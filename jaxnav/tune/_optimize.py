@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, Mapping, NamedTuple, Optional
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
 
 import jax
 import jax.flatten_util
@@ -103,8 +104,9 @@ def value_and_grad(f: Callable, mode: str = "auto"):
     return vg
 
 
-def minimize(loss: Callable, params0: Mapping, space: Space, *, optimizer: Optional[Any] = None, steps: int = 50,
-             mode: str = "auto") -> TuneResult:
+def minimize(
+    loss: Callable, params0: Mapping, space: Space, *, optimizer: Any | None = None, steps: int = 50, mode: str = "auto"
+) -> TuneResult:
     """Minimise ``loss(params)`` with an optax optimiser, all steps in one jitted ``lax.scan``.
 
     The optimiser works on the unconstrained values u = space.inverse(params); parameters not
@@ -159,16 +161,25 @@ def minimize(loss: Callable, params0: Mapping, space: Space, *, optimizer: Optio
             return (new, s, new_val, masked(new_g)), (val, space.constrain(u), gn, _linesearch_evals(s))
 
         val0, g0 = vg(u0)
-        (u, s, val, _), (losses, path, gn, n_ls) = jax.lax.scan(step, (u0, opt.init(u0), val0, masked(g0)), None,
-                                                              length=steps)
+        (u, s, val, _), (losses, path, gn, n_ls) = jax.lax.scan(
+            step, (u0, opt.init(u0), val0, masked(g0)), None, length=steps
+        )
         return space.constrain(u), val, losses, path, gn, jnp.sum(n_ls)
 
     compiled = run.lower(u0).compile()
     t_compile = time.perf_counter() - t0
     params, final, losses, path, gn, n_ls = jax.block_until_ready(compiled(u0))
     n_evals = 1 + int(n_ls) + (0 if stored else steps)
-    return TuneResult(params=params, loss=final, losses=losses, path=path, grad_norm=gn, n_evals=n_evals,
-                      wall_time_s=time.perf_counter() - t0, compile_time_s=t_compile)
+    return TuneResult(
+        params=params,
+        loss=final,
+        losses=losses,
+        path=path,
+        grad_norm=gn,
+        n_evals=n_evals,
+        wall_time_s=time.perf_counter() - t0,
+        compile_time_s=t_compile,
+    )
 
 
 def _stores_value_and_grad(state) -> bool:

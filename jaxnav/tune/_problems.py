@@ -5,7 +5,7 @@ The S0 INS/GNSS target is :func:`jaxnav.experiments.s0_metrics`.
 
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import jax
 import jax.numpy as jnp
@@ -50,8 +50,7 @@ def cv_nll(params: Mapping, zs, *, dt=1.0, sigma=0.003, q=1e-8, P0_scale=1.0):
     if zs.ndim != 3:
         raise ValueError(f"cv_nll(): zs must be (B, T, ndim), got shape {zs.shape}")
     ndim = zs.shape[-1]
-    model = jf.constant_velocity(dt, sigma=jnp.sqrt(params["r_scale"]) * sigma, q=params["q_scale"] * q,
-                                 ndim=ndim)
+    model = jf.constant_velocity(dt, sigma=jnp.sqrt(params["r_scale"]) * sigma, q=params["q_scale"] * q, ndim=ndim)
     P0 = jnp.diag(jnp.concatenate([jnp.full(ndim, P0_scale**2), jnp.full(ndim, (P0_scale / dt) ** 2)]))
 
     # the series share the model and P0, so one covariance recursion serves them all

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import itertools
 import time
-from typing import Any, Callable, Mapping, NamedTuple, Optional, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
@@ -65,8 +66,16 @@ def grid(**axes) -> dict:
     return {k: np.asarray([p[i] for p in prod]) for i, k in enumerate(vals)}
 
 
-def sweep(fn: Callable, params: Mapping, keys, *, chunk: Optional[int] = None, progress: bool = True,
-          desc: str = "sweep", devices: Optional[Sequence] = None) -> SweepResult:
+def sweep(
+    fn: Callable,
+    params: Mapping,
+    keys,
+    *,
+    chunk: int | None = None,
+    progress: bool = True,
+    desc: str = "sweep",
+    devices: Sequence | None = None,
+) -> SweepResult:
     """Evaluate ``fn(params_point, key)`` at every grid point x every key.
 
     Args:
@@ -100,9 +109,16 @@ def sweep(fn: Callable, params: Mapping, keys, *, chunk: Optional[int] = None, p
 
     r = map_sharded(fn, take, G * K, chunk=chunk, devices=devices, desc=desc, progress=progress)
     values = jax.tree_util.tree_map(lambda a: a.reshape((G, K) + a.shape[1:]), r.values)
-    return SweepResult(grid=params, values=values, wall_time_s=time.perf_counter() - t_start,
-                       compile_time_s=r.compile_time_s, n_devices=r.n_devices, chunk=r.chunk,
-                       peak_bytes=r.peak_bytes, n_processes=r.n_processes)
+    return SweepResult(
+        grid=params,
+        values=values,
+        wall_time_s=time.perf_counter() - t_start,
+        compile_time_s=r.compile_time_s,
+        n_devices=r.n_devices,
+        chunk=r.chunk,
+        peak_bytes=r.peak_bytes,
+        n_processes=r.n_processes,
+    )
 
 
 def table(result: SweepResult, metric: Callable = lambda v: v) -> list:
@@ -126,7 +142,13 @@ def table(result: SweepResult, metric: Callable = lambda v: v) -> list:
             a = np.asarray(a)
             if a.shape[:1] != (G,) or a.ndim != 2:
                 raise ValueError(f"table(): metric {name} must be (G, K) = ({G}, K), got {a.shape}")
-            row.update({f"{name}_mean": float(a[g].mean()), f"{name}_std": float(a[g].std()),
-                        f"{name}_min": float(a[g].min()), f"{name}_max": float(a[g].max())})
+            row.update(
+                {
+                    f"{name}_mean": float(a[g].mean()),
+                    f"{name}_std": float(a[g].std()),
+                    f"{name}_min": float(a[g].min()),
+                    f"{name}_max": float(a[g].max()),
+                }
+            )
         rows.append(row)
     return rows

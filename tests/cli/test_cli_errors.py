@@ -14,24 +14,31 @@ import sys
 
 import numpy as np
 import pytest
+from _paths import ROOT
 
 from jaxnav.cli import main
 from jaxnav.experiments import EXPERIMENT
 from jaxnav.io import json_ready, write_json
 
-from _paths import ROOT
-
-EPOCHS = ("point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h\n"
-          + "".join(f"P{p},{2 * k},3631500.{k:04d},39486000.5,22.1,32.81,116.85,18.6,0.008,0.008,0.015\n"
-                    for p in range(2) for k in range(5)))
-CONTROL = ("point,B,L,H,x,y,h\n"
-           + "".join(f"K{i},{32.80 + 0.001 * i:.6f},{116.84 + 0.001 * i:.6f},18.0,{3631000 + 100 * i},"
-                     f"{39486000 + 90 * i},21.5\n" for i in range(6)))
-TENV3 = ("site YYMMMDD yyyy.yyyy __MJD week d reflon _e0(m) __east(m) ____n0(m) _north(m) u0(m) ____up(m) _ant(m) "
-         "sig_e(m) sig_n(m) sig_u(m) __corr_en __corr_eu __corr_nu _latitude(deg) _longitude(deg) __height(m)\n"
-         + "".join(f"LHAS 95MAY{19 + k} {1995.3785 + k / 365.25:.4f} {49856 + k}  {801 + (5 + k) // 7} {(5 + k) % 7}   91.1    385  0.888603   "
-                   f"3282129  0.602585  3624  0.707878  0.0000 0.002231 0.001932 0.008643 -0.009728 -0.044382 "
-                   f"-0.198749  29.6573392384 -268.8960142076  3624.70788\n" for k in range(6)))
+EPOCHS = "point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h\n" + "".join(
+    f"P{p},{2 * k},3631500.{k:04d},39486000.5,22.1,32.81,116.85,18.6,0.008,0.008,0.015\n"
+    for p in range(2)
+    for k in range(5)
+)
+CONTROL = "point,B,L,H,x,y,h\n" + "".join(
+    f"K{i},{32.80 + 0.001 * i:.6f},{116.84 + 0.001 * i:.6f},18.0,{3631000 + 100 * i},{39486000 + 90 * i},21.5\n"
+    for i in range(6)
+)
+TENV3 = (
+    "site YYMMMDD yyyy.yyyy __MJD week d reflon _e0(m) __east(m) ____n0(m) _north(m) u0(m) ____up(m) _ant(m) "
+    "sig_e(m) sig_n(m) sig_u(m) __corr_en __corr_eu __corr_nu _latitude(deg) _longitude(deg) __height(m)\n"
+    + "".join(
+        f"LHAS 95MAY{19 + k} {1995.3785 + k / 365.25:.4f} {49856 + k}  {801 + (5 + k) // 7} {(5 + k) % 7}   91.1    385  0.888603   "
+        f"3282129  0.602585  3624  0.707878  0.0000 0.002231 0.001932 0.008643 -0.009728 -0.044382 "
+        f"-0.198749  29.6573392384 -268.8960142076  3624.70788\n"
+        for k in range(6)
+    )
+)
 
 
 def _s0_config(tmp_path, name, old, new):
@@ -82,8 +89,9 @@ def _files(tmp_path):
     d["unknown_key"] = _s0_config(tmp_path, "unk.toml", "fading_window = 10", "fading_window = 10\nfadng = 3")
     d["missing_key"] = _s0_config(tmp_path, "miss.toml", "fading_window = 10", "")
     d["syntax"] = _s0_config(tmp_path, "syntax.toml", "q_scale = 1.0", "q_scale = = 1.0")
-    d["states"] = _s0_config(tmp_path, "states.toml", "inflate_states = [0, 1, 3, 4, 5, 6, 7, 8]",
-                             "inflate_states = [0, 99]")
+    d["states"] = _s0_config(
+        tmp_path, "states.toml", "inflate_states = [0, 1, 3, 4, 5, 6, 7, 8]", "inflate_states = [0, 99]"
+    )
     d["nstates"] = _s0_config(tmp_path, "nstates.toml", "n_states = 18", "n_states = 17")
     d["qneg"] = _s0_config(tmp_path, "qneg.toml", "q_scale = 1.0", "q_scale = -1.0")
     d["bool_seeds"] = _s0_config(tmp_path, "bool.toml", "seeds = 32", "seeds = true")
@@ -103,21 +111,31 @@ def _files(tmp_path):
     d["ins_nofile"] = tmp_path / "ins_nofile.toml"
     (tmp_path / "ins_badkey.toml").write_text(ins + "[evaluate]\noutage = 15\n")
     d["ins_badkey"] = tmp_path / "ins_badkey.toml"
-    (tmp_path / "ins_pos.toml").write_text(ins.replace('file = "imu.csv"', f'file = "{d["a_file"]}"')
-                                           .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
-                                           .replace('file = "sol.pos"', f'file = "{d["a_file"]}"'))
+    (tmp_path / "ins_pos.toml").write_text(
+        ins.replace('file = "imu.csv"', f'file = "{d["a_file"]}"')
+        .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
+        .replace('file = "sol.pos"', f'file = "{d["a_file"]}"')
+    )
     d["ins_pos"] = tmp_path / "ins_pos.toml"
-    (tmp_path / "ins_dir.toml").write_text(ins.replace('file = "imu.csv"', f'file = "{d["a_file"]}"')
-                                           .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
-                                           .replace('file = "sol.pos"', f'file = "{tmp_path}"'))
+    (tmp_path / "ins_dir.toml").write_text(
+        ins.replace('file = "imu.csv"', f'file = "{d["a_file"]}"')
+        .replace('tag = "imu.csv.tag"', f'tag = "{d["a_file"]}"')
+        .replace('file = "sol.pos"', f'file = "{tmp_path}"')
+    )
     d["ins_dir"] = tmp_path / "ins_dir.toml"
     for name, sec, line in INS_RANGE_CASES:
-        text = ins.replace('grade = "consumer"\n', 'grade = "consumer"\n' + line + "\n") if sec == "noise" \
+        text = (
+            ins.replace('grade = "consumer"\n', 'grade = "consumer"\n' + line + "\n")
+            if sec == "noise"
             else ins + f"[{sec}]\n{line}\n"
+        )
         (tmp_path / f"ins_{name}.toml").write_text(text)
         d[f"ins_{name}"] = tmp_path / f"ins_{name}.toml"
-    for name, line in (("rw15", "gyro_bias_rw_deg_per_h_per_sqrt_h = 0.1"), ("arw15", "accel_bias_rw_mg_per_sqrt_h = 0.01"),
-                       ("gbi15", "gyro_bias_instability_deg_per_h = 10.0")):
+    for name, line in (
+        ("rw15", "gyro_bias_rw_deg_per_h_per_sqrt_h = 0.1"),
+        ("arw15", "accel_bias_rw_mg_per_sqrt_h = 0.01"),
+        ("gbi15", "gyro_bias_instability_deg_per_h = 10.0"),
+    ):
         (tmp_path / f"ins_{name}.toml").write_text(ins.replace('grade = "consumer"\n', f'grade = "consumer"\n{line}\n'))
         d[f"ins_{name}"] = tmp_path / f"ins_{name}.toml"
     from jaxnav.sim import _cadastral
@@ -129,8 +147,9 @@ def _files(tmp_path):
         d[f"cad_{name}"] = tmp_path / f"cad_{name}.toml"
     (tmp_path / "rtklibexplorer-gnss-imu").mkdir()  # a data set's own folder given where its parent belongs
     d["walkset"] = tmp_path / "rtklibexplorer-gnss-imu"
-    (tmp_path / "cad_unsampled.toml").write_text(cad.replace("imu_rate_hz = 100.0", "imu_rate_hz = 10.0", 1)
-                                                 .replace("accel_s = 2.0 ", "accel_s = 0.05 ", 1))
+    (tmp_path / "cad_unsampled.toml").write_text(
+        cad.replace("imu_rate_hz = 100.0", "imu_rate_hz = 10.0", 1).replace("accel_s = 2.0 ", "accel_s = 0.05 ", 1)
+    )
     d["cad_unsampled"] = tmp_path / "cad_unsampled.toml"
     d["stops_bad"] = tmp_path / "stops.csv"
     d["stops_bad"].write_text("K0, known_coordinate, 0, 10, 132.0, 118.0, 10.0\n")
@@ -139,157 +158,265 @@ def _files(tmp_path):
 
 #: (name, section, TOML line) of ``jaxnav ins`` config values outside their plausible range
 INS_RANGE_CASES = [
-    ("arw_huge", "noise", "arw_deg_per_sqrt_h = 1e300"), ("arw_1e6", "noise", "arw_deg_per_sqrt_h = 1e6"),
-    ("vrw_tiny", "noise", "vrw_m_per_s_per_sqrt_h = 1e-300"), ("abias", "noise", "init_accel_bias_mg = 150000"),
-    ("gbi", "noise", "gyro_bias_instability_deg_per_h = 1e9"), ("tau", "noise", "bias_correlation_time_s = 1e-9"),
-    ("gbias", "noise", "init_gyro_bias_deg_per_s = 500.0"), ("scale", "noise", "init_gyro_scale_ppm = 1e9"),
-    ("static", "alignment", "static_s = 1e-9"), ("zupt_rate", "constraints", "zupt_rate_hz = 1e9"),
+    ("arw_huge", "noise", "arw_deg_per_sqrt_h = 1e300"),
+    ("arw_1e6", "noise", "arw_deg_per_sqrt_h = 1e6"),
+    ("vrw_tiny", "noise", "vrw_m_per_s_per_sqrt_h = 1e-300"),
+    ("abias", "noise", "init_accel_bias_mg = 150000"),
+    ("gbi", "noise", "gyro_bias_instability_deg_per_h = 1e9"),
+    ("tau", "noise", "bias_correlation_time_s = 1e-9"),
+    ("gbias", "noise", "init_gyro_bias_deg_per_s = 500.0"),
+    ("scale", "noise", "init_gyro_scale_ppm = 1e9"),
+    ("static", "alignment", "static_s = 1e-9"),
+    ("zupt_rate", "constraints", "zupt_rate_hz = 1e9"),
     ("nhc_lever", "constraints", "nhc_lever_frd_m = [0, 0, 1e6]"),
-    ("first", "evaluate", "first_s = 1e9"), ("outage", "evaluate", "outage_s = 1e6"),
+    ("first", "evaluate", "first_s = 1e9"),
+    ("outage", "evaluate", "outage_s = 1e6"),
 ]
 #: (name, text in the shipped cadastral.toml, its replacement) outside the plausible ranges
 CADASTRAL_RANGE_CASES = [
-    ("rate0", "imu_rate_hz = 100.0", "imu_rate_hz = 0.0"), ("speed", "speed_mps = 1.2", "speed_mps = -1.2"),
-    ("lat", "lat_deg = 32.06", "lat_deg = 132.06"), ("stop", "stop_s = 10.0", "stop_s = 1e9"),
-    ("arw", "arw_deg_per_sqrt_h = 0.05", "arw_deg_per_sqrt_h = 1e300"), ("bias", "bias_mg = 0.3", "bias_mg = -0.3"),
-    ("pipe", "outlier_k = 6.0", "outlier_k = 0.0"), ("pipe_key", "outlier_k = 6.0", "outlier_kk = 6.0"),
+    ("rate0", "imu_rate_hz = 100.0", "imu_rate_hz = 0.0"),
+    ("speed", "speed_mps = 1.2", "speed_mps = -1.2"),
+    ("lat", "lat_deg = 32.06", "lat_deg = 132.06"),
+    ("stop", "stop_s = 10.0", "stop_s = 1e9"),
+    ("arw", "arw_deg_per_sqrt_h = 0.05", "arw_deg_per_sqrt_h = 1e300"),
+    ("bias", "bias_mg = 0.3", "bias_mg = -0.3"),
+    ("pipe", "outlier_k = 6.0", "outlier_k = 0.0"),
+    ("pipe_key", "outlier_k = 6.0", "outlier_kk = 6.0"),
 ]
 
 #: (case id, argv with {name} placeholders for _files, strings the one stderr line must contain)
-CASES = [
-    ("no command", [], ["jaxnav:", "command"]),
-    ("unknown command", ["fly"], ["jaxnav:", "'fly'"]),
-    ("unknown option", ["demo", "--frobnicate"], ["--frobnicate"]),
-    ("demo seeds 0", ["demo", "--seeds", "0"], ["jaxnav demo:", "--seeds", "[1, 100000]", "got 0"]),
-    ("demo seeds -1", ["demo", "--seeds", "-1"], ["--seeds", "got -1"]),
-    ("demo seeds text", ["demo", "--seeds", "many"], ["--seeds", "'many'"]),
-    ("demo seeds float", ["demo", "--seeds", "2.5"], ["--seeds", "'2.5'"]),
-    ("demo sweep-points 0", ["demo", "--sweep-points", "0"], ["--sweep-points", ">= 1"]),
-    ("demo config missing", ["demo", "--config", "{tmp}/nope.toml"], ["nope.toml", "no such file", "--config"]),
-    ("demo config b=1.5", ["demo", "--config", "{b15}"], ["b15.toml", "filter.b = 1.5 must be < 1"]),
-    ("demo config b=-0.1", ["demo", "--config", "{bneg}"], ["bneg.toml", "filter.b = -0.1"]),
-    ("demo config seeds=0", ["demo", "--config", "{seeds0}"], ["seeds0.toml", "monte_carlo.seeds = 0"]),
-    ("demo config unknown key", ["demo", "--config", "{unknown_key}"], ["unk.toml", "unknown key filter.fadng"]),
-    ("demo config missing key", ["demo", "--config", "{missing_key}"],
-     ["miss.toml", "filter.fading_window is required"]),
-    ("demo config syntax", ["demo", "--config", "{syntax}"], ["syntax.toml", "invalid TOML", "line"]),
-    ("demo config states", ["demo", "--config", "{states}"], ["states.toml", "filter.inflate_states", "[0, 17]"]),
-    ("demo config n_states", ["demo", "--config", "{nstates}"], ["nstates.toml", "filter.n_states must be one of [15, 18]"]),
-    ("demo config q_scale<0", ["demo", "--config", "{qneg}"], ["qneg.toml", "filter.q_scale = -1.0"]),
-    ("demo config bool seeds", ["demo", "--config", "{bool_seeds}"], ["bool.toml", "monte_carlo.seeds must be an integer"]),
-    ("demo config latin-1", ["demo", "--config", "{latin1}"], ["latin1.toml:", "not UTF-8", "0xE9"]),
-    ("demo out is a file", ["demo", "--out", "{a_file}"], ["a_file", "--out", "existing file"]),
-    ("demo out under a file", ["demo", "--out", "{a_file}/sub"], ["a_file/sub", "cannot write the output folder"]),
-    ("demo-filters b 1.5", ["demo-filters", "--b", "1.5"], ["jaxnav demo-filters:", "--b", "[0, 1)"]),
-    ("demo-filters b -0.1", ["demo-filters", "--b", "-0.1"], ["--b", "got -0.1"]),
-    ("demo-filters b nan", ["demo-filters", "--b", "nan"], ["--b", "finite"]),
-    ("demo-filters b inf", ["demo-filters", "--b", "inf"], ["--b", "finite"]),
-    ("demo-filters epochs 0", ["demo-filters", "--epochs", "0"], ["--epochs", "[100, 1e+06]"]),
-    ("demo-filters seeds 0", ["demo-filters", "--seeds", "0"], ["--seeds"]),
-    ("demo-filters out is a file", ["demo-filters", "--out", "{a_file}"], ["a_file", "existing file"]),
-    ("ins config missing", ["ins", "{tmp}/nope.toml"], ["jaxnav ins:", "nope.toml", "no such config file"]),
-    ("ins not shipped", ["ins", "no_such_name"], ["jaxnav ins:", "not a shipped config", "walk_0827"]),
-    ("ins data file missing", ["ins", "{ins_nofile}", "--out", "{tmp}/o"], ["imu.csv", "no such file", "imu.file"]),
-    ("ins unknown key", ["ins", "{ins_badkey}"], ["ins_badkey.toml", "unknown key evaluate.outage"]),
-    ("ins unreadable files", ["ins", "{ins_pos}", "--out", "{tmp}/o"], ["a_file"]),
-    ("ins gnss file is a folder", ["ins", "{ins_dir}", "--out", "{tmp}/o"],
-     ["a folder, not a file", "gnss.file"]),
-    # a density the chosen error model has no state for is refused, naming the state counts that use it
-    ("ins bias rw with 15 states", ["ins", "{ins_rw15}", "--out", "{tmp}/o"],
-     ["ins_rw15.toml", "noise.gyro_bias_rw_deg_per_h_per_sqrt_h is used only with states = 21", "states = 15"]),
-    ("ins accel bias rw with 15 states", ["ins", "{ins_arw15}", "--out", "{tmp}/o"],
-     ["ins_arw15.toml", "noise.accel_bias_rw_mg_per_sqrt_h is used only with states = 21"]),
-    ("ins bias instability with 15 states", ["ins", "{ins_gbi15}", "--out", "{tmp}/o"],
-     ["ins_gbi15.toml", "noise.gyro_bias_instability_deg_per_h is used only with states = 18 or 21"]),
-    ("rtk same file twice", ["rtk", "{ep}", "{ep}", "--out", "{tmp}/o"], ["point 'P0' also appears in"]),
-    ("ins data folder missing", ["ins", "walk_0827", "--data", "{tmp}/no_data"], ["no_data", "no such data folder"]),
-    ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
-    # --data is the folder that holds the data sets in every command, relative to the working directory,
-    # and the message names the folder searched
-    ("walk data relative", ["walk", "--data", "no_data"], ["{tmp}/no_data: no such data folder (--data = no_data)"]),
-    ("ins data relative", ["ins", "walk_0827", "--data", "no_data"], ["{tmp}/no_data: no such data folder"]),
-    ("walk data is the set itself", ["walk", "--data", "{walkset}"],
-     ["rtklibexplorer-gnss-imu/rtklibexplorer-gnss-imu: no such data folder", "looks like the data set itself"]),
-    ("walk data without the files", ["walk", "--data", "."],
-     ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"]),
-    ("ins data without the files", ["ins", "walk_0827", "--data", "."],
-     ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"]),
-    ("cadastral data is the set itself", ["cadastral", "--out", "{tmp}/c", "--data", "{walkset}"],
-     ["looks like the data set itself"]),
-    ("rtk nothing", ["rtk"], ["jaxnav rtk:", "give FILES or --simulate"]),
-    ("rtk missing file", ["rtk", "{tmp}/none.pos"], ["none.pos", "no such file"]),
-    ("rtk control K2,inf", ["rtk", "{ep}", "--control", "{cp_inf}", "--out", "{tmp}/o"],
-     ["cp_inf.csv:4:", "column 'B'", "'inf' is not a finite number"]),
-    ("rtk epoch log 0xE9", ["rtk", "{ep_e9}", "--out", "{tmp}/o"], ["ep_e9.csv:8:", "not UTF-8", "0xE9 at column 3"]),
-    ("rtk levelling nan", ["rtk", "{ep}", "--levelling", "{lev_nan}", "--out", "{tmp}/o"],
-     ["lev_nan.csv:2:", "column 'height'", "not a finite number"]),
-    ("rtk control missing", ["rtk", "{ep}", "--control", "{tmp}/cp.csv"], ["cp.csv", "no such file", "--control"]),
-    ("rtk step 0", ["rtk", "{ep}", "--step", "0"], ["--step", "(0, 86400]", "got 0"]),
-    ("rtk window 0", ["rtk", "{ep}", "--window", "0"], ["--window", "[1, 1e+06]"]),
-    ("rtk min-epochs > window", ["rtk", "{ep}", "--min-epochs", "90"], ["--min-epochs 90", "--window 60"]),
-    ("rtk lon0 1000", ["rtk", "{ep}", "--lon0", "1000"], ["--lon0", "[-180, 360]"]),
-    ("rtk zone width 4", ["rtk", "{ep}", "--zone-width", "4"], ["--zone-width", "invalid choice"]),
-    ("rtk simulate -1", ["rtk", "--simulate", "-1"], ["--simulate", "got -1"]),
-    ("rtk out is a file", ["rtk", "{ep}", "--out", "{a_file}"], ["a_file", "--out"]),
-    ("monitor nothing", ["monitor"], ["jaxnav monitor:", "give daily series files"]),
-    ("monitor missing file", ["monitor", "{tmp}/x.neu"], ["x.neu", "no such file"]),
-    ("monitor tenv3 inf", ["monitor", "{tenv3_inf}", "--out", "{tmp}/o"],
-     ["bad.tenv3:2:", "north = inf m", "not finite"]),
-    ("monitor tenv3 latitude", ["monitor", "{tenv3_lat}", "--out", "{tmp}/o"], ["lat.tenv3:2:", "latitude", "90"]),
-    ("monitor unknown suffix", ["monitor", "{ep}", "--out", "{tmp}/o"], ["ep.csv", "unknown daily-series format"]),
-    ("monitor period 0", ["monitor", "{tenv3_inf}", "--period", "0"], ["--period", ">= 1"]),
-    ("monitor gross 2", ["monitor", "--simulate", "--gross", "2"], ["--gross", "[0, 1]"]),
-    ("monitor stations 0", ["monitor", "--simulate", "--stations", "0"], ["--stations"]),
-    ("monitor epochs 1", ["monitor", "--simulate", "--epochs", "1"], ["--epochs"]),
-    ("monitor seed -1", ["monitor", "--simulate", "--seed", "-1"], ["--seed"]),
-    ("monitor kappa 0", ["monitor", "{tenv3_inf}", "--kappa", "0"], ["--kappa 0", "(-2, 0)"]),
-    ("monitor kappa word", ["monitor", "{tenv3_inf}", "--kappa", "pink"], ["--kappa", "'estimate'"]),
-    ("monitor step no station", ["monitor", "{tenv3_inf}", "--step", "2003.5"], ["--step", "STATION:DATE"]),
-    ("monitor step bad date", ["monitor", "{tenv3_inf}", "--step", "LHAS:2003-13-01"], ["--step", "2003-13-01"]),
-    ("monitor step unknown station", ["monitor", "{tenv3_ok}", "--step", "XXXX:2010-01-01", "--out", "{tmp}/o"],
-     ["--step XXXX", "no such station", "LHAS"]),
-    ("monitor files and simulate", ["monitor", "--simulate", "{tenv3_inf}"], ["not both"]),
-    ("monitor steps file missing", ["monitor", "{tenv3_ok}", "--steps-file", "{tmp}/none.txt"],
-     ["none.txt", "no such file", "--steps-file"]),
-    ("monitor steps file bad kind", ["monitor", "{tenv3_ok}", "--steps-file", "{steps_bad}", "--out", "{tmp}/o"],
-     ["steps_bad.txt:3:", "unknown step kind 'antenna'"]),
-    ("monitor postseismic form", ["monitor", "{tenv3_ok}", "--postseismic", "LHAS:2003-01-01:power:30"],
-     ["--postseismic LHAS:2003-01-01:power:30", "log:TAU_DAYS"]),
-    ("monitor postseismic fields", ["monitor", "{tenv3_ok}", "--postseismic", "LHAS:2003-01-01"],
-     ["--postseismic expects STATION:DATE:FORM:TAU"]),
-    ("monitor postseismic unknown station",
-     ["monitor", "{tenv3_ok}", "--postseismic", "XXXX:2010-01-01:log:30", "--out", "{tmp}/o"],
-     ["--postseismic XXXX:2010-01-01:log:30", "no such station"]),
-    ("monitor poly degree 0", ["monitor", "{tenv3_ok}", "--poly-degree", "0"], ["--poly-degree"]),
-    ("sweep missing config", ["sweep", "{tmp}/none.toml"], ["jaxnav sweep:", "none.toml", "no such config"]),
-    ("sweep seeds 0", ["sweep", "{t_seeds0}"], ["t_seeds0.toml", "problem.seeds = 0"]),
-    ("sweep init 1.5", ["sweep", "{t_init}"], ["t_init.toml", "params.b.init = 1.5"]),
-    ("sweep num 0", ["sweep", "{t_num0}"], ["t_num0.toml", "sweep.b.num = 0"]),
-    ("sweep duration < 0", ["sweep", "{t_dur}"], ["t_dur.toml", "problem.duration = -5.0"]),
-    ("sweep bool init", ["sweep", "{t_param}"], ["t_param.toml", "params.b.init must be a number, got True"]),
-    ("sweep out is a file", ["sweep", "s0_b", "--out", "{a_file}"], ["a_file", "existing file"]),
-    ("sweep out under a file", ["sweep", "s0_b", "--out", "{a_file}/x"], ["cannot write the output folder"]),
-    ("tune steps 0", ["tune", "{t_steps0}"], ["jaxnav tune:", "tune.steps = 0"]),
-    ("tune learning rate < 0", ["tune", "{t_lr}"], ["tune.learning_rate = -0.5"]),
-    ("tune mode", ["tune", "{t_mode}"], ["tune.mode must be one of"]),
-    ("tune unknown key", ["tune", "{t_unknown}"], ["unknown key tune.momentum"]),
-    ("tune out under a file", ["tune", "cv_noise", "--out", "{a_file}/x"], ["cannot write the output folder"]),
-    ("cadastral seeds 0", ["cadastral", "--out", "{tmp}/c", "--seeds", "0"], ["jaxnav cadastral:", "--seeds"]),
-    ("cadastral chunk 0", ["cadastral", "--out", "{tmp}/c", "--chunk", "0"], ["--chunk"]),
-    ("cadastral legs 0", ["cadastral", "--out", "{tmp}/c", "--legs", "0"], ["--legs"]),
-    ("cadastral legs without a target", ["cadastral", "--out", "{tmp}/c", "--legs", "2"], ["first 2 leg(s)", "at least 3 legs"]),
-    ("cadastral grade", ["cadastral", "--out", "{tmp}/c", "--grade", "navy"], ["--grade 'navy'", "tactical"]),
-    ("cadastral config missing", ["cadastral", "--out", "{tmp}/c", "--config", "{tmp}/c.toml"], ["c.toml", "no such"]),
-    ("cadastral stops latitude", ["cadastral", "--out", "{tmp}/c", "--stops", "{stops_bad}"],
-     ["stops.csv:1:", "lat_deg = 132"]),
-    ("cadastral out is a file", ["cadastral", "--out", "{a_file}"], ["a_file", "existing file"]),
-    # a route the IMU rate cannot sample: refused when the config is read, naming the file (not mid-run)
-    ("cadastral route not sampled", ["cadastral", "--out", "{tmp}/c", "--config", "{cad_unsampled}"],
-     ["cad_unsampled.toml: survey and legs", "imu_rate_hz = 10"]),
-] + [(f"ins range {n}", ["ins", f"{{ins_{n}}}", "--out", "{tmp}/o"],
-      [f"ins_{n}.toml", f"{sec}.{line.split(' =')[0]}", "plausible"]) for n, sec, line in INS_RANGE_CASES] \
-  + [(f"cadastral range {n}", ["cadastral", "--out", "{tmp}/c", "--config", f"{{cad_{n}}}"],
-      [f"cad_{n}.toml", new.split(" =")[0]]) for n, old, new in CADASTRAL_RANGE_CASES]
+CASES = (
+    [
+        ("no command", [], ["jaxnav:", "command"]),
+        ("unknown command", ["fly"], ["jaxnav:", "'fly'"]),
+        ("unknown option", ["demo", "--frobnicate"], ["--frobnicate"]),
+        ("demo seeds 0", ["demo", "--seeds", "0"], ["jaxnav demo:", "--seeds", "[1, 100000]", "got 0"]),
+        ("demo seeds -1", ["demo", "--seeds", "-1"], ["--seeds", "got -1"]),
+        ("demo seeds text", ["demo", "--seeds", "many"], ["--seeds", "'many'"]),
+        ("demo seeds float", ["demo", "--seeds", "2.5"], ["--seeds", "'2.5'"]),
+        ("demo sweep-points 0", ["demo", "--sweep-points", "0"], ["--sweep-points", ">= 1"]),
+        ("demo config missing", ["demo", "--config", "{tmp}/nope.toml"], ["nope.toml", "no such file", "--config"]),
+        ("demo config b=1.5", ["demo", "--config", "{b15}"], ["b15.toml", "filter.b = 1.5 must be < 1"]),
+        ("demo config b=-0.1", ["demo", "--config", "{bneg}"], ["bneg.toml", "filter.b = -0.1"]),
+        ("demo config seeds=0", ["demo", "--config", "{seeds0}"], ["seeds0.toml", "monte_carlo.seeds = 0"]),
+        ("demo config unknown key", ["demo", "--config", "{unknown_key}"], ["unk.toml", "unknown key filter.fadng"]),
+        (
+            "demo config missing key",
+            ["demo", "--config", "{missing_key}"],
+            ["miss.toml", "filter.fading_window is required"],
+        ),
+        ("demo config syntax", ["demo", "--config", "{syntax}"], ["syntax.toml", "invalid TOML", "line"]),
+        ("demo config states", ["demo", "--config", "{states}"], ["states.toml", "filter.inflate_states", "[0, 17]"]),
+        (
+            "demo config n_states",
+            ["demo", "--config", "{nstates}"],
+            ["nstates.toml", "filter.n_states must be one of [15, 18]"],
+        ),
+        ("demo config q_scale<0", ["demo", "--config", "{qneg}"], ["qneg.toml", "filter.q_scale = -1.0"]),
+        (
+            "demo config bool seeds",
+            ["demo", "--config", "{bool_seeds}"],
+            ["bool.toml", "monte_carlo.seeds must be an integer"],
+        ),
+        ("demo config latin-1", ["demo", "--config", "{latin1}"], ["latin1.toml:", "not UTF-8", "0xE9"]),
+        ("demo out is a file", ["demo", "--out", "{a_file}"], ["a_file", "--out", "existing file"]),
+        ("demo out under a file", ["demo", "--out", "{a_file}/sub"], ["a_file/sub", "cannot write the output folder"]),
+        ("demo-filters b 1.5", ["demo-filters", "--b", "1.5"], ["jaxnav demo-filters:", "--b", "[0, 1)"]),
+        ("demo-filters b -0.1", ["demo-filters", "--b", "-0.1"], ["--b", "got -0.1"]),
+        ("demo-filters b nan", ["demo-filters", "--b", "nan"], ["--b", "finite"]),
+        ("demo-filters b inf", ["demo-filters", "--b", "inf"], ["--b", "finite"]),
+        ("demo-filters epochs 0", ["demo-filters", "--epochs", "0"], ["--epochs", "[100, 1e+06]"]),
+        ("demo-filters seeds 0", ["demo-filters", "--seeds", "0"], ["--seeds"]),
+        ("demo-filters out is a file", ["demo-filters", "--out", "{a_file}"], ["a_file", "existing file"]),
+        ("ins config missing", ["ins", "{tmp}/nope.toml"], ["jaxnav ins:", "nope.toml", "no such config file"]),
+        ("ins not shipped", ["ins", "no_such_name"], ["jaxnav ins:", "not a shipped config", "walk_0827"]),
+        ("ins data file missing", ["ins", "{ins_nofile}", "--out", "{tmp}/o"], ["imu.csv", "no such file", "imu.file"]),
+        ("ins unknown key", ["ins", "{ins_badkey}"], ["ins_badkey.toml", "unknown key evaluate.outage"]),
+        ("ins unreadable files", ["ins", "{ins_pos}", "--out", "{tmp}/o"], ["a_file"]),
+        ("ins gnss file is a folder", ["ins", "{ins_dir}", "--out", "{tmp}/o"], ["a folder, not a file", "gnss.file"]),
+        # a density the chosen error model has no state for is refused, naming the state counts that use it
+        (
+            "ins bias rw with 15 states",
+            ["ins", "{ins_rw15}", "--out", "{tmp}/o"],
+            ["ins_rw15.toml", "noise.gyro_bias_rw_deg_per_h_per_sqrt_h is used only with states = 21", "states = 15"],
+        ),
+        (
+            "ins accel bias rw with 15 states",
+            ["ins", "{ins_arw15}", "--out", "{tmp}/o"],
+            ["ins_arw15.toml", "noise.accel_bias_rw_mg_per_sqrt_h is used only with states = 21"],
+        ),
+        (
+            "ins bias instability with 15 states",
+            ["ins", "{ins_gbi15}", "--out", "{tmp}/o"],
+            ["ins_gbi15.toml", "noise.gyro_bias_instability_deg_per_h is used only with states = 18 or 21"],
+        ),
+        ("rtk same file twice", ["rtk", "{ep}", "{ep}", "--out", "{tmp}/o"], ["point 'P0' also appears in"]),
+        (
+            "ins data folder missing",
+            ["ins", "walk_0827", "--data", "{tmp}/no_data"],
+            ["no_data", "no such data folder"],
+        ),
+        ("walk data missing", ["walk", "--data", "{tmp}/no_data"], ["jaxnav walk:", "no_data", "no such data folder"]),
+        # --data is the folder that holds the data sets in every command, relative to the working directory,
+        # and the message names the folder searched
+        (
+            "walk data relative",
+            ["walk", "--data", "no_data"],
+            ["{tmp}/no_data: no such data folder (--data = no_data)"],
+        ),
+        ("ins data relative", ["ins", "walk_0827", "--data", "no_data"], ["{tmp}/no_data: no such data folder"]),
+        (
+            "walk data is the set itself",
+            ["walk", "--data", "{walkset}"],
+            ["rtklibexplorer-gnss-imu/rtklibexplorer-gnss-imu: no such data folder", "looks like the data set itself"],
+        ),
+        (
+            "walk data without the files",
+            ["walk", "--data", "."],
+            ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"],
+        ),
+        (
+            "ins data without the files",
+            ["ins", "walk_0827", "--data", "."],
+            ["{tmp}/rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv: no such file", "imu.file"],
+        ),
+        (
+            "cadastral data is the set itself",
+            ["cadastral", "--out", "{tmp}/c", "--data", "{walkset}"],
+            ["looks like the data set itself"],
+        ),
+        ("rtk nothing", ["rtk"], ["jaxnav rtk:", "give FILES or --simulate"]),
+        ("rtk missing file", ["rtk", "{tmp}/none.pos"], ["none.pos", "no such file"]),
+        (
+            "rtk control K2,inf",
+            ["rtk", "{ep}", "--control", "{cp_inf}", "--out", "{tmp}/o"],
+            ["cp_inf.csv:4:", "column 'B'", "'inf' is not a finite number"],
+        ),
+        (
+            "rtk epoch log 0xE9",
+            ["rtk", "{ep_e9}", "--out", "{tmp}/o"],
+            ["ep_e9.csv:8:", "not UTF-8", "0xE9 at column 3"],
+        ),
+        (
+            "rtk levelling nan",
+            ["rtk", "{ep}", "--levelling", "{lev_nan}", "--out", "{tmp}/o"],
+            ["lev_nan.csv:2:", "column 'height'", "not a finite number"],
+        ),
+        ("rtk control missing", ["rtk", "{ep}", "--control", "{tmp}/cp.csv"], ["cp.csv", "no such file", "--control"]),
+        ("rtk step 0", ["rtk", "{ep}", "--step", "0"], ["--step", "(0, 86400]", "got 0"]),
+        ("rtk window 0", ["rtk", "{ep}", "--window", "0"], ["--window", "[1, 1e+06]"]),
+        ("rtk min-epochs > window", ["rtk", "{ep}", "--min-epochs", "90"], ["--min-epochs 90", "--window 60"]),
+        ("rtk lon0 1000", ["rtk", "{ep}", "--lon0", "1000"], ["--lon0", "[-180, 360]"]),
+        ("rtk zone width 4", ["rtk", "{ep}", "--zone-width", "4"], ["--zone-width", "invalid choice"]),
+        ("rtk simulate -1", ["rtk", "--simulate", "-1"], ["--simulate", "got -1"]),
+        ("rtk out is a file", ["rtk", "{ep}", "--out", "{a_file}"], ["a_file", "--out"]),
+        ("monitor nothing", ["monitor"], ["jaxnav monitor:", "give daily series files"]),
+        ("monitor missing file", ["monitor", "{tmp}/x.neu"], ["x.neu", "no such file"]),
+        (
+            "monitor tenv3 inf",
+            ["monitor", "{tenv3_inf}", "--out", "{tmp}/o"],
+            ["bad.tenv3:2:", "north = inf m", "not finite"],
+        ),
+        ("monitor tenv3 latitude", ["monitor", "{tenv3_lat}", "--out", "{tmp}/o"], ["lat.tenv3:2:", "latitude", "90"]),
+        ("monitor unknown suffix", ["monitor", "{ep}", "--out", "{tmp}/o"], ["ep.csv", "unknown daily-series format"]),
+        ("monitor period 0", ["monitor", "{tenv3_inf}", "--period", "0"], ["--period", ">= 1"]),
+        ("monitor gross 2", ["monitor", "--simulate", "--gross", "2"], ["--gross", "[0, 1]"]),
+        ("monitor stations 0", ["monitor", "--simulate", "--stations", "0"], ["--stations"]),
+        ("monitor epochs 1", ["monitor", "--simulate", "--epochs", "1"], ["--epochs"]),
+        ("monitor seed -1", ["monitor", "--simulate", "--seed", "-1"], ["--seed"]),
+        ("monitor kappa 0", ["monitor", "{tenv3_inf}", "--kappa", "0"], ["--kappa 0", "(-2, 0)"]),
+        ("monitor kappa word", ["monitor", "{tenv3_inf}", "--kappa", "pink"], ["--kappa", "'estimate'"]),
+        ("monitor step no station", ["monitor", "{tenv3_inf}", "--step", "2003.5"], ["--step", "STATION:DATE"]),
+        ("monitor step bad date", ["monitor", "{tenv3_inf}", "--step", "LHAS:2003-13-01"], ["--step", "2003-13-01"]),
+        (
+            "monitor step unknown station",
+            ["monitor", "{tenv3_ok}", "--step", "XXXX:2010-01-01", "--out", "{tmp}/o"],
+            ["--step XXXX", "no such station", "LHAS"],
+        ),
+        ("monitor files and simulate", ["monitor", "--simulate", "{tenv3_inf}"], ["not both"]),
+        (
+            "monitor steps file missing",
+            ["monitor", "{tenv3_ok}", "--steps-file", "{tmp}/none.txt"],
+            ["none.txt", "no such file", "--steps-file"],
+        ),
+        (
+            "monitor steps file bad kind",
+            ["monitor", "{tenv3_ok}", "--steps-file", "{steps_bad}", "--out", "{tmp}/o"],
+            ["steps_bad.txt:3:", "unknown step kind 'antenna'"],
+        ),
+        (
+            "monitor postseismic form",
+            ["monitor", "{tenv3_ok}", "--postseismic", "LHAS:2003-01-01:power:30"],
+            ["--postseismic LHAS:2003-01-01:power:30", "log:TAU_DAYS"],
+        ),
+        (
+            "monitor postseismic fields",
+            ["monitor", "{tenv3_ok}", "--postseismic", "LHAS:2003-01-01"],
+            ["--postseismic expects STATION:DATE:FORM:TAU"],
+        ),
+        (
+            "monitor postseismic unknown station",
+            ["monitor", "{tenv3_ok}", "--postseismic", "XXXX:2010-01-01:log:30", "--out", "{tmp}/o"],
+            ["--postseismic XXXX:2010-01-01:log:30", "no such station"],
+        ),
+        ("monitor poly degree 0", ["monitor", "{tenv3_ok}", "--poly-degree", "0"], ["--poly-degree"]),
+        ("sweep missing config", ["sweep", "{tmp}/none.toml"], ["jaxnav sweep:", "none.toml", "no such config"]),
+        ("sweep seeds 0", ["sweep", "{t_seeds0}"], ["t_seeds0.toml", "problem.seeds = 0"]),
+        ("sweep init 1.5", ["sweep", "{t_init}"], ["t_init.toml", "params.b.init = 1.5"]),
+        ("sweep num 0", ["sweep", "{t_num0}"], ["t_num0.toml", "sweep.b.num = 0"]),
+        ("sweep duration < 0", ["sweep", "{t_dur}"], ["t_dur.toml", "problem.duration = -5.0"]),
+        ("sweep bool init", ["sweep", "{t_param}"], ["t_param.toml", "params.b.init must be a number, got True"]),
+        ("sweep out is a file", ["sweep", "s0_b", "--out", "{a_file}"], ["a_file", "existing file"]),
+        ("sweep out under a file", ["sweep", "s0_b", "--out", "{a_file}/x"], ["cannot write the output folder"]),
+        ("tune steps 0", ["tune", "{t_steps0}"], ["jaxnav tune:", "tune.steps = 0"]),
+        ("tune learning rate < 0", ["tune", "{t_lr}"], ["tune.learning_rate = -0.5"]),
+        ("tune mode", ["tune", "{t_mode}"], ["tune.mode must be one of"]),
+        ("tune unknown key", ["tune", "{t_unknown}"], ["unknown key tune.momentum"]),
+        ("tune out under a file", ["tune", "cv_noise", "--out", "{a_file}/x"], ["cannot write the output folder"]),
+        ("cadastral seeds 0", ["cadastral", "--out", "{tmp}/c", "--seeds", "0"], ["jaxnav cadastral:", "--seeds"]),
+        ("cadastral chunk 0", ["cadastral", "--out", "{tmp}/c", "--chunk", "0"], ["--chunk"]),
+        ("cadastral legs 0", ["cadastral", "--out", "{tmp}/c", "--legs", "0"], ["--legs"]),
+        (
+            "cadastral legs without a target",
+            ["cadastral", "--out", "{tmp}/c", "--legs", "2"],
+            ["first 2 leg(s)", "at least 3 legs"],
+        ),
+        ("cadastral grade", ["cadastral", "--out", "{tmp}/c", "--grade", "navy"], ["--grade 'navy'", "tactical"]),
+        (
+            "cadastral config missing",
+            ["cadastral", "--out", "{tmp}/c", "--config", "{tmp}/c.toml"],
+            ["c.toml", "no such"],
+        ),
+        (
+            "cadastral stops latitude",
+            ["cadastral", "--out", "{tmp}/c", "--stops", "{stops_bad}"],
+            ["stops.csv:1:", "lat_deg = 132"],
+        ),
+        ("cadastral out is a file", ["cadastral", "--out", "{a_file}"], ["a_file", "existing file"]),
+        # a route the IMU rate cannot sample: refused when the config is read, naming the file (not mid-run)
+        (
+            "cadastral route not sampled",
+            ["cadastral", "--out", "{tmp}/c", "--config", "{cad_unsampled}"],
+            ["cad_unsampled.toml: survey and legs", "imu_rate_hz = 10"],
+        ),
+    ]
+    + [
+        (
+            f"ins range {n}",
+            ["ins", f"{{ins_{n}}}", "--out", "{tmp}/o"],
+            [f"ins_{n}.toml", f"{sec}.{line.split(' =')[0]}", "plausible"],
+        )
+        for n, sec, line in INS_RANGE_CASES
+    ]
+    + [
+        (
+            f"cadastral range {n}",
+            ["cadastral", "--out", "{tmp}/c", "--config", f"{{cad_{n}}}"],
+            [f"cad_{n}.toml", new.split(" =")[0]],
+        )
+        for n, old, new in CADASTRAL_RANGE_CASES
+    ]
+)
 
 
 @pytest.fixture(scope="module")
@@ -345,8 +472,14 @@ def test_internal_error_says_so_and_points_to_debug(monkeypatch, capsys):
 
 
 def test_json_is_strict_with_null_reasons(tmp_path):
-    data = {"rms": float("nan"), "per_seed": np.array([1.0, np.inf, np.nan]), "inner": {"x": -math.inf, "ok": 2},
-            "n": np.int64(3), "flag": np.bool_(True), "ok": [1.5]}
+    data = {
+        "rms": float("nan"),
+        "per_seed": np.array([1.0, np.inf, np.nan]),
+        "inner": {"x": -math.inf, "ok": 2},
+        "n": np.int64(3),
+        "flag": np.bool_(True),
+        "ok": [1.5],
+    }
     p = write_json(tmp_path / "r.json", data)
 
     def no_constants(name):
@@ -355,7 +488,11 @@ def test_json_is_strict_with_null_reasons(tmp_path):
     back = json.loads(p.read_text(), parse_constant=no_constants)
     assert back["rms"] is None and back["rms_null_reason"].startswith("not computed (nan)")
     assert back["per_seed"] == [1.0, None, None] and back["per_seed_null_reason"].startswith("2 of 3 values not finite")
-    assert back["inner"]["x"] is None and back["inner"]["x_null_reason"].startswith("infinite (-inf)") and back["inner"]["ok"] == 2
+    assert (
+        back["inner"]["x"] is None
+        and back["inner"]["x_null_reason"].startswith("infinite (-inf)")
+        and back["inner"]["ok"] == 2
+    )
     assert back["n"] == 3 and back["flag"] is True and back["ok"] == [1.5] and "ok_null_reason" not in back
     assert json_ready({"a": 1.0})[1] == {}
     given = json_ready({"rms": float("nan"), "rms_null_reason": "no fixed epoch in the window"})[0]
@@ -366,8 +503,9 @@ def test_json_is_strict_with_null_reasons(tmp_path):
 def _run(args, tmp_path):
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     env.pop("JAXNAV_DATA", None)
-    return subprocess.run([sys.executable, "-m", "jaxnav", *args], capture_output=True, text=True, cwd=tmp_path,
-                          env=env, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "jaxnav", *args], capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120
+    )
 
 
 def test_subprocess_bad_seeds_and_bad_control_file(files):
@@ -375,11 +513,14 @@ def test_subprocess_bad_seeds_and_bad_control_file(files):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--seeds" in r.stderr and "Traceback" not in r.stderr
     # the error is the last stderr line, after the stage line of the reading; with -q it is the only one
     msg = f"jaxnav rtk: {files['cp_inf']}:4: column 'B': 'inf' is not a finite number\n"
-    r = _run(["rtk", str(files["ep"]), "--control", str(files["cp_inf"]), "--out", str(files["tmp"] / "s")],
-             files["tmp"])
+    r = _run(
+        ["rtk", str(files["ep"]), "--control", str(files["cp_inf"]), "--out", str(files["tmp"] / "s")], files["tmp"]
+    )
     assert r.returncode == 2 and r.stderr == "reading 1 file(s): ep.csv\n" + msg, r.stderr
-    r = _run(["rtk", "-q", str(files["ep"]), "--control", str(files["cp_inf"]), "--out", str(files["tmp"] / "s")],
-             files["tmp"])
+    r = _run(
+        ["rtk", "-q", str(files["ep"]), "--control", str(files["cp_inf"]), "--out", str(files["tmp"] / "s")],
+        files["tmp"],
+    )
     assert r.returncode == 2 and r.stderr == msg, r.stderr
 
 
@@ -489,16 +630,20 @@ def test_summaries_print_words_and_short_numbers():
 
     assert status_words(65536) == "65536 (GNSS_GATED)" and status_words(0) == "0 (ok)"
     assert status_words(np.array([GNSS_GATED, NONFINITE_MEASUREMENT])) == "65537 (NONFINITE_MEASUREMENT | GNSS_GATED)"
-    assert csv_number(0.034999999999999996) == "0.035" and csv_number(3) == 3 and csv_number(1.2345678901234567e-9) == "1.23456789012e-09"
+    assert (
+        csv_number(0.034999999999999996) == "0.035"
+        and csv_number(3) == 3
+        and csv_number(1.2345678901234567e-9) == "1.23456789012e-09"
+    )
 
 
 @pytest.mark.parametrize("how", ["walk --data", "ins --data", "ins JAXNAV_DATA"])
 def test_data_means_the_folder_of_the_data_sets_relative_to_the_cwd(how, tmp_path, monkeypatch):
     """`jaxnav walk --data D`, `jaxnav ins walk_0827 --data D` and `JAXNAV_DATA=D jaxnav ins walk_0827`
     read the same files, D relative to the working directory (never to the config's folder or D's parent)."""
-    import jaxnav.cli.ins as ins_cli
-
     from _paths import DATA_ROOT
+
+    import jaxnav.cli.ins as ins_cli
 
     work = tmp_path / "a" / "b"
     work.mkdir(parents=True)

@@ -11,19 +11,22 @@ import logging
 
 import numpy as np
 import pytest
+from _outputs import check_provenance, no_constants
 
 import jaxnav
 from jaxnav._progress import Progress
 from jaxnav.cli import main
 
-from _outputs import check_provenance, no_constants
-
 #: a 2-point epoch log, 5 epochs each, mm-level scatter (x, y, h and B, L, H)
-EPOCHS = ("point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h\n"
-          + "".join(f"P{p},{2 * k},{3631500 + 0.004 * ((3 * k) % 5 - 2):.4f},{39486000.5 + 0.003 * ((2 * k) % 5 - 2):.4f},"
-                    f"{22.1 + 0.006 * ((4 * k) % 5 - 2):.4f},{32.81 + 1e-8 * ((3 * k) % 5 - 2):.10f},"
-                    f"{116.85 + 1e-8 * ((2 * k) % 5 - 2):.10f},{18.6 + 0.006 * ((4 * k) % 5 - 2):.4f},0.008,0.008,0.015\n"
-                    for p in range(2) for k in range(5)))
+EPOCHS = "point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h\n" + "".join(
+    f"P{p},{2 * k},{3631500 + 0.004 * ((3 * k) % 5 - 2):.4f},{39486000.5 + 0.003 * ((2 * k) % 5 - 2):.4f},"
+    f"{22.1 + 0.006 * ((4 * k) % 5 - 2):.4f},{32.81 + 1e-8 * ((3 * k) % 5 - 2):.10f},"
+    f"{116.85 + 1e-8 * ((2 * k) % 5 - 2):.10f},{18.6 + 0.006 * ((4 * k) % 5 - 2):.4f},0.008,0.008,0.015\n"
+    for p in range(2)
+    for k in range(5)
+)
+
+
 def test_version(capsys):
     assert main(["--version"]) == 0
     assert capsys.readouterr().out == f"jaxnav {jaxnav.__version__}\n"
@@ -49,8 +52,11 @@ def test_quiet_verbose_and_outputs_of_rtk(epochs, tmp_path, capsys, where):
         opts = [flag] if flag else []
         argv = (opts + ["rtk", f, "--out", str(out)]) if where == "before" else (["rtk", f, "--out", str(out)] + opts)
         if flag == "-v":  # the formats as words (before the FILE) or as a comma list
-            argv = argv[:-3] + ["--figure-format", "pdf", "svg", f] + argv[-2:] if where == "before" else \
-                argv + ["--figure-format", "pdf,svg"]
+            argv = (
+                argv[:-3] + ["--figure-format", "pdf", "svg", f] + argv[-2:]
+                if where == "before"
+                else argv + ["--figure-format", "pdf,svg"]
+            )
         if flag == "":  # a folder used before: its old results.json is replaced, its old files not listed
             out.mkdir()
             (out / "results.json").write_text('{"stale": true}')
@@ -76,14 +82,22 @@ def test_quiet_verbose_and_outputs_of_rtk(epochs, tmp_path, capsys, where):
     head = [ln for ln in lines if ln.startswith("#")]
     assert lines[: len(head)] == head and len(lines) == len(head) + 1 + 2
     text = "\n".join(head)
-    for needle in ("# crs: WGS-84 Gauss-Krueger", "+proj=tmerc", "+lon_0=117", "# zone: central meridian 117 deg",
-                   "# height system: WGS-84 ellipsoidal", "# time system: GPST", "# units: suffix _m metres"):
+    for needle in (
+        "# crs: WGS-84 Gauss-Krueger",
+        "+proj=tmerc",
+        "+lon_0=117",
+        "# zone: central meridian 117 deg",
+        "# height system: WGS-84 ellipsoidal",
+        "# time system: GPST",
+        "# units: suffix _m metres",
+    ):
         assert needle in text, needle
     cols = lines[len(head)].split(",")
     assert cols[:6] == ["point", "n_epochs", "x_m", "y_m", "h_m", "H_ellipsoidal_m"]
     assert all(c in ("point", "n_epochs") or c.endswith(("_m", "_mm", "_cm")) for c in cols), cols
-    t = np.genfromtxt(out / "rtk_results.csv", delimiter=",", names=True, dtype=None, encoding="utf-8",
-                      skip_header=len(head))
+    t = np.genfromtxt(
+        out / "rtk_results.csv", delimiter=",", names=True, dtype=None, encoding="utf-8", skip_header=len(head)
+    )
     assert t["n_epochs"].tolist() == [5, 5]
 
 
@@ -163,12 +177,26 @@ def test_walk_scores_json_strict_with_units(tmp_path):
     from jaxnav.ins import OutageScores
 
     nan = float("nan")
-    sc = OutageScores(windows=np.array([[10.0, 25.0], [40.0, 55.0]]), n_ref=np.array([3, 0]),
-                      fwd_max=np.array([1.2, nan]), sm_max=np.array([0.5, nan]), fwd_rms=np.array([0.8, nan]),
-                      sm_rms=np.array([0.3, nan]), fwd_rms_all=0.8, sm_rms_all=0.3, fwd_max_mean=1.2, sm_max_mean=0.5,
-                      fwd_rms_outside=0.02, t=np.arange(4.0), err_fwd=np.array([nan, 0.1, nan, 0.2]),
-                      err_sm=np.array([nan, 0.05, nan, 0.1]), withheld=np.array([False, True, True, False]),
-                      runtime_s=1.5, figure=None, n_nonfinite_nav=0)
+    sc = OutageScores(
+        windows=np.array([[10.0, 25.0], [40.0, 55.0]]),
+        n_ref=np.array([3, 0]),
+        fwd_max=np.array([1.2, nan]),
+        sm_max=np.array([0.5, nan]),
+        fwd_rms=np.array([0.8, nan]),
+        sm_rms=np.array([0.3, nan]),
+        fwd_rms_all=0.8,
+        sm_rms_all=0.3,
+        fwd_max_mean=1.2,
+        sm_max_mean=0.5,
+        fwd_rms_outside=0.02,
+        t=np.arange(4.0),
+        err_fwd=np.array([nan, 0.1, nan, 0.2]),
+        err_sm=np.array([nan, 0.05, nan, 0.1]),
+        withheld=np.array([False, True, True, False]),
+        runtime_s=1.5,
+        figure=None,
+        n_nonfinite_nav=0,
+    )
     path = write_walk_scores(tmp_path, sc)
     text = path.read_text()
     assert "NaN" not in text and "Infinity" not in text

@@ -34,18 +34,42 @@ def car_spec():
     """A 200 s drive: 20 s standing, accelerations, turns both ways, a stop-and-go."""
     S = sim.Segment
     r = math.radians
-    segs = (S("rest", duration=20.0), S("accelerate", duration=8.0, dspeed=12.0), S("cruise", hold=10.0),
-            S("turn", duration=8.0, dheading=r(90.0)), S("cruise", hold=12.0), S("turn", duration=6.0, dheading=r(-60.0)),
-            S("cruise", hold=10.0), S("accelerate", duration=6.0, dspeed=-12.0), S("rest", duration=8.0),
-            S("accelerate", duration=6.0, dspeed=10.0), S("turn", duration=10.0, dheading=r(-120.0)),
-            S("cruise", hold=14.0), S("turn", duration=8.0, dheading=r(75.0)), S("cruise", hold=20.0),
-            S("turn", duration=6.0, dheading=r(40.0)), S("cruise", hold=48.0))
+    segs = (
+        S("rest", duration=20.0),
+        S("accelerate", duration=8.0, dspeed=12.0),
+        S("cruise", hold=10.0),
+        S("turn", duration=8.0, dheading=r(90.0)),
+        S("cruise", hold=12.0),
+        S("turn", duration=6.0, dheading=r(-60.0)),
+        S("cruise", hold=10.0),
+        S("accelerate", duration=6.0, dspeed=-12.0),
+        S("rest", duration=8.0),
+        S("accelerate", duration=6.0, dspeed=10.0),
+        S("turn", duration=10.0, dheading=r(-120.0)),
+        S("cruise", hold=14.0),
+        S("turn", duration=8.0, dheading=r(75.0)),
+        S("cruise", hold=20.0),
+        S("turn", duration=6.0, dheading=r(40.0)),
+        S("cruise", hold=48.0),
+    )
     return sim.TrajectorySpec(lat=r(40.1), lon=r(-105.2), h=1600.0, heading=r(30.0), speed=0.0, segments=segs)
 
 
-def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=(0.6, 0.3, -1.4),
-              tag_error_s=-0.15, imu_rate=100.0, gnss_rate=2.0, pos_sigma=0.02, vel_sigma=0.03,
-              vibration=1.0, spec=None, imu_start_s=0.0) -> Recording:
+def write_car(
+    folder,
+    *,
+    seed=0,
+    mounting_rpy_deg=(3.0, -4.0, 100.0),
+    lever_frd=(0.6, 0.3, -1.4),
+    tag_error_s=-0.15,
+    imu_rate=100.0,
+    gnss_rate=2.0,
+    pos_sigma=0.02,
+    vel_sigma=0.03,
+    vibration=1.0,
+    spec=None,
+    imu_start_s=0.0,
+) -> Recording:
     """Simulate the car (industrial-grade IMU errors, RTK-level GNSS) and write ``imu.txt`` / ``gnss.txt``;
     ``vibration`` scales the engine and road vibration while moving (0: a perfectly smooth road);
     ``spec``: another :class:`jaxnav.sim.TrajectorySpec` (default :func:`car_spec`);
@@ -61,8 +85,15 @@ def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=
     # 0.15 m/s^2 at 31 Hz lateral, 0.01 rad/s at 17 Hz in roll); none at standstill, engine off
     t_end = np.asarray(truth.t)
     moving = np.linalg.norm(np.asarray(truth.v_n)[1:], axis=1) > 0.05
+
     def vib(amp, hz):  # increment of amp sin(2 pi hz t) over (t_k, t_k+1]
-        return vibration * amp / (2 * np.pi * hz) * (np.cos(2 * np.pi * hz * t_end[:-1]) - np.cos(2 * np.pi * hz * t_end[1:]))
+        return (
+            vibration
+            * amp
+            / (2 * np.pi * hz)
+            * (np.cos(2 * np.pi * hz * t_end[:-1]) - np.cos(2 * np.pi * hz * t_end[1:]))
+        )
+
     dv[:, 2] += np.where(moving, vib(0.3, 23.0), 0.0)
     dv[:, 0] += np.where(moving, vib(0.15, 31.0), 0.0)
     dth[:, 1] += np.where(moving, vib(0.01, 17.0), 0.0)
@@ -92,8 +123,19 @@ def write_car(folder, *, seed=0, mounting_rpy_deg=(3.0, -4.0, 100.0), lever_frd=
     sd = np.tile([pos_sigma, pos_sigma, pos_sigma], (idx.size, 1))
     vsd = np.tile([vel_sigma] * 3, (idx.size, 1))
     # 13 columns: sow, lat, lon, h, vN, vE, vD, sdN, sdE, sdD, sdvN, sdvE, sdvD
-    g = np.column_stack([SOW0 + tg, np.degrees(ant[:, 0]), np.degrees(ant[:, 1]), ant[:, 2], v_ant[:, 1], v_ant[:, 0],
-                         -v_ant[:, 2], sd, vsd])
+    g = np.column_stack(
+        [
+            SOW0 + tg,
+            np.degrees(ant[:, 0]),
+            np.degrees(ant[:, 1]),
+            ant[:, 2],
+            v_ant[:, 1],
+            v_ant[:, 0],
+            -v_ant[:, 2],
+            sd,
+            vsd,
+        ]
+    )
     np.savetxt(gnss_file, g, fmt=["%.4f", "%.10f", "%.10f", "%.4f"] + ["%.5f"] * 9)
     return Recording(imu_file=imu_file, gnss_file=gnss_file, truth=truth, t_gnss=tg, tag_error_s=tag_error_s)
 
@@ -157,7 +199,20 @@ def write_truth_nav(rec: Recording, path, *, step: int = 1):
     e = np.asarray(tr.euler)[::step]  # [pitch, roll, yaw] of the RFU body in ENU
     t = np.asarray(tr.t)[::step]
     yaw = np.mod(-np.degrees(e[:, 2]), 360.0)
-    rows = np.column_stack([np.full(t.size, WEEK), SOW0 + t, np.degrees(pos[:, 0]), np.degrees(pos[:, 1]), pos[:, 2],
-                            v[:, 1], v[:, 0], -v[:, 2], np.degrees(e[:, 1]), np.degrees(e[:, 0]), yaw])
+    rows = np.column_stack(
+        [
+            np.full(t.size, WEEK),
+            SOW0 + t,
+            np.degrees(pos[:, 0]),
+            np.degrees(pos[:, 1]),
+            pos[:, 2],
+            v[:, 1],
+            v[:, 0],
+            -v[:, 2],
+            np.degrees(e[:, 1]),
+            np.degrees(e[:, 0]),
+            yaw,
+        ]
+    )
     np.savetxt(path, rows, fmt=["%d", "%.4f", "%.10f", "%.10f", "%.4f"] + ["%.5f"] * 3 + ["%.6f"] * 3)
     return path

@@ -1,18 +1,15 @@
 """The demonstration runs end to end on small sizes and writes its table, JSON and figure."""
 
-import json
 import pathlib
-
-import pytest
 
 import jax
 import numpy as np
+import pytest
+from _outputs import check_provenance
 
 from jaxnav.cli import main
 from jaxnav.experiments import EXPERIMENT, load_experiment
 from jaxnav.tune import run_chunked
-
-from _outputs import check_provenance
 
 
 def test_demo_writes_results_and_figure(tmp_path, capsys):
@@ -49,7 +46,7 @@ def test_s0_demo_writes_table_json_and_figures(tmp_path, capsys):
     res = check_provenance(out, argv, config=True)  # the shipped s0_experiment.toml and its contents
     assert res["provenance"]["config_file"].endswith("s0_experiment.toml") and "filter" in res["provenance"]["config"]
     assert set(res["filters"]) == {"classic", "attenuated", "fading"}
-    for name, f in res["filters"].items():
+    for f in res["filters"].values():
         assert len(f["per_seed"]["pos_rms_m"]) == 2 and len(f["mean"]["vel_rms_mps"]) == 3
         assert len(f["published"]["pos_rms_m"]) == 3
     # the unmodelled sudden velocity changes hurt the classic filter; fading suppresses it
@@ -71,10 +68,11 @@ def test_s0_table_says_why_it_differs_from_the_published_one():
     from jaxnav.experiments.s0 import FILTERS, format_s0
 
     per_seed = dict(pos_rms_m=[[1.0, 2.0, 3.0]] * 2, vel_rms_mps=[[0.1, 0.2, 0.3]] * 2, att_rms_rad=[[1e-3] * 3] * 2)
-    res = dict(settings=dict(seeds=2, experiment=dict(published={f: [1.0] * 9 for f in FILTERS},
-                                                      filter=dict(b=0.254))),
-               filters={f: dict(per_seed=per_seed) for f in FILTERS},
-               sweep=dict(b=[0.1, 0.254], mean_pos_rms_m=[2.0, 3.0], seeds=2))
+    res = dict(
+        settings=dict(seeds=2, experiment=dict(published={f: [1.0] * 9 for f in FILTERS}, filter=dict(b=0.254))),
+        filters={f: dict(per_seed=per_seed) for f in FILTERS},
+        sweep=dict(b=[0.1, 0.254], mean_pos_rms_m=[2.0, 3.0], seeds=2),
+    )
     text = format_s0(res)
     assert "one simulated run per filter" in text and "mean +- std over the seeds" in text
     assert "model mismatch it does not state" in text and "reproductions.md" in text

@@ -3,13 +3,12 @@ convention (C_vehicle_sensor = Rz(yaw) Ry(pitch) Rx(roll), Groves-style angles t
 FRD -> RFU conversions of mounting and lever arm, checked against scipy's rotations."""
 
 import math
-import pathlib
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from jaxnav.experiments.ins_config import (C_RFU_FRD, CONFIG_DIR, ConfigError, load_ins_config, sensor_to_body)
+from jaxnav.experiments.ins_config import C_RFU_FRD, CONFIG_DIR, ConfigError, load_ins_config, sensor_to_body
 
 BASE = """
 [imu]
@@ -44,8 +43,10 @@ BAD = [
     (BASE + "[evaluate]\noutage_s = -1\n", "evaluate.outage_s = -1.0 must be > 0"),
     (BASE + "[evaluate]\noutage_s = true\n", "evaluate.outage_s must be a number"),
     (BASE.replace('format = "rtklib-csv"', 'format = "kf-gins"\ntag = "x.tag"'), "imu.tag is only used with"),
-    (BASE.replace('format = "rtklib-csv"', 'mounting_rpy_deg = [0, 0, 0]\nmounting_groves_rpy_deg = [1, 2, 3]'),
-     "conflicts with mounting_rpy_deg"),
+    (
+        BASE.replace('format = "rtklib-csv"', "mounting_rpy_deg = [0, 0, 0]\nmounting_groves_rpy_deg = [1, 2, 3]"),
+        "conflicts with mounting_rpy_deg",
+    ),
     (BASE.replace('format = "rtklib-csv"', "mounting_dcm = [[1, 0, 0], [0, 1, 0], [0, 0, 2]]"), "must be a rotation"),
     (BASE.replace('format = "rtklib-csv"', "mounting_rpy_deg = [0, 0]"), "list of 3 finite numbers"),
     (BASE.replace('format = "rtklib-csv"', "time_offset_s = 99"), "imu.time_offset_s = 99.0 must be <= 10"),
@@ -58,8 +59,10 @@ BAD = [
     (BASE + "[constraints]\nzupt = true\n", "constraints.zupt must be 'auto' or false"),
     (BASE + "[alignment]\nheading = 'north'\n", "alignment.heading must be"),
     (BASE.replace('file = "imu.csv"', 'file = "${JAXNAV_NOT_SET_HERE}/imu.csv"'), "JAXNAV_NOT_SET_HERE"),
-    (BASE.replace('[gnss]\nfile = "sol.pos"', '[gnss]\nfile = "sol.pos"\nlever_arm_frd_m = [0, 0, 500]'),
-     "lever arm beyond 100 m"),
+    (
+        BASE.replace('[gnss]\nfile = "sol.pos"', '[gnss]\nfile = "sol.pos"\nlever_arm_frd_m = [0, 0, 500]'),
+        "lever arm beyond 100 m",
+    ),
     (BASE.replace("[imu]", "[imu]\nfile2 = 'x'"), "unknown key imu.file2"),
     ("[imu]\nfile = 'a'\n", "missing section [gnss]"),
     ("[imu\nfile = 'a'\n", "invalid TOML"),

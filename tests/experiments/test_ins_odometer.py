@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import pytest
-
 from _recording import car_config, write_car
+
 from jaxnav.ins import C_RFU_FRD
 from jaxnav.ins.attitude import quat_to_dcm
 
@@ -36,7 +36,7 @@ def runs(tmp_path_factory):
     rec = write_car(folder / "data", vibration=0.3)
     rows = np.loadtxt(rec.imu_file)
     sp = _wheel_speed(rec)
-    np.savetxt(rec.imu_file, np.column_stack([rows, sp[-rows.shape[0]:]]), fmt=["%.4f"] + ["%.12e"] * 6 + ["%.4f"])
+    np.savetxt(rec.imu_file, np.column_stack([rows, sp[-rows.shape[0] :]]), fmt=["%.4f"] + ["%.12e"] * 6 + ["%.4f"])
     out = {}
     for name, extra in (("odo", ODO + NHC), ("nhc", NHC)):
         cfg = car_config(rec, folder / "data", time_offset=0.15, extra=extra)
@@ -62,15 +62,25 @@ def test_scale_factor_recovered_and_drift_cut(runs):
 def test_csv_source_gives_the_same_scale(runs, tmp_path):
     """The same readings as a CSV (seconds of week with gps_week, km/h) give the same estimate."""
     from _recording import SOW0, WEEK
+
     from jaxnav.cli import main
 
     rec, folder, out = runs
     rows = np.loadtxt(rec.imu_file)
     csv = folder / "data" / "wheel.csv"
-    np.savetxt(csv, np.column_stack([rows[:, 0], rows[:, 7] * 3.6]), fmt="%.6f", delimiter=",",
-               header="tow,speed_kmh", comments="")
-    extra = ODO.replace('source = "imu"', f'source = "csv"\nfile = "wheel.csv"\ngps_week = {WEEK}\n'
-                                          'columns = {t = "tow", speed = "speed_kmh"}\nunits = {speed = "km/h"}')
+    np.savetxt(
+        csv,
+        np.column_stack([rows[:, 0], rows[:, 7] * 3.6]),
+        fmt="%.6f",
+        delimiter=",",
+        header="tow,speed_kmh",
+        comments="",
+    )
+    extra = ODO.replace(
+        'source = "imu"',
+        f'source = "csv"\nfile = "wheel.csv"\ngps_week = {WEEK}\n'
+        'columns = {t = "tow", speed = "speed_kmh"}\nunits = {speed = "km/h"}',
+    )
     cfg = car_config(rec, folder / "data", time_offset=0.15, extra=extra + NHC)
     assert main(["ins", str(cfg), "--out", str(tmp_path / "o"), "-q"]) == 0
     o = json.loads((tmp_path / "o" / "results.json").read_text())["odometer"]
@@ -78,13 +88,16 @@ def test_csv_source_gives_the_same_scale(runs, tmp_path):
     assert SOW0 > 0
 
 
-@pytest.mark.parametrize("section, match", [
-    ('[odometer]\nsource = "csv"\n', "odometer.file is required"),
-    ('[odometer]\nsource = "imu"\nfile = "x.csv"\n', "odometer.file is only used with source = 'csv'"),
-    ('[odometer]\nsource = "imu"\nsigma_m_s = 50.0\n', "odometer.sigma_m_s = 50.0 is outside the plausible range"),
-    ('[odometer]\nsource = "wheel"\n', "odometer.source must be one of"),
-    ('[odometer]\nsource = "imu"\nscale = 1.0\n', "unknown key odometer.scale"),
-])
+@pytest.mark.parametrize(
+    "section, match",
+    [
+        ('[odometer]\nsource = "csv"\n', "odometer.file is required"),
+        ('[odometer]\nsource = "imu"\nfile = "x.csv"\n', "odometer.file is only used with source = 'csv'"),
+        ('[odometer]\nsource = "imu"\nsigma_m_s = 50.0\n', "odometer.sigma_m_s = 50.0 is outside the plausible range"),
+        ('[odometer]\nsource = "wheel"\n', "odometer.source must be one of"),
+        ('[odometer]\nsource = "imu"\nscale = 1.0\n', "unknown key odometer.scale"),
+    ],
+)
 def test_bad_odometer_settings_named(runs, tmp_path, section, match):
     from jaxnav.experiments.ins_config import ConfigError, load_ins_config
 
@@ -99,6 +112,7 @@ def test_heading_csv_input(runs, tmp_path):
     every reading reaches an IMU sample, the run stays healthy, and the outage drift is no worse than NHC alone
     (a wrong sign or unit would turn the heading updates against the solution)."""
     from _recording import SOW0, WEEK
+
     from jaxnav.cli import main
 
     rec, folder, out = runs
@@ -106,10 +120,11 @@ def test_heading_csv_input(runs, tmp_path):
     k = np.arange(0, np.asarray(tr.t).size, int(round(1.0 / float(tr.dt))))[1:]
     hdg = np.mod(-np.degrees(np.asarray(tr.euler)[k, 2]) + np.random.default_rng(5).normal(0, 0.3, k.size), 360.0)
     csv = folder / "data" / "heading.csv"
-    np.savetxt(csv, np.column_stack([SOW0 + np.asarray(tr.t)[k], hdg, np.full(k.size, 0.3)]), fmt="%.6f",
-               delimiter=",")
-    extra = (f'[heading]\nfile = "heading.csv"\ngps_week = {WEEK}\ncolumns = {{t = 0, heading = 1, sigma = 2}}\n'
-             "rate_hz = 1.0\n")
+    np.savetxt(csv, np.column_stack([SOW0 + np.asarray(tr.t)[k], hdg, np.full(k.size, 0.3)]), fmt="%.6f", delimiter=",")
+    extra = (
+        f'[heading]\nfile = "heading.csv"\ngps_week = {WEEK}\ncolumns = {{t = 0, heading = 1, sigma = 2}}\n'
+        "rate_hz = 1.0\n"
+    )
     cfg = car_config(rec, folder / "data", time_offset=0.15, extra=extra + NHC)
     assert main(["ins", str(cfg), "--out", str(tmp_path / "h"), "-q"]) == 0
     r = json.loads((tmp_path / "h" / "results.json").read_text())

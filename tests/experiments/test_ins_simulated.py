@@ -9,12 +9,10 @@ smoother better than the forward filter inside the outages, every output file re
 scores against the car's true trajectory (``[evaluate] truth``, KF-GINS ``truth.nav``).
 """
 
-import json
 import math
 
 import numpy as np
 import pytest
-
 from _recording import car_config, write_car, write_truth_nav
 
 
@@ -25,10 +23,14 @@ def done(tmp_path_factory):
     folder = tmp_path_factory.mktemp("car")
     rec = write_car(folder / "data")
     write_truth_nav(rec, folder / "data" / "truth.nav", step=5)
-    cfg = car_config(rec, folder / "data", states=21, evaluate_extra='truth = "truth.nav"\ntruth_format = "kf-gins"',
-                     
-                     extra='[constraints]\nzupt = "auto"\nzaru = true\nnhc = true\ndetector_threshold = 30.0\n'
-                           "detector_sigma_a_m_s2 = 0.01\ndetector_sigma_w_deg_s = 0.05\ndetector_min_s = 1.0\n")
+    cfg = car_config(
+        rec,
+        folder / "data",
+        states=21,
+        evaluate_extra='truth = "truth.nav"\ntruth_format = "kf-gins"',
+        extra='[constraints]\nzupt = "auto"\nzaru = true\nnhc = true\ndetector_threshold = 30.0\n'
+        "detector_sigma_a_m_s2 = 0.01\ndetector_sigma_w_deg_s = 0.05\ndetector_min_s = 1.0\n",
+    )
     out = folder / "out"
     argv = ["ins", str(cfg), "--out", str(out), "-q"]
     assert main(argv) == 0
@@ -80,6 +82,7 @@ def test_trajectory_against_truth(done):
     tr = rec.truth
     t_true = np.asarray(tr.t)
     from _recording import SOW0, WEEK
+
     t_rel = t - (WEEK * 604800.0 + SOW0)
     pos_true = np.stack([np.interp(t_rel, t_true, np.asarray(tr.pos)[:, i]) for i in range(3)], -1)
     pos = np.stack([np.radians(a["lat_deg"]), np.radians(a["lon_deg"]), a["h_m"]], -1)
@@ -97,12 +100,22 @@ def test_trajectory_against_truth(done):
 
 def test_output_files_readable(done):
     _, out, r = done
-    from jaxnav.io import read_pos
     import geojson
 
+    from jaxnav.io import read_pos
+
     names = {p.name for p in out.iterdir()}
-    for n in ("trajectory.csv", "trajectory_forward.csv", "track.geojson", "track.kml", "results.json",
-              "track_outages.png", "differences_to_gnss.png", "attitude.png", "biases.png"):
+    for n in (
+        "trajectory.csv",
+        "trajectory_forward.csv",
+        "track.geojson",
+        "track.kml",
+        "results.json",
+        "track_outages.png",
+        "differences_to_gnss.png",
+        "attitude.png",
+        "biases.png",
+    ):
         assert n in names, n
     pos_files = [p for p in out.iterdir() if p.suffix == ".pos"]
     sol = read_pos(pos_files[0])

@@ -8,7 +8,6 @@ error, report a sigma, and fit nothing on the fixes ``[evaluate]`` withholds.
 
 import numpy as np
 import pytest
-
 from _recording import WEEK, car_config, write_car
 
 TAG_ERROR = -0.0437  # not a multiple of the grid step: some trials put a GNSS epoch inside an IMU interval

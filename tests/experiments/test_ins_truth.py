@@ -29,20 +29,31 @@ def folder(tmp_path):
     return tmp_path
 
 
-@pytest.mark.parametrize("evaluate, match", [
-    ('truth = "missing.nav"\n', "missing.nav: no such file (%s: evaluate.truth)"),
-    ('truth = "truth.nav"\ntruth_format = "nav"\n', "%s: evaluate.truth_format must be one of"),
-    ('truth = "truth.nav"\ntruth_format = "csv"\n', "%s: evaluate.truth_columns is required"),
-    ('truth_format = "kf-gins"\n', "%s: evaluate.truth_format is only used with truth = FILE"),
-    ('truth = "truth.nav"\ntruth_columns = {t = 0}\n', "%s: evaluate.truth_columns is only used with truth_format = 'csv'"),
-    ('truth = "truth.nav"\ntruth_format = "csv"\ntruth_columns = {t = 0, speed = 1}\n',
-     "%s: evaluate.truth_columns has unknown key 'speed'"),
-    ('truth = "truth.nav"\ntruth_format = "csv"\ntruth_columns = {t = 0, lat = 1, lon = 2, h = 3}\n'
-     'truth_units = {angle = "grad"}\n', "%s: evaluate.truth_units angle = 'grad'"),
-    ('truth = "truth.nav"\ntruth_delimiter = ";;"\n', "%s: evaluate.truth_delimiter must be one character"),
-    ('outages = false\n', "%s: evaluate.outages = false leaves nothing to evaluate"),
-    ('truth = 3\n', "%s: evaluate.truth must be a string"),
-])
+@pytest.mark.parametrize(
+    "evaluate, match",
+    [
+        ('truth = "missing.nav"\n', "missing.nav: no such file (%s: evaluate.truth)"),
+        ('truth = "truth.nav"\ntruth_format = "nav"\n', "%s: evaluate.truth_format must be one of"),
+        ('truth = "truth.nav"\ntruth_format = "csv"\n', "%s: evaluate.truth_columns is required"),
+        ('truth_format = "kf-gins"\n', "%s: evaluate.truth_format is only used with truth = FILE"),
+        (
+            'truth = "truth.nav"\ntruth_columns = {t = 0}\n',
+            "%s: evaluate.truth_columns is only used with truth_format = 'csv'",
+        ),
+        (
+            'truth = "truth.nav"\ntruth_format = "csv"\ntruth_columns = {t = 0, speed = 1}\n',
+            "%s: evaluate.truth_columns has unknown key 'speed'",
+        ),
+        (
+            'truth = "truth.nav"\ntruth_format = "csv"\ntruth_columns = {t = 0, lat = 1, lon = 2, h = 3}\n'
+            'truth_units = {angle = "grad"}\n',
+            "%s: evaluate.truth_units angle = 'grad'",
+        ),
+        ('truth = "truth.nav"\ntruth_delimiter = ";;"\n', "%s: evaluate.truth_delimiter must be one character"),
+        ("outages = false\n", "%s: evaluate.outages = false leaves nothing to evaluate"),
+        ("truth = 3\n", "%s: evaluate.truth must be a string"),
+    ],
+)
 def test_bad_truth_settings_named(folder, capsys, evaluate, match):
     cfg = folder / "run.toml"
     cfg.write_text(HEAD + evaluate)
@@ -62,8 +73,10 @@ def test_bad_truth_file_named_with_line(folder, capsys):
     assert len(err) == 1 and "truth_bad.nav:7: 10 fields, expected 11" in err[0], err
     # a CSV reference whose column map names a column the header lacks
     (folder / "ref.csv").write_text("t,lat,lon,h\n1,40.1,-105.2,1600\n")
-    cfg.write_text(HEAD + 'truth = "ref.csv"\ntruth_format = "csv"\ntruth_columns = {t = "t", lat = "lat", lon = "lon", '
-                          'h = "height"}\n')
+    cfg.write_text(
+        HEAD + 'truth = "ref.csv"\ntruth_format = "csv"\ntruth_columns = {t = "t", lat = "lat", lon = "lon", '
+        'h = "height"}\n'
+    )
     assert main(["ins", str(cfg), "--out", str(folder / "o"), "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "ref.csv:1: the header has no column 'height'" in err[0], err

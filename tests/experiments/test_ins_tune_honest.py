@@ -5,7 +5,6 @@ lever arm must not change, so the scores after tuning come from data the tuning 
 """
 
 import numpy as np
-
 from _recording import car_config, write_car
 
 

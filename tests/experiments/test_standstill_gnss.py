@@ -8,7 +8,6 @@ must still get them.
 
 import numpy as np
 import pytest
-
 from _recording import car_config, write_car
 
 
@@ -30,9 +29,9 @@ def test_no_zupt_while_cruising_and_zupt_at_stops(car, platform, velocity):
     rec, p = car
     text = p.read_text()
     if platform is not None:
-        text = text.replace('[run]\n', f'[run]\nplatform = "{platform}"\n')
+        text = text.replace("[run]\n", f'[run]\nplatform = "{platform}"\n')
     if not velocity:
-        text = text.replace('[gnss]\n', '[gnss]\nuse_velocity = false\n')
+        text = text.replace("[gnss]\n", "[gnss]\nuse_velocity = false\n")
     p = p.with_name(f"car_{platform}_{velocity}.toml")
     p.write_text(text)
     prep = prepare(load_ins_config(p), progress=lambda *a: None)
@@ -56,9 +55,11 @@ def test_config_keys(car, tmp_path):
     cfg = load_ins_config(p)
     assert cfg.constraints.platform == "handheld" and cfg.constraints.detector_threshold == "auto"
     base = p.read_text()
-    for old, new, key in (("[run]\n", '[run]\nplatform = "boat"\n', "platform"),
-                          ('zupt = "auto"\n', 'zupt = "auto"\ndetector_threshold = "low"\n', "detector_threshold"),
-                          ('zupt = "auto"\n', 'zupt = "auto"\nzupt_gnss_k = -1.0\n', "zupt_gnss_k")):
+    for old, new, key in (
+        ("[run]\n", '[run]\nplatform = "boat"\n', "platform"),
+        ('zupt = "auto"\n', 'zupt = "auto"\ndetector_threshold = "low"\n', "detector_threshold"),
+        ('zupt = "auto"\n', 'zupt = "auto"\nzupt_gnss_k = -1.0\n', "zupt_gnss_k"),
+    ):
         q = tmp_path / "bad.toml"
         q.write_text(base.replace(old, new))
         with pytest.raises(ConfigError, match=key):
@@ -75,15 +76,27 @@ def test_slow_rover_default_preset(tmp_path):
     from jaxnav.experiments.ins_run import prepare
 
     S = sim.Segment
-    spec = sim.TrajectorySpec(lat=math.radians(40.1), lon=math.radians(-105.2), h=1600.0, heading=0.5, speed=0.0,
-                              segments=(S("rest", duration=20.0), S("accelerate", duration=3.0, dspeed=0.3),
-                                        S("cruise", hold=20.0), S("accelerate", duration=3.0, dspeed=-0.3),
-                                        S("rest", duration=10.0), S("accelerate", duration=3.0, dspeed=0.3),
-                                        S("turn", duration=10.0, dheading=1.0), S("cruise", hold=10.0)))
+    spec = sim.TrajectorySpec(
+        lat=math.radians(40.1),
+        lon=math.radians(-105.2),
+        h=1600.0,
+        heading=0.5,
+        speed=0.0,
+        segments=(
+            S("rest", duration=20.0),
+            S("accelerate", duration=3.0, dspeed=0.3),
+            S("cruise", hold=20.0),
+            S("accelerate", duration=3.0, dspeed=-0.3),
+            S("rest", duration=10.0),
+            S("accelerate", duration=3.0, dspeed=0.3),
+            S("turn", duration=10.0, dheading=1.0),
+            S("cruise", hold=10.0),
+        ),
+    )
     rec = write_car(tmp_path, vibration=0.0, spec=spec)
     p = car_config(rec, tmp_path, time_offset=0.15)
     text = p.read_text()
-    text = text[:text.index("[evaluate]")].replace("min_speed_m_s = 3.0", "min_speed_m_s = 0.2")
+    text = text[: text.index("[evaluate]")].replace("min_speed_m_s = 3.0", "min_speed_m_s = 0.2")
     p.write_text(text + '[constraints]\nzupt = "auto"\n')
     prep = prepare(load_ins_config(p), progress=lambda *a: None)
     t = prep.t - prep.t[0]

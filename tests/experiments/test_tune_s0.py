@@ -7,7 +7,6 @@ first 300 s of the S0 timeline (cruise, acceleration and the first unsensed velo
 
 from __future__ import annotations
 
-import json
 import pathlib
 
 import jax
@@ -37,9 +36,15 @@ def _losses(setup, theta, remat=False):
     b, rho, q, r = theta
     key = jax.random.PRNGKey(4)
     # both filters in one program (jf.switch): index 0 attenuated, 1 fading
-    m = jax.vmap(lambda i: s0_metrics(setup, {"b": b, "rho": rho, "tau": 0.05, "q_scale": q, "r_scale": r,
-                                              "filter_index": i}, key, filter=("attenuated", "fading"),
-                                      remat=remat))(jnp.arange(2))
+    m = jax.vmap(
+        lambda i: s0_metrics(
+            setup,
+            {"b": b, "rho": rho, "tau": 0.05, "q_scale": q, "r_scale": r, "filter_index": i},
+            key,
+            filter=("attenuated", "fading"),
+            remat=remat,
+        )
+    )(jnp.arange(2))
     return jnp.stack([m["loss"][0], m["loss"][1], m["nll"][0]])
 
 
@@ -73,8 +78,13 @@ def test_reverse_mode_with_checkpointing_equals_forward_mode(setup, derivatives)
     # only the attenuated run: d(loss 0)/db involves nothing else, and the fading run would add
     # ~10 s of compilation (measured) for a zero contribution
     key = jax.random.PRNGKey(4)
-    loss = lambda b: s0_metrics(setup, {"b": b, "q_scale": THETA[2], "r_scale": THETA[3]}, key,  # noqa: E731
-                                filter="attenuated", remat=True)["loss"]
+    loss = lambda b: s0_metrics(
+        setup,
+        {"b": b, "q_scale": THETA[2], "r_scale": THETA[3]},
+        key,  # noqa: E731
+        filter="attenuated",
+        remat=True,
+    )["loss"]
     g_rev = float(jax.jit(jax.grad(loss))(THETA[0]))
     assert g_rev == pytest.approx(float(derivatives[1][0, 0]), rel=1e-9)
 

@@ -14,9 +14,9 @@ import pathlib
 
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav.experiments import walk as rd
-from _paths import DATA_ROOT
 
 DATA = DATA_ROOT / "rtklibexplorer-gnss-imu" / "walk_0827"
 
@@ -97,19 +97,30 @@ def test_the_guides_state_the_numbers_of_this_run(run):
     from _paths import ROOT
 
     sc, _ = run
-    got = dict(fwd=sc.fwd_rms_all, fwd_max=float(np.nanmax(sc.fwd_max)), sm=sc.sm_rms_all,
-               sm_max=float(np.nanmax(sc.sm_max)))
+    got = dict(
+        fwd=sc.fwd_rms_all, fwd_max=float(np.nanmax(sc.fwd_max)), sm=sc.sm_rms_all, sm_max=float(np.nanmax(sc.sm_max))
+    )
     guide = (ROOT / "docs/guide/ins.md").read_text(encoding="utf-8")
-    m = re.search(r"walk_0827 \(`jaxnav ins walk_0827`.*?horizontal RMS in the outages forward ([\d.]+) m \(max "
-                  r"([\d.]+) m\), smoothed ([\d.]+) m \(max ([\d.]+) m\)", guide, re.S)
-    row = re.search(r"\| shipped config \(15 states\) \| [\d.]+ \| ([\d.]+) m \(([\d.]+) m\) \| ([\d.]+) m "
-                    r"\(([\d.]+) m\) \|", guide)
-    readme = re.search(r"horizontal RMS of ([\d.]+) m forward and ([\d.]+) m smoothed",
-                       (ROOT / "README.md").read_text(encoding="utf-8"))
+    m = re.search(
+        r"walk_0827 \(`jaxnav ins walk_0827`.*?horizontal RMS in the outages forward ([\d.]+) m \(max "
+        r"([\d.]+) m\), smoothed ([\d.]+) m \(max ([\d.]+) m\)",
+        guide,
+        re.S,
+    )
+    row = re.search(
+        r"\| shipped config \(15 states\) \| [\d.]+ \| ([\d.]+) m \(([\d.]+) m\) \| ([\d.]+) m "
+        r"\(([\d.]+) m\) \|",
+        guide,
+    )
+    readme = re.search(
+        r"horizontal RMS of ([\d.]+) m forward and ([\d.]+) m smoothed",
+        (ROOT / "README.md").read_text(encoding="utf-8"),
+    )
     assert m and row and readme
     for stated in (m.groups(), row.groups()):
-        assert [float(v) for v in stated] == pytest.approx([got["fwd"], got["fwd_max"], got["sm"], got["sm_max"]],
-                                                           abs=0.0051), (stated, got)
+        assert [float(v) for v in stated] == pytest.approx(
+            [got["fwd"], got["fwd_max"], got["sm"], got["sm_max"]], abs=0.0051
+        ), (stated, got)
     assert [float(v) for v in readme.groups()] == pytest.approx([got["fwd"], got["sm"]], abs=0.0051)
 
 

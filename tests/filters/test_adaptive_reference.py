@@ -9,9 +9,9 @@ scenarios; the observed differences are ~1e-13 relative, see ``_agree``).
 
 import numpy as np
 import pytest
+from reference import paper_filters as ref
 
 from jaxnav import filters as jf
-from reference import paper_filters as ref
 
 TOL = 1e-10
 T_RANDOM = 200
@@ -31,8 +31,12 @@ def _agree(got, want, name="", tol=TOL):
     return err
 
 
-def _agree_filter(res, rr, tag, fields=("means", "covs", "pred_means", "pred_covs", "innovations",
-                                        "innov_covs", "factors", "nis", "logliks")):
+def _agree_filter(
+    res,
+    rr,
+    tag,
+    fields=("means", "covs", "pred_means", "pred_covs", "innovations", "innov_covs", "factors", "nis", "logliks"),
+):
     for f in fields:
         _agree(getattr(res, f), getattr(rr, f), f"{tag} {f}")
 
@@ -99,7 +103,7 @@ def jump_case():
     T = T_CV
     model = _np_model(jf.constant_velocity(1.0, sigma=0.5, accel_var=1e-3))
     vel = np.tile([2.0, -1.0, 0.5], (T, 1))
-    vel[T // 2:] += [3.0, -2.0, 1.5]
+    vel[T // 2 :] += [3.0, -2.0, 1.5]
     vel = vel + np.cumsum(0.03 * rng.standard_normal((T, 3)), axis=0)
     pos = np.cumsum(vel, axis=0)
     zs = pos + 0.5 * rng.standard_normal((T, 3))
@@ -159,7 +163,7 @@ def test_attenuated_factor_sequence(random_cases, b):
     res = jf.kalman_filter(model, x0, P0, zs, inflation=jf.attenuated(b))
     S = np.asarray(res.factors)
     k = np.arange(1, T_RANDOM + 1)
-    closed = (1.0 - b ** k) / (1.0 - b)  # eq. (11)
+    closed = (1.0 - b**k) / (1.0 - b)  # eq. (11)
     _agree(S, closed, f"S_k closed form b={b}", tol=1e-14)
     _agree(S, ref.attenuated_factors(b, T_RANDOM), f"S_k reference b={b}", tol=1e-14)
     assert S[0] == 1.0  # S_1 = 1: the first prediction has k = 1
@@ -219,7 +223,7 @@ def test_fading_matches_reference(jump_case, cfg, absolute):
     lam = np.asarray(res.factors)
     # the scenario exercises the rule: lambda_k > 1 often, and right after the jump
     assert np.mean(lam > 1.0) > 0.3, np.mean(lam > 1.0)
-    assert np.sum(lam[T // 2:T // 2 + 10] > 1.0) >= 5
+    assert np.sum(lam[T // 2 : T // 2 + 10] > 1.0) >= 5
     assert lam.max() > 4.0
 
 
@@ -369,16 +373,22 @@ def test_nan_rows_skip_update(jump_case, kind):
         "classic": (dict(), lambda: ref.classic_kf(model, x0, P0, z)),
         "attenuated": (dict(inflation=jf.attenuated(0.254)), lambda: ref.attenuated_kf(model, x0, P0, z, 0.254)),
         "fading": (dict(inflation=jf.fading(window=5)), lambda: ref.fading_kf(model, x0, P0, z, window=5)),
-        "vc": (dict(estimator=jf.variance_compensation(**VC_CONFIGS[3])),
-               lambda: ref.variance_compensation_kf(model, x0, P0, z, **VC_CONFIGS[3])),
+        "vc": (
+            dict(estimator=jf.variance_compensation(**VC_CONFIGS[3])),
+            lambda: ref.variance_compensation_kf(model, x0, P0, z, **VC_CONFIGS[3]),
+        ),
         "sage_husa": (dict(estimator=jf.sage_husa(0.95)), lambda: ref.sage_husa_kf(model, x0, P0, z, b=0.95)),
     }
     kw, reference = runs[kind]
     res = jf.kalman_filter(model, x0, P0, z, **kw)
     rr = reference()
     rows = list(GAP_ROWS)
-    _agree_filter(res, rr, f"NaN rows {kind}", fields=("means", "covs", "pred_means", "pred_covs",
-                                                        "innovations", "factors", "nis", "logliks"))
+    _agree_filter(
+        res,
+        rr,
+        f"NaN rows {kind}",
+        fields=("means", "covs", "pred_means", "pred_covs", "innovations", "factors", "nis", "logliks"),
+    )
     seen = np.setdiff1d(np.arange(T), rows)  # jaxnav documents S = I at a skipped epoch
     _agree(np.asarray(res.innov_covs)[seen], rr.innov_covs[seen], f"NaN rows {kind} innov_covs")
     np.testing.assert_array_equal(np.asarray(res.innovations)[rows], 0.0)

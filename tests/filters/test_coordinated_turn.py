@@ -25,8 +25,9 @@ def test_ekf_follows_a_circle():
     truth = np.stack([v / om * np.sin(th), v / om * (1 - np.cos(th))], -1)
     zs = truth + np.random.default_rng(0).normal(0.0, 0.3, truth.shape)
     m = jf.coordinated_turn(1.0, 0.09 * np.eye(2), accel_std=0.1, turn_std=0.01, pos_std=0.05)
-    r = jf.extended_kalman_filter(m, jnp.array([0.0, 0.0, v, 0.0, 0.0]), jnp.diag(jnp.array([1.0, 1.0, 1.0, 0.1, 0.01])),
-                                  jnp.asarray(zs))
+    r = jf.extended_kalman_filter(
+        m, jnp.array([0.0, 0.0, v, 0.0, 0.0]), jnp.diag(jnp.array([1.0, 1.0, 1.0, 0.1, 0.01])), jnp.asarray(zs)
+    )
     assert abs(float(r.means[-1, 4]) - om) < 0.02
     rms = lambda p: np.sqrt(np.mean(np.sum((p[20:, :2] - truth[20:]) ** 2, -1)))  # noqa: E731
     assert rms(np.asarray(r.means)) < 0.85 * rms(zs)  # better than the fixes it filters

@@ -90,8 +90,14 @@ def test_sage_husa_learns_a_larger_noise_without_flag():
     """True noise twice the model's (inside the default range): no flag, R estimated near (6 mm)^2."""
     sc = simulate_cv_scenario(jax.random.PRNGKey(1), T=400, sigma=2 * SIGMA, accel_std=1e-4, change_accel=(0, 0, 0))
     model = jf.constant_velocity(1.0, sigma=SIGMA, accel_var=1e-8)
-    r = jf.kalman_filter(model, jnp.concatenate([sc.zs[0], jnp.zeros(3)]), jnp.eye(6) * 1e-4, sc.zs,
-                         estimator=jf.sage_husa(0.98), save=("noise",))
+    r = jf.kalman_filter(
+        model,
+        jnp.concatenate([sc.zs[0], jnp.zeros(3)]),
+        jnp.eye(6) * 1e-4,
+        sc.zs,
+        estimator=jf.sage_husa(0.98),
+        save=("noise",),
+    )
     assert int(r.status) == 0
     var = np.asarray(jnp.diagonal(r.noise.R, axis1=1, axis2=2))[200:]
     np.testing.assert_allclose(var.mean(axis=0), (2 * SIGMA) ** 2, rtol=0.3)
@@ -136,28 +142,31 @@ def test_fading_lambda_is_capped_and_flagged(burst):
 # ------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("make, match", [
-    (lambda: jf.attenuated(1.5), r"b must be in \[0, 1\)"),
-    (lambda: jf.attenuated(-0.1), r"b must be in \[0, 1\)"),
-    (lambda: jf.attenuated(1.0), r"b must be in \[0, 1\)"),
-    (lambda: jf.attenuated(float("nan")), r"b must be in \[0, 1\)"),
-    (lambda: jf.constant(-1), r"S must be in \[1, inf\)"),
-    (lambda: jf.constant(0.5), r"S must be in \[1, inf\)"),
-    (lambda: jf.constant(np.inf), r"S must be in \[1, inf\)"),
-    (lambda: jf.fading(rho=-1), r"rho must be in \(0, inf\)"),
-    (lambda: jf.fading(rho=0.0), r"rho must be in \(0, inf\)"),
-    (lambda: jf.fading(smooth=0.0), r"smooth must be in \(0, inf\)"),
-    (lambda: jf.fading(max_factor=0.5), r"max_factor must be in \[1, inf\)"),
-    (lambda: jf.sage_husa(0), r"b must be in \(0, 1\)"),
-    (lambda: jf.sage_husa(1.0), r"b must be in \(0, 1\)"),
-    (lambda: jf.sage_husa(0.9, r_max=0.5), r"r_max must be in \[1, inf\)"),
-    (lambda: jf.sage_husa(0.9, r_min=0.0), r"r_min must be in \(0, 1\]"),
-    (lambda: jf.sage_husa(0.9, eig_floor=-1.0), r"eig_floor must be in \[0, inf\)"),
-    (lambda: jf.variance_compensation(10, floor_rel=-0.1), r"floor_rel must be in \[0, inf\)"),
-    (lambda: jf.variance_compensation(10, ridge=-1.0), r"ridge must be in \[0, inf\)"),
-    (lambda: jf.igg3(-1.0, 2.0), r"k0 must be in \(0, inf\)"),
-    (lambda: jf.yang_factor(0.0), r"c0 must be in \(0, inf\)"),
-])
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda: jf.attenuated(1.5), r"b must be in \[0, 1\)"),
+        (lambda: jf.attenuated(-0.1), r"b must be in \[0, 1\)"),
+        (lambda: jf.attenuated(1.0), r"b must be in \[0, 1\)"),
+        (lambda: jf.attenuated(float("nan")), r"b must be in \[0, 1\)"),
+        (lambda: jf.constant(-1), r"S must be in \[1, inf\)"),
+        (lambda: jf.constant(0.5), r"S must be in \[1, inf\)"),
+        (lambda: jf.constant(np.inf), r"S must be in \[1, inf\)"),
+        (lambda: jf.fading(rho=-1), r"rho must be in \(0, inf\)"),
+        (lambda: jf.fading(rho=0.0), r"rho must be in \(0, inf\)"),
+        (lambda: jf.fading(smooth=0.0), r"smooth must be in \(0, inf\)"),
+        (lambda: jf.fading(max_factor=0.5), r"max_factor must be in \[1, inf\)"),
+        (lambda: jf.sage_husa(0), r"b must be in \(0, 1\)"),
+        (lambda: jf.sage_husa(1.0), r"b must be in \(0, 1\)"),
+        (lambda: jf.sage_husa(0.9, r_max=0.5), r"r_max must be in \[1, inf\)"),
+        (lambda: jf.sage_husa(0.9, r_min=0.0), r"r_min must be in \(0, 1\]"),
+        (lambda: jf.sage_husa(0.9, eig_floor=-1.0), r"eig_floor must be in \[0, inf\)"),
+        (lambda: jf.variance_compensation(10, floor_rel=-0.1), r"floor_rel must be in \[0, inf\)"),
+        (lambda: jf.variance_compensation(10, ridge=-1.0), r"ridge must be in \[0, inf\)"),
+        (lambda: jf.igg3(-1.0, 2.0), r"k0 must be in \(0, inf\)"),
+        (lambda: jf.yang_factor(0.0), r"c0 must be in \(0, inf\)"),
+    ],
+)
 def test_constructors_reject_out_of_range(make, match):
     with pytest.raises(ValueError, match=match):
         make()
@@ -237,8 +246,9 @@ def _float32_rel_var_error(model, x0, P0, zs, *, status32=0, **plug):
     out = []
     for dt in (jnp.float64, jnp.float32):
         m = jf.LinearGaussian(*[None if a is None else jnp.asarray(a, dt) for a in model])
-        r = jf.kalman_filter(m, jnp.asarray(x0, dt), jnp.asarray(P0, dt), jnp.asarray(zs, dt), allow_float32=True,
-                             save=("covs",), **plug)
+        r = jf.kalman_filter(
+            m, jnp.asarray(x0, dt), jnp.asarray(P0, dt), jnp.asarray(zs, dt), allow_float32=True, save=("covs",), **plug
+        )
         assert int(r.status) == (status32 if dt == jnp.float32 else 0), (dt, _status.status_words(r.status))
         out.append(np.asarray(jnp.diagonal(r.covs, axis1=1, axis2=2), float))
     return float(np.max(np.abs(out[1] / out[0] - 1.0)))

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 import jaxnav
-
 from jaxnav import _status
 from jaxnav import filters as jf
 from jaxnav._numerics import mm
@@ -23,14 +22,31 @@ from jaxnav._numerics import mm
 pytestmark = pytest.mark.timeout(120)
 
 T = 120
-FIELDS = ("means", "covs", "pred_means", "pred_covs", "innovations", "innov_covs", "nis", "logliks",
-          "factors", "valid", "loglik", "n_nonfinite", "n_skipped", "status", "x_final", "P_final")
+FIELDS = (
+    "means",
+    "covs",
+    "pred_means",
+    "pred_covs",
+    "innovations",
+    "innov_covs",
+    "nis",
+    "logliks",
+    "factors",
+    "valid",
+    "loglik",
+    "n_nonfinite",
+    "n_skipped",
+    "status",
+    "x_final",
+    "P_final",
+)
 
 
 def _assert_same(a, b, rtol=1e-10, atol=1e-12):
     for name in FIELDS:
-        np.testing.assert_allclose(np.asarray(getattr(a, name), float), np.asarray(getattr(b, name), float),
-                                   rtol=rtol, atol=atol, err_msg=name)
+        np.testing.assert_allclose(
+            np.asarray(getattr(a, name), float), np.asarray(getattr(b, name), float), rtol=rtol, atol=atol, err_msg=name
+        )
 
 
 @pytest.fixture(scope="module")
@@ -40,8 +56,13 @@ def problem():
     F = np.stack([np.eye(n) + 0.1 * rng.standard_normal((n, n)) for _ in range(T)])
     G = rng.standard_normal((T, n, p))
     H = rng.standard_normal((m, n))
-    model = jf.LinearGaussian(F=jnp.asarray(F), H=jnp.asarray(H), Q=0.01 * jnp.eye(p),
-                              R=jnp.asarray([[0.2, 0.05], [0.05, 0.1]]), G=jnp.asarray(G))
+    model = jf.LinearGaussian(
+        F=jnp.asarray(F),
+        H=jnp.asarray(H),
+        Q=0.01 * jnp.eye(p),
+        R=jnp.asarray([[0.2, 0.05], [0.05, 0.1]]),
+        G=jnp.asarray(G),
+    )
     x0 = jnp.asarray(rng.standard_normal(n))
     P0 = jnp.eye(n)
     zs = np.array(rng.standard_normal((T, m)))
@@ -67,8 +88,12 @@ def test_textbook_covariance_update_equals_joseph(problem):
     """joseph=False (P - K H P) equals the Joseph form for the optimal gain, in the filter, its vmap with a
     covariance per sequence, and the batch entry point; PSD is kept on this well-conditioned model."""
     model, x0, P0, zs, mask = problem
-    _assert_same(jf.kalman_filter(model, x0, P0, zs, mask=mask, joseph=False),
-                 jf.kalman_filter(model, x0, P0, zs, mask=mask), rtol=1e-9, atol=1e-11)
+    _assert_same(
+        jf.kalman_filter(model, x0, P0, zs, mask=mask, joseph=False),
+        jf.kalman_filter(model, x0, P0, zs, mask=mask),
+        rtol=1e-9,
+        atol=1e-11,
+    )
     P0s = jnp.stack([P0, 2.0 * P0])
     run = lambda P, j: jf.kalman_filter(model, x0, P, zs, mask=mask, joseph=j)  # noqa: E731
     got = jax.jit(jax.vmap(lambda P: run(P, False)))(P0s)
@@ -77,8 +102,9 @@ def test_textbook_covariance_update_equals_joseph(problem):
         assert np.all(np.linalg.eigvalsh(np.asarray(got.covs[i])) > 0)
     clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
     b = jf.kalman_filter_batch(model, x0, P0, jnp.stack([clean, -clean]), mask=mask, joseph=False)
-    np.testing.assert_allclose(np.asarray(b.covs), np.asarray(jf.kalman_filter(model, x0, P0, clean, mask=mask).covs),
-                               rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(
+        np.asarray(b.covs), np.asarray(jf.kalman_filter(model, x0, P0, clean, mask=mask).covs), rtol=1e-9, atol=1e-11
+    )
 
 
 def test_unmasked_nan_is_flagged(problem):
@@ -97,14 +123,16 @@ def test_trusted_data_under_vmap_share_one_covariance_recursion(problem):
     clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
     batch = jnp.stack([clean, 0.5 * clean, clean + 1.0])
     run = lambda z: jf.kalman_filter(model, x0, P0, z, mask=mask, check_finite=False)  # noqa: E731
-    axes = jf.KalmanResult(*[0] * len(jf.KalmanResult._fields))._replace(covs=None, pred_covs=None, innov_covs=None,
-                                                                        P_final=None)
+    axes = jf.KalmanResult(*[0] * len(jf.KalmanResult._fields))._replace(
+        covs=None, pred_covs=None, innov_covs=None, P_final=None
+    )
     got = jax.jit(jax.vmap(run, out_axes=axes))(batch)
     for i in range(3):
         ref = run(batch[i])
         for name in ("means", "pred_means", "innovations", "nis", "logliks", "loglik", "x_final"):
-            np.testing.assert_allclose(np.asarray(getattr(got, name)[i]), np.asarray(getattr(ref, name)), rtol=1e-11,
-                                       atol=1e-12, err_msg=name)
+            np.testing.assert_allclose(
+                np.asarray(getattr(got, name)[i]), np.asarray(getattr(ref, name)), rtol=1e-11, atol=1e-12, err_msg=name
+            )
         np.testing.assert_allclose(np.asarray(got.covs), np.asarray(ref.covs), rtol=1e-11, atol=1e-12)
     with pytest.raises(ValueError):  # with NaN masking (the default) each sequence has its own covariances
         jax.vmap(lambda z: jf.kalman_filter(model, x0, P0, z, mask=mask), out_axes=axes)(batch)
@@ -152,15 +180,21 @@ def test_plain_vmap_equals_the_loop(problem):
     clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
     batch = jnp.stack([clean, 0.5 * clean]).at[1].set(zs)
     masks = jnp.stack([mask, mask.at[10:20].set(False)])
-    per_mask = jax.jit(jax.vmap(lambda z, mk: jf.kalman_filter(model, x0, P0, z, mask=mk, inflation=jf.attenuated(0.3))))
+    per_mask = jax.jit(
+        jax.vmap(lambda z, mk: jf.kalman_filter(model, x0, P0, z, mask=mk, inflation=jf.attenuated(0.3)))
+    )
     got = per_mask(batch, masks)
     for i in range(2):
-        _assert_same(jax.tree_util.tree_map(lambda a: a[i], got),
-                     jf.kalman_filter(model, x0, P0, batch[i], mask=masks[i], inflation=jf.attenuated(0.3)),
-                     rtol=1e-9, atol=1e-10)  # rounding: XLA fuses the batched products differently
+        _assert_same(
+            jax.tree_util.tree_map(lambda a: a[i], got),
+            jf.kalman_filter(model, x0, P0, batch[i], mask=masks[i], inflation=jf.attenuated(0.3)),
+            rtol=1e-9,
+            atol=1e-10,
+        )  # rounding: XLA fuses the batched products differently
     fading = lambda z: jf.kalman_filter(model, x0, P0, z, inflation=jf.fading(10)).means  # noqa: E731
-    np.testing.assert_allclose(np.asarray(jax.vmap(fading)(batch)[1]), np.asarray(fading(batch[1])),
-                               rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(
+        np.asarray(jax.vmap(fading)(batch)[1]), np.asarray(fading(batch[1])), rtol=1e-9, atol=1e-10
+    )
 
 
 def _batch_problem(problem, T_):
@@ -190,8 +224,9 @@ def test_kalman_filter_batch_equals_per_sequence(problem, T_, block):
     for i in range(3):
         for name in FIELDS:
             a = getattr(got, name) if name in shared else getattr(got, name)[i]
-            np.testing.assert_allclose(np.asarray(a, float), np.asarray(getattr(refs[i], name), float), rtol=1e-11,
-                                       atol=1e-12, err_msg=name)
+            np.testing.assert_allclose(
+                np.asarray(a, float), np.asarray(getattr(refs[i], name), float), rtol=1e-11, atol=1e-12, err_msg=name
+            )
     assert int(refs[3].status) & _status.NONFINITE_STATE
     assert [bool(int(s) & _status.NONFINITE_STATE) for s in got.status] == [False, False, False, True]
     assert int(got.status[3]) == int(refs[3].status) and [int(c) for c in got.n_nonfinite] == [1, 1, 1, 1]
@@ -213,8 +248,13 @@ def test_kalman_filter_batch_equals_per_sequence(problem, T_, block):
             return -jf.kalman_filter(m, x0, P0, z, mask=mk, save=()).loglik
 
         g_ref = jax.vmap(jax.grad(nll), in_axes=(None, 0))(0.2, batch[:3]).sum()
-        g = jax.grad(lambda t: -jf.kalman_filter_batch(mod._replace(R=mod.R * jnp.exp(t)), x0, P0, batch[:3],
-                                                       mask=mk, save=(), block=8).loglik.sum())(0.2)
+        g = jax.grad(
+            lambda t: (
+                -jf.kalman_filter_batch(
+                    mod._replace(R=mod.R * jnp.exp(t)), x0, P0, batch[:3], mask=mk, save=(), block=8
+                ).loglik.sum()
+            )
+        )(0.2)
         np.testing.assert_allclose(float(g), float(g_ref), rtol=1e-9)
 
 
@@ -241,6 +281,7 @@ def test_kalman_filter_batch_widens_the_mask_for_nan_of_one_sequence(problem):
 def test_blocking_is_kept_for_batches_whose_maps_stay_small():
     """The block maps grow with T, not B: a long series with few sequences keeps the per-sequence recursion."""
     from jaxnav.filters._batch import worth_blocking
+
     assert worth_blocking(256, 3600, 6, 3, ("means",)) and worth_blocking(8, 3600, 6, 3, ())
     assert worth_blocking(256, 86_400, 6, 3, ("means",))  # maps ~0.6 GB < the 1.4 GB of outputs
     assert not worth_blocking(2, 86_400, 6, 3, ("means",))  # ~0.6 GB of maps for 11 MB of means
@@ -281,8 +322,12 @@ def test_switch_equals_each_rule_in_one_program(problem):
     parts = [None, jf.attenuated(0.3), jf.fading(window=5)]
     alone = [jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=r) for r in parts]
     for i in range(3):
-        _assert_same(jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.switch(i, parts)), alone[i],
-                     rtol=1e-13, atol=1e-13)
+        _assert_same(
+            jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.switch(i, parts)),
+            alone[i],
+            rtol=1e-13,
+            atol=1e-13,
+        )
     run = lambda i: jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.switch(i, parts), save=("means",))  # noqa: E731
     batched = jax.jit(jax.vmap(run))(jnp.arange(3.0))
     for i in range(3):
@@ -293,8 +338,9 @@ def test_switch_equals_each_rule_in_one_program(problem):
         return jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=r, save=()).loglik
 
     g = jax.grad(ll)(0.3, 0)
-    g_alone = jax.grad(lambda b: jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.attenuated(b),
-                                                  save=()).loglik)(0.3)
+    g_alone = jax.grad(
+        lambda b: jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.attenuated(b), save=()).loglik
+    )(0.3)
     np.testing.assert_allclose(float(g), float(g_alone), rtol=1e-12)
     assert float(jax.grad(ll)(0.3, 1)) == 0.0  # the fading filter does not depend on b
     with pytest.raises(ValueError, match="different states"):

@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
+from _models import random_stable_model, simulate
 from filterpy.kalman import KalmanFilter
 
 from jaxnav import filters as jf
-from _models import random_stable_model, simulate
 
 SHAPES = [(2, 1), (4, 2), (6, 3), (9, 6), (5, 4)]
 CASES = [(n, m, seed, tv) for (n, m) in SHAPES for seed in range(2) for tv in (False, True)]
@@ -32,8 +32,7 @@ def _filterpy_run(F, H, Q, R, x0, P0, zs, alpha=1.0):
         ll += kf.log_likelihood
     means, covs = np.array(means), np.array(covs)
     xs_s, Ps_s, _, _ = kf.rts_smoother(means, covs, Fs=Fs, Qs=Qs)
-    return dict(means=means, covs=covs, pred_means=np.array(mp), pred_covs=np.array(Pp), loglik=ll,
-                sm=xs_s, sP=Ps_s)
+    return dict(means=means, covs=covs, pred_means=np.array(mp), pred_covs=np.array(Pp), loglik=ll, sm=xs_s, sP=Ps_s)
 
 
 @pytest.fixture(scope="module", params=CASES, ids=lambda c: f"n{c[0]}m{c[1]}s{c[2]}{'tv' if c[3] else ''}")
@@ -85,15 +84,15 @@ def _dense_posterior(F, H, Q, R, x0, P0, zs):
     Phi = np.eye(n)
     for t in range(T):
         Phi = F @ Phi
-        A[t * n:(t + 1) * n, :n] = Phi
+        A[t * n : (t + 1) * n, :n] = Phi
         Ps = np.eye(n)
         for s in range(t, -1, -1):
-            A[t * n:(t + 1) * n, (s + 1) * n:(s + 2) * n] = Ps
+            A[t * n : (t + 1) * n, (s + 1) * n : (s + 2) * n] = Ps
             Ps = Ps @ F
     C0 = np.zeros(((T + 1) * n, (T + 1) * n))
     C0[:n, :n] = P0
     for s in range(T):
-        C0[(s + 1) * n:(s + 2) * n, (s + 1) * n:(s + 2) * n] = Q
+        C0[(s + 1) * n : (s + 2) * n, (s + 1) * n : (s + 2) * n] = Q
     mu = A[:, :n] @ x0
     Sig = A @ C0 @ A.T
     Hb = np.kron(np.eye(T), H)
@@ -102,7 +101,7 @@ def _dense_posterior(F, H, Q, R, x0, P0, zs):
     K = np.linalg.solve(S, Hb @ Sig).T
     mean = mu + K @ (zs.ravel() - Hb @ mu)
     cov = Sig - K @ Hb @ Sig
-    return mean.reshape(T, n), np.array([cov[t * n:(t + 1) * n, t * n:(t + 1) * n] for t in range(T)])
+    return mean.reshape(T, n), np.array([cov[t * n : (t + 1) * n, t * n : (t + 1) * n] for t in range(T)])
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -4,6 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _models import random_spd, random_stable_model
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
@@ -12,7 +13,6 @@ import jaxnav
 from jaxnav import _status
 from jaxnav import filters as jf
 from jaxnav.sim import simulate_cv_scenario, simulate_linear
-from _models import random_spd, random_stable_model
 
 N, M, T = 4, 2, 40
 
@@ -41,8 +41,13 @@ def _psd(A, rel=1e-10, psd=True):
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), kind=st.sampled_from(sorted(KINDS)),
-       log_q=st.floats(-10, 1), log_r=st.floats(-8, 2), nan_frac=st.sampled_from([0.0, 0.2]))
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    kind=st.sampled_from(sorted(KINDS)),
+    log_q=st.floats(-10, 1),
+    log_r=st.floats(-8, 2),
+    nan_frac=st.sampled_from([0.0, 0.2]),
+)
 # found by hypothesis: the printed |tr N / tr M| (S0 eq. (14)) with variance compensation
 # estimating a huge Q drives lambda_k to 1e10, P to 1e15 and S indefinite; the filter must say so
 @example(seed=6322, kind="fading+vc", log_q=0.0, log_r=0.0, nan_frac=0.2)
@@ -54,8 +59,13 @@ def test_covariances_stay_symmetric_psd(seed, kind, log_q, log_r, nan_frac):
     """P and P_pred stay symmetric, and PSD unless the filter raised an error flag (nothing silent)."""
     rng = np.random.default_rng(seed)
     F, H, Q, R = random_stable_model(rng, N, M, radius=1.0)
-    model = jf.LinearGaussian(F, H, Q * 10**log_q, R * 10**log_r,
-                              G=rng.normal(size=(N, 2)) if kind.endswith("vc") or kind == "variance_compensation" else None)
+    model = jf.LinearGaussian(
+        F,
+        H,
+        Q * 10**log_q,
+        R * 10**log_r,
+        G=rng.normal(size=(N, 2)) if kind.endswith("vc") or kind == "variance_compensation" else None,
+    )
     if model.G is not None:
         model = model._replace(Q=random_spd(rng, 2, 10**log_q))
     zs = rng.normal(size=(T, M)) * 10 ** (log_r / 2) + rng.normal(size=(T, M)).cumsum(0) * 0.1
@@ -119,20 +129,26 @@ def test_fading_lambda_rises_during_change_of_dynamics_and_returns_to_one():
     model = jf.constant_velocity(1.0, sigma=0.003, accel_var=(1e-5) ** 2)
 
     def one(key):
-        sc = simulate_cv_scenario(key, T=Tn, sigma=0.003, accel_std=1e-5, change_start=0.4,
-                                  change_len=0.1, change_accel=(2e-4, -1.5e-4, -4e-4))
+        sc = simulate_cv_scenario(
+            key,
+            T=Tn,
+            sigma=0.003,
+            accel_std=1e-5,
+            change_start=0.4,
+            change_len=0.1,
+            change_accel=(2e-4, -1.5e-4, -4e-4),
+        )
         x0 = jnp.concatenate([sc.x_true[0, :3], jnp.zeros(3)])
-        r = jf.kalman_filter(model, x0, jnp.eye(6) * 1e-5, sc.zs, inflation=jf.fading(window=10),
-                             save=("factors",))
+        r = jf.kalman_filter(model, x0, jnp.eye(6) * 1e-5, sc.zs, inflation=jf.fading(window=10), save=("factors",))
         return r.factors
 
     lam = np.asarray(jax.jit(jax.vmap(one))(jax.random.split(jax.random.PRNGKey(1), runs)))
     med = np.median(lam, axis=0)
     i0, i1 = 160, 200
-    before, during, after = lam[:, 50:i0], lam[:, i0:i1], lam[:, i1 + 40:]
+    before, during, after = lam[:, 50:i0], lam[:, i0:i1], lam[:, i1 + 40 :]
     assert during.mean() > 1.25 * before.mean()
-    assert np.mean(med[i0 + 2:i1] > 1.2) > 0.9  # inflated throughout the change
-    assert np.mean(med[i1 + 40:] == 1.0) > 0.7  # back to 1 after it
+    assert np.mean(med[i0 + 2 : i1] > 1.2) > 0.9  # inflated throughout the change
+    assert np.mean(med[i1 + 40 :] == 1.0) > 0.7  # back to 1 after it
     assert abs(after.mean() - before.mean()) < 0.1
 
 

@@ -25,6 +25,7 @@ def _loss(model, x0, P0, sc):
     def loss(b):
         r = jf.kalman_filter(model, x0, P0, sc.zs, inflation=jf.attenuated(b), save=("means",))
         return jnp.sqrt(jnp.mean((r.means[:, :3] - sc.x_true[:, :3]) ** 2))
+
     return loss
 
 
@@ -85,6 +86,7 @@ def test_jit_equals_eager(scen):
 
 # ---------------------------------------------------------------- bad input
 
+
 def test_wrong_shapes_raise_value_error_naming_shapes(scen):
     model, x0, P0, sc = scen
     with pytest.raises(ValueError, match=r"P0 has shape \(5, 5\)"):
@@ -123,9 +125,17 @@ def test_nonfinite_rows_skip_update_and_are_counted(scen):
     r2 = jf.kalman_filter(model, x0, P0, zs2, mask=mask)
     np.testing.assert_allclose(r.means, r2.means, rtol=0, atol=0)
     # partial row: equals a filter that never sees component 1 at epoch 20
-    ref = jf.kalman_filter(model, x0, P0, sc.zs[:21].at[10].set(0.0), mask=jnp.asarray(
-        np.c_[np.ones((21, 3), bool)] & ~(np.arange(21)[:, None] == 10) &
-        ~((np.arange(21)[:, None] == 20) & (np.arange(3)[None] == 1))))
+    ref = jf.kalman_filter(
+        model,
+        x0,
+        P0,
+        sc.zs[:21].at[10].set(0.0),
+        mask=jnp.asarray(
+            np.c_[np.ones((21, 3), bool)]
+            & ~(np.arange(21)[:, None] == 10)
+            & ~((np.arange(21)[:, None] == 20) & (np.arange(3)[None] == 1))
+        ),
+    )
     np.testing.assert_allclose(r.means[:21], ref.means, rtol=1e-13, atol=1e-15)
 
 
@@ -154,8 +164,9 @@ def test_float32_needs_opt_in_and_is_stable(scen):
     z32 = jnp.asarray(sc.zs - sc.zs[0], jnp.float32)
     with pytest.raises(ValueError, match="enable_x64"):
         jf.kalman_filter(m32, x32 - x32, P32, z32)
-    r32 = jf.kalman_filter(m32, x32 - jnp.concatenate([sc.zs[0], jnp.zeros(3)]).astype(jnp.float32),
-                           P32, z32, allow_float32=True)
+    r32 = jf.kalman_filter(
+        m32, x32 - jnp.concatenate([sc.zs[0], jnp.zeros(3)]).astype(jnp.float32), P32, z32, allow_float32=True
+    )
     r64 = jf.kalman_filter(model, x0 - jnp.concatenate([sc.zs[0], jnp.zeros(3)]), P0, sc.zs - sc.zs[0])
     assert r32.means.dtype == jnp.float32
     err = np.abs(np.asarray(r32.means, float) - np.asarray(r64.means))

@@ -64,9 +64,11 @@ def test_value_and_gradient_match_autodiff_and_central_differences(data):
     central differences (h = 1e-5 in log q, log sigma: ~1e-9 relative), with no mask, whole
     epochs masked and single elements masked (one compiled program: the masks are arrays)."""
     zs, x0, P0 = data
-    masks = {"none": jnp.ones((T, 3), bool),
-             "epochs": jnp.broadcast_to((jnp.arange(T) % 7 != 3)[:, None], (T, 3)),
-             "elements": jnp.asarray(np.random.default_rng(3).random((T, 3)) > 0.2)}
+    masks = {
+        "none": jnp.ones((T, 3), bool),
+        "epochs": jnp.broadcast_to((jnp.arange(T) % 7 != 3)[:, None], (T, 3)),
+        "elements": jnp.asarray(np.random.default_rng(3).random((T, 3)) > 0.2),
+    }
     th = jnp.log(jnp.array([0.03, 1.6]))
     vg_ref, vg_new, ref = jax.jit(jax.value_and_grad(_ref)), jax.jit(jax.value_and_grad(_new)), jax.jit(_ref)
     h = 1e-5
@@ -121,8 +123,11 @@ def test_vmap_forward_mode_and_per_sequence(data):
     zs, x0, P0 = data
     rng = np.random.default_rng(11)
     clean = jnp.where(jnp.isfinite(zs), zs, 0.0)[None] + jnp.asarray(rng.standard_normal((4, T, 3)))
-    batches = {"clean": clean, "one NaN": clean.at[2, 17, 0].set(jnp.nan),
-               "common gap": clean.at[:, 60:70, :].set(jnp.nan)}
+    batches = {
+        "clean": clean,
+        "one NaN": clean.at[2, 17, 0].set(jnp.nan),
+        "common gap": clean.at[:, 60:70, :].set(jnp.nan),
+    }
     th = jnp.log(jnp.array([0.03, 1.6]))
     x0B = x0 + jnp.arange(4.0)[:, None] * 0.1
 

@@ -1,9 +1,9 @@
 """Nonlinear filters (EKF, iterated EKF, UKF, CKF) and smoothers against filterpy, the linear filter,
 a Gauss-Newton solve, finite differences and loops."""
 
-import numpy as np
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from scipy.optimize import least_squares
@@ -83,8 +83,9 @@ def test_ukf_and_smoother_equal_filterpy(alpha, tol):
     """alpha = 1e-3 puts weights of ~1e6 on the points: both sides round at ~1e-7 there."""
     f, h = jax.jit(turn), jax.jit(range_bearing)
     pts = MerweScaledSigmaPoints(N, alpha=alpha, beta=2.0, kappa=0.0)
-    uk = UnscentedKalmanFilter(N, M, 1.0, hx=lambda x: np.asarray(h(x, 0)), fx=lambda x, dt: np.asarray(f(x, 0)),
-                               points=pts)
+    uk = UnscentedKalmanFilter(
+        N, M, 1.0, hx=lambda x: np.asarray(h(x, 0)), fx=lambda x, dt: np.asarray(f(x, 0)), points=pts
+    )
     uk.x, uk.P, uk.Q, uk.R = X0.copy(), P0.copy(), Q, R
     mu, cov = uk.batch_filter(ZS)[:2]
     xs, Ps, _ = uk.rts_smoother(mu, cov)
@@ -116,20 +117,29 @@ def test_linear_model_gives_the_kalman_filter_and_rts():
     runs = {
         "ekf": (jf.extended_kalman_filter(model, x0, P0l, zs), jf.extended_rts_smoother),
         "iekf": (jf.extended_kalman_filter(model, x0, P0l, zs, iterations=3), jf.extended_rts_smoother),
-        "ukf": (jf.unscented_kalman_filter(model, x0, P0l, zs, alpha=1.0),
-                lambda m, r: jf.unscented_rts_smoother(m, r, alpha=1.0)),
-        "ckf": (jf.cubature_kalman_filter(model, x0, P0l, zs),
-                lambda m, r: jf.unscented_rts_smoother(m, r, alpha=1.0, beta=0.0)),
+        "ukf": (
+            jf.unscented_kalman_filter(model, x0, P0l, zs, alpha=1.0),
+            lambda m, r: jf.unscented_rts_smoother(m, r, alpha=1.0),
+        ),
+        "ckf": (
+            jf.cubature_kalman_filter(model, x0, P0l, zs),
+            lambda m, r: jf.unscented_rts_smoother(m, r, alpha=1.0, beta=0.0),
+        ),
     }
     for name, (res, smoother) in runs.items():
         for field in ("means", "covs", "pred_means", "pred_covs", "innovations", "nis", "logliks"):
-            np.testing.assert_allclose(getattr(res, field), getattr(ref, field), rtol=0, atol=1e-12 * max(
-                1.0, float(np.max(np.abs(getattr(ref, field))))), err_msg=f"{name} {field}")
+            np.testing.assert_allclose(
+                getattr(res, field),
+                getattr(ref, field),
+                rtol=0,
+                atol=1e-12 * max(1.0, float(np.max(np.abs(getattr(ref, field))))),
+                err_msg=f"{name} {field}",
+            )
         sm = smoother(model, res)
-        np.testing.assert_allclose(sm.means, ref_s.means, rtol=0, atol=1e-12 * np.max(np.abs(ref_s.means)),
-                                   err_msg=name)
-        np.testing.assert_allclose(sm.covs, ref_s.covs, rtol=0, atol=1e-12 * np.max(np.abs(ref_s.covs)),
-                                   err_msg=name)
+        np.testing.assert_allclose(
+            sm.means, ref_s.means, rtol=0, atol=1e-12 * np.max(np.abs(ref_s.means)), err_msg=name
+        )
+        np.testing.assert_allclose(sm.covs, ref_s.covs, rtol=0, atol=1e-12 * np.max(np.abs(ref_s.covs)), err_msg=name)
 
 
 def test_iterated_ekf_is_gauss_newton_on_one_update():
@@ -189,6 +199,8 @@ def test_every_plugin_runs_on_ekf_and_ukf(name):
         res = run(MODEL, X0, P0, ZS[:200], **kw)
         finite = np.all(np.isfinite(res.means)) and np.isfinite(float(res.loglik))
         assert finite or int(res.status) != 0, name
+
+
 def test_robust_estimator_holds_against_gross_errors():
     zs = ZS[:200].copy()
     zs[50::20, 0] += 200.0  # 8 gross range errors (200 sigma)
@@ -232,8 +244,7 @@ def test_grad_of_loglik_wrt_closed_over_parameters_equals_finite_differences():
 
     def loglik(theta, run):
         sx, q = theta[0], theta[1]
-        model = jf.NonlinearGaussian(turn, lambda x, t: range_bearing(x, t, jnp.stack([sx, STATION[1]])),
-                                     Q * q, R)
+        model = jf.NonlinearGaussian(turn, lambda x, t: range_bearing(x, t, jnp.stack([sx, STATION[1]])), Q * q, R)
         return run(model, X0, P0, zs, save=()).loglik
 
     theta = np.array([-195.0, 1.3])
@@ -253,15 +264,22 @@ def test_inputs_and_time_varying_noise():
     """f and h take the t-th slice of an ``inputs`` pytree; Q, R given per epoch equal the static ones."""
     zs = ZS[:60]
     dts = np.ones(60)
-    model = jf.NonlinearGaussian(lambda x, u: turn(x, 0, u["dt"]), lambda x, u: range_bearing(x, 0),
-                                 np.broadcast_to(Q, (60, N, N)), np.broadcast_to(R, (60, M, M)))
-    for run, smooth in ((jf.extended_kalman_filter, jf.extended_rts_smoother),
-                        (jf.unscented_kalman_filter, jf.unscented_rts_smoother)):
+    model = jf.NonlinearGaussian(
+        lambda x, u: turn(x, 0, u["dt"]),
+        lambda x, u: range_bearing(x, 0),
+        np.broadcast_to(Q, (60, N, N)),
+        np.broadcast_to(R, (60, M, M)),
+    )
+    for run, smooth in (
+        (jf.extended_kalman_filter, jf.extended_rts_smoother),
+        (jf.unscented_kalman_filter, jf.unscented_rts_smoother),
+    ):
         res = run(model, X0, P0, zs, inputs={"dt": dts})
         ref = run(MODEL, X0, P0, zs)
         np.testing.assert_allclose(res.means, ref.means, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(smooth(model, res, inputs={"dt": dts}).means, smooth(MODEL, ref).means,
-                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(
+            smooth(model, res, inputs={"dt": dts}).means, smooth(MODEL, ref).means, rtol=0, atol=1e-9
+        )
 
 
 def test_shape_errors_name_the_shapes():

@@ -13,11 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 import jaxnav.filters as jf
 from jaxnav.experiments import ct_drive as cd
-
-from _paths import DATA_ROOT
 
 jax.config.update("jax_enable_x64", True)
 

@@ -21,12 +21,28 @@ from jaxnav.filters._parallel import parallel_filter, parallel_smoother
 pytestmark = pytest.mark.timeout(120)
 
 T_LONG = 2000
-FIELDS = ("means", "covs", "pred_means", "pred_covs", "innovations", "innov_covs", "nis", "logliks",
-          "valid", "loglik", "n_nonfinite", "n_skipped", "status", "x_final", "P_final")
+FIELDS = (
+    "means",
+    "covs",
+    "pred_means",
+    "pred_covs",
+    "innovations",
+    "innov_covs",
+    "nis",
+    "logliks",
+    "valid",
+    "loglik",
+    "n_nonfinite",
+    "n_skipped",
+    "status",
+    "x_final",
+    "P_final",
+)
 
 
 def _random_model(rng, n, m, T=None, p=None):
     """A random stable linear Gaussian model with PD noises (time-varying when T is given)."""
+
     def spd(k, scale):
         B = rng.standard_normal((k, k))
         return scale * (B @ B.T / k + 0.2 * np.eye(k))
@@ -45,8 +61,9 @@ def _random_model(rng, n, m, T=None, p=None):
         R = np.stack([spd(m, 0.5) for _ in range(T)])
         Q = spd(n if p is None else p, 0.1)
         G = None if p is None else rng.standard_normal((T, n, p))
-    return jf.LinearGaussian(F=jnp.asarray(F), H=jnp.asarray(H), Q=jnp.asarray(Q), R=jnp.asarray(R),
-                             G=None if G is None else jnp.asarray(G))
+    return jf.LinearGaussian(
+        F=jnp.asarray(F), H=jnp.asarray(H), Q=jnp.asarray(Q), R=jnp.asarray(R), G=None if G is None else jnp.asarray(G)
+    )
 
 
 def _simulate(rng, model, x0, T):
@@ -94,8 +111,9 @@ def test_smoother_equals_rts_long(cv_long):
     ref = jf.rts_smoother(model, seq)
     got = parallel_smoother(model, par)
     for name in ("means", "covs", "gains"):
-        np.testing.assert_allclose(np.asarray(getattr(got, name)), np.asarray(getattr(ref, name)),
-                                   rtol=1e-9, atol=1e-9, err_msg=name)
+        np.testing.assert_allclose(
+            np.asarray(getattr(got, name)), np.asarray(getattr(ref, name)), rtol=1e-9, atol=1e-9, err_msg=name
+        )
     assert int(got.status) == int(ref.status) == 0
     means_only = parallel_smoother(model, par, save=("means",))
     assert means_only.covs is None and means_only.gains is None
@@ -115,8 +133,9 @@ def test_tree_schedule_equals_sequential():
     np.testing.assert_allclose(np.asarray(par.means), np.asarray(seq.means), rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(np.asarray(par.covs), np.asarray(seq.covs), rtol=1e-9, atol=1e-9)
     sm = parallel_smoother(model, seq, method="tree", save=("means",))
-    np.testing.assert_allclose(np.asarray(sm.means), np.asarray(jf.rts_smoother(model, seq).means),
-                               rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(
+        np.asarray(sm.means), np.asarray(jf.rts_smoother(model, seq).means), rtol=1e-9, atol=1e-9
+    )
 
 
 @settings(max_examples=8, deadline=None, derandomize=True)
@@ -163,13 +182,18 @@ def test_solve_small_pivots():
     A = jnp.array([[0.0, 2.0, 1.0], [1.0, 1.0, 0.0], [3.0, 0.0, 1.0]])
     B = jnp.arange(6.0).reshape(3, 2)
     solve = jax.jit(solve_small)
-    np.testing.assert_allclose(np.asarray(solve(A, B)), np.linalg.solve(np.asarray(A), np.asarray(B)),
-                               rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(
+        np.asarray(solve(A, B)), np.linalg.solve(np.asarray(A), np.asarray(B)), rtol=1e-13, atol=1e-13
+    )
     rng = np.random.default_rng(0)
     As = rng.standard_normal((5, 6, 6))
     bs = rng.standard_normal((5, 6))
-    np.testing.assert_allclose(np.asarray(solve(jnp.asarray(As), jnp.asarray(bs))),
-                               np.linalg.solve(As, bs[..., None])[..., 0], rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(
+        np.asarray(solve(jnp.asarray(As), jnp.asarray(bs))),
+        np.linalg.solve(As, bs[..., None])[..., 0],
+        rtol=1e-10,
+        atol=1e-10,
+    )
 
 
 def test_bad_shapes_raise():

@@ -17,31 +17,40 @@ pytestmark = pytest.mark.timeout(120)
 
 def test_records_are_declared_classes_with_the_saved_outputs():
     assert jf.StepInfo._fields == ALL_OUTPUTS
-    assert jf.KalmanResult._fields[:len(ALL_OUTPUTS)] == ALL_OUTPUTS
-    assert jf.KalmanResult._fields[len(ALL_OUTPUTS):] == ("loglik", "n_nonfinite", "n_skipped", "status", "x_final",
-                                                           "P_final")
+    assert jf.KalmanResult._fields[: len(ALL_OUTPUTS)] == ALL_OUTPUTS
+    assert jf.KalmanResult._fields[len(ALL_OUTPUTS) :] == (
+        "loglik",
+        "n_nonfinite",
+        "n_skipped",
+        "status",
+        "x_final",
+        "P_final",
+    )
     assert jf.StepInfo() == (None,) * len(ALL_OUTPUTS)
 
 
-@pytest.mark.parametrize("build, match", [
-    (lambda: jf.Constant(S=0.5), r"Constant: S must be in \[1, inf\)"),
-    (lambda: jf.Attenuated(b=1.0), r"Attenuated: b must be in \[0, 1\)"),
-    (lambda: jf.Fading(window=3, rho=0.5), "either window"),
-    (lambda: jf.Fading(window=0), "window must be a positive integer"),
-    (lambda: jf.Fading(max_factor=0.5), "max_factor"),
-    (lambda: jf.Switch(index=0, rules=()), "at least one rule"),
-    (lambda: jf.Switch(index=0, rules=(jf.constant(2.0, states=[0]), jf.fading(states=[1]))), "different states"),
-    (lambda: jf.VarianceCompensation(window=0), "window must be a positive integer"),
-    (lambda: jf.VarianceCompensation(window=5, min_epochs=9), "min_epochs"),
-    (lambda: jf.VarianceCompensation(floor=-1.0), "floor"),
-    (lambda: jf.SageHusa(estimate="P"), "estimate"),
-    (lambda: jf.SageHusa(b=1.0), r"b must be in \(0, 1\)"),
-    (lambda: jf.IGG3(k0=3.0, k1=2.0), "k0 < k1"),
-    (lambda: jf.IGG3(lockout=0), "lockout"),
-    (lambda: jf.YangFactor(c0=2.0, c1=1.0), "c1 > c0"),
-    (lambda: jf.Chain(parts=()), "at least one estimator"),
-    (lambda: jf.Chain(parts=(jf.constant(2.0),)), "not a noise estimator"),
-])
+@pytest.mark.parametrize(
+    "build, match",
+    [
+        (lambda: jf.Constant(S=0.5), r"Constant: S must be in \[1, inf\)"),
+        (lambda: jf.Attenuated(b=1.0), r"Attenuated: b must be in \[0, 1\)"),
+        (lambda: jf.Fading(window=3, rho=0.5), "either window"),
+        (lambda: jf.Fading(window=0), "window must be a positive integer"),
+        (lambda: jf.Fading(max_factor=0.5), "max_factor"),
+        (lambda: jf.Switch(index=0, rules=()), "at least one rule"),
+        (lambda: jf.Switch(index=0, rules=(jf.constant(2.0, states=[0]), jf.fading(states=[1]))), "different states"),
+        (lambda: jf.VarianceCompensation(window=0), "window must be a positive integer"),
+        (lambda: jf.VarianceCompensation(window=5, min_epochs=9), "min_epochs"),
+        (lambda: jf.VarianceCompensation(floor=-1.0), "floor"),
+        (lambda: jf.SageHusa(estimate="P"), "estimate"),
+        (lambda: jf.SageHusa(b=1.0), r"b must be in \(0, 1\)"),
+        (lambda: jf.IGG3(k0=3.0, k1=2.0), "k0 < k1"),
+        (lambda: jf.IGG3(lockout=0), "lockout"),
+        (lambda: jf.YangFactor(c0=2.0, c1=1.0), "c1 > c0"),
+        (lambda: jf.Chain(parts=()), "at least one estimator"),
+        (lambda: jf.Chain(parts=(jf.constant(2.0),)), "not a noise estimator"),
+    ],
+)
 def test_exported_constructors_check_their_arguments(build, match):
     with pytest.raises(ValueError, match=match):
         build()
@@ -66,13 +75,23 @@ def test_rebuilding_a_pytree_skips_the_checks():
 
 
 def test_data_independent_is_a_property_everywhere():
-    plugins = [jf.NoInflation(), jf.NoEstimator(), jf.constant(2.0), jf.attenuated(0.2), jf.fading(3),
-               jf.switch(0, [None, jf.attenuated(0.2)]), jf.variance_compensation(5), jf.sage_husa(),
-               jf.igg3(), jf.yang_factor(), jf.chain(jf.igg3())]
+    plugins = [
+        jf.NoInflation(),
+        jf.NoEstimator(),
+        jf.constant(2.0),
+        jf.attenuated(0.2),
+        jf.fading(3),
+        jf.switch(0, [None, jf.attenuated(0.2)]),
+        jf.variance_compensation(5),
+        jf.sage_husa(),
+        jf.igg3(),
+        jf.yang_factor(),
+        jf.chain(jf.igg3()),
+    ]
     got = [p.data_independent for p in plugins]
     assert got == [True, True, True, True, False, True, False, False, False, False, False]
     for p in plugins:
-        assert isinstance(type(p).__dict__.get("data_independent", getattr(type(p), "data_independent")), property)
+        assert isinstance(type(p).__dict__.get("data_independent", type(p).data_independent), property)
 
 
 def test_a_subclass_inherits_the_defaults_and_runs():

@@ -4,13 +4,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _models import random_spd, random_stable_model
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from jaxnav import _status
 from jaxnav import filters as jf
 from jaxnav.sim import simulate_cv_scenario, simulate_linear
-from _models import random_spd, random_stable_model
 
 SIG = 3e-3  # m
 ACC = 1e-4  # m/s^2 per epoch
@@ -126,8 +126,15 @@ def test_outliers_flagged(gross_runs):
 
 def test_yang_factor_follows_change_of_dynamics():
     """Factor ~1 in quiet epochs, > 1 inside an unmodelled acceleration burst; better forecasts there."""
-    sc = simulate_cv_scenario(jax.random.PRNGKey(5), T=T, sigma=SIG, accel_std=2e-5,
-                              change_accel=(3e-4, -2e-4, -6e-4), change_start=0.5, change_len=0.15)
+    sc = simulate_cv_scenario(
+        jax.random.PRNGKey(5),
+        T=T,
+        sigma=SIG,
+        accel_std=2e-5,
+        change_accel=(3e-4, -2e-4, -6e-4),
+        change_start=0.5,
+        change_len=0.15,
+    )
     model = jf.constant_velocity(1.0, sigma=SIG, accel_var=(2e-5) ** 2)  # same shapes: compiled once
     x0 = jnp.concatenate([sc.zs[0], jnp.zeros(3)])
     P0 = jnp.diag(jnp.array([SIG**2] * 3 + [1e-6] * 3))
@@ -170,8 +177,9 @@ def test_grad_wrt_k0_matches_finite_differences(cv_data):
     zo, _ = _gross(jax.random.PRNGKey(9), zs[:150])
 
     def loss(k0):
-        r = jf.kalman_filter(model, x0, P0, zo, estimator=jf.IGG3(k0=k0, k1=k0 + 2.5, w_min=1e-12),
-                             save=("pred_means",))
+        r = jf.kalman_filter(
+            model, x0, P0, zo, estimator=jf.IGG3(k0=k0, k1=k0 + 2.5, w_min=1e-12), save=("pred_means",)
+        )
         return jnp.sqrt(jnp.mean((r.pred_means[SKIP:, :3] - xs[SKIP:150, :3]) ** 2))
 
     vg = jax.jit(jax.value_and_grad(loss))  # one compilation for the gradient and the differences
@@ -182,8 +190,13 @@ def test_grad_wrt_k0_matches_finite_differences(cv_data):
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), log_q=st.floats(-8, 1), log_r=st.floats(-6, 2),
-       nan_frac=st.sampled_from([0.0, 0.2]), kind=st.sampled_from(["both", "chain"]))
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    log_q=st.floats(-8, 1),
+    log_r=st.floats(-6, 2),
+    nan_frac=st.sampled_from([0.0, 0.2]),
+    kind=st.sampled_from(["both", "chain"]),
+)
 # found by hypothesis: variance compensation chained with IGG3 on 30-sigma gross errors drives P
 # to 1e25-1e33 and indefinite (S fails too); the filter must say so rather than stay silent
 @example(seed=969, log_q=1.0, log_r=0.0, nan_frac=0.0, kind="chain")
@@ -198,8 +211,10 @@ def test_covariances_stay_psd(seed, log_q, log_r, nan_frac, kind):
     hit = rng.uniform(size=zs.shape) < 0.1
     zs[hit] += rng.choice([-30.0, 30.0], size=hit.sum()) * 10 ** (log_r / 2)  # 30-sigma gross errors
     zs[rng.uniform(size=zs.shape) < nan_frac] = np.nan
-    kw = {"both": dict(estimator=jf.igg3(1.5, 3.0), inflation=jf.yang_factor(1.0, 3.0, max_factor=1e4)),
-          "chain": dict(estimator=jf.chain(jf.variance_compensation(window=6, min_epochs=3), jf.igg3()))}[kind]
+    kw = {
+        "both": dict(estimator=jf.igg3(1.5, 3.0), inflation=jf.yang_factor(1.0, 3.0, max_factor=1e4)),
+        "chain": dict(estimator=jf.chain(jf.variance_compensation(window=6, min_epochs=3), jf.igg3())),
+    }[kind]
     r = jf.kalman_filter(model, rng.normal(size=N), random_spd(rng, N, 1.0, cond=1e4), zs, **kw)
     failed = int(r.status) & (_status.CHOLESKY_FAILED | _status.NONFINITE_STATE | _status.COVARIANCE_INDEFINITE)
     if (seed, kind) == (969, "chain"):

@@ -164,5 +164,6 @@ def test_user_composition_writes_no_batch_covariances(data):
     f = jax.jit(jax.vmap(lambda z: jf.rts_smoother(m, jf.kalman_filter(m, X0, P0, z)).means))
     text = f.lower(zs).compile().as_text()
     assert f"f64[{B},{T},6,6]" not in text
-    np.testing.assert_allclose(f(zs), jnp.stack([jf.rts_smoother(m, jf.kalman_filter(m, X0, P0, z)).means
-                                                 for z in zs]), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        f(zs), jnp.stack([jf.rts_smoother(m, jf.kalman_filter(m, X0, P0, z)).means for z in zs]), rtol=1e-12, atol=1e-12
+    )

@@ -1,17 +1,15 @@
 """Gauss-Krüger against PROJ's own regression vectors (GRS80 tmerc/etmerc blocks, 50 nm)."""
 
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
-from jaxnav import geodesy as g
 from _paths import DATA_ROOT
 from reference.proj_run import proj_available, proj_transform
 
-GIE = (DATA_ROOT / "proj_reference_values"
-       / "tmerc_etmerc_utm_builtins_excerpt.gie")
+from jaxnav import geodesy as g
+
+GIE = DATA_ROOT / "proj_reference_values" / "tmerc_etmerc_utm_builtins_excerpt.gie"
 
 
 def _grs80_cases():
@@ -71,7 +69,8 @@ def test_round_trip_zone_prefix_and_extras():
     np.testing.assert_allclose(ex.scale, 1 + (y - 39.5e6) ** 2 / (2 * 6.38e6**2), atol=2e-6)
     # the scale is the derivative of the projection (conformal): compare with jacfwd
     J = jax.jacfwd(lambda p: jnp.stack(g.gauss_kruger(p[0], p[1], lon0=lon0, ellipsoid=g.CGCS2000)))(
-        jnp.array([lat[10], lon[10]]))
+        jnp.array([lat[10], lon[10]])
+    )
     RM, RN = g.meridian_radius(lat[10], g.CGCS2000), g.prime_vertical_radius(lat[10], g.CGCS2000)
     k_num = float(jnp.hypot(J[0, 0], J[1, 0]) / RM)
     assert abs(k_num - float(ex.scale[10])) < 1e-12
@@ -91,8 +90,10 @@ if not proj_available():
 
 def _pyproj_tmerc(ellipsoid, lon0_deg):
     # PROJ's exact (Poder/Engsager) transverse Mercator on the same ellipsoid; x east, y north
-    crs = (f"+proj=tmerc +algo=poder_engsager +lat_0=0 +lon_0={lon0_deg!r} +k=1 +x_0=500000 +y_0=0 "
-           f"+a={ellipsoid.a!r} +rf={1.0 / ellipsoid.f!r} +units=m +no_defs")
+    crs = (
+        f"+proj=tmerc +algo=poder_engsager +lat_0=0 +lon_0={lon0_deg!r} +k=1 +x_0=500000 +y_0=0 "
+        f"+a={ellipsoid.a!r} +rf={1.0 / ellipsoid.f!r} +units=m +no_defs"
+    )
     return f"+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad +step {crs}"
 
 

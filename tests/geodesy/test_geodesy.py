@@ -13,10 +13,10 @@ import jax.numpy as jnp
 import numpy as np
 import pymap3d as pm
 import pytest
+from _paths import SHARED  # noqa: E402
 
 from jaxnav import geodesy as g
 
-from _paths import SHARED  # noqa: E402
 VECTORS = SHARED / "data" / "pymap3d_reference_values" / "pymap3d_test_vectors.json"
 
 DEG_TOL = 1e-9  # deg
@@ -110,8 +110,13 @@ def _axis_cases(vectors):
     out = []
     for xyz, lla in t["cases"]:
         # split on the commas outside parentheses: "(A-1)/sqrt2,(A-1)/sqrt2,0"
-        out.append(([_parse_axis_expr(p, A, B) for p in re.split(r",(?![^()]*\))", xyz)],
-                    [_parse_axis_expr(p, A, B) for p in lla.split(",")], f"{xyz} -> {lla}"))
+        out.append(
+            (
+                [_parse_axis_expr(p, A, B) for p in re.split(r",(?![^()]*\))", xyz)],
+                [_parse_axis_expr(p, A, B) for p in lla.split(",")],
+                f"{xyz} -> {lla}",
+            )
+        )
     return out
 
 
@@ -220,17 +225,29 @@ def test_matches_pymap3d_random(random_points, ell):
     enu_ref = pm.ecef2enu(*xyz_ref, lat0, lon0, h0, pe)
     _assert_metres(g.ecef_to_enu(*xyz_ref, r(lat0), r(lon0), h0, ellipsoid=ell), enu_ref, "ecef2enu")
 
-    _assert_metres(g.geodetic_to_enu(r(lat), r(lon), h, r(lat0), r(lon0), h0, ellipsoid=ell),
-                   pm.geodetic2enu(lat, lon, h, lat0, lon0, h0, pe), "geodetic2enu")
+    _assert_metres(
+        g.geodetic_to_enu(r(lat), r(lon), h, r(lat0), r(lon0), h0, ellipsoid=ell),
+        pm.geodetic2enu(lat, lon, h, lat0, lon0, h0, pe),
+        "geodetic2enu",
+    )
 
     e, n, u = P["enu"]
-    _assert_metres(g.enu_to_ecef(e, n, u, r(lat0), r(lon0), h0, ellipsoid=ell),
-                   pm.enu2ecef(e, n, u, lat0, lon0, h0, pe), "enu2ecef")
-    _assert_geodetic(g.enu_to_geodetic(e, n, u, r(lat0), r(lon0), h0, ellipsoid=ell),
-                     pm.enu2geodetic(e, n, u, lat0, lon0, h0, pe), "enu2geodetic")
+    _assert_metres(
+        g.enu_to_ecef(e, n, u, r(lat0), r(lon0), h0, ellipsoid=ell),
+        pm.enu2ecef(e, n, u, lat0, lon0, h0, pe),
+        "enu2ecef",
+    )
+    _assert_geodetic(
+        g.enu_to_geodetic(e, n, u, r(lat0), r(lon0), h0, ellipsoid=ell),
+        pm.enu2geodetic(e, n, u, lat0, lon0, h0, pe),
+        "enu2geodetic",
+    )
     # globe-spanning ENU vectors (up to ~1.3e4 km): enu2geodetic back to the random points
-    _assert_geodetic(g.enu_to_geodetic(*enu_ref, r(lat0), r(lon0), h0, ellipsoid=ell),
-                     pm.enu2geodetic(*enu_ref, lat0, lon0, h0, pe), "enu2geodetic (global)")
+    _assert_geodetic(
+        g.enu_to_geodetic(*enu_ref, r(lat0), r(lon0), h0, ellipsoid=ell),
+        pm.enu2geodetic(*enu_ref, lat0, lon0, h0, pe),
+        "enu2geodetic (global)",
+    )
 
 
 def test_vectors_match_pymap3d_random(random_points):
@@ -281,7 +298,9 @@ def test_round_trip_geodetic_ecef_geodetic():
     lon = rng.uniform(-np.pi, np.pi, N)
     h = rng.uniform(-1000.0, 1e5, N)
     for ell in ELLIPSOIDS + [g.CGCS2000]:
-        la, lo, hh = (np.array(v) for v in g.ecef_to_geodetic(*g.geodetic_to_ecef(lat, lon, h, ellipsoid=ell), ellipsoid=ell))
+        la, lo, hh = (
+            np.array(v) for v in g.ecef_to_geodetic(*g.geodetic_to_ecef(lat, lon, h, ellipsoid=ell), ellipsoid=ell)
+        )
         assert np.max(np.abs(la - lat)) < 1e-12
         assert np.max(np.abs(lo - lon)) < 1e-12
         assert np.max(np.abs(hh - h)) < 1e-7
@@ -304,7 +323,9 @@ def test_round_trip_enu():
     for ell in (g.WGS84, g.KRASSOVSKY):
         back = g.ecef_to_enu(*g.enu_to_ecef(e, n, u, lat0, lon0, h0, ellipsoid=ell), lat0, lon0, h0, ellipsoid=ell)
         _assert_metres(back, (e, n, u), "enu->ecef->enu", tol=1e-7)
-        back = g.geodetic_to_enu(*g.enu_to_geodetic(e, n, u, lat0, lon0, h0, ellipsoid=ell), lat0, lon0, h0, ellipsoid=ell)
+        back = g.geodetic_to_enu(
+            *g.enu_to_geodetic(e, n, u, lat0, lon0, h0, ellipsoid=ell), lat0, lon0, h0, ellipsoid=ell
+        )
         _assert_metres(back, (e, n, u), "enu->geodetic->enu", tol=1e-7)
     # the origin maps to zero
     _assert_metres(g.geodetic_to_enu(lat0, lon0, h0, lat0, lon0, h0), np.zeros((3, N)), "origin", tol=1e-8)
@@ -416,9 +437,15 @@ def _assert_inverse(J_geo, J_ecef):
 
 
 SPECIAL = {
-    "north pole": [0.0, 0.0, B_], "south pole": [0.0, 0.0, -B_], "above north pole": [0.0, 0.0, B_ + 100.0],
-    "inside on polar axis": [0.0, 0.0, 0.001 * B_], "+x": [A_, 0.0, 0.0], "-x": [-A_, 0.0, 0.0],
-    "+y": [0.0, A_, 0.0], "-y": [0.0, -A_, 0.0], "inside on x axis": [0.1 * A_, 0.0, 0.0],
+    "north pole": [0.0, 0.0, B_],
+    "south pole": [0.0, 0.0, -B_],
+    "above north pole": [0.0, 0.0, B_ + 100.0],
+    "inside on polar axis": [0.0, 0.0, 0.001 * B_],
+    "+x": [A_, 0.0, 0.0],
+    "-x": [-A_, 0.0, 0.0],
+    "+y": [0.0, A_, 0.0],
+    "-y": [0.0, -A_, 0.0],
+    "inside on x axis": [0.1 * A_, 0.0, 0.0],
 }
 
 
@@ -469,5 +496,7 @@ def test_vmap_equals_loop_and_jit_equals_eager(random_points):
     # the ENU chain, jitted whole, equals eager
     lat0, lon0, h0 = 0.6, -1.2, 300.0
     enu_eager = np.array(g.geodetic_to_enu(P[:, 0], P[:, 1], P[:, 2], lat0, lon0, h0))
-    enu_jit = np.array(jax.jit(lambda a, b, c: jnp.stack(g.geodetic_to_enu(a, b, c, lat0, lon0, h0)))(P[:, 0], P[:, 1], P[:, 2]))
+    enu_jit = np.array(
+        jax.jit(lambda a, b, c: jnp.stack(g.geodetic_to_enu(a, b, c, lat0, lon0, h0)))(P[:, 0], P[:, 1], P[:, 2])
+    )
     np.testing.assert_allclose(enu_jit, enu_eager, rtol=0, atol=1e-8)

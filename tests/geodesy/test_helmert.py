@@ -6,14 +6,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
-from jaxnav import geodesy as g
-from jaxnav.units import ARCSEC
 from _paths import DATA_ROOT
 from reference.proj_run import proj_available, proj_transform
 
-GIE = (DATA_ROOT / "proj_reference_values"
-       / "helmert_more_builtins_excerpt.gie")
+from jaxnav import geodesy as g
+from jaxnav.units import ARCSEC
+
+GIE = DATA_ROOT / "proj_reference_values" / "helmert_more_builtins_excerpt.gie"
 
 
 def _gie_blocks():
@@ -53,8 +52,11 @@ def test_all_vector_blocks_parsed():
     assert len(BLOCKS) == 6 and sum(len(b["pairs"]) for b in BLOCKS) == 7
 
 
-@pytest.mark.parametrize("block", [b for b in BLOCKS if "theta" not in b["params"]],
-                         ids=lambda b: f"{b['params'].get('convention', 'position_vector')}-{len(b['pairs'])}")
+@pytest.mark.parametrize(
+    "block",
+    [b for b in BLOCKS if "theta" not in b["params"]],
+    ids=lambda b: f"{b['params'].get('convention', 'position_vector')}-{len(b['pairs'])}",
+)
 def test_7_parameter_against_proj_vectors(block):
     """Both rotation conventions, exact and first-order, and time-dependent (14-parameter) cases."""
     p = block["params"]
@@ -63,10 +65,11 @@ def test_7_parameter_against_proj_vectors(block):
     for acc, exp in block["pairs"]:
         dt = acc[3] - f("t_epoch") if len(acc) > 3 and "t_epoch" in p else 0.0
         # 14 parameters: each parameter drifts linearly from t_epoch (PROJ's model)
-        par = g.Helmert7(t=jnp.array([f("x") + dt * f("dx"), f("y") + dt * f("dy"), f("z") + dt * f("dz")]),
-                         r=jnp.array([f("rx") + dt * f("drx"), f("ry") + dt * f("dry"),
-                                      f("rz") + dt * f("drz")]) * ARCSEC,
-                         s=(f("s") + dt * f("ds")) * 1e-6)
+        par = g.Helmert7(
+            t=jnp.array([f("x") + dt * f("dx"), f("y") + dt * f("dy"), f("z") + dt * f("dz")]),
+            r=jnp.array([f("rx") + dt * f("drx"), f("ry") + dt * f("dry"), f("rz") + dt * f("drz")]) * ARCSEC,
+            s=(f("s") + dt * f("ds")) * 1e-6,
+        )
         out = g.helmert7(par, jnp.array(acc[:3]), convention=conv, exact=bool(p.get("exact", False)))
         assert np.max(np.abs(np.asarray(out) - exp[:3])) <= block["tol"], (acc, exp)
         back = g.helmert7_inverse(par, out, convention=conv, exact=bool(p.get("exact", False)))
@@ -77,9 +80,10 @@ def test_4_parameter_against_proj_vector():
     """PROJ's 2-D helmert is x' = t + s R(-theta) x: theta_PROJ = -theta, s_PROJ = 1 + m."""
     (b,) = [b for b in BLOCKS if "theta" in b["params"]]
     p = b["params"]
-    par = g.Similarity2D(t=jnp.array([float(p["x"]), float(p["y"])]), theta=-float(p["theta"]) * ARCSEC,
-                         m=float(p["s"]) - 1.0)
-    (acc, exp), = b["pairs"]
+    par = g.Similarity2D(
+        t=jnp.array([float(p["x"]), float(p["y"])]), theta=-float(p["theta"]) * ARCSEC, m=float(p["s"]) - 1.0
+    )
+    ((acc, exp),) = b["pairs"]
     out = g.similarity2d(par, jnp.array(acc[:2]))
     assert np.max(np.abs(np.asarray(out) - exp[:2])) <= b["tol"]
     np.testing.assert_allclose(g.similarity2d_inverse(par, out), acc[:2], atol=1e-8)
@@ -96,8 +100,10 @@ def test_7_parameter_against_pyproj_random(convention, exact):
         r = [float(v) for v in rng.uniform(-20, 20, 3)]  # arc-seconds (large: exact and first order differ)
         s = float(rng.uniform(-10, 10))  # ppm
         X = rng.uniform(-6.4e6, 6.4e6, (20, 3))
-        op = (f"+proj=helmert +convention={convention} {'+exact' if exact else ''} +x={t[0]!r} +y={t[1]!r} "
-              f"+z={t[2]!r} +rx={r[0]!r} +ry={r[1]!r} +rz={r[2]!r} +s={s!r}")
+        op = (
+            f"+proj=helmert +convention={convention} {'+exact' if exact else ''} +x={t[0]!r} +y={t[1]!r} "
+            f"+z={t[2]!r} +rx={r[0]!r} +ry={r[1]!r} +rz={r[2]!r} +s={s!r}"
+        )
         ref = proj_transform([(op, (X[:, 0], X[:, 1], X[:, 2]), "FORWARD")])[0].T
         par = g.Helmert7(t=jnp.asarray(t), r=jnp.asarray(r) * ARCSEC, s=s * 1e-6)
         out = np.asarray(g.helmert7(par, jnp.asarray(X), convention=convention, exact=exact))
@@ -109,8 +115,12 @@ def test_conventions_have_opposite_rotations():
     npar = par._replace(r=-par.r)
     X = jnp.array([[4e6, 1e6, 4.7e6]])
     # (to first order; the exact matrices are transposes, R3 R2 R1 vs R1^T R2^T R3^T)
-    np.testing.assert_allclose(g.helmert7(par, X, convention="position_vector"),
-                               g.helmert7(npar, X, convention="coordinate_frame"), atol=1e-9, rtol=0)
+    np.testing.assert_allclose(
+        g.helmert7(par, X, convention="position_vector"),
+        g.helmert7(npar, X, convention="coordinate_frame"),
+        atol=1e-9,
+        rtol=0,
+    )
     # position vector: a positive rz turns a vector on the x axis towards +y
     out = g.helmert7(g.Helmert7(t=jnp.zeros(3), r=jnp.array([0.0, 0.0, 1e-6]), s=0.0), jnp.array([1e6, 0.0, 0.0]))
     assert float(out[1]) == pytest.approx(1.0)
@@ -147,8 +157,9 @@ def test_estimate_helmert7_recovers_parameters(sim7):
 def test_estimate_helmert7_noise_free_exact_and_weights(sim7):
     X, _, true = sim7
     Y = g.helmert7(true, jnp.asarray(X), convention="coordinate_frame", exact=True)
-    fit = g.estimate_helmert7(jnp.asarray(X), Y, convention="coordinate_frame", exact=True,
-                              weights=jnp.arange(1.0, 9.0))
+    fit = g.estimate_helmert7(
+        jnp.asarray(X), Y, convention="coordinate_frame", exact=True, weights=jnp.arange(1.0, 9.0)
+    )
     np.testing.assert_allclose(fit.params.t, true.t, atol=1e-5)
     np.testing.assert_allclose(fit.params.r, true.r, atol=1e-11)
     assert abs(float(fit.params.s) - true.s) < 1e-12 and float(fit.sigma0) < 1e-6
@@ -174,8 +185,9 @@ def test_estimate_similarity2d_recovers_parameters_and_precision():
     assert abs(float(np.sqrt(np.mean(s0**2))) - noise) < 0.0005
     f = g.estimate_similarity2d(jnp.asarray(src), g.similarity2d(true, jnp.asarray(src)))
     assert f.dof == 16 and f.residuals.shape == (10, 2) and float(jnp.max(jnp.abs(f.residuals))) < 1e-7
-    np.testing.assert_allclose(g.similarity2d_inverse(f.params, g.similarity2d(f.params, jnp.asarray(src))), src,
-                               atol=1e-7)
+    np.testing.assert_allclose(
+        g.similarity2d_inverse(f.params, g.similarity2d(f.params, jnp.asarray(src))), src, atol=1e-7
+    )
 
 
 def test_too_few_points_and_bad_shapes():
@@ -197,14 +209,20 @@ def test_too_few_points_and_bad_shapes():
 
 
 hyp = pytest.importorskip("hypothesis")
-from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st
 
 _f = st.floats
 
 
 @settings(max_examples=25, deadline=None)
-@given(t=st.tuples(_f(-500, 500), _f(-500, 500), _f(-500, 500)), r=st.tuples(_f(-30, 30), _f(-30, 30), _f(-30, 30)),
-       s=_f(-50, 50), conv=st.sampled_from(["position_vector", "coordinate_frame"]), exact=st.booleans())
+@given(
+    t=st.tuples(_f(-500, 500), _f(-500, 500), _f(-500, 500)),
+    r=st.tuples(_f(-30, 30), _f(-30, 30), _f(-30, 30)),
+    s=_f(-50, 50),
+    conv=st.sampled_from(["position_vector", "coordinate_frame"]),
+    exact=st.booleans(),
+)
 def test_property_helmert7_inverse_and_estimate(t, r, s, conv, exact):
     """Invariants: inverse(forward(X)) = X; noise-free estimation returns the parameters."""
     par = g.Helmert7(t=jnp.array(t), r=jnp.array(r) * ARCSEC, s=s * 1e-6)

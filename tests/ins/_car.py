@@ -6,7 +6,6 @@ Built once per test session (lru_cache); ~10 000 samples."""
 import functools
 import math
 
-
 import numpy as np
 
 import jaxnav
@@ -18,26 +17,44 @@ HEADING0 = math.radians(37.0)
 D = math.radians
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def car():
     """Truth: t (N+1,), euler (N+1, 3) [pitch, roll, yaw], v_n, pos; ideal dtheta, dv (N, 3); rest spans."""
     jaxnav.enable_x64()
     S = sim.Segment
-    segs = (S("rest", 20.0), S("accelerate", 4.0, dspeed=8.0), S("turn", 6.0, dheading=D(90)),
-            S("cruise", 4.0), S("turn", 5.0, dheading=D(-60)), S("accelerate", 4.0, dspeed=-8.0),
-            S("rest", 10.0), S("accelerate", 3.0, dspeed=6.0), S("turn", 4.0, dheading=D(45)),
-            S("turn", 6.0, dheading=D(-110)), S("cruise", 3.0), S("turn", 4.0, dheading=D(70)),
-            S("accelerate", 3.0, dspeed=-6.0), S("rest", 5.0))
+    segs = (
+        S("rest", 20.0),
+        S("accelerate", 4.0, dspeed=8.0),
+        S("turn", 6.0, dheading=D(90)),
+        S("cruise", 4.0),
+        S("turn", 5.0, dheading=D(-60)),
+        S("accelerate", 4.0, dspeed=-8.0),
+        S("rest", 10.0),
+        S("accelerate", 3.0, dspeed=6.0),
+        S("turn", 4.0, dheading=D(45)),
+        S("turn", 6.0, dheading=D(-110)),
+        S("cruise", 3.0),
+        S("turn", 4.0, dheading=D(70)),
+        S("accelerate", 3.0, dspeed=-6.0),
+        S("rest", 5.0),
+    )
     spec = sim.TrajectorySpec(lat=LAT, lon=LON, h=H, heading=HEADING0, segments=segs)
     tr = sim.generate_trajectory(spec, imu_rate_hz=RATE)
     t = np.asarray(tr.t)
     speed = np.linalg.norm(np.asarray(tr.v_n), axis=1)
-    return dict(t=t, euler=np.asarray(tr.euler), v_n=np.asarray(tr.v_n), pos=np.asarray(tr.pos),
-                dtheta=np.asarray(tr.dtheta), dv=np.asarray(tr.dv), speed=speed, dt=1.0 / RATE)
+    return dict(
+        t=t,
+        euler=np.asarray(tr.euler),
+        v_n=np.asarray(tr.v_n),
+        pos=np.asarray(tr.pos),
+        dtheta=np.asarray(tr.dtheta),
+        dv=np.asarray(tr.dv),
+        speed=speed,
+        dt=1.0 / RATE,
+    )
 
 
-def measured(seed=0, *, arw=None, vrw=None, gyro_bias=(0.0, 0.0, 0.0), accel_bias=(0.0, 0.0, 0.0),
-             vibration=True):
+def measured(seed=0, *, arw=None, vrw=None, gyro_bias=(0.0, 0.0, 0.0), accel_bias=(0.0, 0.0, 0.0), vibration=True):
     """(t_imu (N,), w_b (N, 3) rad/s, f_b (N, 3) m/s^2) at the interval ends t[1:], body RFU.
 
     Consumer-class noise by default (ARW 0.5 deg/sqrt(h), VRW 0.1 m/s/sqrt(h)); ``vibration`` adds
@@ -79,5 +96,3 @@ def rest_truth(t):
     s = c["speed"]
     still = (s[1:] < 1e-9) & (s[:-1] < 1e-9)
     return np.interp(t, c["t"][1:], still.astype(float)) > 0.5
-
-

@@ -10,8 +10,9 @@ import pytest
 
 import jaxnav
 from jaxnav import _status, ins, sim
-from jaxnav.ins import LCParams, PVMeasurements, loosely_coupled, measurements as ms
+from jaxnav.ins import LCParams, PVMeasurements, loosely_coupled
 from jaxnav.ins import attitude as A
+from jaxnav.ins import measurements as ms
 
 # ----------------------------------------------------------------------------- 1. H = dz/dx
 
@@ -32,8 +33,18 @@ def _cases():
     Cvb = A.euler_to_dcm(jnp.array([0.02, -0.03, 0.05]))
     lever = jnp.array([0.3, -1.2, -0.4])
     return {
-        "gnss_pv": (ms.GNSS_PV, ms.GnssData(pos=_nav().pos + jnp.array([1e-7, -2e-7, 1.0]), vel=jnp.array([8.1, -11.2, 0.3]),
-                                            R=jnp.eye(6), mask=jnp.ones(6, bool), lever=lever), 1.0, 9),
+        "gnss_pv": (
+            ms.GNSS_PV,
+            ms.GnssData(
+                pos=_nav().pos + jnp.array([1e-7, -2e-7, 1.0]),
+                vel=jnp.array([8.1, -11.2, 0.3]),
+                R=jnp.eye(6),
+                mask=jnp.ones(6, bool),
+                lever=lever,
+            ),
+            1.0,
+            9,
+        ),
         "zupt": (ms.ZUPT, None, ms.ZuptParams(0.02), 12),
         "zaru": (ms.ZARU, None, ms.ZaruParams(1e-3), 12),
         "nhc": (ms.NHC, None, ms.VehicleParams(0.1, Cvb, jnp.zeros(3)), 12),
@@ -54,8 +65,13 @@ def test_H_equals_the_jacobian_of_the_nonlinear_measurement(name):
     n = 15
 
     def z_of(x):
-        ctx = ms.MeasContext(nav=_perturb(nav, x), w_ib_b=w + x[9:12], w_mean_b=w + x[9:12], T_mean=jnp.asarray(2.0),
-                             dtx=jnp.asarray(0.0))
+        ctx = ms.MeasContext(
+            nav=_perturb(nav, x),
+            w_ib_b=w + x[9:12],
+            w_mean_b=w + x[9:12],
+            T_mean=jnp.asarray(2.0),
+            dtx=jnp.asarray(0.0),
+        )
         return model.fn(ctx, data, params, ins.IDX15, n).z
 
     x0 = jnp.zeros(n)
@@ -74,15 +90,17 @@ def test_H_equals_the_jacobian_of_the_nonlinear_measurement(name):
 
 def test_heading_residual_is_wrapped_and_vertical_axis_masked():
     nav = _nav()
-    ctx = ms.MeasContext(nav=nav, w_ib_b=jnp.zeros(3), w_mean_b=jnp.zeros(3), T_mean=jnp.asarray(0.0),
-                         dtx=jnp.asarray(0.0))
+    ctx = ms.MeasContext(
+        nav=nav, w_ib_b=jnp.zeros(3), w_mean_b=jnp.zeros(3), T_mean=jnp.asarray(0.0), dtx=jnp.asarray(0.0)
+    )
     u = A.quat_to_dcm(nav.q_bn) @ jnp.array([0.0, 1.0, 0.0])
     psi = float(jnp.arctan2(u[0], u[1]))
     for meas in (psi + 2 * np.pi - 0.01, psi - 2 * np.pi - 0.01):
         r = ms.HEADING.fn(ctx, jnp.asarray(meas), ms.HeadingParams(0.01, jnp.array([0.0, 1.0, 0.0])), ins.IDX15, 15)
         np.testing.assert_allclose(float(r.z[0]), 0.01, atol=1e-9)
-    r = ms.HEADING.fn(ctx, jnp.asarray(1.0), ms.HeadingParams(0.01, A.quat_to_dcm(nav.q_bn).T @ jnp.array([0.0, 0, 1])),
-                      ins.IDX15, 15)
+    r = ms.HEADING.fn(
+        ctx, jnp.asarray(1.0), ms.HeadingParams(0.01, A.quat_to_dcm(nav.q_bn).T @ jnp.array([0.0, 0, 1])), ins.IDX15, 15
+    )
     assert not bool(r.mask[0])
     # ZARU without standstill samples in the interval is masked
     r = ms.ZARU.fn(ctx, None, ms.ZaruParams(1e-3), ins.IDX15, 15)
@@ -172,8 +190,14 @@ def _v3(x):
 def _gnss_meas(gn):
     M = gn.t.shape[0]
     R = np.diag([1.0] * 3 + [0.05**2] * 3)
-    return PVMeasurements(t=np.asarray(gn.t), pos=gn.pos, vel=gn.vel, R=jnp.broadcast_to(R, (M, 6, 6)),
-                          mask=jnp.broadcast_to(gn.valid[:, None], (M, 6)), lever=jnp.zeros((M, 3)))
+    return PVMeasurements(
+        t=np.asarray(gn.t),
+        pos=gn.pos,
+        vel=gn.vel,
+        R=jnp.broadcast_to(R, (M, 6, 6)),
+        mask=jnp.broadcast_to(gn.valid[:, None], (M, 6)),
+        lever=jnp.zeros((M, 3)),
+    )
 
 
 def _horizontal_error(res, truth):
@@ -199,13 +223,28 @@ def car():
     truth = sim.make_trajectory(cfg)
     r = sim.simulate(cfg, jax.random.PRNGKey(3), trajectory=truth)
     g, a = cfg.gyro, cfg.accel
-    P0 = ins.ERROR_MODEL_15.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
-                            pos_enu=1.0, gyro_bias=_v3(g.bias_sigma), accel_bias=_v3(a.bias_sigma))
+    P0 = ins.ERROR_MODEL_15.P0(
+        truth.pos[0],
+        att=_v3(cfg.initial_errors.attitude),
+        vel=0.1,
+        pos_enu=1.0,
+        gyro_bias=_v3(g.bias_sigma),
+        accel_bias=_v3(a.bias_sigma),
+    )
     params = LCParams(P0=P0, Qc=ins.ERROR_MODEL_15.Qc(sim.imu_noise(cfg)), tau_markov=300.0)
     meas = _gnss_meas(r.gnss)
     t_imu = np.asarray(truth.t[1:])
-    base = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
-                           save=ins.LCSave(("nav",)))
+    base = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        save=ins.LCSave(("nav",)),
+    )
     return cfg, truth, r, params, meas, t_imu, base
 
 
@@ -213,8 +252,18 @@ def test_nhc_cuts_the_car_outage_drift_several_fold(car):
     """Two 60 s GNSS outages on a car with a MEMS-grade IMU (30 deg/h, 3 mg): GNSS-only drifts 26 m and 8 m
     (max horizontal); with the non-holonomic constraint at 2 Hz, 4.0 m and 0.7 m (measured)."""
     cfg, truth, r, params, meas, t_imu, base = car
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
-                          aids=(ins.nhc(sigma=0.1, rate_hz=2.0),), save=ins.LCSave(("nav", "valid")))
+    res = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        aids=(ins.nhc(sigma=0.1, rate_hz=2.0),),
+        save=ins.LCSave(("nav", "valid")),
+    )
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     t0, e0 = _horizontal_error(base, truth)
     t1, e1 = _horizontal_error(res, truth)
@@ -226,7 +275,9 @@ def test_nhc_cuts_the_car_outage_drift_several_fold(car):
     assert np.array_equal(row[row >= 0], np.arange(meas.t.shape[0]))
     assert (row < 0).sum() == pytest.approx(cfg.duration, abs=2)  # one extra epoch per second (2 Hz - 1 Hz)
     valid = np.asarray(res.epochs.valid)
-    assert np.all(valid[row < 0] == 2) and np.all(valid[(row >= 0) & np.asarray(meas.mask[:, 0])[np.maximum(row, 0)]] == 8)
+    assert np.all(valid[row < 0] == 2) and np.all(
+        valid[(row >= 0) & np.asarray(meas.mask[:, 0])[np.maximum(row, 0)]] == 8
+    )
 
 
 def _inject_outliers(meas, idx, east_m):
@@ -245,11 +296,31 @@ def test_chi2_gate_rejects_injected_gnss_outliers_and_counts_them(car):
     t = np.asarray(meas.t)
     idx = np.array([20, 45, 70, 95, 170, 190, 290, 310])  # outside the outages
     bad = _inject_outliers(meas, idx, 15.0)
-    run = lambda m, **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, m, params,  # noqa: E731
-                                          dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, save=ins.LCSave(("nav",)), **kw)
+    run = lambda m, **kw: loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        m,
+        params,  # noqa: E731
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        save=ins.LCSave(("nav",)),
+        **kw,
+    )
     ungated = run(bad)
-    gated = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, bad, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
-                            gate=ins.LCGate(0.9999), save=ins.LCSave(("nav", "gated", "gnss_nis")))
+    gated = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        bad,
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        gate=ins.LCGate(0.9999),
+        save=ins.LCSave(("nav", "gated", "gnss_nis")),
+    )
     g = np.asarray(gated.epochs.gated)
     assert np.all(g[idx])  # every outlier rejected
     assert int(gated.n_gated) == int(g.sum()) and g.sum() <= len(idx) + 2  # few false alarms at p = 1e-4
@@ -277,24 +348,62 @@ def test_21_state_model_recovers_an_injected_gyro_scale_factor(car):
     dth = r.imu.dtheta * (1.0 + s_true)  # measured = (1 + s) true + bias ... (bias scaled: 0.5 % of 30 deg/h)
     g, a = cfg.gyro, cfg.accel
     bias_sd = jnp.concatenate([jnp.asarray(_v3(g.bias_sigma)), jnp.asarray(_v3(a.bias_sigma))])
-    P0 = ins.ERROR_MODEL_21.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
-                            pos_enu=1.0, gyro_bias=bias_sd[:3], accel_bias=bias_sd[3:], gyro_scale=2e-2,
-                            accel_scale=1e-3)
-    Qc = ins.ERROR_MODEL_21.Qc(ins.ImuNoise(gyro_arw=_v3(g.white), accel_vrw=_v3(a.white)))  # random-constant biases, scale factors
+    P0 = ins.ERROR_MODEL_21.P0(
+        truth.pos[0],
+        att=_v3(cfg.initial_errors.attitude),
+        vel=0.1,
+        pos_enu=1.0,
+        gyro_bias=bias_sd[:3],
+        accel_bias=bias_sd[3:],
+        gyro_scale=2e-2,
+        accel_scale=1e-3,
+    )
+    Qc = ins.ERROR_MODEL_21.Qc(
+        ins.ImuNoise(gyro_arw=_v3(g.white), accel_vrw=_v3(a.white))
+    )  # random-constant biases, scale factors
     p21 = LCParams(P0=P0, Qc=Qc, tau_markov=jnp.full(6, jnp.inf))
-    res = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_21,
-                          save=ins.LCSave(("nav", "biases", "covs", "pred_covs", "Phi", "corrections")))
+    res = loosely_coupled(
+        r.nav0,
+        t_imu,
+        dth,
+        r.imu.dv,
+        meas,
+        p21,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_21,
+        save=ins.LCSave(("nav", "biases", "covs", "pred_covs", "Phi", "corrections")),
+    )
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     est = np.asarray(res.final_biases.gyro_scale)
-    sd = np.sqrt(np.asarray(res.epochs.covs[-1]).diagonal()[18 - 3:18])
+    sd = np.sqrt(np.asarray(res.epochs.covs[-1]).diagonal()[18 - 3 : 18])
     assert abs(est[2] - s_true[2]) < 3 * sd[2] and sd[2] < 0.25 * s_true[2], (est, sd)
     assert abs(est[2] - s_true[2]) < 0.35 * s_true[2], (est, sd)
-    r15 = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, save=ins.LCSave(("nav",)))
+    r15 = loosely_coupled(
+        r.nav0,
+        t_imu,
+        dth,
+        r.imu.dv,
+        meas,
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        save=ins.LCSave(("nav",)),
+    )
     # the innovations are better explained with the scale factor modelled than absorbed by the 15-state biases
     assert float(res.loglik) > float(r15.loglik) + 10.0, (float(res.loglik), float(r15.loglik))
     # the two-speed mechanization inside the filter carries the scale-factor sums too (measured: 0.45 mm)
-    r10 = loosely_coupled(r.nav0, t_imu, dth, r.imu.dv, meas, p21, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_21, propagation=ins.LCPropagation(nav_every=10),
-                          save=ins.LCSave(("nav",)))
+    r10 = loosely_coupled(
+        r.nav0,
+        t_imu,
+        dth,
+        r.imu.dv,
+        meas,
+        p21,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_21,
+        propagation=ins.LCPropagation(nav_every=10),
+        save=ins.LCSave(("nav",)),
+    )
     np.testing.assert_allclose(np.asarray(r10.final_biases.gyro_scale), est, atol=1e-6)
     assert np.abs(np.asarray(r10.epochs.nav.pos) - np.asarray(res.epochs.nav.pos))[:, :2].max() * 6.4e6 < 5e-3
     # smoothing works on the 21 states (scale factors fed back too)
@@ -364,17 +473,38 @@ def test_zupt_and_zaru_cut_the_drift_of_a_stop_and_go_walk():
     v = np.linalg.norm(np.asarray(truth.v_n), axis=1)
     still = (v[1:] < 1e-9) & (v[:-1] < 1e-9)  # per IMU sample: at rest over the whole interval
     g, a = cfg.gyro, cfg.accel
-    P0 = ins.ERROR_MODEL_15.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1,
-                            pos_enu=2.0, gyro_bias=_v3(g.bias_sigma), accel_bias=_v3(a.bias_sigma))
+    P0 = ins.ERROR_MODEL_15.P0(
+        truth.pos[0],
+        att=_v3(cfg.initial_errors.attitude),
+        vel=0.1,
+        pos_enu=2.0,
+        gyro_bias=_v3(g.bias_sigma),
+        accel_bias=_v3(a.bias_sigma),
+    )
     params = LCParams(P0=P0, Qc=ins.ERROR_MODEL_15.Qc(sim.imu_noise(cfg)), tau_markov=300.0)
     gn = r.gnss
     M = gn.t.shape[0]
-    meas = PVMeasurements(t=np.asarray(gn.t), pos=gn.pos, vel=gn.vel,
-                          R=jnp.broadcast_to(np.diag([4.0] * 3 + [0.01] * 3), (M, 6, 6)),
-                          mask=jnp.broadcast_to(gn.valid[:, None], (M, 6)), lever=jnp.zeros((M, 3)))
+    meas = PVMeasurements(
+        t=np.asarray(gn.t),
+        pos=gn.pos,
+        vel=gn.vel,
+        R=jnp.broadcast_to(np.diag([4.0] * 3 + [0.01] * 3), (M, 6, 6)),
+        mask=jnp.broadcast_to(gn.valid[:, None], (M, 6)),
+        lever=jnp.zeros((M, 3)),
+    )
     t_imu = np.asarray(truth.t[1:])
-    run = lambda aids: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
-                                       dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, aids=aids, save=ins.LCSave(("nav",)))
+    run = lambda aids: loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,  # noqa: E731
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        aids=aids,
+        save=ins.LCSave(("nav",)),
+    )
     base = run(())
     aided = run((ins.zupt(still, sigma=0.02, rate_hz=5.0), ins.zaru(still, density=1e-3, rate_hz=5.0)))
     assert int(aided.status) & ~_status.INFO_FLAGS == 0
@@ -405,8 +535,18 @@ def test_odometer_and_heading_close_the_loop_on_the_car(car):
     hdg = np.arctan2(u[:, 0], u[:, 1]) + np.radians(0.5) * rng.standard_normal(N)
     hdg = np.where((k + 1) % 50 == 0, hdg, np.nan)
     aids = (ins.odometer(speed, sigma=0.05), ins.heading(hdg, sigma=np.radians(0.5)), ins.nhc(sigma=0.1))
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
-                          aids=aids, save=ins.LCSave(("nav", "valid")))
+    res = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        aids=aids,
+        save=ins.LCSave(("nav", "valid")),
+    )
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     m0 = _outage_max(*_horizontal_error(base, truth))
     m1 = _outage_max(*_horizontal_error(res, truth))
@@ -433,8 +573,18 @@ def test_aid_parameters_are_array_leaves_under_grad(car):
     def loglik(log_sigma):
         aid = ins.nhc(sigma=0.1, rate_hz=2.0)
         aid = aid._replace(params=aid.params._replace(sigma=jnp.exp(log_sigma)))
-        return loosely_coupled(r.nav0, t_i, dth, dvv, m, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, aids=(aid,),
-                               save=ins.LCSave(("valid",))).loglik
+        return loosely_coupled(
+            r.nav0,
+            t_i,
+            dth,
+            dvv,
+            m,
+            params,
+            dt_imu=cfg.dt,
+            error_model=ins.ERROR_MODEL_15,
+            aids=(aid,),
+            save=ins.LCSave(("valid",)),
+        ).loglik
 
     x = jnp.log(jnp.array([0.1, 0.2]))
     g = np.asarray(jax.jit(jax.jacfwd(loglik))(x))
@@ -450,14 +600,33 @@ def test_inactive_aids_leave_the_gnss_filter_unchanged_and_bad_aid_input_is_name
     the update) and no epochs: the result equals the GNSS-only filter to rounding."""
     cfg, truth, r, params, meas, t_imu, base = car
     N = t_imu.size
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
-                          aids=(ins.zupt(np.zeros(N, bool)),), save=ins.LCSave(("nav",)))
+    res = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        aids=(ins.zupt(np.zeros(N, bool)),),
+        save=ins.LCSave(("nav",)),
+    )
     assert res.epochs.t.shape == base.epochs.t.shape
     d = np.abs(np.asarray(res.epochs.nav.pos) - np.asarray(base.epochs.nav.pos))[:, :2].max() * 6.4e6
     assert d < 1e-6, d  # metres
     np.testing.assert_allclose(float(res.loglik), float(base.loglik), rtol=1e-10)
-    run = lambda **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
-                                       dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15, **kw)
+    run = lambda **kw: loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,  # noqa: E731
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        **kw,
+    )
     with pytest.raises(ValueError, match="data leaves must have"):
         run(aids=(ins.odometer(np.ones(N + 1), active=np.ones(N, bool)),))
     with pytest.raises(ValueError, match="'gnss_nis' needs a gate"):
@@ -465,8 +634,15 @@ def test_inactive_aids_leave_the_gnss_filter_unchanged_and_bad_aid_input_is_name
     with pytest.raises(ValueError, match="at most one aid"):
         run(aids=(ins.zaru(np.ones(N, bool)), ins.zaru(np.ones(N, bool))))
     with pytest.raises(ValueError, match="tau_markov has shape"):
-        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas,
-                        LCParams(P0=jnp.eye(21), Qc=jnp.eye(18), tau_markov=jnp.ones(3)), error_model=ins.ERROR_MODEL_21)
+        loosely_coupled(
+            r.nav0,
+            t_imu,
+            r.imu.dtheta,
+            r.imu.dv,
+            meas,
+            LCParams(P0=jnp.eye(21), Qc=jnp.eye(18), tau_markov=jnp.ones(3)),
+            error_model=ins.ERROR_MODEL_21,
+        )
     with pytest.raises(ValueError, match="aids must be Aid"):
         run(aids=(ins.NavState,))
 
@@ -507,17 +683,44 @@ def test_odometer_scale_factor_state_recovered_and_outage_drift_cut(car):
     speed = np.where(ok, 1.02 * np.linalg.norm(v, axis=1) + 0.05 * rng.standard_normal(N), np.nan)
     model = ins.ERROR_MODEL_15.with_odometer_scale()
     assert model.n == 16 and model.names[-1] == "s_odo" and model.p == ins.ERROR_MODEL_15.p
-    P0 = model.P0(truth.pos[0], att=_v3(cfg.initial_errors.attitude), vel=0.1, pos_enu=1.0,
-                            gyro_bias=_v3(cfg.gyro.bias_sigma), accel_bias=_v3(cfg.accel.bias_sigma), odo_scale=0.05)
+    P0 = model.P0(
+        truth.pos[0],
+        att=_v3(cfg.initial_errors.attitude),
+        vel=0.1,
+        pos_enu=1.0,
+        gyro_bias=_v3(cfg.gyro.bias_sigma),
+        accel_bias=_v3(cfg.accel.bias_sigma),
+        odo_scale=0.05,
+    )
     aids = (ins.odometer(speed, sigma=0.05), ins.nhc(sigma=0.1))
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params._replace(P0=P0), dt_imu=cfg.dt,
-                          error_model=model, aids=aids, save=ins.LCSave(("nav", "biases", "covs")))
+    res = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params._replace(P0=P0),
+        dt_imu=cfg.dt,
+        error_model=model,
+        aids=aids,
+        save=ins.LCSave(("nav", "biases", "covs")),
+    )
     assert int(res.status) & ~_status.INFO_FLAGS == 0
     k = float(res.final_biases.odo_scale[0])
     sig = float(np.sqrt(res.epochs.covs[-1, 15, 15]))
     assert abs(k - 0.02) < 0.005 and abs(k - 0.02) < 3 * sig, (k, sig)
-    fixed = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, error_model=ins.ERROR_MODEL_15,
-                            aids=aids, save=ins.LCSave(("nav",)))
+    fixed = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.ERROR_MODEL_15,
+        aids=aids,
+        save=ins.LCSave(("nav",)),
+    )
     m0 = _outage_max(*_horizontal_error(base, truth))
     m1 = _outage_max(*_horizontal_error(res, truth))
     m2 = _outage_max(*_horizontal_error(fixed, truth))
@@ -527,8 +730,9 @@ def test_odometer_scale_factor_state_recovered_and_outage_drift_cut(car):
 def test_heading_per_reading_sigma():
     """ins.heading with a sigma per reading: R of an epoch is its own sigma^2, a NaN sigma takes default_sigma."""
     nav = _nav()
-    ctx = ms.MeasContext(nav=nav, w_ib_b=jnp.zeros(3), w_mean_b=jnp.zeros(3), T_mean=jnp.asarray(0.0),
-                         dtx=jnp.asarray(0.0))
+    ctx = ms.MeasContext(
+        nav=nav, w_ib_b=jnp.zeros(3), w_mean_b=jnp.zeros(3), T_mean=jnp.asarray(0.0), dtx=jnp.asarray(0.0)
+    )
     a = ins.heading(np.array([1.0, np.nan, 1.2]), sigma=np.array([0.02, 0.5, np.nan]), default_sigma=0.1)
     assert a.active.tolist() == [True, False, True]
     R = [float(ms.HEADING.fn(ctx, (a.data[0][i], a.data[1][i]), a.params, ins.IDX15, 15).R[0, 0]) for i in (0, 2)]

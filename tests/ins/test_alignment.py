@@ -3,6 +3,7 @@ gyrocompassing on a simulated navigation-grade static IMU, the auto criterion, g
 
 import math
 
+import _car
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -11,15 +12,24 @@ from jaxnav import ins
 from jaxnav.geodesy import WGS84
 from jaxnav.io import PosSolution
 
-import _car
-
 
 def _pos_solution(t, llh, v):
     M = t.size
     cov = np.tile(np.eye(3) * 0.01**2, (M, 1, 1))
-    return PosSolution(path="sim", t=t, lat=llh[:, 0], lon=llh[:, 1], h=llh[:, 2], q=np.ones(M, int),
-                       ns=np.full(M, 12), cov_enu=cov, age=np.zeros(M), ratio=np.full(M, 99.0), v_enu=v,
-                       vcov_enu=np.tile(np.eye(3) * 0.02**2, (M, 1, 1)))
+    return PosSolution(
+        path="sim",
+        t=t,
+        lat=llh[:, 0],
+        lon=llh[:, 1],
+        h=llh[:, 2],
+        q=np.ones(M, int),
+        ns=np.full(M, 12),
+        cov_enu=cov,
+        age=np.zeros(M),
+        ratio=np.full(M, 99.0),
+        v_enu=v,
+        vcov_enu=np.tile(np.eye(3) * 0.02**2, (M, 1, 1)),
+    )
 
 
 def _wrap_deg(x):
@@ -45,8 +55,17 @@ def test_gnss_course_heading_after_a_turn():
     # the gyro bias is recovered to the noise of a 15 s mean (~4e-5 rad/s) plus the Earth-rate model
     np.testing.assert_allclose(al.gyro_bias, bias, atol=2e-4)
     # auto: a consumer gyro cannot gyrocompass, so the same result, and the criterion says why
-    al2 = ins.coarse_alignment(t, f, w, sol, static_s=15.0, min_speed=5.0, position=c["pos"][0], heading="auto",
-                               gyro_bias_sigma=ins.noise_preset("consumer").gyro_bias_instability)
+    al2 = ins.coarse_alignment(
+        t,
+        f,
+        w,
+        sol,
+        static_s=15.0,
+        min_speed=5.0,
+        position=c["pos"][0],
+        heading="auto",
+        gyro_bias_sigma=ins.noise_preset("consumer").gyro_bias_instability,
+    )
     assert al2.heading_method == "gnss_course" and al2.gyrocompass_sigma > math.radians(10)
     assert al2.att0[2] == pytest.approx(al.att0[2], abs=1e-12)
 
@@ -70,8 +89,9 @@ def _static_nav_grade(seed, heading_deg, T=120.0, rate=100.0, lat=math.radians(4
 
 def test_gyrocompass_navigation_grade():
     t, f, w, pos, nz = _static_nav_grade(0, 37.0)
-    al = ins.coarse_alignment(t, f, w, None, static_s=120.0, position=pos, heading="auto",
-                              gyro_bias_sigma=nz.gyro_bias_instability)
+    al = ins.coarse_alignment(
+        t, f, w, None, static_s=120.0, position=pos, heading="auto", gyro_bias_sigma=nz.gyro_bias_instability
+    )
     assert al.heading_method == "gyrocompass"
     assert al.heading_sigma < math.radians(0.2)
     err = _wrap_deg(math.degrees(al.att0[2]) + 37.0)
@@ -90,8 +110,17 @@ def test_gyrocompass_sigma_matches_scatter():
     errs, sig = [], []
     for s in range(40):
         t, f, w, pos, nz = _static_nav_grade(100 + s, 37.0, T=30.0, rate=50.0)
-        al = ins.coarse_alignment(t, f, w, None, static_s=30.0, position=pos, heading="gyrocompass",
-                                  gyro_arw=nz.gyro_arw, gyro_bias_sigma=nz.gyro_bias_instability)
+        al = ins.coarse_alignment(
+            t,
+            f,
+            w,
+            None,
+            static_s=30.0,
+            position=pos,
+            heading="gyrocompass",
+            gyro_arw=nz.gyro_arw,
+            gyro_bias_sigma=nz.gyro_bias_instability,
+        )
         errs.append(math.remainder(al.att0[2] + math.radians(37.0), 2 * math.pi))
         sig.append(al.heading_sigma)
     ratio = math.sqrt(np.mean(np.square(errs))) / np.mean(sig)

@@ -25,8 +25,7 @@ def _noise(rng, n, dt, white, flicker, rrw):
     G = np.zeros_like(f)
     G[1:] = flicker**2 / (np.pi * f[1:])
     fl = np.fft.irfft(np.fft.rfft(rng.standard_normal(n)) * np.sqrt(G / (2 * dt)), n)
-    return (white / math.sqrt(dt) * rng.standard_normal(n) + fl
-            + np.cumsum(rrw * math.sqrt(dt) * rng.standard_normal(n)))
+    return white / math.sqrt(dt) * rng.standard_normal(n) + fl + np.cumsum(rrw * math.sqrt(dt) * rng.standard_normal(n))
 
 
 def test_adev_equals_allantools_and_uniform_grid_is_exact():
@@ -55,8 +54,11 @@ def test_fit_recovers_white_bias_instability_and_rate_random_walk_within_10_perc
     dt = 0.1
     y = np.stack([_noise(rng, 2**19, dt, N_W, B_F, K_R) for _ in range(3)])
     fit = ins.allan_noise_fit(y, dt)
-    for got, sig, true in ((fit.white, fit.white_sigma, N_W), (fit.bias_instability, fit.bias_instability_sigma, B_F),
-                           (fit.rate_rw, fit.rate_rw_sigma, K_R)):
+    for got, sig, true in (
+        (fit.white, fit.white_sigma, N_W),
+        (fit.bias_instability, fit.bias_instability_sigma, B_F),
+        (fit.rate_rw, fit.rate_rw_sigma, K_R),
+    ):
         np.testing.assert_array_less(np.abs(got / true - 1.0), 0.10)
         assert np.all(sig > 0) and np.all(sig < 0.05 * true)
     assert fit.resolved.all()
@@ -75,11 +77,15 @@ def test_fit_recovers_white_bias_instability_and_rate_random_walk_within_10_perc
 
     fg, fa = ins.allan_noise_fit(y * 1e-4, dt), ins.allan_noise_fit(y * 1e-3, dt)  # rad/s, m/s^2
     sec = loads_toml(noise_toml(fg, fa, source="sim"))["noise"]
-    assert sec["arw_deg_per_sqrt_h"] == pytest.approx(units.rad_per_sqrt_s_to_deg_per_sqrt_hour(fg.white.max()), rel=1e-3)
+    assert sec["arw_deg_per_sqrt_h"] == pytest.approx(
+        units.rad_per_sqrt_s_to_deg_per_sqrt_hour(fg.white.max()), rel=1e-3
+    )
     assert sec["gyro_bias_rw_deg_per_h_per_sqrt_h"] == pytest.approx(
-        units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour(fg.rate_rw.max()), rel=1e-3)
+        units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour(fg.rate_rw.max()), rel=1e-3
+    )
     assert sec["accel_bias_instability_mg"] == pytest.approx(
-        units.mps2_to_mg(fa.bias_instability.max()) * math.sqrt(FLICKER_AVAR) / GM_PEAK_ADEV, rel=1e-3)
+        units.mps2_to_mg(fa.bias_instability.max()) * math.sqrt(FLICKER_AVAR) / GM_PEAK_ADEV, rel=1e-3
+    )
     assert sec["bias_correlation_time_s"] == pytest.approx(fg.tau_floor.max() / GM_PEAK_TAU, rel=1e-3)
 
 
@@ -126,8 +132,10 @@ def test_allan_command_writes_figures_results_and_a_noise_section_ins_accepts(tm
     assert res["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx([ARW_DEG_SQRT_H] * 3, rel=0.05)
     assert res["accel"]["vrw_m_per_s_per_sqrt_h"] == pytest.approx([VRW_M_S_SQRT_H] * 3, rel=0.05)
     cfg = tmp_path / "run.toml"
-    cfg.write_text(f'[imu]\nfile = "{f.name}"\nformat = "kf-gins"\n[gnss]\nfile = "g.txt"\nformat = "kf-gins"\n\n'
-                   + (out / "noise.toml").read_text())
+    cfg.write_text(
+        f'[imu]\nfile = "{f.name}"\nformat = "kf-gins"\n[gnss]\nfile = "g.txt"\nformat = "kf-gins"\n\n'
+        + (out / "noise.toml").read_text()
+    )
     c = load_ins_config(cfg)
     assert c.noise.arw == pytest.approx(units.deg_per_sqrt_hour_to_rad_per_sqrt_s(ARW_DEG_SQRT_H), rel=0.05)
     assert c.noise.vrw == pytest.approx(units.mps_per_sqrt_hour_to_mps_per_sqrt_s(VRW_M_S_SQRT_H), rel=0.05)
@@ -138,12 +146,15 @@ def test_allan_command_writes_figures_results_and_a_noise_section_ins_accepts(tm
     assert "[noise]" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("argv_tail, match", [
-    (["--format", "csv"], "--columns"),
-    (["--format", "kf-gins", "--columns", "t=0"], "only used with --format csv"),
-    (["--format", "kf-gins", "--start", "10", "--end", "5"], "--end"),
-    (["--format", "kf-gins", "--start", "299.9"], "samples in the stretch"),
-])
+@pytest.mark.parametrize(
+    "argv_tail, match",
+    [
+        (["--format", "csv"], "--columns"),
+        (["--format", "kf-gins", "--columns", "t=0"], "only used with --format csv"),
+        (["--format", "kf-gins", "--start", "10", "--end", "5"], "--end"),
+        (["--format", "kf-gins", "--start", "299.9"], "samples in the stretch"),
+    ],
+)
 def test_allan_command_bad_options(tmp_path, capsys, argv_tail, match):
     f = _static_file(tmp_path / "static.txt", n=30_000)
     assert main(["-q", "allan", str(f), "--out", str(tmp_path / "o"), *argv_tail]) == 2
@@ -171,11 +182,33 @@ def test_allan_command_reads_a_csv_with_a_column_map(tmp_path):
     w = np.degrees(arw / math.sqrt(dt) * rng.standard_normal((n, 3)))  # deg/s
     a = 0.001 * rng.standard_normal((n, 3)) + np.array([0.0, 0.0, 1.0])  # g
     f = tmp_path / "imu.csv"
-    np.savetxt(f, np.column_stack([dt * np.arange(n), w, a]), delimiter=",", header="time,wx,wy,wz,ax,ay,az",
-               comments="", fmt="%.9g")
+    np.savetxt(
+        f,
+        np.column_stack([dt * np.arange(n), w, a]),
+        delimiter=",",
+        header="time,wx,wy,wz,ax,ay,az",
+        comments="",
+        fmt="%.9g",
+    )
     out = tmp_path / "out"
-    assert main(["-q", "allan", str(f), "--format", "csv", "--columns", "t=time,gx=wx,gy=wy,gz=wz,ax=ax,ay=ay,az=az",
-                 "--units", "t=s,gyro=deg/s,accel=g", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "-q",
+                "allan",
+                str(f),
+                "--format",
+                "csv",
+                "--columns",
+                "t=time,gx=wx,gy=wy,gz=wz,ax=ax,ay=ay,az=az",
+                "--units",
+                "t=s,gyro=deg/s,accel=g",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     import json
 
     res = json.loads((out / "results.json").read_text())

@@ -35,10 +35,18 @@ def _same_quat(p, q, atol):
 angle = st.floats(-np.pi, np.pi, allow_nan=False)
 # |pitch| <= 1.5 rad (86 deg): away from gimbal lock, where roll and yaw are ill-conditioned
 euler = st.tuples(st.floats(-1.5, 1.5), angle, angle).map(np.array)
-unit3 = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3).map(lambda v: np.array(v) / np.linalg.norm(v))
+unit3 = (
+    st.tuples(*[st.floats(-1, 1)] * 3)
+    .filter(lambda v: np.linalg.norm(v) > 1e-3)
+    .map(lambda v: np.array(v) / np.linalg.norm(v))
+)
 # rotation vectors: |phi| < pi - 1e-3 (at pi, phi and -phi are the same rotation)
 rotvec = st.tuples(unit3, st.floats(0.0, np.pi - 1e-3)).map(lambda t: t[0] * t[1])
-quat = st.tuples(*[st.floats(-1, 1)] * 4).filter(lambda v: np.linalg.norm(v) > 1e-2).map(lambda v: np.array(v) / np.linalg.norm(v))
+quat = (
+    st.tuples(*[st.floats(-1, 1)] * 4)
+    .filter(lambda v: np.linalg.norm(v) > 1e-2)
+    .map(lambda v: np.array(v) / np.linalg.norm(v))
+)
 vec3 = st.tuples(*[st.floats(-100, 100)] * 3).map(np.array)
 
 # compiled once: every hypothesis example reuses them (shape (3,) / (4,): no retrace)
@@ -48,21 +56,33 @@ _quat_dcm_quat = jax.jit(lambda q: A.dcm_to_quat(A.quat_to_dcm(q)))
 _rv_quat_rv = jax.jit(lambda p: A.quat_to_rv(A.rv_to_quat(p)))
 _rv_dcm_rv = jax.jit(lambda p: A.quat_to_rv(A.dcm_to_quat(A.rv_to_dcm(p))))
 _dcms = jax.jit(lambda a, p, q: jnp.stack([A.euler_to_dcm(a), A.rv_to_dcm(p), A.quat_to_dcm(q)]))
-_rotate = jax.jit(lambda q, v: (A.quat_rotate(q, v), A.quat_to_dcm(q) @ v,
-                                A.quat_mul(A.quat_mul(q, jnp.concatenate([jnp.zeros(1), v])), A.quat_conj(q))))
-
-
+_rotate = jax.jit(
+    lambda q, v: (
+        A.quat_rotate(q, v),
+        A.quat_to_dcm(q) @ v,
+        A.quat_mul(A.quat_mul(q, jnp.concatenate([jnp.zeros(1), v])), A.quat_conj(q)),
+    )
+)
 
 
 @jax.jit
 def _batch(att, phi, q1, q2):
     """Everything the batch tests need, computed in one compiled call."""
     return dict(
-        e2d=A.euler_to_dcm(att), rv2d=A.rv_to_dcm(phi), rv2q=A.rv_to_quat(phi),
-        q2d1=A.quat_to_dcm(q1), q2d2=A.quat_to_dcm(q2), q2dneg=A.quat_to_dcm(-q1),
-        mul=A.quat_mul(q1, q2), q1q1c=A.quat_mul(q1, A.quat_conj(q1)), norm=A.quat_normalize(3.0 * q1),
-        q2rv=A.quat_to_rv(q1), q2rvneg=A.quat_to_rv(-q1), skew=A.skew(q1[:, 1:]),
-        q2dmul=A.quat_to_dcm(A.quat_mul(q1, q2)), d2q=A.dcm_to_quat(A.quat_to_dcm(q1)),
+        e2d=A.euler_to_dcm(att),
+        rv2d=A.rv_to_dcm(phi),
+        rv2q=A.rv_to_quat(phi),
+        q2d1=A.quat_to_dcm(q1),
+        q2d2=A.quat_to_dcm(q2),
+        q2dneg=A.quat_to_dcm(-q1),
+        mul=A.quat_mul(q1, q2),
+        q1q1c=A.quat_mul(q1, A.quat_conj(q1)),
+        norm=A.quat_normalize(3.0 * q1),
+        q2rv=A.quat_to_rv(q1),
+        q2rvneg=A.quat_to_rv(-q1),
+        skew=A.skew(q1[:, 1:]),
+        q2dmul=A.quat_to_dcm(A.quat_mul(q1, q2)),
+        d2q=A.dcm_to_quat(A.quat_to_dcm(q1)),
         e2q2d=A.quat_to_dcm(A.euler_to_quat(att)),
     )
 
@@ -93,7 +113,9 @@ def test_matches_scipy(rand):
     np.testing.assert_allclose(q * np.sign(q[:, :1]), qs, rtol=0, atol=1e-15)
     np.testing.assert_allclose(out["q2d1"], Rotation.from_quat(q1, scalar_first=True).as_matrix(), rtol=0, atol=1e-15)
     # Hamilton product = scipy composition (apply q2 first, then q1)
-    ref = (Rotation.from_quat(q1, scalar_first=True) * Rotation.from_quat(q2, scalar_first=True)).as_quat(scalar_first=True)
+    ref = (Rotation.from_quat(q1, scalar_first=True) * Rotation.from_quat(q2, scalar_first=True)).as_quat(
+        scalar_first=True
+    )
     assert all(_same_quat(p, r, 1e-15) for p, r in zip(out["mul"], ref))
     # dcm_to_quat returns w >= 0 and matches scipy's quaternion of the same matrix (up to sign)
     C = out["q2d1"]
@@ -157,7 +179,9 @@ def test_quaternion_algebra(rand):
     np.testing.assert_allclose(out["q2dneg"], out["q2d1"], rtol=0, atol=0)
     np.testing.assert_allclose(out["q2rvneg"], out["q2rv"], rtol=0, atol=1e-15)
     # skew(a) b = a x b
-    np.testing.assert_allclose(np.einsum("nij,nj->ni", out["skew"], q2[:, 1:]), np.cross(q1[:, 1:], q2[:, 1:]), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        np.einsum("nij,nj->ni", out["skew"], q2[:, 1:]), np.cross(q1[:, 1:], q2[:, 1:]), rtol=0, atol=1e-15
+    )
     # euler_to_quat is the quaternion of euler_to_dcm
     np.testing.assert_allclose(out["e2q2d"], out["e2d"], rtol=0, atol=1e-15)
 
@@ -224,8 +248,12 @@ def test_pitch_and_roll_conventions():
     # rotation vector about up = yaw; quaternion of a 90 deg yaw
     np.testing.assert_allclose(jax.jit(A.rv_to_dcm)(jnp.array([0.0, 0.0, 0.3])), _C(yaw=0.3), rtol=0, atol=1e-15)
     s = np.sqrt(0.5)
-    np.testing.assert_allclose(jax.jit(A.euler_to_quat)(jnp.array([0.0, 0.0, np.pi / 2])), [s, 0, 0, s], rtol=0, atol=1e-15)
-    np.testing.assert_allclose(jax.jit(A.rv_to_quat)(jnp.array([0.0, 0.0, np.pi / 2])), [s, 0, 0, s], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        jax.jit(A.euler_to_quat)(jnp.array([0.0, 0.0, np.pi / 2])), [s, 0, 0, s], rtol=0, atol=1e-15
+    )
+    np.testing.assert_allclose(
+        jax.jit(A.rv_to_quat)(jnp.array([0.0, 0.0, np.pi / 2])), [s, 0, 0, s], rtol=0, atol=1e-15
+    )
 
 
 def test_dcm_to_euler_accurate_near_gimbal_lock():
@@ -267,16 +295,28 @@ def _q_of(n):
 @jax.jit
 def _derivatives_at_zero(z, q0, v):
     return dict(
-        q=A.rv_to_quat(z), C=A.rv_to_dcm(z), Jf=jax.jacfwd(A.rv_to_quat)(z), Jr=jax.jacrev(A.rv_to_quat)(z),
-        H=jax.hessian(A.rv_to_quat)(z), rv=A.quat_to_rv(q0), rvneg=A.quat_to_rv(-q0),
-        Kf=jax.jacfwd(A.quat_to_rv)(q0), Kr=jax.jacrev(A.quat_to_rv)(q0), K2=jax.hessian(A.quat_to_rv)(q0),
-        dCv=jax.jacfwd(lambda p: A.rv_to_dcm(p) @ v)(z), skew=A.skew(v),
+        q=A.rv_to_quat(z),
+        C=A.rv_to_dcm(z),
+        Jf=jax.jacfwd(A.rv_to_quat)(z),
+        Jr=jax.jacrev(A.rv_to_quat)(z),
+        H=jax.hessian(A.rv_to_quat)(z),
+        rv=A.quat_to_rv(q0),
+        rvneg=A.quat_to_rv(-q0),
+        Kf=jax.jacfwd(A.quat_to_rv)(q0),
+        Kr=jax.jacrev(A.quat_to_rv)(q0),
+        K2=jax.hessian(A.quat_to_rv)(q0),
+        dCv=jax.jacfwd(lambda p: A.rv_to_dcm(p) @ v)(z),
+        skew=A.skew(v),
     )
 
 
 def test_rv_quat_at_exactly_zero():
-    d = {k: np.array(x) for k, x in _derivatives_at_zero(jnp.zeros(3), jnp.array([1.0, 0.0, 0.0, 0.0]),
-                                                         jnp.array([1.0, 2.0, 3.0])).items()}
+    d = {
+        k: np.array(x)
+        for k, x in _derivatives_at_zero(
+            jnp.zeros(3), jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([1.0, 2.0, 3.0])
+        ).items()
+    }
     np.testing.assert_array_equal(d["q"], [1.0, 0.0, 0.0, 0.0])
     np.testing.assert_array_equal(d["C"], np.eye(3))
     J_ref = np.r_[np.zeros((1, 3)), 0.5 * np.eye(3)]

@@ -62,6 +62,7 @@ def _profile(ell):
         d1 = jax.vmap(jax.grad(normal_gravity, argnums=1), in_axes=(0, None, None))(lat, 0.0, ell)
         d2 = jax.vmap(jax.grad(jax.grad(normal_gravity, argnums=1), argnums=1), in_axes=(0, None, None))(lat, 0.0, ell)
         return gam, d1, d2
+
     return run
 
 
@@ -184,8 +185,11 @@ def test_transport_rate_signs():
     np.testing.assert_allclose(-north[0], 10.0 / (g.meridian_radius(lat) + h), rtol=1e-15)
     # position rate signs and units: north -> lat increases, east -> lon increases, up -> h
     pr = np.array(position_rate(jnp.array([lat, 0.2, h]), jnp.array([1.0, 2.0, 3.0])))
-    np.testing.assert_allclose(pr, [2.0 / (g.meridian_radius(lat) + h),
-                                    1.0 / ((g.prime_vertical_radius(lat) + h) * np.cos(lat)), 3.0], rtol=1e-15)
+    np.testing.assert_allclose(
+        pr,
+        [2.0 / (g.meridian_radius(lat) + h), 1.0 / ((g.prime_vertical_radius(lat) + h) * np.cos(lat)), 3.0],
+        rtol=1e-15,
+    )
 
 
 def test_earth_params_batched_jit_and_grad():
@@ -196,7 +200,9 @@ def test_earth_params_batched_jit_and_grad():
     loop = [single(p, u) for p, u in zip(pos, v)]
     for name in eager._fields:
         np.testing.assert_allclose(np.array(getattr(jitted, name)), np.array(getattr(eager, name)), rtol=1e-14, atol=0)
-        np.testing.assert_allclose(np.array([getattr(e, name) for e in loop]), np.array(getattr(eager, name)), rtol=1e-14, atol=0)
+        np.testing.assert_allclose(
+            np.array([getattr(e, name) for e in loop]), np.array(getattr(eager, name)), rtol=1e-14, atol=0
+        )
     # gravity and its gradient are finite at the poles
     grad = jax.jit(jax.vmap(jax.grad(normal_gravity, argnums=(0, 1))))
     gr = grad(jnp.array([np.pi / 2, -np.pi / 2]), jnp.zeros(2))
@@ -207,8 +213,9 @@ def test_gravity_minus_coriolis_eotvos():
     """Up component: -gamma + 2 w V_E cos L + V_E^2 / (R_N + h) + V_N^2 / (R_M + h) (Eotvos and curvature terms)."""
     lat, h = 0.7, 300.0
     pos = jnp.array([lat, 2.0, h])
-    assert np.array_equal(E.gravity_minus_coriolis(earth_params(pos, jnp.zeros(3)), jnp.zeros(3)),
-                          earth_params(pos, jnp.zeros(3)).g_n)
+    assert np.array_equal(
+        E.gravity_minus_coriolis(earth_params(pos, jnp.zeros(3)), jnp.zeros(3)), earth_params(pos, jnp.zeros(3)).g_n
+    )
     v = jnp.array([80.0, -30.0, 2.0])
     e = earth_params(pos, v)
     G = np.array(E.gravity_minus_coriolis(e, v))

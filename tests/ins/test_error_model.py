@@ -25,13 +25,34 @@ def qc18(arw, sigma, tau, vrw):
     return em.ERROR_MODEL_18.Qc(ImuNoise(gyro_arw=arw, accel_vrw=vrw, gyro_bias_instability=sigma, gyro_bias_tau=tau))
 
 
-def qc21(arw, vrw, *, gyro_bias_sigma=0.0, gyro_bias_tau=jnp.inf, accel_bias_sigma=0.0, accel_bias_tau=jnp.inf,
-         gyro_bias_rw=0.0, accel_bias_rw=0.0, accel_scale_rw=0.0):
+def qc21(
+    arw,
+    vrw,
+    *,
+    gyro_bias_sigma=0.0,
+    gyro_bias_tau=jnp.inf,
+    accel_bias_sigma=0.0,
+    accel_bias_tau=jnp.inf,
+    gyro_bias_rw=0.0,
+    accel_bias_rw=0.0,
+    accel_scale_rw=0.0,
+):
     """Qc of the 21-state model from datasheet values (SI)."""
-    return em.ERROR_MODEL_21.Qc(ImuNoise(
-        gyro_arw=arw, accel_vrw=vrw, gyro_bias_instability=gyro_bias_sigma, gyro_bias_tau=gyro_bias_tau,
-        accel_bias_instability=accel_bias_sigma, accel_bias_tau=accel_bias_tau, gyro_bias_rw=gyro_bias_rw,
-        accel_bias_rw=accel_bias_rw, accel_sf_rw=accel_scale_rw))
+    return em.ERROR_MODEL_21.Qc(
+        ImuNoise(
+            gyro_arw=arw,
+            accel_vrw=vrw,
+            gyro_bias_instability=gyro_bias_sigma,
+            gyro_bias_tau=gyro_bias_tau,
+            accel_bias_instability=accel_bias_sigma,
+            accel_bias_tau=accel_bias_tau,
+            gyro_bias_rw=gyro_bias_rw,
+            accel_bias_rw=accel_bias_rw,
+            accel_sf_rw=accel_scale_rw,
+        )
+    )
+
+
 NAV_BLOCKS = {"phi": em.IDX18.phi, "dv": em.IDX18.dv, "dpos": em.IDX18.dpos}
 ALL_BLOCKS = dict(NAV_BLOCKS, eps_b=em.IDX18.eps_b, eps_r=em.IDX18.eps_r, nabla=em.IDX18.nabla)
 
@@ -70,8 +91,14 @@ def _points():
     The last one uses the reversed Earth rate of backward navigation (earth_rate_sign = -1).
     """
     deg = units.DEG
-    pos = jnp.array([[39.0 * deg, 108.0 * deg, 205.8795], [-33.0 * deg, 151.0 * deg, 1200.0],
-                     [62.0 * deg, -20.0 * deg, 15.0], [5.0 * deg, 10.0 * deg, 3000.0]])
+    pos = jnp.array(
+        [
+            [39.0 * deg, 108.0 * deg, 205.8795],
+            [-33.0 * deg, 151.0 * deg, 1200.0],
+            [62.0 * deg, -20.0 * deg, 15.0],
+            [5.0 * deg, 10.0 * deg, 3000.0],
+        ]
+    )
     v = jnp.array([[40.0, 69.3, 2.5], [-55.0, 20.0, -1.0], [10.0, -80.0, 0.5], [150.0, 30.0, 4.0]])
     att = jnp.array([[5.0, -3.0, -30.0], [-2.0, 8.0, 120.0], [1.0, 1.0, 45.0], [10.0, -15.0, -170.0]]) * deg
     C = euler_to_dcm(att)
@@ -120,9 +147,19 @@ def test_F_equals_jacobian_of_nonlinear_navigation_blockwise(jac):
         worst = max(errs, key=errs.get)
         assert errs[worst] < 1e-6, (k, worst, errs[worst])
         # the blocks that physics makes nonzero are nonzero (the test is not vacuous)
-        for blk in [("phi", "phi"), ("phi", "dv"), ("phi", "dpos"), ("dv", "phi"), ("dv", "dv"),
-                    ("dv", "dpos"), ("dpos", "dv"), ("dpos", "dpos"), ("phi", "eps_b"), ("phi", "eps_r"),
-                    ("dv", "nabla")]:
+        for blk in [
+            ("phi", "phi"),
+            ("phi", "dv"),
+            ("phi", "dpos"),
+            ("dv", "phi"),
+            ("dv", "dv"),
+            ("dv", "dpos"),
+            ("dpos", "dv"),
+            ("dpos", "dpos"),
+            ("phi", "eps_b"),
+            ("phi", "eps_r"),
+            ("dv", "nabla"),
+        ]:
             assert np.linalg.norm(Jx[k][NAV_BLOCKS[blk[0]], ALL_BLOCKS[blk[1]]]) > 0, blk
 
 
@@ -161,8 +198,7 @@ def model():
     pos, v, C, _, f_b = _points()
     F = em.ERROR_MODEL_18.F(pos[0], v[0], C[0] @ f_b[0], C[0], TAU)
     G = em.ERROR_MODEL_18.G(C[0])
-    Qc = qc18(0.01 * units.DEG_PER_SQRT_HOUR, 0.1 * units.DEG_PER_HOUR, TAU,
-                           jnp.array([1e-3, 2e-3, 3e-3]))
+    Qc = qc18(0.01 * units.DEG_PER_SQRT_HOUR, 0.1 * units.DEG_PER_HOUR, TAU, jnp.array([1e-3, 2e-3, 3e-3]))
     return F, G, Qc
 
 
@@ -279,7 +315,9 @@ def test_error_model_records():
     assert m15 is em.ERROR_MODEL_15 and m18 is em.ERROR_MODEL_18
     np.testing.assert_array_equal(m15.F(pos[1], v[1], f_n, C[1], TAU, earth_rate_sign=-1.0), F)
     np.testing.assert_array_equal(m15.G(C[1]), G)
-    np.testing.assert_array_equal(m18.F(pos[1], v[1], f_n, C[1], TAU), em.ERROR_MODEL_18.F(pos[1], v[1], f_n, C[1], TAU))
+    np.testing.assert_array_equal(
+        m18.F(pos[1], v[1], f_n, C[1], TAU), em.ERROR_MODEL_18.F(pos[1], v[1], f_n, C[1], TAU)
+    )
     assert (m15.n, m15.p, m18.n, m18.p) == (15, 6, 18, 9)
     assert m15.idx == em.IDX15 and m18.idx == em.IDX18 and m15.names == em.STATE_NAMES15
     noise = ImuNoise(gyro_arw=1e-4, accel_vrw=3e-3, gyro_bias_instability=2e-6, gyro_bias_tau=TAU)
@@ -394,8 +432,14 @@ def test_15gm_is_21_without_scale_factors():
     F15 = em.ERROR_MODEL_15GM.F(pos[2], v[2], C[2] @ f_b[2], C[2], TAU6)
     np.testing.assert_array_equal(F15, F21[:15, :15])
     np.testing.assert_array_equal(em.ERROR_MODEL_15GM.G(C[2]), em.ERROR_MODEL_21.G(C[2])[:15, :12])
-    noise = ImuNoise(gyro_arw=1e-4, accel_vrw=1e-3, gyro_bias_instability=1e-5, gyro_bias_tau=3600.0,
-                     accel_bias_rw=1e-5, gyro_sf_rw=1e-7)
+    noise = ImuNoise(
+        gyro_arw=1e-4,
+        accel_vrw=1e-3,
+        gyro_bias_instability=1e-5,
+        gyro_bias_tau=3600.0,
+        accel_bias_rw=1e-5,
+        gyro_sf_rw=1e-7,
+    )
     np.testing.assert_array_equal(em.ERROR_MODEL_15GM.Qc(noise), em.ERROR_MODEL_21.Qc(noise)[:12, :12])
     assert em.ERROR_MODEL_15GM.idx == em.IDX15
     np.testing.assert_array_equal(em.ERROR_MODEL_15GM.tau(noise), [3600.0] * 6)
@@ -406,8 +450,20 @@ def test_qc21_from_datasheet_values():
     arw, vrw = 0.1 * units.DEG_PER_SQRT_HOUR, 0.05  # rad/sqrt(s), m/s/sqrt(s)
     bi, tau = 5.0 * units.DEG_PER_HOUR, 1800.0
     rw = 1e-6  # rad/s/sqrt(s)
-    Q = np.diag(np.asarray(qc21(arw, vrw, gyro_bias_sigma=bi, gyro_bias_tau=tau, gyro_bias_rw=rw,
-                                               accel_bias_sigma=1e-3, accel_bias_tau=jnp.inf, accel_scale_rw=1e-7)))
+    Q = np.diag(
+        np.asarray(
+            qc21(
+                arw,
+                vrw,
+                gyro_bias_sigma=bi,
+                gyro_bias_tau=tau,
+                gyro_bias_rw=rw,
+                accel_bias_sigma=1e-3,
+                accel_bias_tau=jnp.inf,
+                accel_scale_rw=1e-7,
+            )
+        )
+    )
     np.testing.assert_allclose(Q[0:3], arw**2)
     np.testing.assert_allclose(Q[3:6], vrw**2)
     np.testing.assert_allclose(Q[6:9], 2 * bi**2 / tau + rw**2)
@@ -426,13 +482,24 @@ def test_qc21_from_datasheet_values():
 
 def test_P0_helper_places_each_block():
     pos = jnp.array([0.7, 0.2, 100.0])
-    P = np.asarray(em.ERROR_MODEL_21.P0(pos, att=1e-3, vel=0.1, pos_enu=[1.0, 2.0, 3.0], gyro_bias=1e-4,
-                                        accel_bias=1e-2, gyro_scale=1e-3, accel_scale=2e-3))
+    P = np.asarray(
+        em.ERROR_MODEL_21.P0(
+            pos,
+            att=1e-3,
+            vel=0.1,
+            pos_enu=[1.0, 2.0, 3.0],
+            gyro_bias=1e-4,
+            accel_bias=1e-2,
+            gyro_scale=1e-3,
+            accel_scale=2e-3,
+        )
+    )
     sd = np.sqrt(np.diag(P))
     np.testing.assert_allclose(sd[[0, 3, 8, 9, 12, 15, 18]], [1e-3, 0.1, 3.0, 1e-4, 1e-2, 1e-3, 2e-3])
     np.testing.assert_allclose(sd[7] * 6.39e6 * np.cos(0.7), 1.0, rtol=5e-3)  # lon from east metres
-    assert em.ERROR_MODEL_18.P0(pos, att=0, vel=0, pos_enu=0, gyro_bias=0, accel_bias=0,
-                                gyro_markov=1e-6)[13, 13] == 1e-12
+    assert (
+        em.ERROR_MODEL_18.P0(pos, att=0, vel=0, pos_enu=0, gyro_bias=0, accel_bias=0, gyro_markov=1e-6)[13, 13] == 1e-12
+    )
 
 
 def test_F21_predicts_the_mechanization_error_growth():
@@ -452,19 +519,41 @@ def test_F21_predicts_the_mechanization_error_growth():
     f = jnp.array([0.8, 2.0, 9.9])  # m/s^2
     dth, dv = jnp.tile(w * dt, (K, 1)), jnp.tile(f * dt, (K, 1))
     ref = mechanize(nav0, dth, dv, dt)
-    x = jnp.zeros(21).at[9:12].set(2e-5).at[12:15].set(jnp.array([3e-3, -2e-3, 1e-3])) \
-        .at[15:18].set(jnp.array([2e-3, -3e-3, 5e-3])).at[18:21].set(jnp.array([-2e-3, 4e-3, 3e-3]))
+    x = (
+        jnp.zeros(21)
+        .at[9:12]
+        .set(2e-5)
+        .at[12:15]
+        .set(jnp.array([3e-3, -2e-3, 1e-3]))
+        .at[15:18]
+        .set(jnp.array([2e-3, -3e-3, 5e-3]))
+        .at[18:21]
+        .set(jnp.array([-2e-3, 4e-3, 3e-3]))
+    )
     # measured - applied = error: the computed increments carry bias and scale errors
     res = mechanize(nav0, dth * (1 + x[15:18]) + x[9:12] * dt, dv * (1 + x[18:21]) + x[12:15] * dt, dt)
     C = quat_to_dcm(ref.nav.q_bn)
     avg = lambda a: jnp.mean(a, axis=0)  # noqa: E731
-    F = em.ERROR_MODEL_21.F(avg(ref.nav.pos), avg(ref.nav.v_n), avg(C @ f), avg(C), jnp.inf,
-                            Cw=avg(C * (w * 1.0)[None, None, :]), Cf=avg(C * f[None, None, :]))
+    F = em.ERROR_MODEL_21.F(
+        avg(ref.nav.pos),
+        avg(ref.nav.v_n),
+        avg(C @ f),
+        avg(C),
+        jnp.inf,
+        Cw=avg(C * (w * 1.0)[None, None, :]),
+        Cf=avg(C * f[None, None, :]),
+    )
     Phi, _, _ = em.discretize_taylor(F, em.ERROR_MODEL_21.G(C0), jnp.zeros((18, 18)), K * dt)
     pred = (Phi @ x)[:9]
     last = lambda a: a[-1]  # noqa: E731
-    got = _chart(quat_to_dcm(last(res.nav.q_bn)), last(C), last(res.nav.v_n), last(ref.nav.v_n),
-                 last(res.nav.pos), last(ref.nav.pos))
+    got = _chart(
+        quat_to_dcm(last(res.nav.q_bn)),
+        last(C),
+        last(res.nav.v_n),
+        last(ref.nav.v_n),
+        last(res.nav.pos),
+        last(ref.nav.pos),
+    )
     for sl in (slice(0, 3), slice(3, 6)):  # attitude and velocity errors (position is second order here)
         np.testing.assert_allclose(got[sl], pred[sl], rtol=2e-2, atol=2e-2 * float(jnp.max(jnp.abs(pred[sl]))))
     # without the scale-factor columns the prediction misses the dominant part of the error

@@ -105,8 +105,10 @@ def test_denser_solution_is_scored_at_the_reference_epochs_and_gaps_are_skipped(
         ins.trajectory_errors(t_ref + 1e6, pref, None, None, t_ref, pref)
 
 
-TRUTH = ("2071 378043.000 30.444 114.471 20.0 1.0 2.0 -0.5 0.1 -0.2 359.5\n"
-         "2071 378043.005 30.444 114.471 20.0 1.0 2.0 -0.5 0.1 -0.2 0.5\n")
+TRUTH = (
+    "2071 378043.000 30.444 114.471 20.0 1.0 2.0 -0.5 0.1 -0.2 359.5\n"
+    "2071 378043.005 30.444 114.471 20.0 1.0 2.0 -0.5 0.1 -0.2 0.5\n"
+)
 
 
 def test_kfgins_truth_reader(tmp_path):
@@ -134,11 +136,16 @@ def test_kfgins_truth_reader(tmp_path):
 
 def test_csv_truth_reader(tmp_path):
     f = tmp_path / "ref.csv"
-    f.write_text("time,lat,lon,height,vu,ve,vn,hdg\n10.0,0.5,1.0,5.0,0.1,1.0,2.0,0.25\n10.5,0.5,1.0,5.0,0.1,1.0,2.0,0.3\n")
+    f.write_text(
+        "time,lat,lon,height,vu,ve,vn,hdg\n10.0,0.5,1.0,5.0,0.1,1.0,2.0,0.25\n10.5,0.5,1.0,5.0,0.1,1.0,2.0,0.3\n"
+    )
     with pytest.raises(ValueError, match="map all of"):
         read_csv_truth(f, {"t": "time", "lat": "lat", "lon": "lon", "h": "height", "heading": "hdg"})
-    tr = read_csv_truth(f, {"t": "time", "lat": "lat", "lon": "lon", "h": "height", "ve": "ve", "vn": "vn", "vu": "vu"},
-                        {"angle": "rad"})
+    tr = read_csv_truth(
+        f,
+        {"t": "time", "lat": "lat", "lon": "lon", "h": "height", "ve": "ve", "vn": "vn", "vu": "vu"},
+        {"angle": "rad"},
+    )
     np.testing.assert_allclose(tr.pos[0], [0.5, 1.0, 5.0])
     np.testing.assert_allclose(tr.v_enu[1], [1.0, 2.0, 0.1])
     assert np.all(np.isnan(tr.rpy))

@@ -8,12 +8,10 @@ import pytest
 from scipy.stats import chi2
 
 import jaxnav
-
 from jaxnav import filters as jf
 from jaxnav import ins, sim
 from jaxnav.ins import attitude as A
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled, smooth
-from jaxnav.units import ARCSEC, DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, MG, UG
 
 SCENARIO = """
 name = "well-specified"
@@ -90,8 +88,12 @@ def _params(cfg, n_states=18):
     RM = float(jaxnav.geodesy.meridian_radius(lat)) + h
     RN = float(jaxnav.geodesy.prime_vertical_radius(lat)) + h
     pe = v3(ie.position)
-    p0 = [v3(ie.attitude) ** 2, v3(ie.velocity) ** 2, np.array([pe[1] / RM, pe[0] / (RN * np.cos(lat)), pe[2]]) ** 2,
-          v3(g.bias_sigma) ** 2]
+    p0 = [
+        v3(ie.attitude) ** 2,
+        v3(ie.velocity) ** 2,
+        np.array([pe[1] / RM, pe[0] / (RN * np.cos(lat)), pe[2]]) ** 2,
+        v3(g.bias_sigma) ** 2,
+    ]
     if n_states == 18:
         p0.append(v3(g.markov_sigma) ** 2)
     p0.append(v3(a.bias_sigma) ** 2)
@@ -103,16 +105,21 @@ def _meas(cfg, gnss):
     M = gnss.t.shape[0]
     v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
     R = np.diag(np.concatenate([v3(cfg.gnss.pos_sigma) ** 2, v3(cfg.gnss.vel_sigma) ** 2]))
-    return PVMeasurements(t=np.asarray(gnss.t), pos=gnss.pos, vel=gnss.vel, R=jnp.broadcast_to(R, (M, 6, 6)),
-                          mask=jnp.broadcast_to(gnss.valid[:, None], (M, 6)), lever=jnp.zeros((M, 3)))
+    return PVMeasurements(
+        t=np.asarray(gnss.t),
+        pos=gnss.pos,
+        vel=gnss.vel,
+        R=jnp.broadcast_to(R, (M, 6, 6)),
+        mask=jnp.broadcast_to(gnss.valid[:, None], (M, 6)),
+        lever=jnp.zeros((M, 3)),
+    )
 
 
 def _true_error(ep, truth, errors, gnss_index, n_states=18):
     """Error state computed - true (nav) and true - applied (sensors) at the epochs, (M, n)."""
     q_t, v_t, p_t = truth.q_bn[gnss_index], truth.v_n[gnss_index], truth.pos[gnss_index]
     phi = -A.quat_to_rv(A.quat_mul(ep.nav.q_bn, A.quat_conj(q_t)))
-    parts = [phi, ep.nav.v_n - v_t, ep.nav.pos - p_t,
-             errors.gyro_bias[None] - ep.biases.gyro]
+    parts = [phi, ep.nav.v_n - v_t, ep.nav.pos - p_t, errors.gyro_bias[None] - ep.biases.gyro]
     if n_states == 18:
         parts.append(errors.gyro_markov[gnss_index - 1] - ep.biases.markov)
     parts.append(errors.accel_bias[None] - ep.biases.accel)
@@ -130,8 +137,9 @@ def runs():
 
     def one(key):
         r = sim.simulate(cfg, key, trajectory=truth)
-        res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv,
-                              _meas(cfg, r.gnss._replace(t=t_gnss)), params, dt_imu=cfg.dt)
+        res = loosely_coupled(
+            r.nav0, t_imu, r.imu.dtheta, r.imu.dv, _meas(cfg, r.gnss._replace(t=t_gnss)), params, dt_imu=cfg.dt
+        )
         e = _true_error(res.epochs, truth, r.errors, gidx)
         P = res.epochs.covs
         nees = jnp.einsum("ti,ti->t", e, jnp.linalg.solve(P, e[..., None])[..., 0])
@@ -223,8 +231,18 @@ def test_filter_family_plugins_and_15_states(outage_run, kind):
     else:
         n = 15
         params = _params(cfg, 15)
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, _meas(cfg, r.gnss), params, dt_imu=cfg.dt,
-                          error_model=ins.error_model_for(n), save=ins.LCSave(("nav", "covs", "factors", "nis")), **kw)
+    res = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        _meas(cfg, r.gnss),
+        params,
+        dt_imu=cfg.dt,
+        error_model=ins.error_model_for(n),
+        save=ins.LCSave(("nav", "covs", "factors", "nis")),
+        **kw,
+    )
     assert int(res.status) & ~1 == 0 and res.epochs.covs.shape[1:] == (n, n)
     f = np.asarray(res.epochs.factors)
     if kind == "attenuated":
@@ -247,8 +265,16 @@ def test_bad_measurements_are_skipped_and_counted_and_time_ranges_checked(outage
     R = np.array(meas.R)
     pos[20, 0] = np.nan  # a NaN latitude: the north component is masked and counted
     R[30, 3, 3] = 1e12  # a huge velocity sigma: that component is masked
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas._replace(pos=pos, R=R), params,
-                          dt_imu=cfg.dt, save=ins.LCSave(("nav", "valid")))
+    res = loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas._replace(pos=pos, R=R),
+        params,
+        dt_imu=cfg.dt,
+        save=ins.LCSave(("nav", "valid")),
+    )
     assert int(res.n_nonfinite) == int(base.n_nonfinite) + 1  # the north component; E and U stay valid
     v = np.asarray(res.epochs.valid)
     assert v[20] == 5 and v[30] == 5  # NaN lat masks 1 of 6 (lat), huge sigma masks 1 of 6
@@ -269,8 +295,17 @@ def test_taylor_discretization_equals_van_loan_and_flags_truncation(outage_run):
 
     cfg, truth, r, params, t_imu, base = outage_run
     meas = _meas(cfg, r.gnss)
-    run = lambda **kw: loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params,  # noqa: E731
-                                       dt_imu=cfg.dt, save=ins.LCSave(("nav", "covs")), **kw)
+    run = lambda **kw: loosely_coupled(
+        r.nav0,
+        t_imu,
+        r.imu.dtheta,
+        r.imu.dv,
+        meas,
+        params,  # noqa: E731
+        dt_imu=cfg.dt,
+        save=ins.LCSave(("nav", "covs")),
+        **kw,
+    )
     vl = run(discretization=ins.LCDiscretization("van_loan"))
     dlat = np.abs(np.asarray(vl.epochs.nav.pos) - np.asarray(base.epochs.nav.pos))[:, :2].max() * 6.4e6
     assert dlat < 1e-6  # m
@@ -291,7 +326,16 @@ def test_two_speed_mechanization_inside_the_filter(outage_run):
     meas = _meas(cfg, r.gnss)
     gidx = np.asarray(r.gnss.index)
     for K, tol in ((10, 5e-4), (7, 5e-4)):
-        res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, propagation=ins.LCPropagation(nav_every=K))
+        res = loosely_coupled(
+            r.nav0,
+            t_imu,
+            r.imu.dtheta,
+            r.imu.dv,
+            meas,
+            params,
+            dt_imu=cfg.dt,
+            propagation=ins.LCPropagation(nav_every=K),
+        )
         assert int(res.status) == 0, K
         assert _pos_err_m(res.epochs.nav.pos, base.epochs.nav.pos).max() < tol, K
         scale = float(jnp.max(jnp.abs(base.epochs.covs)))
@@ -300,8 +344,16 @@ def test_two_speed_mechanization_inside_the_filter(outage_run):
         err0 = _pos_err_m(base.epochs.nav.pos, truth.pos[gidx])
         assert abs(np.sqrt(np.mean(err**2)) - np.sqrt(np.mean(err0**2))) < 1e-3, K
     with pytest.raises(ValueError, match="imu_every needs the per-sample loop"):
-        loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, propagation=ins.LCPropagation(nav_every=10),
-                        save=ins.LCSave(imu_every=5))
+        loosely_coupled(
+            r.nav0,
+            t_imu,
+            r.imu.dtheta,
+            r.imu.dv,
+            meas,
+            params,
+            propagation=ins.LCPropagation(nav_every=10),
+            save=ins.LCSave(imu_every=5),
+        )
     with pytest.raises(ValueError, match="nav_every=0 must be an integer"):
         loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, propagation=ins.LCPropagation(nav_every=0))
 
@@ -342,10 +394,10 @@ def test_zupt_and_known_position_pseudo_measurements(outage_run):
     mask[:, 3:] = True
     mask[::20, 2] = True
     R = np.broadcast_to(np.diag([1.0, 1.0, 0.01**2, 1e-4, 1e-4, 1e-4]), (M, 6, 6))
-    meas = PVMeasurements(t=np.asarray(r.gnss.t), pos=pos_true, vel=vel_true, R=R, mask=mask,
-                          lever=np.zeros((M, 3)))
-    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt,
-                          save=ins.LCSave(("nav", "valid", "covs")))
+    meas = PVMeasurements(t=np.asarray(r.gnss.t), pos=pos_true, vel=vel_true, R=R, mask=mask, lever=np.zeros((M, 3)))
+    res = loosely_coupled(
+        r.nav0, t_imu, r.imu.dtheta, r.imu.dv, meas, params, dt_imu=cfg.dt, save=ins.LCSave(("nav", "valid", "covs"))
+    )
     v = np.asarray(res.epochs.valid)
     assert v[0] == 4 and v[1] == 3  # height + 3 velocities, then velocities only
     dv = np.asarray(res.epochs.nav.v_n) - vel_true

@@ -74,8 +74,9 @@ def _manoeuvre(dt, N, key=0):
 def test_reverse_navigation_retraces_to_start():
     dt, N = 0.01, 20_000  # 200 s at 100 Hz
     dth, dv = _manoeuvre(dt, N)
-    nav0 = ins.NavState(A.euler_to_quat(jnp.array([0.0, 0.0, A.heading_to_yaw(np.radians(30))])),
-                        jnp.array([41.0, 71.0, 0.5]), POS)
+    nav0 = ins.NavState(
+        A.euler_to_quat(jnp.array([0.0, 0.0, A.heading_to_yaw(np.radians(30))])), jnp.array([41.0, 71.0, 0.5]), POS
+    )
     fwd = ins.mechanize(nav0, dth, dv, dt)
     bwd = ins.mechanize_backward(fwd.final.nav, dth, dv, dt, a0=fwd.final.a_prev)
     scale = jnp.array([6.4e6, 6.4e6 * np.cos(LAT), 1.0])
@@ -152,10 +153,10 @@ def s0_window():
 
     tr = sim.make_trajectory(sim.s0_scenario())
     a, K = 60_000, 20_000
-    assert len(np.unique(np.asarray(tr.segment[a:a + K]))) >= 3  # several segments, not a cruise
-    q, v, p = tr.q_bn[a:a + K + 1], tr.v_n[a:a + K + 1], tr.pos[a:a + K + 1]
+    assert len(np.unique(np.asarray(tr.segment[a : a + K]))) >= 3  # several segments, not a cruise
+    q, v, p = tr.q_bn[a : a + K + 1], tr.v_n[a : a + K + 1], tr.pos[a : a + K + 1]
     scale = np.array([6.37e6, 6.37e6 * np.cos(float(p[0, 0])), 1.0])
-    return tr.dtheta[a:a + K], tr.dv[a:a + K], q, v, p, scale
+    return tr.dtheta[a : a + K], tr.dv[a : a + K], q, v, p, scale
 
 
 def test_reverse_navigation_on_s0_ideal_imu_retraces_truth(s0_window):
@@ -195,7 +196,7 @@ def test_two_speed_follows_truth_and_per_sample(s0_window):
     for se in (M, 2 * M, 5):
         r2 = ins.mechanize(n0, dth, dv, 0.01, nav_every=M, save_every=se)
         for a, b in zip(r2.nav, r.nav):
-            np.testing.assert_allclose(np.asarray(a), np.asarray(b[se - 1::se]), rtol=1e-14, atol=1e-12)
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b[se - 1 :: se]), rtol=1e-14, atol=1e-12)
         for a, b in zip(r2.final.nav, r.final.nav):
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-14, atol=1e-12)
     # reverse navigation with the same blocks closes on the start

@@ -37,8 +37,11 @@ def test_groves_is_the_transpose_and_round_trips(rpy):
     # the conversion documented in the module: the equivalent rpy of a Groves-style mounting
     r2, p2, y2 = ins.mounting_to_rpy(G)
     np.testing.assert_allclose(ins.mounting_from_rpy(r2, p2, y2), G, atol=1e-12)
-    np.testing.assert_allclose(ins.mounting_from_rpy(*ins.mounting_to_rpy(ins.mounting_from_rpy_deg(r, p, y))),
-                               ins.mounting_from_rpy_deg(r, p, y), atol=1e-12)
+    np.testing.assert_allclose(
+        ins.mounting_from_rpy(*ins.mounting_to_rpy(ins.mounting_from_rpy_deg(r, p, y))),
+        ins.mounting_from_rpy_deg(r, p, y),
+        atol=1e-12,
+    )
 
 
 def test_the_issue_case_is_13_6_deg_off():

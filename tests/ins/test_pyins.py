@@ -87,8 +87,7 @@ import sys
 
 import numpy as np
 import pytest
-
-from reference.pyins_run import DEG, LLA0, P, STATIONARY_RPH, random_rph, sine_motion
+from reference.pyins_run import DEG, LLA0, STATIONARY_RPH, P, random_rph, sine_motion
 
 if importlib.util.find_spec("pyins") is None or importlib.util.find_spec("numba") is None:
     pytest.skip("python-ins / numba not installed (pip install -e '.[test]')", allow_module_level=True)
@@ -145,8 +144,18 @@ def run_case(ref, tag, dt):
     res = mechanize(nav0, dth, dv, dt, t=t[1:], hold_height=True)
     assert int(res.status) == 0
     jx = (np.asarray(res.nav.pos), np.asarray(res.nav.v_n), np.asarray(att.quat_to_dcm(res.nav.q_bn)))
-    return dict(dt=dt, t=t, v_ned=v_ned, n_inc=int(ref[f"{tag}_n_inc"]), nav0=nav0, dth=dth, dv=dv,
-                truth=_nav(ref, f"{tag}_truth"), pyins=_nav(ref, f"{tag}_pyins"), jax=jx)
+    return dict(
+        dt=dt,
+        t=t,
+        v_ned=v_ned,
+        n_inc=int(ref[f"{tag}_n_inc"]),
+        nav0=nav0,
+        dth=dth,
+        dv=dv,
+        truth=_nav(ref, f"{tag}_truth"),
+        pyins=_nav(ref, f"{tag}_pyins"),
+        jax=jx,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -208,8 +217,10 @@ def test_agreement_with_pyins_1h_100hz(case100, ref):
     d_jt = nav_diff(case100["jax"], case100["truth"])
     d_pt = nav_diff(case100["pyins"], case100["truth"])
     est = first_order_estimate(case100, ref)
-    print(f"\n100 Hz, 1 h, {case100['n_inc']} samples; first-order estimate pos {est['pos']:.2e} m, "
-          f"vel {est['vel']:.2e} m/s, att {est['att']:.2e} rad")
+    print(
+        f"\n100 Hz, 1 h, {case100['n_inc']} samples; first-order estimate pos {est['pos']:.2e} m, "
+        f"vel {est['vel']:.2e} m/s, att {est['att']:.2e} rad"
+    )
     for name, d in (("jaxnav-pyins", d_jp), ("jaxnav-truth", d_jt), ("pyins-truth", d_pt)):
         print(f"  {name}: pos ENU {d['pos']} m, vel {d['vel']} m/s, att {d['att']:.2e} rad")
     assert d_jp["pos"][2] == 0.0 and d_jp["vel"][2] == 0.0  # both hold the height exactly
@@ -265,8 +276,10 @@ def test_free_vertical_channel_gravity_model(case10, ref):
     dh = jx[0][:, 2] - pyi[0][:, 2]
     cut = lambda x, m: tuple(a[:m] for a in x)  # noqa: E731
     d_jp, d_jt, d_pt = (nav_diff(cut(a, n), cut(b, n)) for a, b in ((jx, pyi), (jx, c["truth"]), (pyi, c["truth"])))
-    print(f"\nfree vertical, 10 Hz: dgamma = {dgamma:.3e} m/s^2; jaxnav h - pyins h predicted / measured: "
-          + ", ".join(f"{tt[i]:.0f} s {pred[i]:.3f} / {dh[i]:.3f} m" for i in (n - 1, 2 * n - 1, 3 * n - 1, len(tt) - 1)))
+    print(
+        f"\nfree vertical, 10 Hz: dgamma = {dgamma:.3e} m/s^2; jaxnav h - pyins h predicted / measured: "
+        + ", ".join(f"{tt[i]:.0f} s {pred[i]:.3f} / {dh[i]:.3f} m" for i in (n - 1, 2 * n - 1, 3 * n - 1, len(tt) - 1))
+    )
     print(f"  first {T_FREE:.0f} s:")
     for name, d in (("jaxnav-pyins", d_jp), ("jaxnav-truth", d_jt), ("pyins-truth", d_pt)):
         print(f"  {name}: pos ENU {d['pos']} m, vel {d['vel']} m/s, att {d['att']:.2e} rad")

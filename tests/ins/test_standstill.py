@@ -3,23 +3,23 @@ with known stops and on the walk set's stops seen by RTK; cross-check with the S
 
 import math
 
+import _car
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav import ins
-
-import _car
-from _paths import DATA_ROOT
 
 
 def _car_params():
     nz = ins.noise_preset("consumer")
     dt = _car.car()["dt"]
     # per-sample white-noise std of the sensor (VRW, ARW over one 10 ms sample); threshold: ~6 at rest
-    return ins.StandstillParams(sigma_a=nz.accel_vrw / math.sqrt(dt), sigma_w=nz.gyro_arw / math.sqrt(dt),
-                                threshold=25.0, g=9.806)
+    return ins.StandstillParams(
+        sigma_a=nz.accel_vrw / math.sqrt(dt), sigma_w=nz.gyro_arw / math.sqrt(dt), threshold=25.0, g=9.806
+    )
 
 
 def test_car_stops_precision_recall():
@@ -104,8 +104,10 @@ def test_walk_set_stops():
     p = ins.StandstillParams(sigma_a=0.05, sigma_w=0.01, threshold=100.0, g=g)
     det = np.asarray(ins.detect_standstill(f, w, p, window=31, min_samples=80))
     s = ins.detection_scores(det[inside], truth[inside])
-    print(f"\nwalk_0827 SHOE: precision {s.precision:.4f} recall {s.recall:.4f}; RTK spans "
-          f"{(ref - t[0]).round(2).tolist()}, detected {(ins.standstill_intervals(t, det) - t[0]).round(2).tolist()}")
+    print(
+        f"\nwalk_0827 SHOE: precision {s.precision:.4f} recall {s.recall:.4f}; RTK spans "
+        f"{(ref - t[0]).round(2).tolist()}, detected {(ins.standstill_intervals(t, det) - t[0]).round(2).tolist()}"
+    )
     assert s.precision > 0.98 and s.recall > 0.8
 
 

@@ -2,12 +2,11 @@
 
 import math
 
+import _car
 import numpy as np
 import pytest
 
 from jaxnav import ins
-
-import _car
 
 
 def test_offset_recovered_to_10_ms():

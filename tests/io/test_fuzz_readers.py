@@ -23,20 +23,37 @@ import struct
 
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav import io
 from jaxnav.io import ReaderError
 
-from _paths import DATA_ROOT
-
 SEED = 20
 N_MUTATIONS = 240
-BAD_TOKENS = ["nan", "NaN", "inf", "-inf", "1e308", "-1e308", "1e999", "-1", "9e99", "0",
-              "99999999999999999999999999", "", "x", "--", "1,5", "0x10", "-0"]
+BAD_TOKENS = [
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "1e308",
+    "-1e308",
+    "1e999",
+    "-1",
+    "9e99",
+    "0",
+    "99999999999999999999999999",
+    "",
+    "x",
+    "--",
+    "1,5",
+    "0x10",
+    "-0",
+]
 COUNTS: dict = {}
 
 
 # ----------------------------------------------------------------------------- sources
+
 
 def _head(rel, n_lines, *, keep_comments=True):
     """The first ``n_lines`` lines of a shared-data file (bytes), or skip the test if absent."""
@@ -52,10 +69,12 @@ def _epoch_log_fixture():
     rows = ["# RTK epoch log (fixture)", "point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h"]
     for p in range(3):
         for k in range(25):
-            rows.append(f"P{p:02d},{100 * p + 2 * k},{3631500 + p + rng.normal(0, .01):.4f},"
-                        f"{39486000 + p + rng.normal(0, .01):.4f},{22.1 + rng.normal(0, .02):.4f},"
-                        f"{32.81 + p * 1e-4:.10f},{116.85 + p * 1e-4:.10f},{18.67 + rng.normal(0, .02):.4f},"
-                        f"0.0080,0.0080,0.0150")
+            rows.append(
+                f"P{p:02d},{100 * p + 2 * k},{3631500 + p + rng.normal(0, 0.01):.4f},"
+                f"{39486000 + p + rng.normal(0, 0.01):.4f},{22.1 + rng.normal(0, 0.02):.4f},"
+                f"{32.81 + p * 1e-4:.10f},{116.85 + p * 1e-4:.10f},{18.67 + rng.normal(0, 0.02):.4f},"
+                f"0.0080,0.0080,0.0150"
+            )
     return ("\n".join(rows) + "\n").encode()
 
 
@@ -63,8 +82,11 @@ def _control_fixture():
     rows = ["point,B,L,H,x,y,h"]
     for i in range(8):
         xy = "" if i == 7 else f"{3631000 + 100 * i:.4f},{39486000 + 90 * i:.4f}"
-        rows.append(f"K{i},{32.80 + 0.001 * i:.10f},{116.84 + 0.001 * i:.10f},{18 + i:.4f},"
-                    + (xy if xy else ",") + f",{21.5 + i:.4f}")
+        rows.append(
+            f"K{i},{32.80 + 0.001 * i:.10f},{116.84 + 0.001 * i:.10f},{18 + i:.4f},"
+            + (xy if xy else ",")
+            + f",{21.5 + i:.4f}"
+        )
     return ("\n".join(rows) + "\n").encode()
 
 
@@ -73,8 +95,10 @@ def _levelling_fixture():
 
 
 def _stop_fixture():
-    rows = ["# name, kind, t_start_s, t_end_s, lat_deg, lon_deg, h_m, sigma_e_m, sigma_n_m, sigma_u_m",
-            "K0, known_coordinate, 0, 10, 32.0, 118.0, 10.0"]
+    rows = [
+        "# name, kind, t_start_s, t_end_s, lat_deg, lon_deg, h_m, sigma_e_m, sigma_n_m, sigma_u_m",
+        "K0, known_coordinate, 0, 10, 32.0, 118.0, 10.0",
+    ]
     t = 20.0
     for i in range(12):
         kind = ("zupt", "target", "levelling")[i % 3]
@@ -87,18 +111,25 @@ def _stop_fixture():
 
 def _kfgins_imu_fixture():
     rng = np.random.default_rng(4)
-    return "".join(f"{456250.0 + 0.005 * k:.3f} " + " ".join(f"{x: .9e}" for x in rng.normal(0, 1e-3, 3)) + " "
-                   + " ".join(f"{x: .9e}" for x in rng.normal(0, 1e-3, 2)) + f" {-0.049 + rng.normal(0, 1e-4): .9e}\n"
-                   for k in range(1, 121)).encode()
+    return "".join(
+        f"{456250.0 + 0.005 * k:.3f} "
+        + " ".join(f"{x: .9e}" for x in rng.normal(0, 1e-3, 3))
+        + " "
+        + " ".join(f"{x: .9e}" for x in rng.normal(0, 1e-3, 2))
+        + f" {-0.049 + rng.normal(0, 1e-4): .9e}\n"
+        for k in range(1, 121)
+    ).encode()
 
 
 def _kfgins_gnss_fixture():
     rng = np.random.default_rng(5)
     rows = []
     for k in range(80):
-        rows.append(f"{456250 + k:.3f} {30.4447858 + 1e-6 * k:.10f} {114.4718661 + 1e-6 * k:.10f} "
-                    f"{21.09 + rng.normal(0, .01):.3f} {0.1 * k:.3f} {0.2:.3f} {-0.01:.3f} 0.010 0.009 0.019 "
-                    "0.020 0.020 0.030")
+        rows.append(
+            f"{456250 + k:.3f} {30.4447858 + 1e-6 * k:.10f} {114.4718661 + 1e-6 * k:.10f} "
+            f"{21.09 + rng.normal(0, 0.01):.3f} {0.1 * k:.3f} {0.2:.3f} {-0.01:.3f} 0.010 0.009 0.019 "
+            "0.020 0.020 0.030"
+        )
     return ("\n".join(rows) + "\n").encode()
 
 
@@ -107,7 +138,7 @@ def _csv_imu_fixture():
     rows = ["# generic IMU log", "time_ms,gx,gy,gz,ax,ay,az"]
     for k in range(120):
         g = rng.normal(0, 2, 3)
-        a = rng.normal(0, .05, 3) + [0, 0, 1]
+        a = rng.normal(0, 0.05, 3) + [0, 0, 1]
         rows.append(f"{1.4e12 + 10 * k:.1f},{g[0]:.6f},{g[1]:.6f},{g[2]:.6f},{a[0]:.6f},{a[1]:.6f},{a[2]:.6f}")
     return ("\n".join(rows) + "\n").encode()
 
@@ -115,12 +146,15 @@ def _csv_imu_fixture():
 def _csv_gnss_fixture():
     rows = ["t,lat,lon,h,sd_e,sd_n,sd_u,ve,vn,vu,q"]
     for k in range(80):
-        rows.append(f"{1.4e9 + 0.2 * k:.1f},{52.1 + 1e-7 * k:.10f},{13.4 + 1e-7 * k:.10f},{40 + 0.01 * k:.3f},"
-                    f"0.02,0.02,0.04,{0.5:.3f},{0.4:.3f},0.0,{1 + k % 2}")
+        rows.append(
+            f"{1.4e9 + 0.2 * k:.1f},{52.1 + 1e-7 * k:.10f},{13.4 + 1e-7 * k:.10f},{40 + 0.01 * k:.3f},"
+            f"0.02,0.02,0.04,{0.5:.3f},{0.4:.3f},0.0,{1 + k % 2}"
+        )
     return ("\n".join(rows) + "\n").encode()
 
 
 # ----------------------------------------------------------------------------- output checks
+
 
 def _finite(*arrays):
     return all(np.all(np.isfinite(np.asarray(a, float))) for a in arrays)
@@ -223,15 +257,30 @@ def _experiment_source():
 #: name -> (source bytes factory, file suffix, reader, output check, field delimiter or None for binary)
 READERS = {
     "pos": (lambda: _head("rtk_pos_matrtklib/static/rover_rtk.pos", 330), ".pos", io.read_pos, _check_pos, None),
-    "imu_csv": (lambda: _head("rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv", 300), ".csv", _read_imu,
-                _check_imu, b","),
-    "imu_tag": (lambda: _head_bytes("rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv.tag", 76 + 8 * 200), ".tag",
-                io.read_rtklib_tag, _check_tag, "binary"),
+    "imu_csv": (
+        lambda: _head("rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv", 300),
+        ".csv",
+        _read_imu,
+        _check_imu,
+        b",",
+    ),
+    "imu_tag": (
+        lambda: _head_bytes("rtklibexplorer-gnss-imu/walk_0827/imu_1730.csv.tag", 76 + 8 * 200),
+        ".tag",
+        io.read_rtklib_tag,
+        _check_tag,
+        "binary",
+    ),
     "tenv3": (lambda: _head("gnss_daily_timeseries/LHAS.tenv3", 300), ".tenv3", io.read_daily, _check_daily, None),
     "neu": (lambda: _head("gnss_daily_timeseries/bjfsCleanUnf.neu", 320), ".neu", io.read_daily, _check_daily, None),
     "pbo": (lambda: _pbo_fixture(), ".pos", io.read_daily, _check_daily, None),
-    "col": (lambda: _head("gnss_daily_timeseries/UH01_GOM20_neu_cm.col", 300), ".col", io.read_daily, _check_daily,
-            None),
+    "col": (
+        lambda: _head("gnss_daily_timeseries/UH01_GOM20_neu_cm.col", 300),
+        ".col",
+        io.read_daily,
+        _check_daily,
+        None,
+    ),
     "epoch_log": (_epoch_log_fixture, ".csv", io.read_epoch_log, _check_epoch_log, b","),
     "control": (_control_fixture, ".csv", io.read_control_points, _check_control, b","),
     "levelling": (_levelling_fixture, ".csv", io.read_levelling, _check_levelling, b","),
@@ -253,6 +302,7 @@ def _head_bytes(rel, n):
 
 # ----------------------------------------------------------------------------- mutations
 
+
 def _split_fields(line, delim):
     return line.split(delim) if delim not in (None, b"=") else line.split()
 
@@ -268,13 +318,30 @@ def _text_mutation(rng: random.Random, data: bytes, delim):
         lines = lines[:-1]
     n = len(lines)
     data_idx = [i for i, l in enumerate(lines) if l.strip() and not l.lstrip().startswith((b"#", b"%"))]
-    kind = rng.choice(["flip", "non_utf8", "nul", "truncate", "delete", "duplicate", "swap_lines", "swap_fields",
-                       "bad_token", "bad_token", "bad_token", "long_field", "empty", "header_only", "crlf"])
+    kind = rng.choice(
+        [
+            "flip",
+            "non_utf8",
+            "nul",
+            "truncate",
+            "delete",
+            "duplicate",
+            "swap_lines",
+            "swap_fields",
+            "bad_token",
+            "bad_token",
+            "bad_token",
+            "long_field",
+            "empty",
+            "header_only",
+            "crlf",
+        ]
+    )
     i = rng.choice(data_idx) if data_idx else 0
     line_at_fault = None
     if kind == "flip":
         pos = rng.randrange(len(data)) if data else 0
-        out = data[:pos] + bytes([rng.randrange(256)]) + data[pos + 1:]
+        out = data[:pos] + bytes([rng.randrange(256)]) + data[pos + 1 :]
     elif kind == "non_utf8":
         pos = rng.randrange(len(lines[i]) + 1)
         lines[i] = lines[i][:pos] + rng.choice([b"\xe9", b"\xff", b"\xc3"]) + lines[i][pos:]
@@ -285,9 +352,9 @@ def _text_mutation(rng: random.Random, data: bytes, delim):
     elif kind == "truncate":
         out = data[: rng.randrange(len(data) + 1)]
     elif kind == "delete":
-        out = b"\n".join(lines[:i] + lines[i + 1:]) + b"\n"
+        out = b"\n".join(lines[:i] + lines[i + 1 :]) + b"\n"
     elif kind == "duplicate":
-        out = b"\n".join(lines[: i + 1] + [lines[i]] + lines[i + 1:]) + b"\n"
+        out = b"\n".join(lines[: i + 1] + [lines[i]] + lines[i + 1 :]) + b"\n"
     elif kind == "swap_lines":
         j = min(i + 1, n - 1)
         lines[i], lines[j] = lines[j], lines[i]
@@ -304,8 +371,11 @@ def _text_mutation(rng: random.Random, data: bytes, delim):
             cands = [k for k, l in enumerate(lines) if b"=" in l and not l.lstrip().startswith(b"#")]
             i = rng.choice(cands)
             key = lines[i].split(b"=", 1)[0]
-            lines[i] = key + b"= " + rng.choice([b"nan", b"inf", b"-1", b"1.5", b"1e308", b"0", b'"x"', b"true",
-                                                 b"[]", b"-0.1", b"2e9"])
+            lines[i] = (
+                key
+                + b"= "
+                + rng.choice([b"nan", b"inf", b"-1", b"1.5", b"1e308", b"0", b'"x"', b"true", b"[]", b"-0.1", b"2e9"])
+            )
         else:
             f = _split_fields(lines[i], delim)
             f[rng.randrange(len(f))] = rng.choice(BAD_TOKENS).encode()
@@ -326,8 +396,20 @@ def _text_mutation(rng: random.Random, data: bytes, delim):
 
 def _binary_mutation(rng: random.Random, data: bytes):
     """One mutation of a binary RTKLIB tag file; returns (bytes, kind, None)."""
-    kind = rng.choice(["flip", "flip", "truncate", "header_only", "empty", "start_time", "fraction", "reverse",
-                       "partial_record", "append_garbage"])
+    kind = rng.choice(
+        [
+            "flip",
+            "flip",
+            "truncate",
+            "header_only",
+            "empty",
+            "start_time",
+            "fraction",
+            "reverse",
+            "partial_record",
+            "append_garbage",
+        ]
+    )
     b = bytearray(data)
     if kind == "flip":
         for _ in range(rng.randint(1, 4)):
@@ -343,7 +425,7 @@ def _binary_mutation(rng: random.Random, data: bytes):
     elif kind == "fraction":
         struct.pack_into("<d", b, 68, rng.choice([math.nan, math.inf, -0.5, 1.0, 1e308]))
     elif kind == "reverse":
-        recs = [bytes(b[k:k + 8]) for k in range(76, len(b), 8)]
+        recs = [bytes(b[k : k + 8]) for k in range(76, len(b), 8)]
         b = b[:76] + b"".join(recs[::-1])
     elif kind == "partial_record":
         b = b + b"\x01\x02\x03"
@@ -353,6 +435,7 @@ def _binary_mutation(rng: random.Random, data: bytes):
 
 
 # ----------------------------------------------------------------------------- the test
+
 
 @pytest.mark.parametrize("name", list(READERS))
 def test_reader_fuzz(name, tmp_path):
@@ -386,8 +469,9 @@ def test_reader_fuzz(name, tmp_path):
         except ValueError as exc:  # the config loaders raise ValueError naming the file (TOML syntax: + line)
             assert name == "s0_experiment_toml", (kind, type(exc).__name__, str(exc)[:200])
             assert str(exc).startswith(str(path)), (kind, str(exc)[:200])
-            counts["error_file_and_line" if str(exc).startswith(f"{path}:") and "line" in str(exc)
-                   else "error_file_only"] += 1  # TOML: the file and the key (filter.b = 1.5 ...)
+            counts[
+                "error_file_and_line" if str(exc).startswith(f"{path}:") and "line" in str(exc) else "error_file_only"
+            ] += 1  # TOML: the file and the key (filter.b = 1.5 ...)
         else:
             masked = check(out)
             counts["masked_counted" if masked > baseline else "clean"] += 1
@@ -424,8 +508,11 @@ def test_named_examples_of_the_issue(tmp_path):
     with pytest.raises(ReaderError, match=r"c\.csv:4: column 'B': 'inf' is not a finite number"):
         io.read_control_points(cp)
     imu = tmp_path / "i.csv"
-    imu.write_text("".join(f"0.01,0.02,1.0,0.1,0.2,0.3,{1000 + 6 * k}\n" for k in range(20)).replace(
-        "0.01,0.02,1.0,0.1,0.2,0.3,1030", "0.01,9e99,1.0,0.1,0.2,0.3,1030"))
+    imu.write_text(
+        "".join(f"0.01,0.02,1.0,0.1,0.2,0.3,{1000 + 6 * k}\n" for k in range(20)).replace(
+            "0.01,0.02,1.0,0.1,0.2,0.3,1030", "0.01,9e99,1.0,0.1,0.2,0.3,1030"
+        )
+    )
     with pytest.raises(ReaderError, match=r"i\.csv:6: .*ay = 9e\+99 .*exceeds 1000 m/s\^2"):
         io.read_rtklib_imu(imu, t_start=1.4e9)
     if not (DATA_ROOT / "gnss_daily_timeseries/LHAS.tenv3").exists():
@@ -446,35 +533,70 @@ def test_named_examples_of_the_issue(tmp_path):
 
 # ----------------------------------------------------------------------------- exact field counts, skipped columns
 
+
 def _pbo_fixture():
     """A small EarthScope/PBO daily .pos (format 1.1): 40 daily records of 25 fields."""
     import datetime as dt
 
-    head = ["PBO Station Position Time Series. Reference Frame : IGS14", "Format Version: 1.1.0",
-            "4-character ID: TEST", "Start Field Description", "End Field Description",
-            "*YYYYMMDD HHMMSS JJJJJ.JJJJ X Y Z Sx Sy Sz Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su "
-            "Rne Rnu Reu Soln"]
+    head = [
+        "PBO Station Position Time Series. Reference Frame : IGS14",
+        "Format Version: 1.1.0",
+        "4-character ID: TEST",
+        "Start Field Description",
+        "End Field Description",
+        "*YYYYMMDD HHMMSS JJJJJ.JJJJ X Y Z Sx Sy Sz Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su Rne Rnu Reu Soln",
+    ]
     rows = []
     for k in range(40):
         d = dt.date(2015, 3, 1) + dt.timedelta(days=k)
         mjd = (d - dt.date(1858, 11, 17)).days + 0.5
-        rows.append(f" {d:%Y%m%d} 120000 {mjd:.4f} -1.0e6 5.0e6 3.0e6 0.002 0.003 0.004 0.1 -0.2 0.3 "
-                    f"29.657 91.104 3624.7 {1e-4 * k:.5f} {2e-4 * k:.5f} {-1e-4 * k:.5f} 0.00100 0.00120 0.00400 "
-                    "0.010 -0.020 0.030 final")
+        rows.append(
+            f" {d:%Y%m%d} 120000 {mjd:.4f} -1.0e6 5.0e6 3.0e6 0.002 0.003 0.004 0.1 -0.2 0.3 "
+            f"29.657 91.104 3624.7 {1e-4 * k:.5f} {2e-4 * k:.5f} {-1e-4 * k:.5f} 0.00100 0.00120 0.00400 "
+            "0.010 -0.020 0.030 final"
+        )
     return ("\n".join(head + rows) + "\n").encode()
 
 
 #: name -> (source, suffix, [(field index, bad value, what)]) of the columns a reader parses only to check
 SKIPPED_COLUMNS = {
-    "tenv3": (lambda: _head("gnss_daily_timeseries/LHAS.tenv3", 120), ".tenv3",
-              [(6, "1e400", "reference longitude"), (13, "inf", "antenna height"), (4, "-1e308", "GPS week"),
-               (4, "nan", "GPS week"), (5, "9", "GPS day"), (1, "95MAY32", "date"), (1, "nan", "date"),
-               (2, "2011.5", "decimal year vs MJD")]),
-    "pbo": (_pbo_fixture, ".pos", [(0, "-inf", "YYYYMMDD"), (1, "Infinity", "HHMMSS"), (0, "20150302", "date vs MJD"),
-                                   (1, "235900", "time vs MJD"), (0, "20151399", "no such date")]),
-    "neu": (lambda: _head("gnss_daily_timeseries/bjfsCleanUnf.neu", 120), ".neu",
-            [(2, "NaN", "day of year"), (2, "inf", "day of year"), (1, "1e400", "year"), (2, "400", "day of year"),
-             (1, "2005", "year vs decimal year"), (2, "12.5", "fractional day")]),
+    "tenv3": (
+        lambda: _head("gnss_daily_timeseries/LHAS.tenv3", 120),
+        ".tenv3",
+        [
+            (6, "1e400", "reference longitude"),
+            (13, "inf", "antenna height"),
+            (4, "-1e308", "GPS week"),
+            (4, "nan", "GPS week"),
+            (5, "9", "GPS day"),
+            (1, "95MAY32", "date"),
+            (1, "nan", "date"),
+            (2, "2011.5", "decimal year vs MJD"),
+        ],
+    ),
+    "pbo": (
+        _pbo_fixture,
+        ".pos",
+        [
+            (0, "-inf", "YYYYMMDD"),
+            (1, "Infinity", "HHMMSS"),
+            (0, "20150302", "date vs MJD"),
+            (1, "235900", "time vs MJD"),
+            (0, "20151399", "no such date"),
+        ],
+    ),
+    "neu": (
+        lambda: _head("gnss_daily_timeseries/bjfsCleanUnf.neu", 120),
+        ".neu",
+        [
+            (2, "NaN", "day of year"),
+            (2, "inf", "day of year"),
+            (1, "1e400", "year"),
+            (2, "400", "day of year"),
+            (1, "2005", "year vs decimal year"),
+            (2, "12.5", "fractional day"),
+        ],
+    ),
 }
 FIELD_COUNT_SOURCES = {
     "tenv3": (lambda: _head("gnss_daily_timeseries/LHAS.tenv3", 120), ".tenv3", None),
@@ -486,8 +608,9 @@ FIELD_COUNT_SOURCES = {
 
 def _data_line_indices(lines):
     """Indices of the records: lines of 7 or more fields starting with a number or the tenv3 site."""
-    return [i for i, l in enumerate(lines) if len(l.split()) >= 7 and (l.split()[0][:1].isdigit()
-                                                                         or l.startswith(b"LHAS "))]
+    return [
+        i for i, l in enumerate(lines) if len(l.split()) >= 7 and (l.split()[0][:1].isdigit() or l.startswith(b"LHAS "))
+    ]
 
 
 @pytest.mark.parametrize("name", list(FIELD_COUNT_SOURCES))

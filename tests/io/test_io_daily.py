@@ -1,12 +1,11 @@
 """Daily station series readers: NGL tenv3, SIO .neu, .col tables (real files and bad input)."""
 
-
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav import io
 from jaxnav.units import CM, DEG, MM_PER_YEAR, YEAR
-from _paths import DATA_ROOT
 
 DATA = DATA_ROOT / "gnss_daily_timeseries"
 
@@ -56,10 +55,14 @@ def _write(tmp_path, name, text):
     return p
 
 
-TENV3_HDR = "site YYMMMDD yyyy.yyyy __MJD week d reflon _e0(m) __east(m) ____n0(m) _north(m) u0(m) ____up(m) _ant(m) " \
-            "sig_e(m) sig_n(m) sig_u(m) __corr_en __corr_eu __corr_nu _latitude(deg) _longitude(deg) __height(m)\n"
-TENV3_1 = "LHAS 95MAY19 1995.3785 49856  801 5   91.1    385  0.888603   3282129  0.602585  3624  0.707878  0.0000 " \
-          "0.002231 0.001932 0.008643 -0.009728 -0.044382 -0.198749  29.6573392384 -268.8960142076  3624.70788\n"
+TENV3_HDR = (
+    "site YYMMMDD yyyy.yyyy __MJD week d reflon _e0(m) __east(m) ____n0(m) _north(m) u0(m) ____up(m) _ant(m) "
+    "sig_e(m) sig_n(m) sig_u(m) __corr_en __corr_eu __corr_nu _latitude(deg) _longitude(deg) __height(m)\n"
+)
+TENV3_1 = (
+    "LHAS 95MAY19 1995.3785 49856  801 5   91.1    385  0.888603   3282129  0.602585  3624  0.707878  0.0000 "
+    "0.002231 0.001932 0.008643 -0.009728 -0.044382 -0.198749  29.6573392384 -268.8960142076  3624.70788\n"
+)
 TENV3_2 = TENV3_1.replace("95MAY19 1995.3785 49856  801 5", "95MAY20 1995.3812 49857  801 6")
 
 
@@ -81,8 +84,10 @@ def test_bad_tenv3(tmp_path):
         io.read_tenv3(p)
 
 
-NEU = "# header\n1999.8068 1999 295  0.0537 -0.1458 -0.0204  0.0054  0.0051  0.0056\n" \
-      "1999.8096 1999 296  0.0530 -0.1429 -0.0073  0.0062  0.0057  0.0063\n"
+NEU = (
+    "# header\n1999.8068 1999 295  0.0537 -0.1458 -0.0204  0.0054  0.0051  0.0056\n"
+    "1999.8096 1999 296  0.0530 -0.1429 -0.0073  0.0062  0.0057  0.0063\n"
+)
 
 
 def test_bad_neu(tmp_path):
@@ -97,12 +102,14 @@ def test_bad_neu(tmp_path):
         io.read_neu(p)
 
 
-COL = "Decimal-Year       NS(cm)       EW(cm)       UD(cm) sigma-NS(cm) sigma-EW(cm) sigma-UD(cm)\n" \
-      "   2014.3956       0.2037       0.0395      -0.0516       0.0548       0.0255       0.0605\n"
+COL = (
+    "Decimal-Year       NS(cm)       EW(cm)       UD(cm) sigma-NS(cm) sigma-EW(cm) sigma-UD(cm)\n"
+    "   2014.3956       0.2037       0.0395      -0.0516       0.0548       0.0255       0.0605\n"
+)
 
 
 def test_bad_col(tmp_path):
-    p = _write(tmp_path, "A_x.col", COL.replace(" sigma-UD(cm)", "") .replace("       0.0605", ""))
+    p = _write(tmp_path, "A_x.col", COL.replace(" sigma-UD(cm)", "").replace("       0.0605", ""))
     with pytest.raises(ValueError, match=r"A_x\.col:1: header lacks the column\(s\) \['sigma-UD\(unit\)'\]"):
         io.read_col(p)
     p = _write(tmp_path, "B_x.col", COL + "   2014.3984       0.1714       0.0465      -0.7940       0.0542\n")

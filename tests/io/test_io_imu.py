@@ -5,11 +5,10 @@ import struct
 
 import numpy as np
 import pytest
-
-from jaxnav.io._imu import (GPS_EPOCH_UNIX, STANDARD_GRAVITY, read_rtklib_imu,
-                            read_rtklib_tag)
-from jaxnav.io._rtklib import GPS_EPOCH
 from _paths import DATA_ROOT
+
+from jaxnav.io._imu import GPS_EPOCH_UNIX, STANDARD_GRAVITY, read_rtklib_imu, read_rtklib_tag
+from jaxnav.io._rtklib import GPS_EPOCH
 
 DATA = DATA_ROOT / "rtklibexplorer-gnss-imu" / "walk_0827"
 CSV, TAG, UPSTREAM = DATA / "imu_1730.csv", DATA / "imu_1730.csv.tag", DATA / "imu_1730_sf.csv"
@@ -102,7 +101,7 @@ def test_values_match_upstream_converter(walk, upstream):
     k = len(gyr) // 167
 
     def means(x):
-        return x[:k * 167].reshape(k, 167, 3).mean(axis=1)
+        return x[: k * 167].reshape(k, 167, 3).mean(axis=1)
 
     assert np.max(np.abs(means(log.f_b / STANDARD_GRAVITY) - means(acc_g))) < 3e-3  # g; measured 1.4e-3
     assert np.max(np.abs(means(log.w_b) - means(gyr))) < 2e-3  # rad/s; measured 8.2e-4
@@ -113,18 +112,20 @@ def test_values_match_upstream_converter(walk, upstream):
 
 # ---------------------------------------------------------------- crafted files
 
+
 def _lines(n, c0=1000, step=6):
     return [f"{0.01 * i:.3f},-0.020,1.001,0.100,-0.200,{0.3 + i:.3f},{c0 + step * i}" for i in range(n)]
 
 
-def _tag_bytes(text_bytes, *, every=3, dtick=16, header=b"TIMETAG RTKLIB EX", fpos_bytes=4, crlf=None,
-               t_unix=1756402240, frac=0.5):
+def _tag_bytes(
+    text_bytes, *, every=3, dtick=16, header=b"TIMETAG RTKLIB EX", fpos_bytes=4, crlf=None, t_unix=1756402240, frac=0.5
+):
     """A tag file for a data file written `every` lines per write, `dtick` ms apart."""
     logged = text_bytes if crlf is None else text_bytes.replace(b"\n", b"\r\n")
     ends = [i + 1 for i, ch in enumerate(logged) if ch == 0x0A]
     if not logged.endswith(b"\n"):
         ends.append(len(logged))
-    fpos = ends[every - 1::every]
+    fpos = ends[every - 1 :: every]
     if fpos[-1] != len(logged):
         fpos.append(len(logged))
     fmt = "<II" if fpos_bytes == 4 else "<IQ"

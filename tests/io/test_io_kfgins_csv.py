@@ -18,8 +18,13 @@ def _kf_imu(tmp_path, n=400, rate=200.0, seed=0):
     dth = rng.normal(0, 1e-3, (n, 3)) + [0, 0, 2e-4]
     dv = rng.normal(0, 1e-3, (n, 3)) + [0, 0, -9.8 / rate]  # FRD: an up force reads negative on z (down)
     p = tmp_path / "imu.txt"
-    p.write_text("".join(f"{t[k]:.4f}  {dth[k, 0]: .12e} {dth[k, 1]: .12e} {dth[k, 2]: .12e}  "
-                         f"{dv[k, 0]: .12e} {dv[k, 1]: .12e} {dv[k, 2]: .12e}\n" for k in range(n)))
+    p.write_text(
+        "".join(
+            f"{t[k]:.4f}  {dth[k, 0]: .12e} {dth[k, 1]: .12e} {dth[k, 2]: .12e}  "
+            f"{dv[k, 0]: .12e} {dv[k, 1]: .12e} {dv[k, 2]: .12e}\n"
+            for k in range(n)
+        )
+    )
     return p, t, dth, dv
 
 
@@ -58,13 +63,17 @@ def test_kfgins_imu_missing_and_errors(tmp_path):
     log = io.read_kfgins_imu(p)
     assert log.n_skipped_lines == 1 and log.skipped[0][0] == 10 and len(log.t) == 29
     bad = tmp_path / "bad.txt"
-    for text, match in ((lines[0] + "\n" + lines[1] + " 1.0\n", r"bad\.txt:2: 8 fields, expected 7"),
-                        (lines[1] + "\n" + lines[0] + "\n", r"bad\.txt:2: time .* is not after"),
-                        (lines[0].replace(lines[0].split()[2], "inf", 1) + "\n", r"bad\.txt:1: column 'dthy'.*inf"),
-                        (lines[0].replace(lines[0].split()[4], "x1", 1) + "\n", r"bad\.txt:1: column 'dvx'.*'x1'"),
-                        (lines[0] + "\n" + lines[1].replace(lines[1].split()[1], "9", 1) + "\n",
-                         r"bad\.txt:2: angular rate .* exceeds 200"),
-                        ("", r"bad\.txt: no data records")):
+    for text, match in (
+        (lines[0] + "\n" + lines[1] + " 1.0\n", r"bad\.txt:2: 8 fields, expected 7"),
+        (lines[1] + "\n" + lines[0] + "\n", r"bad\.txt:2: time .* is not after"),
+        (lines[0].replace(lines[0].split()[2], "inf", 1) + "\n", r"bad\.txt:1: column 'dthy'.*inf"),
+        (lines[0].replace(lines[0].split()[4], "x1", 1) + "\n", r"bad\.txt:1: column 'dvx'.*'x1'"),
+        (
+            lines[0] + "\n" + lines[1].replace(lines[1].split()[1], "9", 1) + "\n",
+            r"bad\.txt:2: angular rate .* exceeds 200",
+        ),
+        ("", r"bad\.txt: no data records"),
+    ):
         bad.write_text(text)
         with pytest.raises(ReaderError, match=match):
             io.read_kfgins_imu(bad)
@@ -114,8 +123,11 @@ def test_kfgins_gnss_missing_and_errors(tmp_path):
     assert s.n_masked == 2 and len(s.t) == 19
     assert np.isnan(s.v_enu[5]).all() and np.isfinite(np.delete(s.v_enu, 5, 0)).all()
     # a bad value in the third row, written as the file's second line
-    for i, val, match in ((1, "95.0", r"g\.txt:2: latitude 95"), (8, "-0.01", r"g\.txt:2: position standard dev"),
-                          (0, "1e5", r"g\.txt:2: time .* is not after")):
+    for i, val, match in (
+        (1, "95.0", r"g\.txt:2: latitude 95"),
+        (8, "-0.01", r"g\.txt:2: position standard dev"),
+        (0, "1e5", r"g\.txt:2: time .* is not after"),
+    ):
         t2 = list(text)
         w = t2[2].split()
         w[i] = val
@@ -135,9 +147,14 @@ def test_csv_imu_units_header_and_increments(tmp_path):
     g_dps = rng.normal(0, 5, (n, 3))
     a_g = rng.normal(0, 0.1, (n, 3)) + [0, 0, 1]
     p = tmp_path / "imu.csv"
-    p.write_text("# my logger\ntime_ms,gx,gy,gz,ax,ay,az,temp\n" + "".join(
-        f"{t_ms[k]:.1f},{g_dps[k, 0]:.9f},{g_dps[k, 1]:.9f},{g_dps[k, 2]:.9f},{a_g[k, 0]:.9f},{a_g[k, 1]:.9f},"
-        f"{a_g[k, 2]:.9f},25.0\n" for k in range(n)))
+    p.write_text(
+        "# my logger\ntime_ms,gx,gy,gz,ax,ay,az,temp\n"
+        + "".join(
+            f"{t_ms[k]:.1f},{g_dps[k, 0]:.9f},{g_dps[k, 1]:.9f},{g_dps[k, 2]:.9f},{a_g[k, 0]:.9f},{a_g[k, 1]:.9f},"
+            f"{a_g[k, 2]:.9f},25.0\n"
+            for k in range(n)
+        )
+    )
     cols = {"t": "time_ms", "gx": "gx", "gy": "gy", "gz": "gz", "ax": "ax", "ay": "ay", "az": "az"}
     log = io.read_csv_imu(p, cols, {"t": "ms", "gyro": "deg/s", "accel": "g"})
     np.testing.assert_allclose(log.t, t_ms * 1e-3)
@@ -185,11 +202,23 @@ def test_csv_gnss(tmp_path):
     p = tmp_path / "g.csv"
     rows = ["t,lat_rad,lon_rad,h,se,sn,su,vn,ve,vd,fix"]
     for k in range(10):
-        rows.append(f"{100 + k},{0.53 + 1e-7 * k:.12f},{1.99:.12f},{50 + k},0.02,0.03,0.05,1.0,2.0,-0.1,"
-                    f"{1 if k % 2 else 2}")
+        rows.append(
+            f"{100 + k},{0.53 + 1e-7 * k:.12f},{1.99:.12f},{50 + k},0.02,0.03,0.05,1.0,2.0,-0.1,{1 if k % 2 else 2}"
+        )
     p.write_text("\n".join(rows) + "\n")
-    cols = {"t": "t", "lat": "lat_rad", "lon": "lon_rad", "h": "h", "sd_e": "se", "sd_n": "sn", "sd_u": "su",
-            "vn": "vn", "ve": "ve", "vd": "vd", "q": "fix"}
+    cols = {
+        "t": "t",
+        "lat": "lat_rad",
+        "lon": "lon_rad",
+        "h": "h",
+        "sd_e": "se",
+        "sd_n": "sn",
+        "sd_u": "su",
+        "vn": "vn",
+        "ve": "ve",
+        "vd": "vd",
+        "q": "fix",
+    }
     s = io.read_csv_gnss(p, cols, {"angle": "rad"})
     assert s.lat[0] == pytest.approx(0.53, abs=1e-12) and list(s.q[:2]) == [2, 1]
     np.testing.assert_allclose(s.v_enu[0], [2.0, 1.0, 0.1])

@@ -4,15 +4,17 @@ import datetime as dt
 
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav.io import GPS_EPOCH, read_pos
-from _paths import DATA_ROOT
 
 DATA = DATA_ROOT
 WALK = DATA / "rtklibexplorer-gnss-imu" / "walk_0827" / "gnss_1730_sf.pos"
 
-HEADER = ("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
-          "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio\n")
+HEADER = (
+    "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+    "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio\n"
+)
 
 
 def test_walk_file_matches_its_readme():
@@ -40,20 +42,25 @@ def test_every_shared_pos_file_reads(path):
 
 def test_signed_square_root_covariances_and_week_tow(tmp_path):
     f = tmp_path / "a.pos"
-    f.write_text("% program : test\n" + HEADER.replace("GPST                 ", "GPST")
-                 + "2100 345600.000  35.0  136.0  41.0  1  19  0.0040  0.0030  0.0100  -0.0020  0.0010  -0.0050  0.03  5.9\n")
+    f.write_text(
+        "% program : test\n"
+        + HEADER.replace("GPST                 ", "GPST")
+        + "2100 345600.000  35.0  136.0  41.0  1  19  0.0040  0.0030  0.0100  -0.0020  0.0010  -0.0050  0.03  5.9\n"
+    )
     s = read_pos(f)
     assert s.t[0] == 2100 * 604800 + 345600
     c = s.cov_enu[0]  # E, N, U order
     np.testing.assert_allclose(np.diag(c), [0.003**2, 0.004**2, 0.01**2])
-    assert c[0, 1] == pytest.approx(-0.002**2) and c[0, 2] == pytest.approx(0.001**2)
-    assert c[1, 2] == pytest.approx(-0.005**2)
+    assert c[0, 1] == pytest.approx(-(0.002**2)) and c[0, 2] == pytest.approx(0.001**2)
+    assert c[1, 2] == pytest.approx(-(0.005**2))
     assert np.all(np.isnan(s.v_enu))  # no velocity columns in this file
 
 
 def test_bad_files_name_file_and_line(tmp_path):
     f = tmp_path / "bad.pos"
-    good = "2023/07/11 06:04:32.000   35.1   136.8   41.4   1  19   0.0045 0.0045 0.0097 0.0027 0.0011 -0.0030 0.03 5.9\n"
+    good = (
+        "2023/07/11 06:04:32.000   35.1   136.8   41.4   1  19   0.0045 0.0045 0.0097 0.0027 0.0011 -0.0030 0.03 5.9\n"
+    )
     f.write_text(HEADER + good + good.replace("41.4", "4x.4"))
     with pytest.raises(ValueError, match=r"bad.pos:3: could not convert"):
         read_pos(f)
@@ -75,10 +82,15 @@ def test_bad_files_name_file_and_line(tmp_path):
 
 def test_non_increasing_time_and_missing_columns_name_the_line(tmp_path):
     f = tmp_path / "t.pos"
-    good = "2023/07/11 06:04:32.000   35.1   136.8   41.4   1  19   0.0045 0.0045 0.0097 0.0027 0.0011 -0.0030 0.03 5.9\n"
+    good = (
+        "2023/07/11 06:04:32.000   35.1   136.8   41.4   1  19   0.0045 0.0045 0.0097 0.0027 0.0011 -0.0030 0.03 5.9\n"
+    )
     f.write_text(HEADER + good + good.replace("32.000", "33.000") + good.replace("32.000", "32.500"))
-    with pytest.raises(ValueError, match=r"t.pos:4: time 2023/07/11 06:04:32.500 is not after the previous record's "
-                                         r"\(line 3\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"t.pos:4: time 2023/07/11 06:04:32.500 is not after the previous record's "
+        r"\(line 3\)",
+    ):
         read_pos(f)
     f.write_text(HEADER + good + good)
     with pytest.raises(ValueError, match=r"t.pos:3: time .* is not after"):
@@ -96,6 +108,9 @@ def test_signed_square_root_covariances_of_a_real_file():
     sdn, sde, sdu, sdne, sdeu, sdun = (float(v) for v in line[7:13])
     c = s.cov_enu[0]
     np.testing.assert_allclose([c[1, 1], c[0, 0], c[2, 2]], [sdn**2, sde**2, sdu**2], rtol=1e-12)
-    np.testing.assert_allclose([c[0, 1], c[0, 2], c[1, 2]],
-                               [np.sign(sdne) * sdne**2, np.sign(sdeu) * sdeu**2, np.sign(sdun) * sdun**2], rtol=1e-12)
+    np.testing.assert_allclose(
+        [c[0, 1], c[0, 2], c[1, 2]],
+        [np.sign(sdne) * sdne**2, np.sign(sdeu) * sdeu**2, np.sign(sdun) * sdun**2],
+        rtol=1e-12,
+    )
     assert np.all(np.linalg.eigvalsh(s.cov_enu) > 0)  # every epoch's covariance is positive definite

@@ -30,29 +30,39 @@ def test_epoch_log_round_trip(tmp_path):
 
 def test_epoch_log_iso_time_sigma_plane_and_nan(tmp_path):
     f = tmp_path / "e.csv"
-    f.write_text("point,time,x,y,h,B,L,H,sigma_plane,sigma_h,extra\n"
-                 "Q1,2014-11-17T09:30:00,1,2,3,32.8,116.8,nan,0.010,0.02,z\n"
-                 "Q1,2014-11-17T09:30:02,1,2,3,32.8,116.8,18.1,0.010,0.02,z\n")
+    f.write_text(
+        "point,time,x,y,h,B,L,H,sigma_plane,sigma_h,extra\n"
+        "Q1,2014-11-17T09:30:00,1,2,3,32.8,116.8,nan,0.010,0.02,z\n"
+        "Q1,2014-11-17T09:30:02,1,2,3,32.8,116.8,18.1,0.010,0.02,z\n"
+    )
     log = io.read_epoch_log(f)
     assert log.t[1] - log.t[0] == 2.0
     np.testing.assert_allclose(log.sigma[0], [0.01 / np.sqrt(2), 0.01 / np.sqrt(2), 0.02])
     assert np.isnan(log.H[0])  # kept; the filter masks it
 
 
-@pytest.mark.parametrize("text, match", [
-    (HEAD + ROW.format(t=0) + ROW.format(t=2).replace("22.1234", "22.1x34"), r"e.csv:3: column 'h': cannot read"),
-    (HEAD + ROW.format(t=0) + ROW.format(t=2) + ROW.format(t=2), r"e.csv:4: time 2 of point 'P01' is not after"),
-    (HEAD + ROW.format(t=4) + ROW.format(t=2), r"e.csv:3: time 2 of point 'P01' is not after"),
-    (HEAD.replace(",H,", ",") + ROW.format(t=0), r"e.csv:1: header lacks column\(s\) \['H'\]"),
-    (HEAD + ROW.format(t=0).rsplit(",", 1)[0] + "\n", r"e.csv:2: 10 fields, the header has 11"),
-    (HEAD + ROW.format(t=0) + ROW.format(t=2).replace("P01", "P02") + ROW.format(t=4),
-     r"e.csv:4: point 'P01' continues after other points"),
-    (HEAD + ROW.format(t="yesterday"), r"e.csv:2: column 'time'"),
-    (HEAD + ROW.format(t=0).replace("0.0150", "-0.01"), r"e.csv:2: column 'sigma_h': -0.01 is outside \[0, 10000\]"),
-    (HEAD + ROW.format(t=0).replace("32.81", "132.81"), r"e.csv:2: column 'B': 132.81 is outside \[-90, 90\]"),
-    ("# only a comment\n", r"e.csv: empty file"),
-    (HEAD, r"e.csv: no epochs"),
-])
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        (HEAD + ROW.format(t=0) + ROW.format(t=2).replace("22.1234", "22.1x34"), r"e.csv:3: column 'h': cannot read"),
+        (HEAD + ROW.format(t=0) + ROW.format(t=2) + ROW.format(t=2), r"e.csv:4: time 2 of point 'P01' is not after"),
+        (HEAD + ROW.format(t=4) + ROW.format(t=2), r"e.csv:3: time 2 of point 'P01' is not after"),
+        (HEAD.replace(",H,", ",") + ROW.format(t=0), r"e.csv:1: header lacks column\(s\) \['H'\]"),
+        (HEAD + ROW.format(t=0).rsplit(",", 1)[0] + "\n", r"e.csv:2: 10 fields, the header has 11"),
+        (
+            HEAD + ROW.format(t=0) + ROW.format(t=2).replace("P01", "P02") + ROW.format(t=4),
+            r"e.csv:4: point 'P01' continues after other points",
+        ),
+        (HEAD + ROW.format(t="yesterday"), r"e.csv:2: column 'time'"),
+        (
+            HEAD + ROW.format(t=0).replace("0.0150", "-0.01"),
+            r"e.csv:2: column 'sigma_h': -0.01 is outside \[0, 10000\]",
+        ),
+        (HEAD + ROW.format(t=0).replace("32.81", "132.81"), r"e.csv:2: column 'B': 132.81 is outside \[-90, 90\]"),
+        ("# only a comment\n", r"e.csv: empty file"),
+        (HEAD, r"e.csv: no epochs"),
+    ],
+)
 def test_epoch_log_errors_name_file_and_line(tmp_path, text, match):
     f = tmp_path / "e.csv"
     f.write_text(text)
@@ -64,9 +74,16 @@ def test_levelling_and_control_round_trip_and_errors(tmp_path):
     f = io.write_levelling(tmp_path / "lev.csv", ["P01", "P02"], [21.5, 22.25])
     lev = io.read_levelling(f)
     assert list(lev.point) == ["P01", "P02"] and lev.height[1] == 22.25
-    c = io.write_control_points(tmp_path / "cp.csv", ["K1", "K2", "K3"], np.radians([32.8, 32.81, 32.82]),
-                                np.radians([116.8, 116.81, 116.82]), [18.0, 19.0, 20.0], [3.6e6, np.nan, 3.61e6],
-                                [4.8e5, np.nan, 4.81e5], [21.4, 22.4, np.nan])
+    c = io.write_control_points(
+        tmp_path / "cp.csv",
+        ["K1", "K2", "K3"],
+        np.radians([32.8, 32.81, 32.82]),
+        np.radians([116.8, 116.81, 116.82]),
+        [18.0, 19.0, 20.0],
+        [3.6e6, np.nan, 3.61e6],
+        [4.8e5, np.nan, 4.81e5],
+        [21.4, 22.4, np.nan],
+    )
     cp = io.read_control_points(c)
     np.testing.assert_allclose(np.degrees(cp.lat), [32.8, 32.81, 32.82], atol=1e-10)
     assert np.isnan(cp.x[1]) and np.isnan(cp.h[2]) and cp.h[0] == 21.4

@@ -13,13 +13,22 @@ from jaxnav import io
 
 def _solution(M=5):
     t = 1.4e9 + np.arange(M, dtype=float)
-    pos = np.stack([np.radians(30.5) + 1e-7 * np.arange(M), np.radians(114.3) + 2e-7 * np.arange(M),
-                    20.0 + 0.1 * np.arange(M)], -1)
+    pos = np.stack(
+        [np.radians(30.5) + 1e-7 * np.arange(M), np.radians(114.3) + 2e-7 * np.arange(M), 20.0 + 0.1 * np.arange(M)], -1
+    )
     v = np.tile([1.0, 2.0, -0.1], (M, 1))
     rpy = np.tile(np.radians([1.0, -2.0, 359.0]), (M, 1))
-    return io.NavSolution(t=t, pos=pos, v_enu=v, rpy=rpy, sig_pos_enu=np.tile([0.01, 0.02, 0.03], (M, 1)),
-                          sig_vel=np.tile([0.001, 0.002, 0.003], (M, 1)), sig_att=np.tile(np.radians([0.1, 0.2, 0.3]), (M, 1)),
-                          gnss_used=np.arange(M) % 2 == 0, quality=np.where(np.arange(M) % 2 == 0, 1, 0))
+    return io.NavSolution(
+        t=t,
+        pos=pos,
+        v_enu=v,
+        rpy=rpy,
+        sig_pos_enu=np.tile([0.01, 0.02, 0.03], (M, 1)),
+        sig_vel=np.tile([0.001, 0.002, 0.003], (M, 1)),
+        sig_att=np.tile(np.radians([0.1, 0.2, 0.3]), (M, 1)),
+        gnss_used=np.arange(M) % 2 == 0,
+        quality=np.where(np.arange(M) % 2 == 0, 1, 0),
+    )
 
 
 def test_pos_reads_back(tmp_path):
@@ -54,8 +63,10 @@ def test_shapes_checked(tmp_path):
 
 def test_geojson_and_kml_tracks(tmp_path):
     sol = _solution()
-    tracks = [io.Track("a", sol.pos, color="ff0000ff", width=2, clamp_to_ground=True),
-              io.Track("b", sol.pos[:2], {"gpst_start_s": 1.0})]
+    tracks = [
+        io.Track("a", sol.pos, color="ff0000ff", width=2, clamp_to_ground=True),
+        io.Track("b", sol.pos[:2], {"gpst_start_s": 1.0}),
+    ]
     g = json.loads(io.write_geojson(tmp_path / "t.geojson", tracks).read_text())
     assert [f["properties"] for f in g["features"]] == [{"name": "a"}, {"name": "b", "gpst_start_s": 1.0}]
     lon, lat, h = g["features"][0]["geometry"]["coordinates"][0]

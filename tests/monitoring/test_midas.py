@@ -8,11 +8,11 @@ import math
 import jax
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav import io
 from jaxnav import monitoring as mon
 from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR
-from _paths import DATA_ROOT
 
 DATA = DATA_ROOT / "gnss_daily_timeseries"
 FILES = ("LHAS.tenv3", "bjfsCleanUnf.neu", "UH01_GOM20_neu_cm.col", "MRHK_GOM20_neu_cm.col", "UHCR_GOM20_neu_cm.col")
@@ -79,8 +79,14 @@ def test_midas_recovers_a_known_rate_through_a_step_and_seasonal_terms():
     the step given is within 2 of its sigmas of 3 mm/yr, and so it is without the step (the straddling pairs'
     slopes are trimmed: the robustness Blewitt et al. 2016 designed it for)."""
     n = 2192
-    y, _ = mon.simulate_powerlaw_series(jax.random.PRNGKey(3), n, rate=3 * MM_PER_YEAR, sigma_white=1.5 * MM,
-                                        amplitude=2 * MM / YEAR ** 0.25, gap_fraction=0.1)
+    y, _ = mon.simulate_powerlaw_series(
+        jax.random.PRNGKey(3),
+        n,
+        rate=3 * MM_PER_YEAR,
+        sigma_white=1.5 * MM,
+        amplitude=2 * MM / YEAR**0.25,
+        gap_fraction=0.1,
+    )
     t = 2010.0 + np.arange(n) * DAY / YEAR
     y = np.asarray(y) + 5 * MM * np.cos(2 * np.pi * t) + 20 * MM * (t >= 2013.0)
     with_step = mon.midas_velocity(t, y, [2013.0])
@@ -101,7 +107,7 @@ def lhas_start(tmp_path_factory):
     """The first 3 years of LHAS (its 1995 antenna change inside)."""
     lines = (DATA / "LHAS.tenv3").read_text().splitlines()
     p = tmp_path_factory.mktemp("lhas") / "LHAS.tenv3"
-    p.write_text("\n".join(lines[:1 + 1000]) + "\n")
+    p.write_text("\n".join(lines[: 1 + 1000]) + "\n")
     return p
 
 
@@ -142,9 +148,15 @@ def test_misfit_warnings_name_a_step_the_model_left_out():
         if rate_up is not None:
             b[2, 1] = rate_up * MM
         sig = np.array([1.0, 1.0, sig_up]) * MM_PER_YEAR
-        fit = SimpleNamespace(grid=grid, steps=np.array([t[700]]), velocity=b[:, 1] / YEAR, velocity_sigma=sig,
-                              design_names=("offset", "rate"), A=A,
-                              residual_trend=mon.residual_trend(grid, A, b) / YEAR)
+        fit = SimpleNamespace(
+            grid=grid,
+            steps=np.array([t[700]]),
+            velocity=b[:, 1] / YEAR,
+            velocity_sigma=sig,
+            design_names=("offset", "rate"),
+            A=A,
+            residual_trend=mon.residual_trend(grid, A, b) / YEAR,
+        )
         m, warn = station_midas(fit)
         assert np.all(np.abs(m.velocity / MM - 2.0) < 2 * m.sigma / MM), m
         assert len(warn) == 1 and warn[0].startswith(start), warn

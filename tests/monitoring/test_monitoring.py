@@ -6,14 +6,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav import experiments as ex
 from jaxnav import filters as jf
-from jaxnav import io
+from jaxnav import io, sim
 from jaxnav import monitoring as mon
-from jaxnav import sim
 from jaxnav.units import MM_PER_YEAR
-from _paths import DATA_ROOT
 
 DATA = DATA_ROOT / "gnss_daily_timeseries"
 
@@ -33,8 +32,8 @@ def test_network_model_is_block_diagonal_and_separable():
     both = mon.forecast(net, x0, P0, zs)
     for s, q in ((0, 1e-8), (1, 4e-8)):
         m1 = jf.constant_velocity(1.0, sigma=sig, accel_var=q)
-        x1, P1 = mon.initial_state(zs[0, 3 * s:3 * s + 3], sigma_pos=sig, sigma_vel=1e-3)
-        f1 = mon.forecast(m1, x1, P1, zs[:, 3 * s:3 * s + 3])
+        x1, P1 = mon.initial_state(zs[0, 3 * s : 3 * s + 3], sigma_pos=sig, sigma_vel=1e-3)
+        f1 = mon.forecast(m1, x1, P1, zs[:, 3 * s : 3 * s + 3])
         np.testing.assert_allclose(both.forecast[:, s], f1.forecast[:, 0], rtol=0, atol=1e-13)
         np.testing.assert_allclose(both.velocity_sigma[:, s], f1.velocity_sigma[:, 0], rtol=1e-10)
     assert np.isnan(both.deviation[10, 1, 1]) and np.isfinite(both.deviation[11]).all()
@@ -51,7 +50,7 @@ def test_period_statistics_against_numpy():
     st = mon.period_statistics(dev, 100, thresholds=(0.5e-3, 0.4e-3, 1e-3))
     assert st.max_abs.shape == (2, 2, 3)
     for p in range(2):
-        d = dev[100 * p:100 * (p + 1)]
+        d = dev[100 * p : 100 * (p + 1)]
         a = np.abs(d)
         np.testing.assert_allclose(st.max_abs[p], np.nanmax(a, axis=0))
         np.testing.assert_allclose(st.mean_abs[p], np.nanmean(a, axis=0))
@@ -76,8 +75,15 @@ def test_subsidence_simulator():
     np.testing.assert_allclose(dW[300], (W[301] - W[299]) / 2, rtol=1e-4)  # velocity = dW/dt
     assert W[100] == 0 and dW[100] == 0
     # noise: variance and correlation of white + station Gauss-Markov + common Gauss-Markov
-    cfg = sim.subsidence_config(2, w_max=0.0, sigma_white=(1e-3,) * 3, sigma_corr=(2e-3,) * 3, tau_corr=50.0,
-                                sigma_common=(1e-3,) * 3, tau_common=500.0)
+    cfg = sim.subsidence_config(
+        2,
+        w_max=0.0,
+        sigma_white=(1e-3,) * 3,
+        sigma_corr=(2e-3,) * 3,
+        tau_corr=50.0,
+        sigma_common=(1e-3,) * 3,
+        tau_common=500.0,
+    )
     draw = jax.jit(jax.vmap(lambda k: sim.simulate_subsidence(k, cfg, 3000).noise))
     out = draw(jax.random.split(jax.random.PRNGKey(2), 12))
     n = np.asarray(out).reshape(12, 3000, 6)
@@ -152,8 +158,9 @@ def test_cli_monitor_files(tmp_path):
     s1 = st["s1_adaptive_filter"]
     enu = ("east", "north", "up")  # labelled components, no bare triplets (issue 21)
     assert all(set(s1[k]) == set(enu) for k in ("velocity_mm_per_yr", "ls_slope_mm_per_yr", "published_mm_per_yr"))
-    vel, ls, pub = ([s1[k][c] for c in enu] for k in ("velocity_mm_per_yr", "ls_slope_mm_per_yr",
-                                                       "published_mm_per_yr"))
+    vel, ls, pub = (
+        [s1[k][c] for c in enu] for k in ("velocity_mm_per_yr", "ls_slope_mm_per_yr", "published_mm_per_yr")
+    )
     np.testing.assert_allclose(vel, ls, rtol=1e-6)
     np.testing.assert_allclose(vel, pub, atol=0.25)
     assert s1["random_walk_psd_m2_per_s3"]["east"] > mon.PSD_GRID[0]  # the ML random walk is not the smallest

@@ -11,11 +11,20 @@ from jaxnav.units import DAY, MM, YEAR
 
 def _record(v, lat):
     enu = ("east", "north", "up")
-    return dict(velocity_mm_per_yr=dict(zip(enu, v)), velocity_sigma_mm_per_yr=dict(zip(enu, (0.5, 0.6, 1.5))),
-                midas_velocity_mm_per_yr=dict(zip(enu, v)), midas_velocity_sigma_mm_per_yr=dict(zip(enu, (0.3,) * 3)),
-                latitude_deg=lat, longitude_deg=None if lat is None else 91.1, first_day="2000-01-01",
-                last_day="2009-12-31", span_years=10.0, steps=[{}], model='white + power-law, "REML"',
-                file="/x/a.tenv3")
+    return dict(
+        velocity_mm_per_yr=dict(zip(enu, v)),
+        velocity_sigma_mm_per_yr=dict(zip(enu, (0.5, 0.6, 1.5))),
+        midas_velocity_mm_per_yr=dict(zip(enu, v)),
+        midas_velocity_sigma_mm_per_yr=dict(zip(enu, (0.3,) * 3)),
+        latitude_deg=lat,
+        longitude_deg=None if lat is None else 91.1,
+        first_day="2000-01-01",
+        last_day="2009-12-31",
+        span_years=10.0,
+        steps=[{}],
+        model='white + power-law, "REML"',
+        file="/x/a.tenv3",
+    )
 
 
 def test_velocity_table_has_units_header_and_one_row_per_station(tmp_path):
@@ -37,11 +46,14 @@ def test_velocity_table_has_units_header_and_one_row_per_station(tmp_path):
 def test_velocity_map_draws_stations_with_coordinates(tmp_path):
     from jaxnav.plot import plot_velocity_map
 
-    fig = plot_velocity_map([dict(name="A", lat_deg=29.7, lon_deg=91.1, ve=45.0, vn=16.0, se=1.3, sn=1.0),
-                             dict(name="B", lat_deg=39.6, lon_deg=115.9, ve=30.0, vn=-10.0, se=0.3, sn=0.7,
-                                  corr_en=0.4),
-                             dict(name="C", lat_deg=float("nan"), lon_deg=0.0, ve=1.0, vn=1.0, se=1.0, sn=1.0)],
-                            tmp_path / "map.png")
+    fig = plot_velocity_map(
+        [
+            dict(name="A", lat_deg=29.7, lon_deg=91.1, ve=45.0, vn=16.0, se=1.3, sn=1.0),
+            dict(name="B", lat_deg=39.6, lon_deg=115.9, ve=30.0, vn=-10.0, se=0.3, sn=0.7, corr_en=0.4),
+            dict(name="C", lat_deg=float("nan"), lon_deg=0.0, ve=1.0, vn=1.0, se=1.0, sn=1.0),
+        ],
+        tmp_path / "map.png",
+    )
     names = {t.get_text() for t in fig.axes[0].texts}
     assert {"A", "B"} <= names and "C" not in names and any("mm/yr" in n for n in names)
     assert (tmp_path / "map.png").stat().st_size > 10_000

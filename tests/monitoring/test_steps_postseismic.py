@@ -11,34 +11,58 @@ from jaxnav import io
 from jaxnav import monitoring as mon
 from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR
 
-WHITE, FLICKER = 1.5 * MM, 3.0 * MM / YEAR ** 0.25  # white sigma; flicker amplitude (Hector's mm/yr^0.25)
+WHITE, FLICKER = 1.5 * MM, 3.0 * MM / YEAR**0.25  # white sigma; flicker amplitude (Hector's mm/yr^0.25)
 
 
 def _noise(seed, n, rates_mm_yr):
     """(n, 3) m: rate + white + flicker noise (5 % of days missing), one component per key."""
-    cols = [np.asarray(mon.simulate_powerlaw_series(jax.random.PRNGKey(seed + c), n, rate=r * MM_PER_YEAR,
-                                                    sigma_white=WHITE, amplitude=FLICKER, gap_fraction=0.05)[0])
-            for c, r in enumerate(rates_mm_yr)]
+    cols = [
+        np.asarray(
+            mon.simulate_powerlaw_series(
+                jax.random.PRNGKey(seed + c),
+                n,
+                rate=r * MM_PER_YEAR,
+                sigma_white=WHITE,
+                amplitude=FLICKER,
+                gap_fraction=0.05,
+            )[0]
+        )
+        for c, r in enumerate(rates_mm_yr)
+    ]
     return np.stack(cols, axis=1)
 
 
 def _series(t, y, station="SIMU"):
     n = len(t)
-    return io.DailySeries(station=station, path="simulated", fmt="tenv3", t=t, year=2000.0 + t / YEAR, enu=y,
-                          cov=np.tile(np.eye(3) * WHITE ** 2, (n, 1, 1)), origin=np.zeros(3),
-                          llh=np.full((n, 3), np.nan), reference_velocity=None, reference_velocity_sigma=None,
-                          n_masked=int(np.isnan(y).sum()), xyz=None, cov_xyz=None)
+    return io.DailySeries(
+        station=station,
+        path="simulated",
+        fmt="tenv3",
+        t=t,
+        year=2000.0 + t / YEAR,
+        enu=y,
+        cov=np.tile(np.eye(3) * WHITE**2, (n, 1, 1)),
+        origin=np.zeros(3),
+        llh=np.full((n, 3), np.nan),
+        reference_velocity=None,
+        reference_velocity_sigma=None,
+        n_masked=int(np.isnan(y).sum()),
+        xyz=None,
+        cov_xyz=None,
+    )
 
 
 def test_steps_file_formats_and_errors(tmp_path):
     f = tmp_path / "steps.txt"
-    f.write_text("# station date kind terms\n"
-                 "lhas 1995-08-23 equipment   # antenna\n"
-                 "\n"
-                 "ABCD, 2011.1920, earthquake, log:30, exp:estimate\n"
-                 "ABCD 2012-01-01 unknown\n"
-                 "P123  11MAR11  2  0.5  190.0  9.0  official20110311054624_0001\n"
-                 "P123  99DEC31  1  Antenna_Code_Changed\n")
+    f.write_text(
+        "# station date kind terms\n"
+        "lhas 1995-08-23 equipment   # antenna\n"
+        "\n"
+        "ABCD, 2011.1920, earthquake, log:30, exp:estimate\n"
+        "ABCD 2012-01-01 unknown\n"
+        "P123  11MAR11  2  0.5  190.0  9.0  official20110311054624_0001\n"
+        "P123  99DEC31  1  Antenna_Code_Changed\n"
+    )
     ks = io.read_steps_file(f)
     assert [k.station for k in ks] == ["LHAS", "ABCD", "ABCD", "P123", "P123"]
     assert [k.kind for k in ks] == ["equipment", "earthquake", "unknown", "earthquake", "equipment"]
@@ -48,14 +72,16 @@ def test_steps_file_formats_and_errors(tmp_path):
     assert ks[3].epoch == io.date_to_epoch("2011-03-11") and ks[4].epoch == io.date_to_epoch("1999-12-31")
     # the step applies from the daily solution of its date on (solutions are labelled at noon)
     assert io.date_to_epoch("2000-01-01") == -0.5 * DAY
-    bad = {"LHAS 1995-08-23\n": "expected 'station date kind",
-           "LHAS 1995-13-01 equipment\n": "not a calendar date",
-           "LHAS 95/08/23 equipment\n": "cannot read the date",
-           "LHAS 1995-08-23 antenna\n": "unknown step kind 'antenna'",
-           "LHAS 1995-08-23 equipment log:30\n": "only earthquake steps take post-seismic terms",
-           "LHAS 1995-08-23 earthquake power:30\n": "expected log:TAU_DAYS",
-           "LHAS 1995-08-23 earthquake log:-3\n": "must be in (0, 1e5] days",
-           "LHAS 1995-08-23 earthquake log:soon\n": "is not a number of days"}
+    bad = {
+        "LHAS 1995-08-23\n": "expected 'station date kind",
+        "LHAS 1995-13-01 equipment\n": "not a calendar date",
+        "LHAS 95/08/23 equipment\n": "cannot read the date",
+        "LHAS 1995-08-23 antenna\n": "unknown step kind 'antenna'",
+        "LHAS 1995-08-23 equipment log:30\n": "only earthquake steps take post-seismic terms",
+        "LHAS 1995-08-23 earthquake power:30\n": "expected log:TAU_DAYS",
+        "LHAS 1995-08-23 earthquake log:-3\n": "must be in (0, 1e5] days",
+        "LHAS 1995-08-23 earthquake log:soon\n": "is not a number of days",
+    }
     for k, (text, msg) in enumerate(bad.items()):
         g = tmp_path / f"bad{k}.txt"
         g.write_text("# header\n" + text)
@@ -78,9 +104,9 @@ def test_postseismic_columns_and_polynomial_design():
     np.testing.assert_allclose(ex[500], 1 - np.exp(-99.5 / 50), rtol=1e-12)
     D1 = mon.design_matrix(t, steps=[te])
     D = mon.design_matrix(t, steps=[te], poly_degree=3, postseismic=[(te, "log", tau), (te, "exp", tau)])
-    assert D.names[:len(D1.names)] == D1.names
-    assert D.names[len(D1.names):] == ("poly_2", "poly_3", "postseismic_0_log", "postseismic_1_exp")
-    np.testing.assert_array_equal(D.A[:, :len(D1.names)], D1.A)
+    assert D.names[: len(D1.names)] == D1.names
+    assert D.names[len(D1.names) :] == ("poly_2", "poly_3", "postseismic_0_log", "postseismic_1_exp")
+    np.testing.assert_array_equal(D.A[:, : len(D1.names)], D1.A)
     np.testing.assert_allclose(D.A[:, D.names.index("poly_2")], ((t - D.t_ref) / YEAR) ** 2)
     with pytest.raises(ValueError, match="post-seismic form"):
         mon.postseismic_column(t, te, "power", tau)
@@ -120,14 +146,14 @@ def test_poly_degree_two_recovers_an_acceleration():
     t = 10 * YEAR + np.arange(n) * DAY
     rate = np.array([2.0, -1.0, 0.5])
     tm = 0.5 * (t[0] + t[-1])
-    acc = np.array([3.0, 0.0, 0.0]) * MM / YEAR ** 2
+    acc = np.array([3.0, 0.0, 0.0]) * MM / YEAR**2
     ts = t[n // 2] - 0.5 * DAY
     y = _noise(21, n, rate) + 0.5 * acc * (t - tm)[:, None] ** 2 + 4 * MM * (t >= ts)[:, None]
     fit = mon.fit_station(_series(t, y), steps=[ts], poly_degree=2, random_walk=False)
     c2, s2 = mon.polynomial_terms(fit)[2]
     a, sa = 2 * c2, 2 * s2
-    assert np.all(np.abs(a - acc) < 2 * sa), (a * YEAR ** 2 / MM, sa * YEAR ** 2 / MM)
-    assert np.all(sa * YEAR ** 2 / MM < 1.0)
+    assert np.all(np.abs(a - acc) < 2 * sa), (a * YEAR**2 / MM, sa * YEAR**2 / MM)
+    assert np.all(sa * YEAR**2 / MM < 1.0)
     np.testing.assert_allclose(fit.t_ref, tm)
     v, sd = fit.velocity / MM_PER_YEAR, fit.velocity_sigma / MM_PER_YEAR
     assert np.all(np.abs(v - rate) < 2 * sd), (v, sd)
@@ -144,17 +170,40 @@ def test_cli_steps_file_postseismic_and_poly_degree(tmp_path, capsys):
     t = (years - 2000.0) * YEAR
     te = io.date_to_epoch("2011-01-02")
     amp = np.array([15.0, -8.0, 20.0]) * MM
-    y = _noise(31, n, [4.0, 1.0, -2.0]) + amp * mon.postseismic_column(t, te, "log", 40 * DAY)[:, None] \
+    y = (
+        _noise(31, n, [4.0, 1.0, -2.0])
+        + amp * mon.postseismic_column(t, te, "log", 40 * DAY)[:, None]
         + 8 * MM * (t >= te)[:, None]
-    rows = [f"{yr:.4f} {y[i, 1] / MM:.3f} {y[i, 0] / MM:.3f} {y[i, 2] / MM:.3f} 1.5 1.5 1.5"
-            for i, yr in enumerate(years) if np.all(np.isfinite(y[i]))]
-    (tmp_path / "SIMA_sim.col").write_text("Decimal-Year NS(mm) EW(mm) UD(mm) sigma-NS(mm) sigma-EW(mm) sigma-UD(mm)\n"
-                                           + "\n".join(rows) + "\n")
-    (tmp_path / "steps.txt").write_text("SIMA 2011-01-02 earthquake log:40\nSIMA 2001-01-01 equipment\n"
-                                        "XXXX 2011-01-02 earthquake\n")
+    )
+    rows = [
+        f"{yr:.4f} {y[i, 1] / MM:.3f} {y[i, 0] / MM:.3f} {y[i, 2] / MM:.3f} 1.5 1.5 1.5"
+        for i, yr in enumerate(years)
+        if np.all(np.isfinite(y[i]))
+    ]
+    (tmp_path / "SIMA_sim.col").write_text(
+        "Decimal-Year NS(mm) EW(mm) UD(mm) sigma-NS(mm) sigma-EW(mm) sigma-UD(mm)\n" + "\n".join(rows) + "\n"
+    )
+    (tmp_path / "steps.txt").write_text(
+        "SIMA 2011-01-02 earthquake log:40\nSIMA 2001-01-01 equipment\nXXXX 2011-01-02 earthquake\n"
+    )
     out = tmp_path / "o"
-    assert main(["monitor", str(tmp_path / "SIMA_sim.col"), "--steps-file", str(tmp_path / "steps.txt"),
-                 "--poly-degree", "2", "--no-detect-steps", "--no-random-walk", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "monitor",
+                str(tmp_path / "SIMA_sim.col"),
+                "--steps-file",
+                str(tmp_path / "steps.txt"),
+                "--poly-degree",
+                "2",
+                "--no-detect-steps",
+                "--no-random-walk",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     res = json.loads((out / "monitor.json").read_text())
     assert res["settings"]["poly_degree"] == 2 and res["settings"]["steps_files"] == [str(tmp_path / "steps.txt")]
@@ -183,10 +232,12 @@ def test_known_steps_on_one_day_merge():
     from jaxnav.experiments.velocities import merge_known_steps
 
     d = io.date_to_epoch("2011-03-11")
-    ks = [io.KnownStep("ABCD", d + 0.3 * DAY, "earthquake", (("log", 30 * DAY),), "f.txt:4"),
-          io.KnownStep("ABCD", d, "unknown", (), "--step"),
-          io.KnownStep("ABCD", d + 0.1 * DAY, "earthquake", (("log", None), ("exp", None)), "--postseismic x"),
-          io.KnownStep("ABCD", d - 40 * DAY, "equipment", (), "f.txt:2")]
+    ks = [
+        io.KnownStep("ABCD", d + 0.3 * DAY, "earthquake", (("log", 30 * DAY),), "f.txt:4"),
+        io.KnownStep("ABCD", d, "unknown", (), "--step"),
+        io.KnownStep("ABCD", d + 0.1 * DAY, "earthquake", (("log", None), ("exp", None)), "--postseismic x"),
+        io.KnownStep("ABCD", d - 40 * DAY, "equipment", (), "f.txt:2"),
+    ]
     m = merge_known_steps(ks)
     assert [k.kind for k in m] == ["equipment", "earthquake"]
     assert m[1].epoch == d and m[1].postseismic == (("log", None), ("exp", None))

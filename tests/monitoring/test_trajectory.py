@@ -8,14 +8,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
+from reference.hector_run import hector_available, hector_covariance_row, run_hector
 
 from jaxnav import filters as jf
 from jaxnav import io
 from jaxnav import monitoring as mon
 from jaxnav.monitoring._trajectory import _whitened
 from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR
-from _paths import DATA_ROOT
-from reference.hector_run import hector_available, hector_covariance_row, run_hector
 
 DATA = DATA_ROOT / "gnss_daily_timeseries"
 
@@ -43,15 +43,15 @@ def test_whitening_is_jaxnavs_kalman_filter_with_gaps():
     y = jax.random.normal(jax.random.PRNGKey(1), (T,)) * 3e-3
     valid = jax.random.uniform(jax.random.PRNGKey(2), (T,)) > 0.2
     A = jnp.asarray(mon.design_matrix(np.arange(T) * DAY).A)
-    yt, At, lds = _whitened(theta, y, valid, A, jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid),
-                            False, True)
+    yt, At, lds = _whitened(
+        theta, y, valid, A, jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid), False, True
+    )
     model, P0 = mon.noise_state_space(theta, jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid))
     x0 = jnp.zeros(P0.shape[0])
     for col, ref in ((y, yt), (A[:, 1], At[:, 1])):
         r = jf.kalman_filter(model, x0, P0, jnp.where(valid, col, jnp.nan)[:, None])
         S = r.innov_covs[:, 0, 0]
-        np.testing.assert_allclose(jnp.where(valid, r.innovations[:, 0] / jnp.sqrt(S), 0.0), ref, rtol=1e-9,
-                                   atol=1e-12)
+        np.testing.assert_allclose(jnp.where(valid, r.innovations[:, 0] / jnp.sqrt(S), 0.0), ref, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(jnp.sum(jnp.where(valid, jnp.log(S), 0.0)), lds, rtol=1e-12)
 
 
@@ -92,9 +92,11 @@ def test_95_percent_rate_interval_covers_the_truth_in_simulated_flicker_series()
     B, n = 40, 1096
     rate = 3.0 * MM_PER_YEAR
     keys = jax.random.split(jax.random.PRNGKey(19), B)
-    sim = jax.vmap(lambda k: mon.simulate_powerlaw_series(k, n, rate=rate, sigma_white=2 * MM,
-                                                          amplitude=6 * MM / YEAR**0.25, kappa=-1.0,
-                                                          gap_fraction=0.1))
+    sim = jax.vmap(
+        lambda k: mon.simulate_powerlaw_series(
+            k, n, rate=rate, sigma_white=2 * MM, amplitude=6 * MM / YEAR**0.25, kappa=-1.0, gap_fraction=0.1
+        )
+    )
     y, t = sim(keys)
     y = np.asarray(y)
     valid = np.isfinite(y)
@@ -106,18 +108,34 @@ def test_95_percent_rate_interval_covers_the_truth_in_simulated_flicker_series()
     z = (est - rate) / sd
     assert 0.7 < np.std(z) < 1.4, np.std(z)
     assert np.sum(np.abs(z) <= 1.96) >= 34, np.sum(np.abs(z) <= 1.96)
-    sd_white = np.array([np.sqrt(np.linalg.lstsq(D.A[v], y[i, v], rcond=None)[1][0] / (v.sum() - 6)
-                                 * np.linalg.inv(D.A[v].T @ D.A[v])[1, 1]) for i, v in enumerate(valid)]) / YEAR
+    sd_white = (
+        np.array(
+            [
+                np.sqrt(
+                    np.linalg.lstsq(D.A[v], y[i, v], rcond=None)[1][0]
+                    / (v.sum() - 6)
+                    * np.linalg.inv(D.A[v].T @ D.A[v])[1, 1]
+                )
+                for i, v in enumerate(valid)
+            ]
+        )
+        / YEAR
+    )
     assert np.std((est - rate) / sd_white) > 3.0
 
 
 def _pbo_text(s, station="LHAS"):
     """A PBO .pos (format 1.1) with the local offsets of a DailySeries (header as documented by GAGE)."""
-    head = ["PBO Station Position Time Series. Reference Frame : IGS14", "Format Version: 1.1.0",
-            f"4-character ID: {station}", "Station name : test", "Start Field Description",
-            "dN Difference in North component from NEU reference position, meters", "End Field Description",
-            "*YYYYMMDD HHMMSS JJJJJ.JJJJ X Y Z Sx Sy Sz Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su "
-            "Rne Rnu Reu Soln"]
+    head = [
+        "PBO Station Position Time Series. Reference Frame : IGS14",
+        "Format Version: 1.1.0",
+        f"4-character ID: {station}",
+        "Station name : test",
+        "Start Field Description",
+        "dN Difference in North component from NEU reference position, meters",
+        "End Field Description",
+        "*YYYYMMDD HHMMSS JJJJJ.JJJJ X Y Z Sx Sy Sz Rxy Rxz Ryz NLat Elong Height dN dE dU Sn Se Su Rne Rnu Reu Soln",
+    ]
     rows = []
     for i in range(len(s.t)):
         mjd = s.t[i] / 86400.0 + 51544.5
@@ -125,9 +143,11 @@ def _pbo_text(s, station="LHAS"):
         c = s.cov[i]
         sg = np.sqrt(np.diag(c))
         e, n_, u = s.enu[i]
-        rows.append(f" {d:%Y%m%d} {d:%H%M%S} {mjd:.4f} -1.0e6 5.0e6 3.0e6 0.002 0.003 0.004 0.1 -0.2 0.3 "
-                    f"29.657 91.104 3624.7 {n_:.5f} {e:.5f} {u:.5f} {sg[1]:.5f} {sg[0]:.5f} {sg[2]:.5f} "
-                    f"{c[0, 1] / sg[0] / sg[1]:.3f} {c[1, 2] / sg[1] / sg[2]:.3f} {c[0, 2] / sg[0] / sg[2]:.3f} final")
+        rows.append(
+            f" {d:%Y%m%d} {d:%H%M%S} {mjd:.4f} -1.0e6 5.0e6 3.0e6 0.002 0.003 0.004 0.1 -0.2 0.3 "
+            f"29.657 91.104 3624.7 {n_:.5f} {e:.5f} {u:.5f} {sg[1]:.5f} {sg[0]:.5f} {sg[2]:.5f} "
+            f"{c[0, 1] / sg[0] / sg[1]:.3f} {c[1, 2] / sg[1] / sg[2]:.3f} {c[0, 2] / sg[0] / sg[2]:.3f} final"
+        )
     return "\n".join(head + rows) + "\n"
 
 
@@ -143,8 +163,9 @@ def test_pbo_pos_reader_keeps_enu_full_covariance_and_ecef(tmp_path, lhas):
     np.testing.assert_allclose(r.enu, s.enu, atol=6e-6)
     sr, ss = np.sqrt(np.diagonal(r.cov, axis1=1, axis2=2)), np.sqrt(np.diagonal(s.cov, axis1=1, axis2=2))
     np.testing.assert_allclose(sr, ss, atol=6e-6)  # sigmas written with 5 decimals (m)
-    np.testing.assert_allclose(r.cov / sr[:, :, None] / sr[:, None, :], s.cov / ss[:, :, None] / ss[:, None, :],
-                               atol=6e-4)  # correlations with 3
+    np.testing.assert_allclose(
+        r.cov / sr[:, :, None] / sr[:, None, :], s.cov / ss[:, :, None] / ss[:, None, :], atol=6e-4
+    )  # correlations with 3
     assert r.cov_xyz.shape == (50, 3, 3) and r.cov_xyz[0, 0, 1] == pytest.approx(0.1 * 0.002 * 0.003)
     bad = tmp_path / "rover.pos"
     bad.write_text("% program   : RTKLIB\n% GPST latitude(deg)\n")
@@ -181,9 +202,17 @@ def test_step_detection_finds_a_planted_step_and_nothing_in_pure_noise():
 
     n = 1024
     keys = jax.random.split(jax.random.PRNGKey(7), 3)
-    y = np.stack([np.asarray(mon.simulate_powerlaw_series(k, n, rate=2 * MM_PER_YEAR, sigma_white=2 * MM,
-                                                          amplitude=4 * MM / YEAR**0.25, gap_fraction=0.05)[0])
-                  for k in keys], axis=1)
+    y = np.stack(
+        [
+            np.asarray(
+                mon.simulate_powerlaw_series(
+                    k, n, rate=2 * MM_PER_YEAR, sigma_white=2 * MM, amplitude=4 * MM / YEAR**0.25, gap_fraction=0.05
+                )[0]
+            )
+            for k in keys
+        ],
+        axis=1,
+    )
     t = np.arange(n) * DAY + 10 * YEAR
     spec = mon.noise_spec(n)
     A = mon.design_matrix(t).A

@@ -15,10 +15,10 @@ import pytest  # noqa: E402
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.container import ErrorbarContainer  # noqa: E402
 
-from jaxnav import plot  # noqa: E402
+import jaxnav.experiments.figures as _experiment_figures  # noqa: E402
 import jaxnav.plot._ins as _ins  # noqa: E402
 import jaxnav.plot._tune as _tune  # noqa: E402
-import jaxnav.experiments.figures as _experiment_figures  # noqa: E402
+from jaxnav import plot  # noqa: E402
 
 # JAXNAV_KEEP_FIGURES=DIR keeps the PNGs for a look
 KEEP = os.environ.get("JAXNAV_KEEP_FIGURES")
@@ -40,6 +40,7 @@ def captured(monkeypatch):
         def wrapper(fig, path, **kw):
             figs[pathlib.Path(path).name] = fig
             return save(fig, path, **kw) if KEEP else pathlib.Path(path)
+
         return wrapper
 
     for mod in (_experiment_figures, _tune, _ins):
@@ -74,9 +75,10 @@ def test_filter_family_every_curve_and_band_labelled(tmp_path):
     T = 200
     rng = np.random.default_rng(0)
     t = np.arange(T, dtype=float)
-    runs = {name: {"err": rng.normal(0, 3e-3, (T, 3)), "factors": 1 + rng.random(T),
-                   "q": rng.random((T, 3)) * 1e-9} for name in ("classic", "attenuated", "fading",
-                                                                  "variance_compensation")}
+    runs = {
+        name: {"err": rng.normal(0, 3e-3, (T, 3)), "factors": 1 + rng.random(T), "q": rng.random((T, 3)) * 1e-9}
+        for name in ("classic", "attenuated", "fading", "variance_compensation")
+    }
     fig = _experiment_figures.plot_filter_family(runs, t, (80, 100), _out(tmp_path, "filter_family.png"), b=0.254)
     r = _renderer(fig)
     for ax in fig.axes:
@@ -100,8 +102,9 @@ def test_stop_detection_plots_the_statistic_with_its_threshold(tmp_path):
     moving = (t > 20) & (t < 60) | (t > 75) & (t < 95)
     stat = np.where(moving, 1e4, 1.0) * (1 + 0.1 * np.sin(t))
     spans = np.array([[0.0, 20.0], [60.0, 75.0], [95.0, 100.0]])
-    fig = plot.plot_stop_detection(_out(tmp_path, "cadastral_detection_test.png"), t, stat, 10.0, spans, spans,
-                                   title="synthetic")
+    fig = plot.plot_stop_detection(
+        _out(tmp_path, "cadastral_detection_test.png"), t, stat, 10.0, spans, spans, title="synthetic"
+    )
     ax = fig.axes[0]
     (curve,) = [ln for ln in ax.get_lines() if ln.get_label() == "GLRT statistic T_k"]
     np.testing.assert_allclose(curve.get_ydata(), stat)  # the statistic itself, not a 0/1 mask
@@ -120,8 +123,9 @@ def test_stop_detection_plots_the_statistic_with_its_threshold(tmp_path):
 def test_stop_detection_linear_axis_and_second_trace(tmp_path):
     t = np.linspace(0.0, 10.0, 101)
     stat = 5.0 + np.cos(t)
-    fig = plot.plot_stop_detection(tmp_path / "d.png", t, stat, 5.0, np.zeros((0, 2)),
-                                   extra=(t, np.abs(np.sin(t)), "speed, m/s"))
+    fig = plot.plot_stop_detection(
+        tmp_path / "d.png", t, stat, 5.0, np.zeros((0, 2)), extra=(t, np.abs(np.sin(t)), "speed, m/s")
+    )
     ax = fig.axes[0]
     assert ax.get_yscale() == "linear"
     assert "speed, m/s" in _legend_texts(ax)  # the twin axis' trace is in the one legend
@@ -138,15 +142,30 @@ def test_s0_factors_in_separate_panels_sweep_with_spread_and_seed_named(tmp_path
     M = 100
     t = np.arange(M, dtype=float)
     rng = np.random.default_rng(1)
-    d = lambda f: {"pos_err": rng.normal(0, 1, (M, 3)), "vel_err": rng.normal(0, .1, (M, 3)),  # noqa: E731
-                   "sig_pos": np.ones((M, 3)), "sig_vel": .1 * np.ones((M, 3)), "factors": f}
+    d = lambda f: {
+        "pos_err": rng.normal(0, 1, (M, 3)),
+        "vel_err": rng.normal(0, 0.1, (M, 3)),  # noqa: E731
+        "sig_pos": np.ones((M, 3)),
+        "sig_vel": 0.1 * np.ones((M, 3)),
+        "factors": f,
+    }
     detail = {"classic": d(np.ones(M)), "attenuated": d(np.full(M, 1.3)), "fading": d(1.3 + 0.01 * rng.random(M))}
     bs = np.array([0.1, 0.2, 0.254, 0.3])
     per_seed = np.array([[3.0, 4.0, 5.0], [2.0, 2.5, 3.0], [1.5, 2.0, 2.2], [1.8, 2.4, 3.1]])
     outdir = _out(tmp_path, "s0")
     outdir.mkdir(exist_ok=True)
-    _experiment_figures.plot_s0(outdir, truth=_truth(), gidx=np.arange(M), t=t, detail=detail, sweep_b=bs,
-                 sweep_rms=per_seed.mean(1), b_paper=0.254, sweep_per_seed=per_seed, seed_label="seed 0 of 3")
+    _experiment_figures.plot_s0(
+        outdir,
+        truth=_truth(),
+        gidx=np.arange(M),
+        t=t,
+        detail=detail,
+        sweep_b=bs,
+        sweep_rms=per_seed.mean(1),
+        b_paper=0.254,
+        sweep_per_seed=per_seed,
+        seed_label="seed 0 of 3",
+    )
     fig = captured["factors_and_b_sweep.png"]
     fac = [ax for ax in fig.axes if ax.get_ylabel() == "inflation factor"]
     assert len(fac) == 2  # S_k and lambda_k no longer on one axis (S_k hidden under lambda_k)
@@ -165,8 +184,10 @@ def test_s1_statistics_no_lines_between_independent_periods(tmp_path):
     P, S = 6, 2
     rng = np.random.default_rng(2)
     st = lambda: types.SimpleNamespace(m_P=rng.random((P, S)) * 1e-3, m_H=rng.random((P, S)) * 2e-3)  # noqa: E731
-    res = {"stats": {"standard": st(), "adaptive": st()},
-           "forecast_rms": {"standard": rng.random((P, S)) * 1e-3, "adaptive": rng.random((P, S)) * 1e-3}}
+    res = {
+        "stats": {"standard": st(), "adaptive": st()},
+        "forecast_rms": {"standard": rng.random((P, S)) * 1e-3, "adaptive": rng.random((P, S)) * 1e-3},
+    }
     fig = plot.plot_s1_statistics(res, _out(tmp_path, "s1_statistics.png"))
     for ax in fig.axes:
         lines = [ln for ln in ax.get_lines() if len(ln.get_xdata()) > 1 and ln.get_marker() not in ("None", "")]
@@ -196,8 +217,14 @@ def test_sweep_landscape_ticks_readable(tmp_path, captured):
     loss = (np.log(A / 2e-3) ** 2 + np.log(B / 5e-6) ** 2).reshape(-1, 1) + 1e-3 * rng.random((A.size, 8))
     outdir = _out(tmp_path, "sweep")
     outdir.mkdir(exist_ok=True)
-    plot.plot_sweep(outdir, grid={"q": A.ravel(), "r": B.ravel()}, axes=["q", "r"], loss=loss,
-                    loss_name="mean position RMS, m", init={"q": 2e-3, "r": 4e-6})
+    plot.plot_sweep(
+        outdir,
+        grid={"q": A.ravel(), "r": B.ravel()},
+        axes=["q", "r"],
+        loss=loss,
+        loss_name="mean position RMS, m",
+        init={"q": 2e-3, "r": 4e-6},
+    )
     fig = captured["sweep_landscape.png"]
     for ax in fig.axes[:3]:
         for axis in (ax.xaxis, ax.yaxis):
@@ -220,9 +247,17 @@ def test_tune_plots_the_loss_itself(tmp_path, captured):
     path = {"b": np.array([0.1, 0.2, 0.24, 0.25, 0.254])}
     outdir = _out(tmp_path, "tune")
     outdir.mkdir(exist_ok=True)
-    plot.plot_tune(outdir, path=path, losses=losses, final={"b": 0.254}, final_loss=1.0, landscape=None,
-                   loss_name="mean position RMS, m", start_runs=np.random.default_rng(5).random(10) + 2,
-                   final_runs=np.random.default_rng(6).random(10) + 1)
+    plot.plot_tune(
+        outdir,
+        path=path,
+        losses=losses,
+        final={"b": 0.254},
+        final_loss=1.0,
+        landscape=None,
+        loss_name="mean position RMS, m",
+        start_runs=np.random.default_rng(5).random(10) + 2,
+        final_runs=np.random.default_rng(6).random(10) + 1,
+    )
     ax = captured["tune.png"].axes[1]
     (curve,) = [ln for ln in ax.get_lines() if len(ln.get_xdata()) == len(losses)]
     np.testing.assert_allclose(curve.get_ydata(), losses)  # not loss - min (which dips to ~0 by construction)
@@ -235,14 +270,20 @@ def _rtk_result(P):
     rng = np.random.default_rng(7)
     xyh = rng.normal(0, 1, (P, 3))
     prec = np.abs(rng.normal(1e-3, 2e-4, (P, 3)))
-    return types.SimpleNamespace(xyh=xyh, terminal_xyh=xyh + 0.01, raw_precision=2 * prec, precision=prec,
-                                 formal_precision=prec / 2)
+    return types.SimpleNamespace(
+        xyh=xyh, terminal_xyh=xyh + 0.01, raw_precision=2 * prec, precision=prec, formal_precision=prec / 2
+    )
 
 
 def test_rtk_title_names_files_and_points(tmp_path):
     names = ["P01", "P02", "P03", "P04"]
-    fig = plot.plot_rtk(_rtk_result(4), _out(tmp_path, "rtk.png"), names=names, title="RTK 4 points from a.pos",
-                        h_level=np.array([0.0, 0.01, np.nan, -0.02]))
+    fig = plot.plot_rtk(
+        _rtk_result(4),
+        _out(tmp_path, "rtk.png"),
+        names=names,
+        title="RTK 4 points from a.pos",
+        h_level=np.array([0.0, 0.01, np.nan, -0.02]),
+    )
     assert fig._suptitle.get_text() == "RTK 4 points from a.pos (P01 .. P04)"
     assert fig.axes[-1].get_xlabel().startswith("point name")
     assert [lb.get_text() for lb in fig.axes[-1].get_xticklabels()] == names
@@ -259,17 +300,32 @@ def test_ins_figures_keep_legends_off_the_panels(tmp_path, captured):
     a3 = lambda s=1.0: s * rng.normal(size=(M, 3))  # noqa: E731
     d = _out(tmp_path, "ins")
     d.mkdir(exist_ok=True)
-    plot.plot_ins_differences(t, a3(), np.abs(a3()), a3(.1), np.abs(a3(.1)), win, d / "differences_to_gnss.png",
-                              title="synthetic")
-    plot.plot_ins_attitude(t, a3(10), a3(10), np.abs(a3(.1)) + 0.05, win, d / "attitude.png", title="synthetic")
-    plot.plot_ins_biases(t, a3(100), np.abs(a3(10)), a3(5), np.abs(a3()), win, d / "biases.png",
-                         title="synthetic", gyro_sm=a3(100), accel_sm=a3(5))
+    plot.plot_ins_differences(
+        t, a3(), np.abs(a3()), a3(0.1), np.abs(a3(0.1)), win, d / "differences_to_gnss.png", title="synthetic"
+    )
+    plot.plot_ins_attitude(t, a3(10), a3(10), np.abs(a3(0.1)) + 0.05, win, d / "attitude.png", title="synthetic")
+    plot.plot_ins_biases(
+        t,
+        a3(100),
+        np.abs(a3(10)),
+        a3(5),
+        np.abs(a3()),
+        win,
+        d / "biases.png",
+        title="synthetic",
+        gyro_sm=a3(100),
+        accel_sm=a3(5),
+    )
     grid = np.linspace(-0.2, 0.2, 21)
-    plot.plot_time_offset_likelihood(grid, -1e4 * (grid - 0.05) ** 2, 0.05, 0.004, d / "time_offset.png",
-                                     title="synthetic")
-    want = {"time_offset.png": {"trial offsets", "estimate +-1 sigma (+50.0 +- 4.0 ms)"},"differences_to_gnss.png": {"simulated GNSS outage", "filter +-3 sigma", "filter - GNSS"},
-            "attitude.png": {"simulated GNSS outage", "forward", "RTS smoothed", "RTS smoothed 1-sigma"},
-            "biases.png": {"simulated GNSS outage", "x (right), forward +-1 sigma", "z (up), RTS smoothed"}}
+    plot.plot_time_offset_likelihood(
+        grid, -1e4 * (grid - 0.05) ** 2, 0.05, 0.004, d / "time_offset.png", title="synthetic"
+    )
+    want = {
+        "time_offset.png": {"trial offsets", "estimate +-1 sigma (+50.0 +- 4.0 ms)"},
+        "differences_to_gnss.png": {"simulated GNSS outage", "filter +-3 sigma", "filter - GNSS"},
+        "attitude.png": {"simulated GNSS outage", "forward", "RTS smoothed", "RTS smoothed 1-sigma"},
+        "biases.png": {"simulated GNSS outage", "x (right), forward +-1 sigma", "z (up), RTS smoothed"},
+    }
     for name, labels in want.items():
         fig = captured[name]
         assert all(ax.get_legend() is None for ax in fig.axes)  # no legend over a panel's data
@@ -280,8 +336,19 @@ def test_ins_figures_keep_legends_off_the_panels(tmp_path, captured):
         assert all(lb.y1 <= ax.get_window_extent(r).y0 + 1 for ax in fig.axes)  # below every panel
 
 
-@pytest.mark.parametrize("lo,hi", [(0.68, 3.6), (0.25, 4.0), (2.2e-6, 9.5e-6), (1.1e-3, 3.3e-3), (1e-3, 1e3),
-                                   (1.8e-4, 2.0), (1.0, 1.05), (1e-12, 1e6)])
+@pytest.mark.parametrize(
+    "lo,hi",
+    [
+        (0.68, 3.6),
+        (0.25, 4.0),
+        (2.2e-6, 9.5e-6),
+        (1.1e-3, 3.3e-3),
+        (1e-3, 1e3),
+        (1.8e-4, 2.0),
+        (1.0, 1.05),
+        (1e-12, 1e6),
+    ],
+)
 def test_log_ticks_few_inside_and_apart(lo, hi):
     from jaxnav.plot._style import _log_ticks
 
@@ -307,8 +374,9 @@ def test_ins_differences_ticks_are_plain_numbers(tmp_path, captured):
     drift = np.where((t > 40) & (t < 55), 0.02 * (t - 40) ** 2, 0.0)
     d = np.stack([drift, -drift, 0.01 * np.sin(t)], axis=1)
     s = np.full((M, 3), 0.01)
-    plot.plot_ins_differences(t, d, s, d / 10, s, np.array([[40.0, 55.0]]), tmp_path / "differences_to_gnss.png",
-                              title="synthetic")
+    plot.plot_ins_differences(
+        t, d, s, d / 10, s, np.array([[40.0, 55.0]]), tmp_path / "differences_to_gnss.png", title="synthetic"
+    )
     fig = captured["differences_to_gnss.png"]
     _renderer(fig)
     for ax in fig.axes:
@@ -324,8 +392,9 @@ def test_ins_attitude_heading_unwrapped_and_sigma_in_its_own_style(tmp_path, cap
     t = np.linspace(0.0, 100.0, M)
     heading = (300.0 + 2.0 * t) % 360.0  # crosses north at t = 30
     att = np.stack([np.zeros(M), np.zeros(M), heading], axis=1)
-    plot.plot_ins_attitude(t, att, att, np.full((M, 3), 0.1), np.array([[40.0, 55.0]]), tmp_path / "attitude.png",
-                           title="synthetic")
+    plot.plot_ins_attitude(
+        t, att, att, np.full((M, 3), 0.1), np.array([[40.0, 55.0]]), tmp_path / "attitude.png", title="synthetic"
+    )
     fig = captured["attitude.png"]
     head, sig = fig.axes[2], fig.axes[5]
     for ln in _data_lines(head):
@@ -351,9 +420,17 @@ def _walk_inputs(K=16):
         err[w] = 0.02 * (t[w] - a) ** 2
     n_ref = np.array([60] * (K - 1) + [0])
     fmax = np.array([err[(t >= a) & (t < b)].max() for a, b in windows])
-    scores = types.SimpleNamespace(windows=windows, t=t, err_fwd=err, err_sm=err / 10, n_ref=n_ref,
-                                   fwd_max=np.where(n_ref > 0, fmax, np.nan),
-                                   sm_max=np.where(n_ref > 0, fmax / 10, np.nan), fwd_rms_all=1.0, sm_rms_all=0.1)
+    scores = types.SimpleNamespace(
+        windows=windows,
+        t=t,
+        err_fwd=err,
+        err_sm=err / 10,
+        n_ref=n_ref,
+        fwd_max=np.where(n_ref > 0, fmax, np.nan),
+        sm_max=np.where(n_ref > 0, fmax / 10, np.nan),
+        fwd_rms_all=1.0,
+        sm_rms_all=0.1,
+    )
     return scores, dict(enu_ref=ref, enu_fwd=ref + 0.5, enu_sm=ref + 0.05)
 
 
@@ -371,8 +448,7 @@ def test_walk_outages_one_legend_entry_per_solution_and_labels_apart(tmp_path, c
 
 
 def test_rtk_points_are_marks_not_a_line(tmp_path):
-    fig = plot.plot_rtk(_rtk_result(5), tmp_path / "rtk.png", names=[f"P{i}" for i in range(5)],
-                        h_level=np.zeros(5))
+    fig = plot.plot_rtk(_rtk_result(5), tmp_path / "rtk.png", names=[f"P{i}" for i in range(5)], h_level=np.zeros(5))
     for ax in fig.axes:
         data = [ln for ln in ax.get_lines() if len(np.atleast_1d(ln.get_xdata())) == 5]
         assert data and all(ln.get_linestyle() == "None" for ln in data), [ln.get_label() for ln in data]
@@ -386,9 +462,17 @@ def test_monte_carlo_histograms_count_whole_runs(tmp_path, captured):
     _renderer(fig)
     ticks = _tick_numbers(fig.axes[1].yaxis)
     assert ticks and all(v == int(v) for v in ticks), ticks
-    plot.plot_tune(tmp_path, path={"b": np.array([0.1, 0.2])}, losses=np.array([2.0, 1.0]), final={"b": 0.2},
-                   final_loss=1.0, landscape=None, loss_name="RMS, m", start_runs=np.arange(8.0) / 8 + 2,
-                   final_runs=np.arange(8.0) / 8 + 1)
+    plot.plot_tune(
+        tmp_path,
+        path={"b": np.array([0.1, 0.2])},
+        losses=np.array([2.0, 1.0]),
+        final={"b": 0.2},
+        final_loss=1.0,
+        landscape=None,
+        loss_name="RMS, m",
+        start_runs=np.arange(8.0) / 8 + 2,
+        final_runs=np.arange(8.0) / 8 + 1,
+    )
     fig = captured["tune.png"]
     _renderer(fig)
     ticks = _tick_numbers(fig.axes[2].yaxis)

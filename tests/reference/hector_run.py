@@ -38,8 +38,9 @@ def hector_covariance_row(n: int, d: float, one_minus_phi: float):
     )
     with tempfile.TemporaryDirectory() as tmp:
         out = pathlib.Path(tmp) / "row.npy"
-        subprocess.run([sys.executable, "-c", code, str(out), str(n), repr(d), repr(one_minus_phi)], check=True,
-                       timeout=300)
+        subprocess.run(
+            [sys.executable, "-c", code, str(out), str(n), repr(d), repr(one_minus_phi)], check=True, timeout=300
+        )
         return np.load(out)
 
 
@@ -67,7 +68,8 @@ def run_hector(t_s, y_m, *, steps_s=(), noise="FlickerGGM White", reml=True, tim
             "DataFile S.mom\nDataDirectory pre\nOutputFile out.mom\ninterpolate no\nPhysicalUnit mm\n"
             "TimeUnit days\nScaleFactor 1.0\nperiodicsignals 365.25 182.625\n"
             f"estimateoffsets {'yes' if len(steps_s) else 'no'}\nNoiseModels {noise}\nGGM_1mphi 6.9e-06\n"
-            f"useRMLE {'yes' if reml else 'no'}\nVerbose no\n")
+            f"useRMLE {'yes' if reml else 'no'}\nVerbose no\n"
+        )
         t0 = time.perf_counter()
         r = subprocess.run([exe, "-i", "estimatetrend.ctl"], cwd=d, capture_output=True, text=True, timeout=timeout)
         wall = time.perf_counter() - t0

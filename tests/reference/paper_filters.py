@@ -21,13 +21,20 @@ Every function returns a :class:`RefResult` with per-epoch arrays stacked over t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 
 __all__ = [
-    "RefResult", "attenuated_factors", "attenuated_update_factors", "inflated_kf", "classic_kf", "constant_kf", "attenuated_kf",
-    "fading_kf", "variance_compensation_kf", "sage_husa_kf",
+    "RefResult",
+    "attenuated_factors",
+    "attenuated_update_factors",
+    "inflated_kf",
+    "classic_kf",
+    "constant_kf",
+    "attenuated_kf",
+    "fading_kf",
+    "variance_compensation_kf",
+    "sage_husa_kf",
 ]
 
 
@@ -62,8 +69,13 @@ def _leaf(A, t, static_ndim):
 
 def _model_at(model, t):
     """(F, H, Q, R, G) at output index t; G may be None."""
-    return (_leaf(model.F, t, 2), _leaf(model.H, t, 2), _leaf(model.Q, t, 2),
-            _leaf(model.R, t, 2), _leaf(getattr(model, "G", None), t, 2))
+    return (
+        _leaf(model.F, t, 2),
+        _leaf(model.H, t, 2),
+        _leaf(model.Q, t, 2),
+        _leaf(model.R, t, 2),
+        _leaf(getattr(model, "G", None), t, 2),
+    )
 
 
 def _gamma_q_gamma(G, Q):
@@ -100,8 +112,20 @@ class _Recorder:
     """Collects the per-epoch quantities and stacks them into a RefResult."""
 
     def __init__(self):
-        self.rows = {k: [] for k in ("means", "covs", "pred_means", "pred_covs", "innovations",
-                                     "innov_covs", "factors", "nis", "logliks")}
+        self.rows = {
+            k: []
+            for k in (
+                "means",
+                "covs",
+                "pred_means",
+                "pred_covs",
+                "innovations",
+                "innov_covs",
+                "factors",
+                "nis",
+                "logliks",
+            )
+        }
         self.extra = {}
 
     def add(self, x, P, x_pred, P_pred, v, S, factor, observed, **extra):
@@ -110,16 +134,25 @@ class _Recorder:
             loglik = -0.5 * (nis + np.log(np.linalg.det(2.0 * np.pi * S)))
         else:
             nis = loglik = 0.0
-        for name, val in (("means", x), ("covs", P), ("pred_means", x_pred), ("pred_covs", P_pred),
-                          ("innovations", v), ("innov_covs", S), ("factors", factor), ("nis", nis),
-                         ("logliks", loglik)):
+        for name, val in (
+            ("means", x),
+            ("covs", P),
+            ("pred_means", x_pred),
+            ("pred_covs", P_pred),
+            ("innovations", v),
+            ("innov_covs", S),
+            ("factors", factor),
+            ("nis", nis),
+            ("logliks", loglik),
+        ):
             self.rows[name].append(np.array(val, dtype=np.float64))
         for name, val in extra.items():
             self.extra.setdefault(name, []).append(np.array(val))
 
     def result(self):
-        return RefResult(**{k: np.stack(v) for k, v in self.rows.items()},
-                         extra={k: np.stack(v) for k, v in self.extra.items()})
+        return RefResult(
+            **{k: np.stack(v) for k, v in self.rows.items()}, extra={k: np.stack(v) for k, v in self.extra.items()}
+        )
 
 
 def _step_update(x_pred, P_pred, z, H, R):
@@ -200,8 +233,9 @@ def attenuated_kf(model, x0, P0, zs, b) -> RefResult:
 # --------------------------------------------------------------------------------------------
 
 
-def fading_kf(model, x0, P0, zs, *, window: Optional[int] = None, rho=None, absolute=True,
-              smooth=None, max_factor=None) -> RefResult:
+def fading_kf(
+    model, x0, P0, zs, *, window: int | None = None, rho=None, absolute=True, smooth=None, max_factor=None
+) -> RefResult:
     """Fading-memory filter, S0 eqs. (13)-(17).
 
     lambda_k = max{1, |tr N_k / tr M_k|}                       (14)  (no |.| if absolute=False)
@@ -271,8 +305,9 @@ def _transition(Phis, k, j):
     return M
 
 
-def variance_compensation_kf(model, x0, P0, zs, *, window=30, horizon=1, floor=0.0, floor_rel=1e-2,
-                             ridge=0.0, min_epochs=None) -> RefResult:
+def variance_compensation_kf(
+    model, x0, P0, zs, *, window=30, horizon=1, floor=0.0, floor_rel=1e-2, ridge=0.0, min_epochs=None
+) -> RefResult:
     """Variance-compensation adaptive filter, S1 eqs. (7)-(19).
 
     At epoch k, for every prediction step i = 1..horizon with k - i >= 0, the i-step predicted
@@ -319,8 +354,7 @@ def variance_compensation_kf(model, x0, P0, zs, *, window=30, horizon=1, floor=0
                 Phi_ki = _transition(Phis, k, k - i)  # Phi_{k,k-i}
                 V = zs[t] - H @ Phi_ki @ x_i  # (12)
                 known = np.diag(H @ Phi_ki @ P_i @ Phi_ki.T @ H.T + R)  # (13)-(16) without D_Omega
-                A = sum((H @ _transition(Phis, k, r) @ Gammas[r]) ** 2
-                        for r in range(k - i + 1, k + 1))  # (18)
+                A = sum((H @ _transition(Phis, k, r) @ Gammas[r]) ** 2 for r in range(k - i + 1, k + 1))  # (18)
                 E_k.append(V * V - known)  # (17)
                 A_k.append(A)
             eqs.append((np.concatenate(E_k), np.concatenate(A_k, axis=0)))
@@ -332,8 +366,7 @@ def variance_compensation_kf(model, x0, P0, zs, *, window=30, horizon=1, floor=0
             A = np.concatenate([a for _, a in win], axis=0)
             p = A.shape[1]
             q = np.linalg.solve(A.T @ A + float(ridge) * np.eye(p), A.T @ E)  # (19)
-            lower = np.maximum(np.broadcast_to(np.asarray(floor, np.float64), q.shape),
-                               float(floor_rel) * np.diag(Q))
+            lower = np.maximum(np.broadcast_to(np.asarray(floor, np.float64), q.shape), float(floor_rel) * np.diag(Q))
             q = np.maximum(q, lower)  # negative components clipped to a positive floor
             estimated = True
         GQG = G @ np.diag(q) @ G.T if estimated else _gamma_q_gamma(G, Q)

@@ -116,8 +116,11 @@ def main(out):  # pragma: no cover - runs in its own process
         traj, imu = sim.generate_imu(t, np.array(LLA0), rph, v_ned, sensor_type="increment")
         inc = strapdown.compute_increments_from_imu(imu, "increment")
         outn = strapdown.Integrator(traj.iloc[0], with_altitude=False).integrate(inc)
-        for name, nav in (("truth", to_nav(traj.iloc[1:])), ("pyins", to_nav(outn.iloc[1:])),
-                          ("init", to_nav(traj.iloc[:1]))):
+        for name, nav in (
+            ("truth", to_nav(traj.iloc[1:])),
+            ("pyins", to_nav(outn.iloc[1:])),
+            ("init", to_nav(traj.iloc[:1])),
+        ):
             for k, a in zip(("pos", "v", "C"), nav):
                 res[f"{tag}_{name}_{k}"] = a
         res[f"{tag}_dth"] = imu[["gyro_x", "gyro_y", "gyro_z"]].to_numpy()[1:] @ P.T
@@ -131,8 +134,16 @@ def main(out):  # pragma: no cover - runs in its own process
             lat[0], lon[0] = pos0[0, 0], pos0[0, 1]
             vel[0] = P @ v0[0]
             C[0] = P @ C0[0] @ P
-            loop(dt, lat, lon, LLA0[2], vel, C, np.ascontiguousarray(inc[["theta_x", "theta_y", "theta_z"]].to_numpy()),
-                 np.ascontiguousarray(inc[["dv_x", "dv_y", "dv_z"]].to_numpy()))
+            loop(
+                dt,
+                lat,
+                lon,
+                LLA0[2],
+                vel,
+                C,
+                np.ascontiguousarray(inc[["theta_x", "theta_y", "theta_z"]].to_numpy()),
+                np.ascontiguousarray(inc[["dv_x", "dv_y", "dv_z"]].to_numpy()),
+            )
             res["mid_pos"] = np.stack([lat[1:], lon[1:], np.full(N, LLA0[2])], 1)
             res["mid_v"] = vel[1:] @ P.T
             res["mid_C"] = P @ C[1:] @ P

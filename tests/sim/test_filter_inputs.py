@@ -37,11 +37,16 @@ def test_lc_params_follow_the_scenario_sigmas(short_run):
     pe = np.broadcast_to(ie.position, 3)
     np.testing.assert_allclose(sd[6:9] * [RM, RN * np.cos(lat), 1.0], [pe[1], pe[0], pe[2]], rtol=1e-12)
     np.testing.assert_allclose(sd[9:18], np.concatenate([g.bias_sigma, g.markov_sigma, a.bias_sigma]), rtol=1e-12)
-    np.testing.assert_allclose(np.diag(np.asarray(p.Qc)),
-                               np.concatenate([np.square(g.white), 2 * np.square(g.markov_sigma) / g.markov_tau,
-                                               np.square(a.white)]), rtol=1e-12)
+    np.testing.assert_allclose(
+        np.diag(np.asarray(p.Qc)),
+        np.concatenate([np.square(g.white), 2 * np.square(g.markov_sigma) / g.markov_tau, np.square(a.white)]),
+        rtol=1e-12,
+    )
     np.testing.assert_array_equal(p.tau_markov, g.markov_tau)
-    assert _params(cfg, ins.ERROR_MODEL_15).P0.shape == (15, 15) and _params(cfg, ins.ERROR_MODEL_21).Qc.shape == (18, 18)
+    assert _params(cfg, ins.ERROR_MODEL_15).P0.shape == (15, 15) and _params(cfg, ins.ERROR_MODEL_21).Qc.shape == (
+        18,
+        18,
+    )
 
 
 def test_gnss_measurements_mask_outages_floor_sigmas_and_check_shapes(short_run):
@@ -50,9 +55,10 @@ def test_gnss_measurements_mask_outages_floor_sigmas_and_check_shapes(short_run)
     t = np.asarray(m.t)
     out = (t >= 40.0) & (t < 55.0)
     assert out.any() and not np.asarray(m.mask)[out].any() and np.asarray(m.mask)[~out].all()
-    np.testing.assert_allclose(np.sqrt(np.asarray(m.R)[0].diagonal()),
-                               np.concatenate([np.broadcast_to(cfg.gnss.pos_sigma, 3),
-                                               np.broadcast_to(cfg.gnss.vel_sigma, 3)]))
+    np.testing.assert_allclose(
+        np.sqrt(np.asarray(m.R)[0].diagonal()),
+        np.concatenate([np.broadcast_to(cfg.gnss.pos_sigma, 3), np.broadcast_to(cfg.gnss.vel_sigma, 3)]),
+    )
     g = run.gnss
     c = np.array([[4e-4, 1e-4, 0.0], [1e-4, 1e-2, 0.0], [0.0, 0.0, 9e-2]])  # sigmas 0.02, 0.1, 0.3 m
     vel = np.asarray(g.vel).copy()
@@ -74,9 +80,15 @@ def test_public_helpers_filter_a_run_within_its_sigmas(short_run):
     idx = np.asarray(run.gnss.index)
     d = np.asarray(res.epochs.nav.pos[-1] - run.truth.pos[idx[-1]])
     lat = float(run.truth.pos[idx[-1], 0])
-    err = np.array([d[0] * float(geodesy.meridian_radius(lat)), d[1] * float(geodesy.prime_vertical_radius(lat))
-                    * np.cos(lat), d[2]])
+    err = np.array(
+        [
+            d[0] * float(geodesy.meridian_radius(lat)),
+            d[1] * float(geodesy.prime_vertical_radius(lat)) * np.cos(lat),
+            d[2],
+        ]
+    )
     sig = np.sqrt(np.diag(np.asarray(res.epochs.covs[-1]))[6:9]) * np.array(
-        [float(geodesy.meridian_radius(lat)), float(geodesy.prime_vertical_radius(lat)) * np.cos(lat), 1.0])
+        [float(geodesy.meridian_radius(lat)), float(geodesy.prime_vertical_radius(lat)) * np.cos(lat), 1.0]
+    )
     assert np.all(np.abs(err) < 4 * sig), (err, sig)
     assert np.all(sig < 5.0)

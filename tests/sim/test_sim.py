@@ -70,11 +70,15 @@ def test_ideal_imu_mechanization_reproduces_s0_truth(s0):
 
 
 _CONV_SEGS = (
-    sim.Segment("cruise", 10), sim.Segment("accelerate", 10, dspeed=10),
+    sim.Segment("cruise", 10),
+    sim.Segment("accelerate", 10, dspeed=10),
     sim.Segment("velocity_step", 1, dv_enu=(3, -2, 1), hold=10),
-    sim.Segment("turn", 20, dheading=D(60), hold=5), sim.Segment("climb", 5, dpitch=D(5), hold=20),
-    sim.Segment("pitch", 5, dpitch=-D(5)), sim.Segment("roll", 4, droll=D(20)),
-    sim.Segment("turn", 45, dheading=-D(90)), sim.Segment("roll", 4, droll=-D(20)),
+    sim.Segment("turn", 20, dheading=D(60), hold=5),
+    sim.Segment("climb", 5, dpitch=D(5), hold=20),
+    sim.Segment("pitch", 5, dpitch=-D(5)),
+    sim.Segment("roll", 4, droll=D(20)),
+    sim.Segment("turn", 45, dheading=-D(90)),
+    sim.Segment("roll", 4, droll=-D(20)),
     sim.Segment("velocity_step", 1, dv_enu=(-3, 2, -1)),
     sim.Segment("general", 20, dspeed=5, dheading=D(30), dpitch=D(3), droll=D(10)),
 )
@@ -102,8 +106,9 @@ def test_mechanization_error_converges_at_second_order():
 
 def test_ideal_imu_at_rest_and_body_rate_closed_form():
     """At rest: f^b = [0, 0, g] rotated, w_ib^b = C_bn^T w_ie^n; w_nb^b matches C^T dC/dt."""
-    spec = sim.TrajectorySpec(lat=D(39), lon=D(108), h=100.0, heading=D(30), pitch=D(2), roll=D(-3),
-                              segments=(sim.Segment("rest", 2.0),))
+    spec = sim.TrajectorySpec(
+        lat=D(39), lon=D(108), h=100.0, heading=D(30), pitch=D(2), roll=D(-3), segments=(sim.Segment("rest", 2.0),)
+    )
     tr = sim.generate_trajectory(spec, imu_rate_hz=100.0)
     C = euler_to_dcm(tr.euler[0])
     g = float(earth_params(tr.pos[0], jnp.zeros(3)).g_n[2])
@@ -151,8 +156,11 @@ def test_allan_s0_gyro_and_accel_white_noise(s0):
         err = np.asarray(meas - ideal).T / dt
         taus, adev = sim.allan_deviation(err, dt, ms)
         for ax in range(3):
-            th = np.sqrt(sim.allan_variance_theory(dt, ms, white=model.white[ax], markov_sigma=model.markov_sigma[ax],
-                                                   markov_tau=model.markov_tau[ax]))
+            th = np.sqrt(
+                sim.allan_variance_theory(
+                    dt, ms, white=model.white[ax], markov_sigma=model.markov_sigma[ax], markov_tau=model.markov_tau[ax]
+                )
+            )
             np.testing.assert_allclose(adev[ax], th, rtol=0.10)
     # gyro ADEV(1 s) is the ARW: 0.01 deg/sqrt(h) = 0.6 deg/h at 1 s
     err = np.asarray(r.imu.dtheta - tr.dtheta).T / dt
@@ -181,15 +189,17 @@ def test_allan_markov_plus_white_accel_and_allantools():
     """Accelerometer with Markov (0.05 mg, 2 s) + VRW 20 ug/sqrt(Hz) + bias, 100 Hz, 4 keys x 3 axes:
     Allan deviation within 10 % of theory from 0.01 s to 20 s (measured ratios 0.975-1.025 over
     4 seeds); jaxnav's overlapping ADEV equals allantools.oadev on the same data to 1e-9."""
-    model = sim.SensorErrorModel(bias_sigma=0.1 * units.MG, markov_sigma=0.05 * units.MG, markov_tau=2.0,
-                                 white=20 * units.UG)
+    model = sim.SensorErrorModel(
+        bias_sigma=0.1 * units.MG, markov_sigma=0.05 * units.MG, markov_tau=2.0, white=20 * units.UG
+    )
     dt = 0.01
     err = _error_rates(jax.random.key(5), model, 200000, dt, nkeys=4).reshape(12, -1)
     ms = (1, 10, 50, 100, 200, 400, 800, 2000)
     taus, av = sim.allan_variance(err, dt, ms)
     adev = np.sqrt(np.asarray(av).mean(0))
-    th = np.sqrt(sim.allan_variance_theory(dt, ms, white=model.white[0], markov_sigma=model.markov_sigma[0],
-                                           markov_tau=2.0))
+    th = np.sqrt(
+        sim.allan_variance_theory(dt, ms, white=model.white[0], markov_sigma=model.markov_sigma[0], markov_tau=2.0)
+    )
     np.testing.assert_allclose(adev, th, rtol=0.10)
     # against allantools on the same series
     y = err[0]
@@ -214,8 +224,14 @@ def test_random_constants_scale_factor_and_initial_errors_have_configured_std():
 
     gb, ab, gs, ie = jax.jit(jax.vmap(pick))(keys)
     n = gb.size  # 6000 draws: std of the std ~ 0.9 %
-    for x, s in ((gb, 0.1 * units.DEG_PER_HOUR), (ab, 0.1 * units.MG), (gs, 50e-6),
-                 (ie.attitude, 30 * units.ARCSEC), (ie.velocity, 0.2), (ie.position, 10.0)):
+    for x, s in (
+        (gb, 0.1 * units.DEG_PER_HOUR),
+        (ab, 0.1 * units.MG),
+        (gs, 50e-6),
+        (ie.attitude, 30 * units.ARCSEC),
+        (ie.velocity, 0.2),
+        (ie.position, 10.0),
+    ):
         assert abs(np.std(np.asarray(x)) / s - 1) < 4 / math.sqrt(2 * n)
     assert cfg.accel.markov_sigma == (0.0, 0.0, 0.0)
 
@@ -329,8 +345,17 @@ def test_segments_join_continuously(s0):
 
 
 def test_unsensed_velocity_step_is_missing_from_measured_imu_only():
-    spec = sim.TrajectorySpec(lat=D(39), lon=D(108), h=205.0, heading=D(30), speed=80.0, segments=(
-        sim.Segment("cruise", 5), sim.Segment("velocity_step", 1, dv_enu=(4.0, -3.0, 1.0), sensed=False, hold=4)))
+    spec = sim.TrajectorySpec(
+        lat=D(39),
+        lon=D(108),
+        h=205.0,
+        heading=D(30),
+        speed=80.0,
+        segments=(
+            sim.Segment("cruise", 5),
+            sim.Segment("velocity_step", 1, dv_enu=(4.0, -3.0, 1.0), sensed=False, hold=4),
+        ),
+    )
     cfg = sim.ScenarioConfig(trajectory=spec, duration=10.0, imu_rate_hz=100.0)
     tr = sim.make_trajectory(cfg)
     r = sim.simulate(cfg, jax.random.key(0), trajectory=tr)
@@ -364,11 +389,18 @@ def test_saturation_and_bandwidth():
 
 
 def test_gnss_outages_outliers_and_noise():
-    spec = sim.TrajectorySpec(lat=D(39), lon=D(108), h=205.0, heading=D(30), speed=60.0,
-                              segments=(sim.Segment("turn", 100, dheading=D(90)),))
-    gcfg = sim.GnssConfig(rate_hz=1.0, pos_sigma=(3.0, 4.0, 5.0), vel_sigma=(0.1, 0.2, 0.3),
-                          outages=((100.0, 160.0), (500.0, 520.5)), outlier_prob=0.05, outlier_pos=50.0,
-                          outlier_vel=2.0)
+    spec = sim.TrajectorySpec(
+        lat=D(39), lon=D(108), h=205.0, heading=D(30), speed=60.0, segments=(sim.Segment("turn", 100, dheading=D(90)),)
+    )
+    gcfg = sim.GnssConfig(
+        rate_hz=1.0,
+        pos_sigma=(3.0, 4.0, 5.0),
+        vel_sigma=(0.1, 0.2, 0.3),
+        outages=((100.0, 160.0), (500.0, 520.5)),
+        outlier_prob=0.05,
+        outlier_pos=50.0,
+        outlier_vel=2.0,
+    )
     cfg = sim.ScenarioConfig(trajectory=spec, duration=2000.0, imu_rate_hz=10.0, gnss=gcfg)
     tr = sim.make_trajectory(cfg)
     g = jax.jit(jax.vmap(lambda k: sim.simulate(cfg, k, trajectory=tr).gnss))(jax.random.split(jax.random.key(1), 16))
@@ -397,9 +429,16 @@ def test_gnss_outages_outliers_and_noise():
     np.testing.assert_allclose(np.asarray(g.vel)[valid], (vel_t + ve)[valid], atol=1e-12)
     d = np.asarray(g.pos) - pos_t
     from jaxnav.geodesy import meridian_radius, prime_vertical_radius
+
     lat, h = pos_t[:, 0], pos_t[:, 2]
-    enu = np.stack([d[..., 1] * (np.asarray(prime_vertical_radius(lat)) + h) * np.cos(lat),
-                    d[..., 0] * (np.asarray(meridian_radius(lat)) + h), d[..., 2]], -1)
+    enu = np.stack(
+        [
+            d[..., 1] * (np.asarray(prime_vertical_radius(lat)) + h) * np.cos(lat),
+            d[..., 0] * (np.asarray(meridian_radius(lat)) + h),
+            d[..., 2],
+        ],
+        -1,
+    )
     np.testing.assert_allclose(enu[valid], pe[valid], atol=1e-6)
 
 
@@ -425,8 +464,10 @@ def _close(a, b):
 def test_toml_round_trip(tmp_path):
     cfg = sim.s0_scenario()
     cfg = dataclasses.replace(
-        cfg, gnss=dataclasses.replace(cfg.gnss, outages=((10.0, 20.0),), outlier_prob=0.01),
-        accel=dataclasses.replace(cfg.accel, saturation=(2 * units.G0,) * 3, bandwidth=(20.0,) * 3))
+        cfg,
+        gnss=dataclasses.replace(cfg.gnss, outages=((10.0, 20.0),), outlier_prob=0.01),
+        accel=dataclasses.replace(cfg.accel, saturation=(2 * units.G0,) * 3, bandwidth=(20.0,) * 3),
+    )
     text = sim.dumps_scenario(cfg)
     back = sim.loads_scenario(text)
     _close(cfg, back)
@@ -455,20 +496,23 @@ dspeed_mps = 5.0
 """
 
 
-@pytest.mark.parametrize("bad, field", [
-    (("arw_deg_per_sqrt_h = 0.01", "arw_deg_per_sqrt_hr = 0.01"), "gyro.arw_deg_per_sqrt_hr"),
-    (("arw_deg_per_sqrt_h = 0.01", "markov_tau_s = -3.0"), "gyro.markov_tau_s"),
-    (("arw_deg_per_sqrt_h = 0.01", "arw_deg_per_sqrt_h = [1.0, 2.0]"), "gyro.arw_deg_per_sqrt_h"),
-    (("arw_deg_per_sqrt_h = 0.01", "bias_deg_per_h = \"0.1\""), "gyro.bias_deg_per_h"),
-    (("dspeed_mps = 5.0", "dheading_deg = 5.0"), "segments[0].dheading_deg"),
-    (("kind = \"accelerate\"", "kind = \"loop\""), "segments[0].kind"),
-    (("dspeed_mps = 5.0", "dspeed_mps = -50.0"), "segments[0]"),
-    (("duration_s = 10.0", "duration_s = 200.0"), "duration"),
-    (("imu_rate_hz = 100.0", "imu_rate_hz = 100.0\n[gnss]\nrate_hz = 3.0"), "gnss interval"),
-    (("imu_rate_hz = 100.0", "imu_rate_hz = 100.0\n[gnss]\noutages_s = [[5.0]]"), "gnss.outages_s[0]"),
-    (("height_m = 0.0\n", ""), "start.height_m"),
-    (("[time]", "[timing]"), "timing"),
-])
+@pytest.mark.parametrize(
+    "bad, field",
+    [
+        (("arw_deg_per_sqrt_h = 0.01", "arw_deg_per_sqrt_hr = 0.01"), "gyro.arw_deg_per_sqrt_hr"),
+        (("arw_deg_per_sqrt_h = 0.01", "markov_tau_s = -3.0"), "gyro.markov_tau_s"),
+        (("arw_deg_per_sqrt_h = 0.01", "arw_deg_per_sqrt_h = [1.0, 2.0]"), "gyro.arw_deg_per_sqrt_h"),
+        (("arw_deg_per_sqrt_h = 0.01", 'bias_deg_per_h = "0.1"'), "gyro.bias_deg_per_h"),
+        (("dspeed_mps = 5.0", "dheading_deg = 5.0"), "segments[0].dheading_deg"),
+        (('kind = "accelerate"', 'kind = "loop"'), "segments[0].kind"),
+        (("dspeed_mps = 5.0", "dspeed_mps = -50.0"), "segments[0]"),
+        (("duration_s = 10.0", "duration_s = 200.0"), "duration"),
+        (("imu_rate_hz = 100.0", "imu_rate_hz = 100.0\n[gnss]\nrate_hz = 3.0"), "gnss interval"),
+        (("imu_rate_hz = 100.0", "imu_rate_hz = 100.0\n[gnss]\noutages_s = [[5.0]]"), "gnss.outages_s[0]"),
+        (("height_m = 0.0\n", ""), "start.height_m"),
+        (("[time]", "[timing]"), "timing"),
+    ],
+)
 def test_bad_config_names_the_field(bad, field):
     text = _GOOD.replace(*bad)
     assert text != _GOOD

@@ -6,8 +6,15 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from jaxnav.survey import (ar_kalman, ar_state_space, autocovariance, fit_ar, select_ar_order, simulate_ar,
-                           white_noise_variance)
+from jaxnav.survey import (
+    ar_kalman,
+    ar_state_space,
+    autocovariance,
+    fit_ar,
+    select_ar_order,
+    simulate_ar,
+    white_noise_variance,
+)
 from jaxnav.survey._ar import ar_stationary_cov
 
 PHI2 = jnp.array([0.6, -0.3])
@@ -28,17 +35,17 @@ def test_autocovariance_matches_direct_sum(ar2):
 def test_yule_walker_equals_scipy_toeplitz_solve(ar2):
     g = np.asarray(autocovariance(jnp.asarray(ar2), 4))
     for p in (2, 4):
-        ref = scipy.linalg.solve_toeplitz(g[:p], g[1:p + 1])
+        ref = scipy.linalg.solve_toeplitz(g[:p], g[1 : p + 1])
         f = fit_ar(jnp.asarray(ar2), p, "yule_walker")
         np.testing.assert_allclose(np.asarray(f.phi), ref, rtol=1e-10)
-        np.testing.assert_allclose(float(f.sigma2), g[0] - ref @ g[1:p + 1], rtol=1e-10)
+        np.testing.assert_allclose(float(f.sigma2), g[0] - ref @ g[1 : p + 1], rtol=1e-10)
 
 
 def test_least_squares_equals_numpy_lstsq(ar2):
     x = ar2[:5000]
     d = x - x.mean()
     p = 3
-    X = np.stack([d[p - i - 1: len(d) - i - 1] for i in range(p)], 1)
+    X = np.stack([d[p - i - 1 : len(d) - i - 1] for i in range(p)], 1)
     ref, *_ = np.linalg.lstsq(X, d[p:], rcond=None)
     f = fit_ar(jnp.asarray(x), p, "ls")
     np.testing.assert_allclose(np.asarray(f.phi), ref, rtol=1e-9)

@@ -8,8 +8,18 @@ import pytest
 import jaxnav
 from jaxnav import ins
 from jaxnav.sim import cadastral_scenarios, short_survey, simulate_cadastral, survey_truth
-from jaxnav.survey import (STAGES, detect_stops, make_stop_list, match_stops, plan_survey, preprocess_imu,
-                           process_survey, strapdown_with_resets, summarize_errors, target_errors)
+from jaxnav.survey import (
+    STAGES,
+    detect_stops,
+    make_stop_list,
+    match_stops,
+    plan_survey,
+    preprocess_imu,
+    process_survey,
+    strapdown_with_resets,
+    summarize_errors,
+    target_errors,
+)
 from jaxnav.survey.cadastral import propagate_covariances
 
 
@@ -29,9 +39,20 @@ def survey():
         run = simulate_cadastral(scn, key, truth)
         out = process_survey(plan, run.nav0, run.dtheta, run.dv, run.known_pos, params)
         pre = preprocess_imu(run.dtheta, run.dv, scn.dt, params.pre, lowpass=False)
-        return dict(err=target_errors(out, tpos), n_rej=out.n_rejected, n_wild=run.n_wild, status=out.status,
-                    sf=out.sigma_forward, sb=out.sigma_backward, w=out.weight_forward, f=pre.dv / scn.dt,
-                    g=pre.dtheta / scn.dt, nav0=run.nav0, dth=run.dtheta, dv=run.dv)
+        return dict(
+            err=target_errors(out, tpos),
+            n_rej=out.n_rejected,
+            n_wild=run.n_wild,
+            status=out.status,
+            sf=out.sigma_forward,
+            sb=out.sigma_backward,
+            w=out.weight_forward,
+            f=pre.dv / scn.dt,
+            g=pre.dtheta / scn.dt,
+            nav0=run.nav0,
+            dth=run.dtheta,
+            dv=run.dv,
+        )
 
     # one seed keeps the module's compile-and-run time down; the CLI runs the 64-seed Monte Carlo
     res = jax.tree_util.tree_map(lambda a: a[None], jax.jit(one)(jax.random.PRNGKey(0)))
@@ -121,8 +142,9 @@ def test_propagate_covariances_against_numpy():
     table = np.stack([np.eye(n) * 0.01, np.eye(n) * 0.02])
     rf = np.array([0, -1, -1, -1, -1, -1])
     rb = np.array([-1, -1, -1, -1, -1, 1])
-    Pf, Pb = propagate_covariances(jnp.asarray(Phi), jnp.asarray(pred), jnp.asarray(covs), jnp.asarray(P0), rf, rb,
-                                   jnp.asarray(table))
+    Pf, Pb = propagate_covariances(
+        jnp.asarray(Phi), jnp.asarray(pred), jnp.asarray(covs), jnp.asarray(P0), rf, rb, jnp.asarray(table)
+    )
     P = table[0]
     for j in range(1, M):
         P = Phi[j] @ P @ Phi[j].T + Q[j]
@@ -148,7 +170,8 @@ def test_bad_input(survey):
     with pytest.raises(ValueError, match="T1.*no known-coordinate point before it"):
         plan_survey(make_stop_list(s.t_start, s.t_end, kinds, s.pos, s.sigma, s.name), truth.t_imu)
     with pytest.raises(ValueError, match="too short"):
-        plan_survey(make_stop_list(s.t_start, s.t_start + np.r_[40, 10, 0.6, 15], s.kind, s.pos, s.sigma, s.name),
-                    truth.t_imu)
+        plan_survey(
+            make_stop_list(s.t_start, s.t_start + np.r_[40, 10, 0.6, 15], s.kind, s.pos, s.sigma, s.name), truth.t_imu
+        )
     with pytest.raises(ValueError, match=r"must be \(\d+, 3\)"):
         process_survey(plan, None, jnp.zeros((10, 3)), jnp.zeros((10, 3)), s.pos, params)

@@ -9,8 +9,18 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxnav.survey import (PreprocessParams, ar_kalman, butter2_lowpass, preprocess_imu, reject_outliers,
-                           running_median, select_ar_order, series_stats, white_noise_variance, zero_phase_lowpass)
+from jaxnav.survey import (
+    PreprocessParams,
+    ar_kalman,
+    butter2_lowpass,
+    preprocess_imu,
+    reject_outliers,
+    running_median,
+    select_ar_order,
+    series_stats,
+    white_noise_variance,
+    zero_phase_lowpass,
+)
 
 
 @pytest.mark.parametrize("fc,fs", [(20.0, 100.0), (5.0, 160.0), (40.0, 100.0)])
@@ -28,8 +38,11 @@ def test_zero_phase_lowpass_equals_scipy_filtfilt():
         b, a = scipy.signal.butter(2, fc, fs=100.0)
         ref = scipy.signal.filtfilt(b, a, x, axis=0)
         np.testing.assert_allclose(np.asarray(zero_phase_lowpass(x, 0.01, fc)), ref, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(np.asarray(zero_phase_lowpass(x[:, 0], 0.01, 5.0)),
-                               scipy.signal.filtfilt(*scipy.signal.butter(2, 5.0, fs=100.0), x[:, 0]), atol=1e-10)
+    np.testing.assert_allclose(
+        np.asarray(zero_phase_lowpass(x[:, 0], 0.01, 5.0)),
+        scipy.signal.filtfilt(*scipy.signal.butter(2, 5.0, fs=100.0), x[:, 0]),
+        atol=1e-10,
+    )
 
 
 def test_lowpass_unit_dc_gain_and_zero_phase():
@@ -47,7 +60,7 @@ def test_lowpass_unit_dc_gain_and_zero_phase():
 def test_running_median_matches_numpy():
     rng = np.random.default_rng(1)
     x = rng.normal(size=50)
-    ref = np.array([np.median(x[max(0, i - 2): i + 3]) if 2 <= i < 48 else np.nan for i in range(50)])
+    ref = np.array([np.median(x[max(0, i - 2) : i + 3]) if 2 <= i < 48 else np.nan for i in range(50)])
     got = np.asarray(running_median(x, 2))
     np.testing.assert_allclose(got[2:48], ref[2:48])
 
@@ -143,7 +156,8 @@ def test_preprocess_imu_pipeline(calib):
     assert out.dtheta.shape == (6000, 3)
     assert int(out.n_rejected) >= 1
     # unit DC gain: the mean increment (what drives the navigation error) is kept
-    np.testing.assert_allclose(np.asarray(out.dtheta.mean(0)), np.asarray((rec.gyro_coloured[:6000] * dt).mean(0)),
-                               rtol=0.2, atol=2e-7)
+    np.testing.assert_allclose(
+        np.asarray(out.dtheta.mean(0)), np.asarray((rec.gyro_coloured[:6000] * dt).mean(0)), rtol=0.2, atol=2e-7
+    )
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         preprocess_imu(jnp.zeros((10, 2)), jnp.zeros((10, 2)), dt)

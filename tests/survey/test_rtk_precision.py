@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav import geodesy as g
 from jaxnav.io import read_pos
@@ -19,7 +20,6 @@ from jaxnav.survey import (
     point_sigmas,
     windows_from_pos,
 )
-from _paths import DATA_ROOT
 
 NAGOYA = DATA_ROOT / "rtk_pos_matrtklib" / "static" / "rover_rtk.pos"
 DRIVE = DATA_ROOT / "rtk_pos_matrtklib" / "kinematic" / "rover_1Hz_rtk.pos"
@@ -29,12 +29,16 @@ SPIRENT = DATA_ROOT / "rtk_pos_instinct_simulated" / "Rover-static-2km-east_RTK_
 def test_autocovariance_masked_equals_direct_sums():
     x = np.asarray(jax.random.normal(jax.random.PRNGKey(1), (50,)))
     full = np.ones(50, bool)
-    np.testing.assert_allclose(autocovariance_masked(jnp.asarray(x), jnp.asarray(full), 5),
-                               autocovariance(jnp.asarray(x), 5), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(
+        autocovariance_masked(jnp.asarray(x), jnp.asarray(full), 5),
+        autocovariance(jnp.asarray(x), 5),
+        rtol=1e-12,
+        atol=1e-14,
+    )
     m = full.copy()
     m[[3, 4, 17, 40]] = False
     d = np.where(m, x - x[m].mean(), 0.0)
-    ref = [np.sum(d[:50 - k] * d[k:]) / m.sum() for k in range(6)]
+    ref = [np.sum(d[: 50 - k] * d[k:]) / m.sum() for k in range(6)]
     np.testing.assert_allclose(autocovariance_masked(jnp.asarray(x), jnp.asarray(m), 5), ref, rtol=1e-12, atol=1e-14)
     with pytest.raises(ValueError, match="max_lag=60"):
         autocovariance_masked(jnp.asarray(x), jnp.asarray(m), 60)
@@ -64,9 +68,9 @@ def test_motion_segments_static_then_driving_on_real_files():
     seg = motion_segments(t, lat, lon)
     ns = st.t.size
     # the displacement test also flags the static epochs within window_s/2 = 5 s of the departure
-    assert np.all(seg.segment[:ns - 5] == 0) and not seg.moving[:ns - 5].any() and seg.moving[ns - 5:ns + 1].all()
+    assert np.all(seg.segment[: ns - 5] == 0) and not seg.moving[: ns - 5].any() and seg.moving[ns - 5 : ns + 1].all()
     # the drive: every epoch but those of genuine stops is moving; what stays static is a stop of >= 20 s
-    v_drive = seg.speed[ns + 1:]
+    v_drive = seg.speed[ns + 1 :]
     assert seg.moving[ns:].mean() > 0.8 and np.nanmedian(v_drive) > 1.0
     for s in range(1, seg.n_segments):
         idx = np.flatnonzero(seg.segment == s)
@@ -91,7 +95,7 @@ def _points(path, step, window, min_epochs, lon0):
     seg = []
     for i, n in enumerate(names):
         gi = w["grid"][w["point"] == n]
-        grid[i, :gi.size], grid[i, gi.size:] = gi, gi[-1]
+        grid[i, : gi.size], grid[i, gi.size :] = gi, gi[-1]
         seg.append(w["segment"][w["point"] == n][0])
     return names, z, np.asarray(ser.mask), grid, np.array(seg)
 
@@ -115,8 +119,10 @@ def test_claimed_precision_matches_scatter_on_real_static_point(window, lo, hi):
     actual, claimed = _claimed_vs_actual(z, mask, ps.sigma)
     _, naive = _claimed_vs_actual(z, mask, ps.sigma_naive)
     pooled = float(np.sqrt(np.mean((actual / claimed) ** 2)))
-    print(f"\n{len(names)} points of {window} epochs: actual {actual * 1e3} mm, claimed {claimed * 1e3} mm, "
-          f"naive {naive * 1e3} mm; pooled actual/claimed {pooled:.2f}")
+    print(
+        f"\n{len(names)} points of {window} epochs: actual {actual * 1e3} mm, claimed {claimed * 1e3} mm, "
+        f"naive {naive * 1e3} mm; pooled actual/claimed {pooled:.2f}"
+    )
     assert lo < pooled < hi
     if window == 15:
         assert np.all((actual / claimed > lo) & (actual / claimed < hi))

@@ -2,11 +2,19 @@
 
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav.io import read_stop_list, write_stop_list
-from jaxnav.survey import (STOP_KINDS, DetectorParams, classify, make_stop_list, match_stops, stance_statistic,
-                           static_spans, validate_stops)
-from _paths import DATA_ROOT
+from jaxnav.survey import (
+    STOP_KINDS,
+    DetectorParams,
+    classify,
+    make_stop_list,
+    match_stops,
+    stance_statistic,
+    static_spans,
+    validate_stops,
+)
 
 DATA = DATA_ROOT / "rtklibexplorer-gnss-imu"
 
@@ -35,13 +43,16 @@ def test_stop_list_round_trip(tmp_path):
     assert [STOP_KINDS[k] for k in r.kind][:3] == ["known_coordinate", "zupt", "target"]
 
 
-@pytest.mark.parametrize("line,msg", [
-    ("A, known_coordinate, 0, 10", "needs its known coordinates"),
-    ("A, spaceship, 0, 10", "unknown stop kind"),
-    ("A, zupt, 10, 5", "t_end > t_start"),
-    ("A, zupt, ten, 20", "non-numeric"),
-    ("A, zupt, 1", "columns"),
-])
+@pytest.mark.parametrize(
+    "line,msg",
+    [
+        ("A, known_coordinate, 0, 10", "needs its known coordinates"),
+        ("A, spaceship, 0, 10", "unknown stop kind"),
+        ("A, zupt, 10, 5", "t_end > t_start"),
+        ("A, zupt, ten, 20", "non-numeric"),
+        ("A, zupt, 1", "columns"),
+    ],
+)
 def test_stop_list_errors_name_file_and_line(tmp_path, line, msg):
     f = tmp_path / "bad.csv"
     f.write_text("# header\nK0, known_coordinate, 0, 10, 32.0, 118.0, 10.0\n" + line + "\n")
@@ -88,7 +99,7 @@ def test_stance_statistic_equals_direct_loop():
     Tml = np.asarray(stance_statistic(f, w, DetectorParams(sigma_a=0.05, sigma_g=0.01), window=W))
     for k in (0, 7, 150, N - 1):
         lo = min(max(k - W // 2, 0), N - W)
-        fw, ww = f[lo:lo + W], w[lo:lo + W]
+        fw, ww = f[lo : lo + W], w[lo : lo + W]
         u = fw.mean(0) / np.linalg.norm(fw.mean(0))
         ref = np.mean(np.sum((fw - 9.79 * u) ** 2, 1) / 0.05**2 + np.sum(ww**2, 1) / 0.01**2)
         np.testing.assert_allclose(T[k], ref, rtol=1e-9)
@@ -100,9 +111,9 @@ def test_stance_statistic_equals_direct_loop():
 def test_static_spans_and_matching():
     t = np.arange(1, 1001) * 0.1
     s = np.zeros(1000, bool)
-    s[100:300] = True   # 10.0-30.0 s
+    s[100:300] = True  # 10.0-30.0 s
     s[150:152] = False  # a 0.2 s flicker inside a stop is closed
-    s[500:510] = True   # 1 s: too short
+    s[500:510] = True  # 1 s: too short
     s[700:900] = True
     sp = static_spans(s, t, min_duration=2.0, min_gap=0.5)
     np.testing.assert_allclose(sp, [[10.0, 30.0], [70.0, 90.0]], atol=1e-9)

@@ -6,11 +6,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _paths import DATA_ROOT
 
 from jaxnav import geodesy as g
 from jaxnav import sim as jsim
 from jaxnav.survey import rtk
-from _paths import DATA_ROOT
 
 DATA = DATA_ROOT
 CFG = jsim.RtkPointsConfig()
@@ -46,8 +46,7 @@ def _paper_filter(t, z, sig, center_offset=False):
 def survey():
     """The simulated 45-point S2 survey, its connection models and the forward-filter pipeline."""
     s = jsim.simulate_rtk_points(jax.random.PRNGKey(0), CFG)
-    con = rtk.connection_models(s.control_lat, s.control_lon, s.control_H, s.control_xy, s.control_h,
-                                lon0=CFG.lon_cm)
+    con = rtk.connection_models(s.control_lat, s.control_lon, s.control_H, s.control_xy, s.control_h, lon0=CFG.lon_cm)
     series = rtk.series_from_simulation(s)
     lon0 = jnp.full(CFG.n_points, CFG.lon_cm)
     res = rtk.process_points(series, lon0=lon0, transform=con.transform.params, anomaly=con.anomaly)
@@ -65,8 +64,9 @@ def test_pipeline_equals_paper_recursion_with_padding(survey, center_offset):
     H = np.array(series.H)
     H[2, 7] = np.nan  # a NaN measurement on a valid epoch: masked and counted
     series = series._replace(mask=jnp.asarray(mask), H=jnp.asarray(H))
-    res = rtk.process_points(series, lon0=lon0, transform=con.transform.params, anomaly=con.anomaly,
-                             center_offset=center_offset)
+    res = rtk.process_points(
+        series, lon0=lon0, transform=con.transform.params, anomaly=con.anomaly, center_offset=center_offset
+    )
     # compare in WGS-84 GK: undo the datum transformation and the anomaly (tested on their own)
     epochs = np.asarray(res.epochs)
     xy = np.asarray(g.similarity2d_inverse(con.transform.params, jnp.asarray(epochs[..., :2])))
@@ -129,19 +129,29 @@ def test_rts_pass_improves_precision_not_accuracy(survey):
 def test_errors(survey):
     s = survey[0]
     with pytest.raises(ValueError, match=r"plane similarity \(4 parameters\) needs at least 2 control points"):
-        rtk.connection_models(s.control_lat[:1], s.control_lon[:1], s.control_H[:1], s.control_xy[:1],
-                              np.full(1, np.nan), lon0=CFG.lon_cm)
+        rtk.connection_models(
+            s.control_lat[:1], s.control_lon[:1], s.control_H[:1], s.control_xy[:1], np.full(1, np.nan), lon0=CFG.lon_cm
+        )
     with pytest.raises(ValueError, match="quadratic height-anomaly surface has 6 parameters"):
-        rtk.connection_models(s.control_lat[:4], s.control_lon[:4], s.control_H[:4], np.full((4, 2), np.nan),
-                              s.control_h[:4], lon0=CFG.lon_cm, surface="quadratic")
+        rtk.connection_models(
+            s.control_lat[:4],
+            s.control_lon[:4],
+            s.control_H[:4],
+            np.full((4, 2), np.nan),
+            s.control_h[:4],
+            lon0=CFG.lon_cm,
+            surface="quadratic",
+        )
     bad = rtk.series_from_simulation(s)._replace(sigma=jnp.ones((45, 60, 2)))
     with pytest.raises(ValueError, match=r"'sigma': \(45, 60, 2\)"):
         rtk.process_points(bad, lon0=CFG.lon_cm)
     with pytest.raises(ValueError, match="more than length=2"):
-        rtk.pack_points(["a", "a", "a"], np.arange(3.0), np.zeros(3), np.zeros(3), np.zeros(3), np.ones((3, 3)),
-                        length=2)
-    names, ser = rtk.pack_points(["b", "a", "b"], np.arange(3.0), np.zeros(3), np.zeros(3), np.zeros(3),
-                                 np.ones((3, 3)))
+        rtk.pack_points(
+            ["a", "a", "a"], np.arange(3.0), np.zeros(3), np.zeros(3), np.zeros(3), np.ones((3, 3)), length=2
+        )
+    names, ser = rtk.pack_points(
+        ["b", "a", "b"], np.arange(3.0), np.zeros(3), np.zeros(3), np.zeros(3), np.ones((3, 3))
+    )
     assert list(names) == ["b", "a"] and ser.t.shape == (2, 2) and not bool(ser.mask[1, 1])
 
 
@@ -203,8 +213,19 @@ def test_cli_on_real_static_pos_files(tmp_path):
     # issue 19: the stable schema, the motion test (nothing moves in these files) and the precision
     assert summary["excluded_moving_epochs"] == 0 and summary["height_system"] == "WGS-84 ellipsoidal height (m)"
     assert summary["zone"]["central_meridian_deg"] == [9.0, 138.0] and summary["crs"].startswith("WGS-84 Gauss")
-    keys = {"name", "n_epochs", "t_start", "t_end", "x_m", "y_m", "h_m", "sigma_x_m", "sigma_y_m", "sigma_h_m",
-            "sigma_method"}
+    keys = {
+        "name",
+        "n_epochs",
+        "t_start",
+        "t_end",
+        "x_m",
+        "y_m",
+        "h_m",
+        "sigma_x_m",
+        "sigma_y_m",
+        "sigma_h_m",
+        "sigma_method",
+    }
     for p in summary["points"]:
         assert keys <= set(p) and p["sigma_method"] == "acf_ess_segment" and p["n_epochs"] == p["n"]
     p1 = pts["rover_rtk#1"]

@@ -31,8 +31,9 @@ def cv_point(p, key):
     model = jf.constant_velocity(1.0, sigma=0.01, q=1e-6, ndim=1)
     xs, zs = simulate_linear(key, model, jnp.zeros(2), 200)
     m = jf.constant_velocity(1.0, sigma=0.01 * jnp.sqrt(p["r"]), q=1e-6 * p["q"], ndim=1)
-    res = jf.kalman_filter(m, jnp.zeros(2), jnp.eye(2), zs, inflation=jf.attenuated(p.get("b", 0.0)),
-                           save=("means", "valid"))
+    res = jf.kalman_filter(
+        m, jnp.zeros(2), jnp.eye(2), zs, inflation=jf.attenuated(p.get("b", 0.0)), save=("means", "valid")
+    )
     return {"nll": tune.innovation_nll(res), "rms": tune.rms(res.means - xs)[0]}
 
 
@@ -48,13 +49,15 @@ def studies() -> dict:
     exp = load_experiment()
     S = S0Setup(exp, duration=100.0)
     rule = rules(exp)["attenuated"]
-    out["s0_rms"] = tune.run_chunked(lambda k: S.rms(k, rule), jax.random.split(jax.random.PRNGKey(2019), 5),
-                                     chunk=4, progress=False)
+    out["s0_rms"] = tune.run_chunked(
+        lambda k: S.rms(k, rule), jax.random.split(jax.random.PRNGKey(2019), 5), chunk=4, progress=False
+    )
 
     loss = tune.monte_carlo_mean(lambda p, k: cv_point(p, k)["nll"], jax.random.split(jax.random.PRNGKey(9), 6))
     p0 = {"q": jnp.asarray(3.0), "r": jnp.asarray(0.5)}
-    res = tune.minimize(loss, p0, tune.Space({"q": "log", "r": "log"}), optimizer=optax.adam(0.05), steps=8,
-                        mode="forward")
+    res = tune.minimize(
+        loss, p0, tune.Space({"q": "log", "r": "log"}), optimizer=optax.adam(0.05), steps=8, mode="forward"
+    )
     out["tune_params"] = np.asarray([res.params["q"], res.params["r"]])
     out["tune_losses"] = np.asarray(res.losses)
     out["tune_grad_norm"] = np.asarray(res.grad_norm)
@@ -66,10 +69,31 @@ def main(argv):
     out, pid, nproc, port, config = pathlib.Path(argv[0]), int(argv[1]), int(argv[2]), argv[3], argv[4]
     from jaxnav.cli import main as cli
 
-    rc = cli(["sweep", config, "--out", str(out / f"cli_{pid}"), "--no-progress", "--coordinator",
-              f"127.0.0.1:{port}", "--num-processes", str(nproc), "--process-id", str(pid), "--join-timeout", "60"])
-    facts = {"cli_rc": rc, "process_index": jax.process_index(), "process_count": jax.process_count(),
-             "devices": len(jax.devices()), "local_devices": jax.local_device_count(), "writer": tune.is_writer()}
+    rc = cli(
+        [
+            "sweep",
+            config,
+            "--out",
+            str(out / f"cli_{pid}"),
+            "--no-progress",
+            "--coordinator",
+            f"127.0.0.1:{port}",
+            "--num-processes",
+            str(nproc),
+            "--process-id",
+            str(pid),
+            "--join-timeout",
+            "60",
+        ]
+    )
+    facts = {
+        "cli_rc": rc,
+        "process_index": jax.process_index(),
+        "process_count": jax.process_count(),
+        "devices": len(jax.devices()),
+        "local_devices": jax.local_device_count(),
+        "writer": tune.is_writer(),
+    }
     res = studies()
     np.savez(out / f"process_{pid}.npz", **res)
     print(json.dumps(facts), flush=True)

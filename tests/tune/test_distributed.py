@@ -55,21 +55,31 @@ def _free_port() -> int:
 
 
 def _start(tmp_path, config):
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
-               XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip())
+    env = dict(
+        os.environ,
+        JAX_PLATFORMS="cpu",
+        XLA_FLAGS=(os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip(),
+    )
     for var in ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID"):
         env.pop(var, None)
     port = str(_free_port())
     procs = []
     for i in range(2):  # output to files, not pipes: a full pipe would block a process
         with open(tmp_path / f"stdout_{i}.txt", "w") as out, open(tmp_path / f"stderr_{i}.txt", "w") as err:
-            procs.append(subprocess.Popen([sys.executable, str(HERE / "_multiprocess.py"), str(tmp_path), str(i), "2",
-                                           port, str(config)], env=env, stdout=out, stderr=err))
+            procs.append(
+                subprocess.Popen(
+                    [sys.executable, str(HERE / "_multiprocess.py"), str(tmp_path), str(i), "2", port, str(config)],
+                    env=env,
+                    stdout=out,
+                    stderr=err,
+                )
+            )
     return procs
 
 
 def _wait(procs, tmp_path, deadline):
     """Wait for both; kill both as soon as one fails or the deadline passes. Returns their stdout."""
+
     def tails():
         return "\n----\n".join((tmp_path / f"stderr_{i}.txt").read_text()[-2500:] for i in range(len(procs)))
 
@@ -80,8 +90,9 @@ def _wait(procs, tmp_path, deadline):
                 if p.poll() is None:
                     p.kill()
                     p.wait()
-            pytest.fail(("a process failed" if failed else f"no result within {DEADLINE_S} s (a hang?)")
-                        + "\n" + tails())
+            pytest.fail(
+                ("a process failed" if failed else f"no result within {DEADLINE_S} s (a hang?)") + "\n" + tails()
+            )
         time.sleep(0.2)
     assert all(p.returncode == 0 for p in procs), tails()
     return [(tmp_path / f"stdout_{i}.txt").read_text() for i in range(len(procs))]
@@ -106,8 +117,14 @@ def test_two_processes_equal_one_process(tmp_path):
     outs = _wait(procs, tmp_path, deadline)
     facts = [json.loads(o.strip().splitlines()[-1]) for o in outs]
     for i, f in enumerate(facts):
-        assert f == {"cli_rc": 0, "process_index": i, "process_count": 2, "devices": 4, "local_devices": 2,
-                     "writer": i == 0}
+        assert f == {
+            "cli_rc": 0,
+            "process_index": i,
+            "process_count": 2,
+            "devices": 4,
+            "local_devices": 2,
+            "writer": i == 0,
+        }
 
     # process 0 alone wrote the command's results; they equal the single-process command's
     assert sorted(os.listdir(tmp_path / "cli_1")) == []
@@ -134,13 +151,19 @@ def test_two_processes_equal_one_process(tmp_path):
     assert ref["tune_losses"][-1] < ref["tune_losses"][0]
 
 
-@pytest.mark.parametrize("argv,message", [
-    (["--coordinator", "localhost"], "HOST:PORT"),
-    (["--coordinator", "localhost:0"], "HOST:PORT"),
-    (["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "2"], "process id must be in 0 .. 1"),
-    (["--num-processes", "0"], "must be in"),
-    (["--process-id", "-1"], "must be in"),
-])
+@pytest.mark.parametrize(
+    "argv,message",
+    [
+        (["--coordinator", "localhost"], "HOST:PORT"),
+        (["--coordinator", "localhost:0"], "HOST:PORT"),
+        (
+            ["--coordinator", "127.0.0.1:1234", "--num-processes", "2", "--process-id", "2"],
+            "process id must be in 0 .. 1",
+        ),
+        (["--num-processes", "0"], "must be in"),
+        (["--process-id", "-1"], "must be in"),
+    ],
+)
 def test_process_options_are_checked_before_any_work(tmp_path, capsys, argv, message):
     assert main(["sweep", "cv_noise", "--out", str(tmp_path / "o")] + argv) == 2
     err = capsys.readouterr().err

@@ -13,18 +13,24 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 import pytest
+from _paths import ROOT  # noqa: E402
 
 from jaxnav import filters as jf
 from jaxnav import tune
 from jaxnav.sim import simulate_linear
 
-from _paths import ROOT  # noqa: E402
-
-
 # --- bijectors -------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("name,vals", [("unit", [1e-6, 0.254, 0.999]), ("positive", [1e-3, 1.0, 50.0]),
-                                       ("log", [1e-8, 1.0, 1e6]), ("real", [-3.0, 0.0, 2.0])])
+
+@pytest.mark.parametrize(
+    "name,vals",
+    [
+        ("unit", [1e-6, 0.254, 0.999]),
+        ("positive", [1e-3, 1.0, 50.0]),
+        ("log", [1e-8, 1.0, 1e6]),
+        ("real", [-3.0, 0.0, 2.0]),
+    ],
+)
 def test_bijector_round_trip(name, vals):
     b = tune.bijector(name)
     v = jnp.asarray(vals)
@@ -45,6 +51,7 @@ def test_space_checks_domain_names_and_trainable():
 
 
 # --- gradients and the optax loop -------------------------------------------------------------
+
 
 def test_forward_and_reverse_value_and_grad_agree():
     def f(u):
@@ -70,8 +77,9 @@ def test_minimize_finds_constrained_optimum_and_freezes_untrainable(opt):
 
     sp = tune.Space({"b": "unit", "s": "log", "c": "positive"}, trainable=("b", "s"))
     optimizer = optax.adam(0.1) if opt == "adam" else optax.lbfgs()
-    res = tune.minimize(loss, {"b": 0.9, "s": 0.1, "c": 5.0}, sp, optimizer=optimizer,
-                        steps=300 if opt == "adam" else 30)
+    res = tune.minimize(
+        loss, {"b": 0.9, "s": 0.1, "c": 5.0}, sp, optimizer=optimizer, steps=300 if opt == "adam" else 30
+    )
     assert float(res.params["b"]) == pytest.approx(0.3, abs=1e-4)
     assert float(res.params["s"]) == pytest.approx(2.0, rel=1e-4)
     assert float(res.params["c"]) == pytest.approx(5.0, rel=1e-14)
@@ -99,7 +107,7 @@ def test_minimize_lbfgs_traces_the_loss_once_and_converges(mode):
     assert float(res.params["c"]) == pytest.approx(3.0, rel=1e-14)
     assert float(res.loss) == pytest.approx(4.0, abs=1e-10)
     assert 20 < res.n_evals < 80  # stopped before the budget
-    assert np.all(np.isinf(np.asarray(res.losses)[res.n_evals:]))
+    assert np.all(np.isinf(np.asarray(res.losses)[res.n_evals :]))
     assert np.all(np.isfinite(np.asarray(res.losses)[: res.n_evals]))
     with pytest.raises(ValueError, match="c1 < c2"):
         tune.minimize_lbfgs(loss, {"x": 0.0, "y": 0.0, "c": 1.0}, sp, c1=0.5, c2=0.1)
@@ -124,6 +132,7 @@ def test_ml_noise_scales_recovered_on_cv_batch():
 
 # --- losses -----------------------------------------------------------------------------------
 
+
 def test_losses_on_a_consistent_filter():
     model = jf.constant_velocity(1.0, sigma=0.01, q=1e-6, ndim=1)
     x0, P0 = jnp.zeros(2), jnp.eye(2)
@@ -147,13 +156,13 @@ def test_losses_on_a_consistent_filter():
 
 # --- sweeps -----------------------------------------------------------------------------------
 
+
 def _cv_point(p, key):
     """NLL and position RMS of one CV series under scaled noise (a small sweep target)."""
     model = jf.constant_velocity(1.0, sigma=0.01, q=1e-6, ndim=1)
     xs, zs = simulate_linear(key, model, jnp.zeros(2), 200)
     m = jf.constant_velocity(1.0, sigma=0.01 * jnp.sqrt(p["r"]), q=1e-6 * p["q"], ndim=1)
-    res = jf.kalman_filter(m, jnp.zeros(2), jnp.eye(2), zs, inflation=jf.attenuated(p["b"]),
-                           save=("means", "valid"))
+    res = jf.kalman_filter(m, jnp.zeros(2), jnp.eye(2), zs, inflation=jf.attenuated(p["b"]), save=("means", "valid"))
     return {"nll": tune.innovation_nll(res), "rms": tune.rms(res.means - xs)[0]}
 
 
@@ -207,8 +216,13 @@ _SHARDED = textwrap.dedent("""
 def test_sweep_on_four_forced_host_devices_equals_one_device(tmp_path):
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     out = tmp_path / "sharded.npz"
-    proc = subprocess.run([sys.executable, "-c", _SHARDED, str(out), str(ROOT / "tests")], env=env,
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", _SHARDED, str(out), str(ROOT / "tests")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     info = json.loads(proc.stdout.strip().splitlines()[-1])
     assert info["n_devices"] == 4 and info["chunk"] == 8
