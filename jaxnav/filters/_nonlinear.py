@@ -24,13 +24,13 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import cho_solve, gaussian_loglik, masked_measurement, safe_cholesky, symmetrize, whiten
+from jaxnav._numerics import cho_solve, safe_cholesky, symmetrize
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import pytree_dataclass, static_field
 from jaxnav.filters._rts import rts_smoother
 from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoothed_means
-from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, UpdateResult, scan_setup, step_with_gain
+from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, scan_setup, step_with_gain, update
 
 
 @pytree_dataclass
@@ -86,41 +86,9 @@ def _mul(A, B):
 
 
 def _update(x_pred, P_pred, z, H, R, valid, joseph):
-    """:func:`~jaxnav.filters._step.update` (masking, Cholesky solves, log-likelihood, result record)
-    with the products of :func:`_mul`, which XLA fuses into loop kernels under ``vmap`` instead of
-    one batched dot per tiny product; the Joseph form stays the congruence
-    (I - K H) P (I - K H)^T + K R K^T, positive semi-definite by construction.
-
-    Args:
-      x_pred: (n,) prior mean.  P_pred: (n, n).  z: (m,).  H: (m, n).  R: (m, m).  valid: (m,) bool.
-    Returns:
-      :class:`~jaxnav.filters._step.UpdateResult`.
-    """
-    n = P_pred.shape[-1]
-    Hm, Rm = masked_measurement(H, R, valid)
-    v = jnp.where(valid, z - _mul(Hm, x_pred), 0.0)
-    PHt = _mul(P_pred, Hm.T)
-    S = symmetrize(_mul(Hm, PHt) + Rm)
-    L, ok = safe_cholesky(S)
-    K = cho_solve(L, PHt.T).T
-    x = x_pred + _mul(K, v)
-    if joseph:
-        IKH = jnp.eye(n, dtype=P_pred.dtype) - _mul(K, Hm)
-        P = symmetrize(_mul(_mul(IKH, P_pred), IKH.T) + _mul(_mul(K, Rm), K.T))
-    else:
-        P = symmetrize(P_pred - _mul(K, PHt.T))
-    w = whiten(L, v)
-    loglik = gaussian_loglik(w, L, jnp.sum(valid))
-    return UpdateResult(
-        x=jnp.where(ok, x, x_pred),
-        P=jnp.where(ok, P, P_pred),
-        v=v,
-        S=S,
-        K=jnp.where(ok, K, 0.0),
-        nis=jnp.sum(w * w),
-        loglik=loglik,
-        ok=ok,
-    )
+    """:func:`~jaxnav.filters._step.update` with the products of :func:`_mul`, which XLA fuses into loop
+    kernels under ``vmap`` instead of one batched dot per tiny product (same formulas, Joseph congruence)."""
+    return update(x_pred, P_pred, z, H, R, valid, joseph, matmul=_mul)
 
 
 # ---------------------------------------------------------------------------------------------
