@@ -410,11 +410,19 @@ class LCPropagation(NamedTuple):
       hold_height: as :func:`jaxnav.ins.mechanize`.
       remat: wrap each epoch in ``jax.checkpoint`` so that reverse-mode gradients store one carry per
         epoch instead of every IMU sample's intermediates (the forward result is identical).
+      max_epoch_samples: the scan pads every epoch interval to the longest one, so one long gap
+        (a GNSS outage taken out of ``meas``, IMU data long before the first fix) would multiply
+        the work of the whole run. Intervals with more samples than this are split by
+        prediction-only epochs (no measurement; ``result.epochs.gnss_row`` -1) of at most this
+        many samples. None (default): automatic, the 90th percentile of the samples per interval,
+        applied only where the longest interval exceeds twice that; 0: never split. Not with
+        ``LCSave.imu_every`` (its per-sample layout follows the intervals).
     """
 
     nav_every: int = 1
     hold_height: bool = False
     remat: bool = False
+    max_epoch_samples: int | None = None
 
 
 class LCSave(NamedTuple):
@@ -885,6 +893,36 @@ def chi2_quantile(prob: float, dof: int) -> float:
     return 0.5 * (lo + hi)
 
 
+def _split_samples(t_imu, t_epochs, max_samples):
+    """Host side: (N,) bool, the IMU samples after which a prediction-only epoch splits a long interval, or None.
+
+    Epoch interval j holds the samples ending in (t_epochs[j-1], t_epochs[j]] (see :func:`segment_imu`);
+    one of c > cap samples is cut after every cap-th sample, into ceil(c / cap) pieces of at most cap.
+    ``max_samples``: cap (``LCPropagation.max_epoch_samples``); None: the 90th percentile of the
+    interval lengths, only when the longest exceeds twice that; 0: no split.
+    """
+    if max_samples == 0:
+        return None
+    ends = np.searchsorted(t_imu, np.asarray(t_epochs, float) + 1e-9, side="right")
+    starts = np.concatenate([[0], ends[:-1]])
+    counts = ends - starts
+    if max_samples is None:
+        cap = max(int(np.ceil(np.percentile(counts, 90))), 1)
+        if counts.max() <= 2 * cap:
+            return None
+    else:
+        cap = int(max_samples)
+    long = np.nonzero(counts > cap)[0]
+    if not long.size:
+        return None
+    n_cuts = (counts[long] - 1) // cap
+    first = np.repeat(starts[long], n_cuts)
+    m = np.arange(n_cuts.sum()) - np.repeat(np.cumsum(n_cuts) - n_cuts, n_cuts) + 1  # 1..n_cuts per interval
+    split = np.zeros(len(t_imu), bool)
+    split[first + m * cap - 1] = True
+    return split
+
+
 def _merge_epochs(t_imu, meas: PVMeasurements, active):
     """Host side: the filter's epochs = GNSS epochs merged with the IMU samples where an aid applies.
 
@@ -944,6 +982,9 @@ def _check_options(model, gate, save: LCSave, propagation: LCPropagation, discre
         raise ValueError(f"gate max_run={gate.max_run!r} must be an integer >= 1")
     if not isinstance(propagation.nav_every, (int, np.integer)) or propagation.nav_every < 1:
         raise ValueError(f"nav_every={propagation.nav_every!r} must be an integer >= 1")
+    mx = propagation.max_epoch_samples
+    if mx is not None and (not isinstance(mx, (int, np.integer)) or isinstance(mx, bool) or mx < 0):
+        raise ValueError(f"max_epoch_samples={mx!r} must be None or an integer >= 0")
     if propagation.nav_every > 1 and save.imu_every:
         raise ValueError("save imu_every needs the per-sample loop: use nav_every=1")
 
@@ -1102,10 +1143,14 @@ def loosely_coupled(
     sig = jnp.sqrt(jnp.diagonal(meas.R, axis1=1, axis2=2))
     meas = meas._replace(mask=jnp.asarray(meas.mask, bool) & (sig <= max_sigma), t=np.asarray(meas.t, float))
     aids = tuple(aids)
-    gnss_row, aid_epochs = np.arange(np.shape(meas.t)[0]), None
+    raw, thinned, mean_aid = _thin_aids(aids, N, dt_imu) if aids else ([], [], None)
+    gnss_meas, gnss_row, aid_epochs, n_split = meas, np.arange(np.shape(meas.t)[0]), None, 0
     if aids:
-        raw, thinned, mean_aid = _thin_aids(aids, N, dt_imu)
-        meas, gnss_row, sample = _merge_epochs(t_imu, meas, np.stack(thinned))
+        meas, gnss_row, sample = _merge_epochs(t_imu, gnss_meas, np.stack(thinned))
+    split = None if save.imu_every else _split_samples(t_imu, meas.t, propagation.max_epoch_samples)
+    if split is not None:
+        meas, gnss_row, sample = _merge_epochs(t_imu, gnss_meas, np.stack(thinned + [split]))
+        n_split = int(np.count_nonzero((gnss_row < 0) & ~np.any([t[sample] for t in thinned], axis=0)))
     seg = segment_imu(t_imu, meas.t, dt_imu)
     if aids:
         aid_epochs = _aid_epochs(aids, N, raw, thinned, mean_aid, sample, seg)
@@ -1139,7 +1184,8 @@ def loosely_coupled(
         check_finite=check_finite,
     )
     res = _lc_core(inputs, params, inflation, estimator, opts)
-    return res._replace(epochs=res.epochs._replace(gnss_row=gnss_row))
+    # the prediction-only epochs that split long intervals are not skipped updates
+    return res._replace(epochs=res.epochs._replace(gnss_row=gnss_row), n_skipped=res.n_skipped - n_split)
 
 
 def smooth(result: LCResult, *, error_model: ErrorModel = ERROR_MODEL_18) -> tuple[NavState, SensorBiases, Any]:

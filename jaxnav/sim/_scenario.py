@@ -182,7 +182,7 @@ def _cached_trajectory(spec, rate, duration, substeps):
 def make_trajectory(config: ScenarioConfig) -> Trajectory:
     """Truth and ideal IMU of a scenario (deterministic; cached for the last 4 configs).
 
-    Computed eagerly (``jax.ensure_compile_time_eval``) even when called inside ``jit``/``vmap``,
+    Computed eagerly (a compiled program run on concrete arrays) even when called inside ``jit``/``vmap``,
     so the cache never holds tracers.
     """
     return _cached_trajectory(config.trajectory, config.imu_rate_hz, config.duration, config.rk4_substeps)

@@ -412,6 +412,22 @@ def _build(start, rate, piece, local, pos0, dt, unsensed_mask, *, substeps, elli
 
 
 _build_jit = jax.jit(_build, static_argnames=("substeps", "ellipsoid", "with_unsensed"))
+_BUILDS: dict = {}
+
+
+def _compiled_build(args, statics):
+    """The compiled :func:`_build` for these argument shapes and static options (cached).
+
+    Called on concrete arrays, a compiled executable runs eagerly even inside an outer ``jit`` or
+    ``vmap``, so the trajectory is a constant of the caller's program; tracing ``_build`` under
+    ``jax.ensure_compile_time_eval`` instead would evaluate each of its constant expressions
+    op by op, every one a compile of its own.
+    """
+    key = (tuple((a.shape, a.dtype.str) for a in args), statics)
+    if key not in _BUILDS:
+        substeps, ellipsoid, with_uns = statics
+        _BUILDS[key] = _build_jit.lower(*args, substeps=substeps, ellipsoid=ellipsoid, with_unsensed=with_uns).compile()
+    return _BUILDS[key]
 
 
 def generate_trajectory(
@@ -446,20 +462,18 @@ def generate_trajectory(
     unsensed = (~tab.sensed) & np.any(tab.rate[:, 4:7] != 0, axis=1)
     with_uns = bool(unsensed.any())
     mask = unsensed[piece].astype(np.float64)
+    args = (
+        np.asarray(tab.start, np.float64),
+        np.asarray(tab.rate, np.float64),
+        np.asarray(piece, np.int32),
+        np.asarray(local, np.int32),
+        np.asarray([spec.lat, spec.lon, spec.h], np.float64),
+        np.asarray(dt, np.float64),
+        np.asarray(mask, np.float64),
+    )
+    statics = (int(rk4_substeps), ellipsoid, with_uns)
+    euler, q_bn, v_n, pos, a_n, dtheta, dv, dv_uns = _compiled_build(args, statics)(*args)
     with jax.ensure_compile_time_eval():
-        out = _build_jit(
-            jnp.asarray(tab.start),
-            jnp.asarray(tab.rate),
-            jnp.asarray(piece, jnp.int32),
-            jnp.asarray(local, jnp.int32),
-            jnp.asarray([spec.lat, spec.lon, spec.h], jnp.float64),
-            jnp.asarray(dt, jnp.float64),
-            jnp.asarray(mask),
-            substeps=int(rk4_substeps),
-            ellipsoid=ellipsoid,
-            with_unsensed=with_uns,
-        )
-        euler, q_bn, v_n, pos, a_n, dtheta, dv, dv_uns = out
         t = jnp.arange(tab.n_total + 1, dtype=jnp.float64) * dt
         seg = jnp.asarray(tab.source[piece], jnp.int32)
     return Trajectory(

@@ -74,9 +74,10 @@ def test_too_little_overlap_is_a_clear_error(car):
 
 def test_clock_drift_detected(tmp_path):
     """IMU time tags that drift: the tag error goes from +0.03 s to -0.03 s over the 200 s drive (300 ppm, a
-    cheap logger's crystal). The drift of a linear clock model is recovered within 3 sigma and 10 %, and
+    cheap logger's crystal). The drift of a linear clock model is recovered within 3 sigma and 15 %, and
     flagged; the model's offsets at the halves match the tags there, and the run's single offset lies
-    between them."""
+    between them. (The estimate scatters by about its sigma between seeds: 293-340 ppm on seeds 0-3, so
+    a 10 % bound would fail on some seeds.)"""
     from jaxnav.experiments import load_ins_config
     from jaxnav.experiments.ins_run import read_inputs
 
@@ -95,7 +96,7 @@ def test_clock_drift_detected(tmp_path):
     assert dr.get("significant") and "clock drift" in dr["warning"], dr
     # offset to add = -tag error = -tag0 - rate (t - t0): +300 ppm
     d, sd = dr["drift_s_per_s"], dr["drift_sigma_s_per_s"]
-    assert abs(d + rate) < 0.1 * abs(rate) and abs(d + rate) < 3 * sd + 1e-5, (d, sd)
+    assert abs(d + rate) < 0.15 * abs(rate) and abs(d + rate) < 3 * sd + 1e-5, (d, sd)
     tt0 = WEEK * 604800.0 + t0  # GPST of the first tag
     for w in dr["windows"]:
         assert w["offset_s"] == pytest.approx(-tag0 - rate * (w["t_mean_s"] - tt0), abs=0.01)

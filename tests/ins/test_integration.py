@@ -404,3 +404,30 @@ def test_zupt_and_known_position_pseudo_measurements(outage_run):
     assert np.sqrt(np.mean(dv[50:] ** 2)) < 0.02  # m/s
     dh = np.asarray(res.epochs.nav.pos[:, 2]) - pos_true[:, 2]
     assert np.max(np.abs(dh[::20][3:])) < 0.05  # the known heights hold the vertical channel
+
+
+def test_long_gaps_are_split_into_prediction_only_epochs(outage_run):
+    """The outage's 60 epochs taken out of the measurements: the 61 s interval (3050 samples against 50 in
+    the others) is cut every 50 samples, at the times of the epochs taken out, so the run equals the one
+    with those epochs masked; the cuts are not skipped updates and map to no GNSS row."""
+    from jaxnav.ins.integration import _split_samples
+
+    cfg, truth, r, params, t_imu, base = outage_run
+    meas = _meas(cfg, r.gnss)
+    t = np.asarray(meas.t)
+    keep = ~((t >= 150) & (t < 210))
+    gap = jax.tree_util.tree_map(lambda a: np.asarray(a)[keep], meas)
+    split = _split_samples(t_imu, gap.t, None)
+    assert split.sum() == 60 and np.allclose(t_imu[split], t[~keep], atol=1e-9)
+    assert _split_samples(t_imu, gap.t, 0) is None and _split_samples(t_imu, t, None) is None  # off; no gap
+    assert _split_samples(t_imu, gap.t, 1000).sum() == 3  # an explicit cap: 3050 samples in 4 pieces
+    res = loosely_coupled(r.nav0, t_imu, r.imu.dtheta, r.imu.dv, gap, params, dt_imu=cfg.dt)
+    row = np.asarray(res.epochs.gnss_row)
+    assert row.size == t.size and np.array_equal(row[keep], np.arange(keep.sum())) and np.all(row[~keep] == -1)
+    assert int(res.n_skipped) == 0 and int(base.n_skipped) == 60
+    np.testing.assert_allclose(np.asarray(res.epochs.nav.pos), np.asarray(base.epochs.nav.pos), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(res.epochs.covs), np.asarray(base.epochs.covs), rtol=1e-9, atol=1e-20)
+    with pytest.raises(ValueError, match="max_epoch_samples"):
+        loosely_coupled(
+            r.nav0, t_imu, r.imu.dtheta, r.imu.dv, gap, params, propagation=ins.LCPropagation(max_epoch_samples=-1)
+        )

@@ -1,7 +1,7 @@
 """One study on 2 processes x 2 CPU devices (jax.distributed, gloo) equals the single-process study.
 
 Two processes on 127.0.0.1 join through a small ``jaxnav sweep ... --coordinator --num-processes
---process-id`` (process 0 alone writes), then run an S0 Monte Carlo and a tuning loop (loss,
+--process-id`` (process 0 alone writes), then run a chunked Monte Carlo of a filter and a tuning loop (loss,
 gradient, optax steps) whose Monte Carlo runs are sharded over the 4 devices of both processes
 (``tests/tune/_multiprocess.py``).
 The same studies run here in one process on one device; all agree to 1e-12. A hang fails fast:
@@ -142,10 +142,10 @@ def test_two_processes_equal_one_process(tmp_path):
     # every process returns the whole study, equal to the single-process one
     for i in range(2):
         got = np.load(tmp_path / f"process_{i}.npz")
-        for name in ("s0_rms", "tune_params", "tune_losses", "tune_grad_norm", "tune_path"):
+        for name in ("mc_stats", "tune_params", "tune_losses", "tune_grad_norm", "tune_path"):
             assert got[name].shape == np.shape(ref[name]), name
             np.testing.assert_allclose(got[name], ref[name], rtol=1e-12, atol=0, err_msg=name)
-    assert ref["s0_rms"].shape == (5, 9) and np.all(np.isfinite(ref["s0_rms"]))
+    assert ref["mc_stats"].shape == (5, 9) and np.all(np.isfinite(ref["mc_stats"]))
     # the optimiser moved the parameters (the loop ran on both processes, the same steps)
     assert np.all(np.abs(np.log(ref["tune_params"] / np.array([3.0, 0.5]))) > 0.1)
     assert ref["tune_losses"][-1] < ref["tune_losses"][0]
