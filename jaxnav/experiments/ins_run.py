@@ -1017,8 +1017,11 @@ def nis_check(prep: Prepared, d: RunNoise | None = None) -> dict:
     from jaxnav.ins.integration import chi2_quantile
 
     g = prep.cfg.gnss
-    ungated = prep._replace(cfg=prep.cfg._replace(gnss=g._replace(gate_probability=None)))
-    res = run_filter(ungated, d, save=("nav", "innovations", "innov_covs"))
+    # an open gate (probability 1: nothing rejected) where the run has a gate: the final run's compiled program
+    ungated = prep._replace(
+        cfg=prep.cfg._replace(gnss=g._replace(gate_probability=None if g.gate_probability is None else 1.0))
+    )
+    res = run_filter(ungated, d)
     nis = position_nis(res, prep.meas.mask)
     ok = np.isfinite(nis)
     n = int(ok.sum())

@@ -1,6 +1,6 @@
 """``jaxnav ins`` calibrates its noise by default: consistent uncertainties from a grade preset alone.
 
-A simulated car (110 s, 50 Hz IMU, 2 Hz RTK-level GNSS, two 15 s outages, known truth) whose IMU
+A simulated car (110 s, 25 Hz IMU, 2 Hz RTK-level GNSS, two 15 s outages, known truth) whose IMU
 white noise is 4x the consumer preset's: the preset alone is overconfident (GNSS position NIS per
 dof above its band, the outage errors far outside the solution's 3 sigma); the default
 ``calibrate = "auto"`` fits ARW, VRW and the GNSS sigma factor on the epochs the filter sees and
@@ -23,7 +23,7 @@ def _car(folder, factor):
     rec = write_car(
         folder,
         spec=short_car_spec(),
-        imu_rate=50.0,
+        imu_rate=25.0,
         vibration=0.0,
         gyro_white=factor * CONSUMER_ARW,
         accel_white=factor * CONSUMER_VRW,
