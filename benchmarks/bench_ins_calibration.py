@@ -164,7 +164,7 @@ def table(rows, seeds):
             f"| {r['platform']} | {r['factor']:g}x | {r['when']} | {r['calibrated']} | {r['nis']:.2f} | "
             f"{r['nees_all']:.2f} ({r['nees_out']:.2f}) | {100 * r['share_epochs_in_band']:.0f} % | "
             f"{100 * r['cov_all']:.1f} % ({100 * r['cov_out']:.1f} %) | {100 * r['gated']:.1f} % | "
-            f"{r['cal_s'] if r['when'] == 'after' else float('nan'):.0f} |"
+            + (f"{r['cal_s']:.0f} |" if r["when"] == "after" else "- |")
         )
     r0 = rows[0]
     out.append("")

@@ -56,6 +56,8 @@ def test_overconfident_preset_is_calibrated_to_consistency(tmp_path):
     assert c["mode"] == "auto" and c["ran"] and "outside" in c["reason"]
     lo, hi = c["nis_band_per_dof"]
     assert c["nis_before_per_dof"] > hi and lo <= c["nis_after_per_dof"] <= hi
+    # the check's open gate rejected nothing: every GNSS epoch the filter sees has its NIS
+    assert c["n_nis_epochs"] == r["gnss"]["n_epochs_used"]
     # fitted on the GNSS epochs the filter sees, never the withheld ones
     assert c["n_epochs"] == r["gnss"]["n_epochs_used"] and r["gnss"]["n_withheld"] > 40
     assert "outside the [evaluate] outages" in c["fitted_on"]
