@@ -100,3 +100,27 @@ def test_preset_that_fits_is_kept_and_few_epochs_warn(tmp_path):
     # calibrate = false: nothing runs
     d, c = calibrate_noise(prep, False)
     assert not c["ran"] and "nis_before_per_dof" not in c
+
+
+class _Called(BaseException):
+    """Raised by the stand-in for the processing (not an Exception: the command lets it through)."""
+
+
+@pytest.mark.parametrize("argv, expected", [([], None), (["--no-calibrate"], False)])
+def test_no_calibrate_option_reaches_the_run(tmp_path, monkeypatch, argv, expected):
+    """``--no-calibrate`` overrides ``[tune] calibrate`` with false; without it the config decides (None)."""
+    import jaxnav.experiments.ins_output as ins_output
+    from jaxnav.cli import main
+
+    for f in ("imu.txt", "gnss.txt"):
+        (tmp_path / f).write_text("0\n")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[imu]\nfile = "imu.txt"\nformat = "kf-gins"\n[gnss]\nfile = "gnss.txt"\nformat = "kf-gins"\n')
+
+    def process(cfg, out, *, tune=False, calibrate=None, **kw):
+        raise _Called(calibrate)
+
+    monkeypatch.setattr(ins_output, "process", process)
+    with pytest.raises(_Called) as e:
+        main(["-q", "ins", str(cfg), "--out", str(tmp_path / "o"), *argv])
+    assert e.value.args[0] is expected
