@@ -1165,9 +1165,17 @@ def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
         n_evals=tr.n_evals,
     )
     if not after["consistent"]:
+        bits = []
+        if not lo <= after["nis_per_dof"] <= hi:
+            bits.append(f"the GNSS position NIS per dof is {after['nis_per_dof']:.2f}, outside {lo:g}-{hi:g}")
+        if after["share_above_gate"] > NIS_GATE_SHARE_MAX:
+            bits.append(
+                f"{100 * after['share_above_gate']:.1f} % of the GNSS epochs are beyond the gate (at most "
+                f"{100 * NIS_GATE_SHARE_MAX:g} % for consistent noise)"
+            )
         rep["warning"] = (
-            f"after calibration the GNSS position NIS per dof is {after['nis_per_dof']:.2f}, still outside "
-            f"{NIS_BAND[0]:g}-{NIS_BAND[1]:g}: the uncertainties may be wrong (unmodelled errors?)"
+            f"after calibration {' and '.join(bits)}: the uncertainties may still be wrong (errors the "
+            "error model has no state for?)"
         )
         say(f"warning: {rep['warning']}")
     rep["wall_time_s"] = time.perf_counter() - t0
