@@ -65,10 +65,10 @@ def test_overconfident_preset_is_calibrated_to_consistency(tmp_path):
     assert c["after_display"]["arw"] > 2.0 * c["before_display"]["arw"]
     assert c["after_display"]["vrw"] > 1.2 * c["before_display"]["vrw"]
     assert c["display_units"]["arw"] == "deg/sqrt(h)" and c["before_si"]["arw"] == pytest.approx(CONSUMER_ARW)
-    # consistent: the truth inside the solution's 3 sigma (the preset alone: 84 % overall, 63 % in the
-    # outages, NEES 13.5), sigmas not inflated beyond the errors (NEES of 3 expected; a 100 % coverage
-    # of two correlated outages is no evidence of over-caution, a NEES far below 3 would be), and the
-    # gate keeps (nearly) every GNSS epoch (the preset alone: 12.5 % gated)
+    # consistent: the truth inside the solution's 3 sigma (the preset alone, calibrate = false: 82 %
+    # overall, 69 % in the outages, NEES 23 and 43), sigmas not inflated beyond the errors (NEES of 3
+    # expected; a 100 % coverage of two correlated outages is no evidence of over-caution, a NEES far
+    # below 3 would be), and the gate keeps (nearly) every GNSS epoch (the preset alone: 18 % gated)
     f = r["evaluation"]["truth"]["forward"]
     assert f["outages"]["share_pos_within_3_sigma"] >= 0.90 and f["all"]["share_pos_within_3_sigma"] >= 0.90
     assert 1.0 <= f["all"]["nees_pos_mean"] <= 6.0 and 1.0 <= f["outages"]["nees_pos_mean"] <= 9.0
