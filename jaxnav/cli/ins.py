@@ -31,6 +31,12 @@ def register(subparsers):
         "likelihood over the whole run, then rerun and report before/after",
     )
     p.add_argument(
+        "--no-calibrate",
+        action="store_true",
+        help="use the configured noise as given: no NIS check and no automatic noise calibration "
+        "(same as [tune] calibrate = false)",
+    )
+    p.add_argument(
         "--data",
         default=None,
         help=f"folder that holds the data sets (like ../shared/data; relative to the working directory); "
@@ -68,7 +74,8 @@ def check_input_files(cfg) -> None:
 
 
 def run_config(args, cfg, out, *, tune: bool = False) -> int:
-    """``jaxnav ins`` / ``jaxnav walk`` on a checked config: the stages as INFO lines, the summary on stdout."""
+    """``jaxnav ins`` / ``jaxnav walk`` on a checked config: the stages as INFO lines, the summary on stdout;
+    ``args.no_calibrate`` (``--no-calibrate``) overrides ``[tune] calibrate`` with false."""
     from jaxnav.experiments.ins_output import format_ins, process
     from jaxnav.io import files_snapshot
 
@@ -76,7 +83,8 @@ def run_config(args, cfg, out, *, tune: bool = False) -> int:
     out = prepare_out(out)
     args.out = str(out)
     begin_computation(args)
-    results = process(cfg, out, tune=tune, progress=logging.getLogger("jaxnav").info)
+    calibrate = False if getattr(args, "no_calibrate", False) else None
+    results = process(cfg, out, tune=tune, calibrate=calibrate, progress=logging.getLogger("jaxnav").info)
     print(format_ins(results))
     print(f"wrote {len(results['files'])} files into {pathlib.Path(out)}")
     return 0

@@ -94,6 +94,7 @@ RANGES = {
     "evaluate.first_s": (0.0, 1e6),
     "evaluate.gap_s": (0.1, 1e5),
     "evaluate.end_margin_s": (0.0, 1e5),
+    "tune.calibrate_steps": (1.0, 1e4),
 }
 
 
@@ -251,12 +252,17 @@ class EvaluateSection(NamedTuple):
 class TuneSection(NamedTuple):
     """[tune]: parameters tuned by ``--tune`` (names of :data:`TUNABLE`), L-BFGS evaluations (``steps``),
     gradient mode, and the loss: "innovations" (GNSS innovation likelihood over the run) or "outages"
-    (predictive likelihood of fixes withheld on training windows between the evaluation windows)."""
+    (predictive likelihood of fixes withheld on training windows between the evaluation windows).
+    ``calibrate``: the default noise self-calibration, "auto" (only when the GNSS position NIS of the
+    configured noise is outside its band), True (always) or False (never); ``calibrate_steps``: its
+    L-BFGS evaluations."""
 
     params: tuple
     steps: int
     mode: str
     loss: str = "innovations"
+    calibrate: Any = "auto"
+    calibrate_steps: int = 12
 
 
 class InsConfig(NamedTuple):
@@ -664,11 +670,17 @@ def _tune(path, d) -> TuneSection:
     ps = d.get("params", ["arw", "vrw"])
     if not isinstance(ps, list) or not ps or not all(p in TUNABLE for p in ps) or len(set(ps)) != len(ps):
         r.fail("params", f"must be a non-empty list of distinct names from {list(TUNABLE)}, got {ps!r}")
+    cal = d.get("calibrate", "auto")
+    r.used.add("calibrate")
+    if cal != "auto" and not isinstance(cal, bool):
+        r.fail("calibrate", f"must be 'auto', true or false, got {cal!r}")
     t = TuneSection(
         params=tuple(ps),
         steps=r.get("steps", int, 25, lo=1, hi=10_000),
         mode=r.get("mode", str, "reverse", choices=("reverse", "forward")),
         loss=r.get("loss", str, "innovations", choices=("innovations", "outages")),
+        calibrate=cal,
+        calibrate_steps=r.get("calibrate_steps", int, 12, lo=1, hi=10_000),
     )
     r.done()
     return t

@@ -378,10 +378,13 @@ def _odometer(prep, run) -> dict | None:
     return d
 
 
-def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) -> dict:
-    """The whole ``jaxnav ins`` job: run (and with ``tune`` tune, then rerun), write every output into ``out``.
+def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", progress=print) -> dict:
+    """The whole ``jaxnav ins`` job: calibrate the noise where needed, run (and with ``tune`` tune, then rerun),
+    write every output into ``out``.
 
-    ``progress``: a callable taking one line of text for the stages ("reading ...", "tuning ..."), or None.
+    ``calibrate``: "auto" | True | False, overriding ``[tune] calibrate`` (None: the config's;
+    :func:`jaxnav.experiments.ins_run.calibrate_noise`). ``--tune`` starts from the noise the calibration
+    leaves. ``progress``: a callable taking one line of text for the stages ("reading ...", "tuning ..."), or None.
 
     Returns:
       the ``results.json`` dict (also written), with "provenance" (:func:`jaxnav.io.provenance`: version,
@@ -389,7 +392,7 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
       written, paths relative to ``out``).
     """
     from jaxnav._status import INFO_FLAGS, describe
-    from jaxnav.experiments.ins_run import prepare, run_ins, tune_noise
+    from jaxnav.experiments.ins_run import GATED_SHARE_WARN, calibrate_noise, prepare, run_ins, tune_noise
     from jaxnav.io import provenance, write_json
 
     out = pathlib.Path(out)
@@ -399,11 +402,25 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
 
     truth = read_truth(cfg)  # before the filter: a bad reference file fails fast
     prep = prepare(cfg, progress=progress)
+    mode = cfg.tune.calibrate if calibrate is None else calibrate
+    if mode is not False:
+        say(f"checking the noise: GNSS position NIS of the configured noise without the gate (calibrate = {mode})")
+    dens, cal = calibrate_noise(prep, mode, progress=progress)
+    prep = prep._replace(densities=dens)
     say(
         f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
         f"running the filter and the smoother"
     )
     run = run_ins(prep)
+    n_used = int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1)))
+    n_gated = int(run.result.n_gated) if run.result.n_gated is not None else 0
+    gated_share = n_gated / n_used if n_used else 0.0
+    if gated_share > GATED_SHARE_WARN:
+        cal["gate_warning"] = (
+            f"the chi-square gate rejected {n_gated} of {n_used} GNSS epochs ({100 * gated_share:.1f} %, above "
+            f"{100 * GATED_SHARE_WARN:.0f} %): the noise does not explain the GNSS data"
+        )
+        say(f"warning: {cal['gate_warning']}")
     prov = provenance(config_file=cfg.path, config=cfg.raw)
     if command:
         prov["command"] = command
@@ -436,9 +453,12 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
         "gnss": {
             "file": str(cfg.gnss.file),
             "n_epochs_in_imu_span": int(prep.meas.t.size),
-            "n_epochs_used": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
+            "n_epochs_used": n_used,
             "n_withheld": int(np.count_nonzero(prep.withheld)),
+            "n_gated": n_gated,
+            "gated_share": gated_share,
         },
+        "calibration": cal,
         "constraints": _constraints(prep, run),
         "odometer": _odometer(prep, run),
         "heading": None
@@ -483,6 +503,8 @@ def process(cfg, out, *, tune: bool = False, command: str = "", progress=print) 
             "noise_after": _densities_dict(rep.densities),
             "evaluation_before": results["evaluation"],
             "evaluation_after": _evaluation(run_t.scores),
+            "n_gated_gnss_epochs_after": int(run_t.result.n_gated) if run_t.result.n_gated is not None else 0,
+            "started_from": "the calibrated noise" if cal.get("ran") else "the configured noise",
         }
         run = run_t
         results["odometer"] = _odometer(prep, run)
@@ -519,6 +541,13 @@ def _tuning(prep, results: dict) -> dict:
     off = prep.time_offset_info
     if off.get("source") == "estimate":
         fitted["time_offset"] = {"fitted_on": off["fitted_on"], "n_epochs": off["n_epochs_used"]}
+    cal = results.get("calibration") or {}
+    if cal.get("ran"):
+        fitted["noise calibration"] = {
+            "params": cal["params"],
+            "fitted_on": cal["fitted_on"],
+            "n_epochs": cal["n_epochs"],
+        }
     if "tune" in results:
         t = results["tune"]
         fitted[", ".join(t["params"])] = {"fitted_on": t["fitted_on"], "n_epochs": t["n_epochs"]}
@@ -554,9 +583,10 @@ def format_ins(results: dict) -> str:
         f"  mounting: {r['mounting']['source']}; time offset {r['time_offset_s']:+.3f} s "
         f"({_offset_note(r['time_offset'])}); initial heading {r['alignment']['heading_deg']:.1f} deg",
         f"  {r['n_states']}-state filter + RTS: status {status_words(r['status'])}, log-likelihood {r['loglik']:.1f}, "
-        f"{r['n_gated_gnss_epochs']} GNSS epochs rejected by the chi-square gate, "
-        f"{r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s",
+        f"{r['n_gated_gnss_epochs']} GNSS epochs ({100 * r['gnss'].get('gated_share', 0.0):.1f} %) rejected by "
+        f"the chi-square gate, {r['n_skipped_updates']} epochs without update, {r['runtime_s']:.1f} s",
     ]
+    lines += _calibration_lines(r.get("calibration"))
     dr = r["time_offset"].get("drift", {})
     if "drift_s_per_s" in dr:
         w = dr["windows"]
@@ -638,6 +668,28 @@ def format_ins(results: dict) -> str:
             lines.append(f"  --tune fitted on {t['n_epochs']} {t['fitted_on']}")
         ev(t["evaluation_after"], " after tuning")
     return "\n".join(lines)
+
+
+def _calibration_lines(c) -> list:
+    """Summary lines of the ``calibration`` block: what was calibrated, from which epochs, NIS before/after."""
+    if not c:
+        return []
+    if c.get("ran"):
+        u = c["display_units"]
+        vals = ", ".join(
+            f"{k} {c['before_display'][k]:.4g} -> {c['after_display'][k]:.4g}{'' if u[k] == '1' else ' ' + u[k]}"
+            for k in c["params"]
+        )
+        out = [
+            f"  noise calibrated ({c['reason']}): {vals}; fitted on {c['n_epochs']} {c['fitted_on']} "
+            f"(innovation likelihood without the gate, {c['n_evals']} evaluations, {c['wall_time_s']:.1f} s); "
+            f"GNSS position NIS per dof {c['nis_before_per_dof']:.2f} -> {c['nis_after_per_dof']:.2f}"
+        ]
+    else:
+        nis = f" (GNSS position NIS per dof {c['nis_before_per_dof']:.2f})" if "nis_before_per_dof" in c else ""
+        out = [f"  noise as configured, not calibrated: {c['reason']}{nis if 'NIS' not in c['reason'] else ''}"]
+    out += [f"  WARNING: {c[k]}" for k in ("warning", "gate_warning") if c.get(k)]
+    return out
 
 
 def _fmt(v):

@@ -946,8 +946,8 @@ def tune_noise(
         return jnp.sum(jnp.where(jnp.asarray(scored), nll, 0.0))
 
     t0 = time.perf_counter()
-    ll0 = -float(loss(p0))
     res = minimize_lbfgs(loss, p0, space, max_evals=max_evals, mode=mode)
+    ll0 = -float(np.asarray(res.losses)[0])  # the first evaluation is at the start values
     d1, lev1 = unpack(res.params)
     ll1 = -float(res.loss)
     si = {n: np.asarray(v).tolist() for n, v in p0.items()}
@@ -964,6 +964,222 @@ def tune_noise(
         fitted_on=fitted_on,
         n_epochs=n_fit,
     )
+
+
+#: band of the mean GNSS position NIS per degree of freedom inside which the noise counts as consistent
+#: (a factor 1.25 either way in innovation variance; docs/guide/ins.md "Noise self-calibration")
+NIS_BAND = (0.8, 1.25)
+#: largest share of GNSS epochs whose NIS exceeds the gate's chi-square quantile for consistent noise
+NIS_GATE_SHARE_MAX = 0.01
+#: fewest GNSS position epochs the filter must see for a noise calibration
+MIN_CALIBRATION_EPOCHS = 50
+#: gated share of the GNSS epochs above which a run warns
+GATED_SHARE_WARN = 0.05
+
+
+def position_nis(res, mask) -> np.ndarray:
+    """NIS of the GNSS position innovations per GNSS epoch: nu' S^-1 nu with the 3x3 position block.
+
+    Args:
+      res: :class:`jaxnav.ins.LCResult` saved with "innovations", "innov_covs" (rows 0-2 of each epoch's
+        stacked measurement are the GNSS position components, m).  mask: (M, 6) bool GNSS mask (PVMeasurements).
+    Returns:
+      (M,) NIS (3 degrees of freedom), NaN at the epochs whose three position components were not all used.
+    """
+    ep = res.epochs
+    row = np.asarray(ep.gnss_row)
+    g = np.nonzero(row >= 0)[0]
+    nu = np.asarray(ep.innovations, float)[g, :3]
+    S = np.asarray(ep.innov_covs, float)[g, :3, :3]
+    valid = np.asarray(mask, bool)[row[g], :3].all(-1) & np.isfinite(nu).all(-1)
+    out = np.full(np.asarray(mask).shape[0], np.nan)
+    if valid.any():
+        L = np.linalg.cholesky(S[valid])
+        w = np.linalg.solve(L, nu[valid][..., None])[..., 0]
+        out[row[g][valid]] = np.sum(w * w, -1)
+    return out
+
+
+def nis_check(prep: Prepared, d: RunNoise | None = None) -> dict:
+    """Mean GNSS position NIS per degree of freedom of the filter WITHOUT the chi-square gate.
+
+    Only the GNSS epochs the filter sees (the ``[evaluate]`` outages stay withheld). Expected 1 for a
+    consistent filter; consistent here: the mean inside :data:`NIS_BAND` and at most
+    :data:`NIS_GATE_SHARE_MAX` of the epochs beyond the gate's quantile (docs/guide/ins.md, "Noise
+    self-calibration": thousands of time-correlated epochs make the chi-square band of the mean far
+    too narrow to use, and GNSS noise dominating the innovations makes a wide band blind).
+
+    Returns:
+      dict: ``nis_per_dof`` (mean NIS / 3), ``nis_median_per_dof`` (median NIS / 2.366, the chi-square(3)
+      median; robust to outliers), ``n_epochs``, ``share_above_gate`` (NIS above the chi-square(3) quantile
+      of ``gnss.gate_probability``, or 0.9999 without a gate), ``consistent`` (bool).
+    """
+    from jaxnav.ins.integration import chi2_quantile
+
+    g = prep.cfg.gnss
+    # an open gate (probability 1: nothing rejected) where the run has a gate: the final run's compiled program
+    ungated = prep._replace(
+        cfg=prep.cfg._replace(gnss=g._replace(gate_probability=None if g.gate_probability is None else 1.0))
+    )
+    res = run_filter(ungated, d)
+    nis = position_nis(res, prep.meas.mask)
+    ok = np.isfinite(nis)
+    n = int(ok.sum())
+    thr = chi2_quantile(g.gate_probability if g.gate_probability is not None else 0.9999, 3)
+    mean = float(np.mean(nis[ok]) / 3.0) if n else float("nan")
+    return {
+        "nis_per_dof": mean,
+        "nis_median_per_dof": float(np.median(nis[ok]) / 2.366) if n else float("nan"),
+        "n_epochs": n,
+        "share_above_gate": float(np.mean(nis[ok] > thr)) if n else float("nan"),
+        "consistent": bool(n and NIS_BAND[0] <= mean <= NIS_BAND[1] and np.mean(nis[ok] > thr) <= NIS_GATE_SHARE_MAX),
+        "loglik": float(res.loglik),
+    }
+
+
+def calibration_params(cfg: InsConfig) -> tuple:
+    """The densities the default calibration fits: ARW, VRW and the GNSS position sigma factor, and the gyro
+    bias instability where the model has a state for it (``noise.states`` 18 or 21)."""
+    extra = ("gyro_bias_instability",) if cfg.noise.states in (18, 21) else ()
+    return ("arw", "vrw", "pos_sigma_scale", *extra)
+
+
+def _display(name: str, v) -> float:
+    """A tuned parameter in the unit of its config key (deg/sqrt(h), m/s/sqrt(h), deg/h, 1)."""
+    from jaxnav.units import DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR
+
+    scale = {
+        "arw": 1.0 / DEG_PER_SQRT_HOUR,
+        "vrw": math.sqrt(HOUR),
+        "gyro_bias_instability": 1.0 / DEG_PER_HOUR,
+        "pos_sigma_scale": 1.0,
+    }[name]
+    return float(v) * scale
+
+
+#: unit of each calibrated parameter in :func:`calibrate_noise`'s report (the config key's unit)
+DISPLAY_UNITS = {
+    "arw": "deg/sqrt(h)",
+    "vrw": "m/s/sqrt(h)",
+    "gyro_bias_instability": "deg/h",
+    "pos_sigma_scale": "1",
+}
+
+
+def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
+    """Self-calibration of the noise densities: NIS check of the configured noise, ML fit where it fails.
+
+    1. The filter runs with the configured noise WITHOUT the chi-square gate; the mean NIS per degree of
+       freedom of its GNSS position innovations (:func:`nis_check`, the epochs the filter sees) is
+       compared with :data:`NIS_BAND`.
+    2. ``mode`` "auto": inside the band the configured noise is kept (one extra forward run). Outside it
+       (or ``mode`` True), :func:`tune_noise` with the innovations loss fits :func:`calibration_params`
+       (L-BFGS, forward-mode gradients, ``[tune] calibrate_steps`` evaluations) on the same epochs, ungated: the ``[evaluate]``
+       outages stay withheld. False: nothing runs.
+    3. Fewer than :data:`MIN_CALIBRATION_EPOCHS` GNSS position epochs: the configured noise is kept and
+       the measured NIS reported with a warning.
+
+    Args:
+      prep: :class:`Prepared`.  mode: "auto" | True | False (default ``[tune] calibrate``).
+      progress: callable for one line of text (stages and warnings), or None.
+    Returns:
+      (:class:`RunNoise` to run with, report dict for ``results.json`` ``calibration``: mode, ran, reason,
+      NIS per dof before (and after), parameters before/after in SI and display units, the epochs fitted
+      on and their number, evaluations, wall time, warning).
+    """
+    say = progress or (lambda *_: None)
+    cfg = prep.cfg
+    mode = cfg.tune.calibrate if mode is None else mode
+    t0 = time.perf_counter()
+    rep: dict = {
+        "mode": mode,
+        "ran": False,
+        "nis_band_per_dof": list(NIS_BAND),
+        "nis_gate_share_max": NIS_GATE_SHARE_MAX,
+    }
+    if mode is False:
+        rep["reason"] = "calibrate = false: the configured noise is used as given"
+        return prep.densities, rep
+    before = nis_check(prep)
+    n = before["n_epochs"]
+    rep.update(
+        nis_before_per_dof=before["nis_per_dof"],
+        nis_median_before_per_dof=before["nis_median_per_dof"],
+        n_nis_epochs=n,
+        share_above_gate_before=before["share_above_gate"],
+        min_epochs=MIN_CALIBRATION_EPOCHS,
+    )
+    where = "GNSS position epochs the filter sees" + (
+        ", outside the [evaluate] outages" if np.asarray(prep.withheld).any() else ""
+    )
+    if n < MIN_CALIBRATION_EPOCHS:
+        rep["reason"] = (
+            f"too few GNSS epochs to calibrate ({n} < {MIN_CALIBRATION_EPOCHS}): the configured noise is kept"
+        )
+        rep["warning"] = (
+            f"only {n} GNSS position epochs, too few to check or calibrate the noise: GNSS position NIS per dof "
+            f"{before['nis_per_dof']:.2f} (consistent: {NIS_BAND[0]:g}-{NIS_BAND[1]:g}); the configured noise is "
+            "used, its uncertainties unchecked"
+        )
+        say(f"warning: {rep['warning']}")
+        rep["wall_time_s"] = time.perf_counter() - t0
+        return prep.densities, rep
+    lo, hi = NIS_BAND
+    why = (
+        f"GNSS position NIS per dof {before['nis_per_dof']:.2f} inside {lo:g}-{hi:g}"
+        if lo <= before["nis_per_dof"] <= hi
+        else f"GNSS position NIS per dof {before['nis_per_dof']:.2f} outside {lo:g}-{hi:g}"
+    )
+    if before["share_above_gate"] > NIS_GATE_SHARE_MAX:
+        why += f", {100 * before['share_above_gate']:.1f} % of the epochs beyond the gate"
+    if mode == "auto" and before["consistent"]:
+        rep["reason"] = f"{why}: the configured noise is consistent and kept"
+        rep["wall_time_s"] = time.perf_counter() - t0
+        return prep.densities, rep
+    names = calibration_params(cfg)
+    rep["reason"] = f"calibrate = true; {why}" if mode is True else why
+    say(
+        f"calibrating {', '.join(names)} ({rep['reason']}): innovation likelihood on {n} {where}, ungated, "
+        f"L-BFGS {cfg.tune.calibrate_steps} evaluations"
+    )
+    ungated = prep._replace(cfg=cfg._replace(gnss=cfg.gnss._replace(gate_probability=None)))
+    # forward mode: 3-4 parameters cost 3-4 tangents, cheaper than reverse mode's tape (about 2x per evaluation)
+    tr = tune_noise(ungated, names, max_evals=cfg.tune.calibrate_steps, mode="forward", loss_kind="innovations")
+    after = nis_check(prep, tr.densities)
+    rep.update(
+        ran=True,
+        params=list(names),
+        loss="innovations (GNSS innovation log-likelihood of the forward filter, no gate)",
+        before_si={k: float(v) for k, v in tr.before.items()},
+        after_si={k: float(v) for k, v in tr.after.items()},
+        before_display={k: _display(k, v) for k, v in tr.before.items()},
+        after_display={k: _display(k, v) for k, v in tr.after.items()},
+        display_units={k: DISPLAY_UNITS[k] for k in names},
+        loglik_before=tr.loglik_before,
+        loglik_after=tr.loglik_after,
+        nis_after_per_dof=after["nis_per_dof"],
+        nis_median_after_per_dof=after["nis_median_per_dof"],
+        share_above_gate_after=after["share_above_gate"],
+        fitted_on=where,
+        n_epochs=tr.n_epochs,
+        n_evals=tr.n_evals,
+    )
+    if not after["consistent"]:
+        bits = []
+        if not lo <= after["nis_per_dof"] <= hi:
+            bits.append(f"the GNSS position NIS per dof is {after['nis_per_dof']:.2f}, outside {lo:g}-{hi:g}")
+        if after["share_above_gate"] > NIS_GATE_SHARE_MAX:
+            bits.append(
+                f"{100 * after['share_above_gate']:.1f} % of the GNSS epochs are beyond the gate (at most "
+                f"{100 * NIS_GATE_SHARE_MAX:g} % for consistent noise)"
+            )
+        rep["warning"] = (
+            f"after calibration {' and '.join(bits)}: the uncertainties may still be wrong (errors the "
+            "error model has no state for?)"
+        )
+        say(f"warning: {rep['warning']}")
+    rep["wall_time_s"] = time.perf_counter() - t0
+    return tr.densities, rep
 
 
 def _mask_without_outages(prep: Prepared):

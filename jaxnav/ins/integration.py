@@ -374,7 +374,8 @@ class LCGate(NamedTuple):
     masked, the epoch's aids kept, it is counted in ``n_gated`` and flagged GNSS_GATED.
 
     Attributes:
-      prob: probability in (0, 1).
+      prob: probability in (0, 1); 1.0: an open gate that rejects nothing (the same compiled program as
+        a gated run, for an ungated run that shares its compilation).
       max_run: after this many consecutive rejected GNSS epochs the next one is accepted whatever its
         NIS (re-acquisition: a gate alone locks a filter out for good once it has drifted, e.g. after
         a poor initial heading or a long outage); int >= 1.
@@ -1158,7 +1159,10 @@ def loosely_coupled(
         raise ValueError(f"save imu_every={save.imu_every} must divide the samples per epoch interval ({seg.K})")
     thresholds = None
     if gate is not None:
-        thresholds = jnp.asarray([np.inf] + [chi2_quantile(float(gate.prob), k) for k in range(1, 7)])
+        open_ = float(gate.prob) == 1.0  # a gate that rejects nothing: the gated run's program, no epoch gated
+        thresholds = jnp.asarray(
+            [np.inf] + [np.inf if open_ else chi2_quantile(float(gate.prob), k) for k in range(1, 7)]
+        )
     dtype = jnp.asarray(nav0.v_n).dtype
     dt_all = jnp.broadcast_to(jnp.asarray(dt_imu, dtype), (N,))
     # the IMU samples of every epoch interval, (M, K, ...); padded samples get dt = 1 and are skipped by ``use``

@@ -55,6 +55,44 @@ def car_spec():
     return sim.TrajectorySpec(lat=r(40.1), lon=r(-105.2), h=1600.0, heading=r(30.0), speed=0.0, segments=segs)
 
 
+def short_car_spec():
+    """A 110 s drive: 16 s standing, then accelerations and turns both ways at up to 12 m/s (no stop)."""
+    S = sim.Segment
+    r = math.radians
+    segs = (
+        S("rest", duration=16.0),
+        S("accelerate", duration=6.0, dspeed=12.0),
+        S("cruise", hold=8.0),
+        S("turn", duration=6.0, dheading=r(90.0)),
+        S("cruise", hold=10.0),
+        S("turn", duration=6.0, dheading=r(-60.0)),
+        S("cruise", hold=8.0),
+        S("turn", duration=8.0, dheading=r(-120.0)),
+        S("cruise", hold=12.0),
+        S("turn", duration=6.0, dheading=r(75.0)),
+        S("cruise", hold=24.0),
+    )
+    return sim.TrajectorySpec(lat=r(40.1), lon=r(-105.2), h=1600.0, heading=r(30.0), speed=0.0, segments=segs)
+
+
+def walk_spec():
+    """A 120 s walk at 1.4 m/s: 16 s standing, then straight legs joined by turns both ways (no stop)."""
+    S = sim.Segment
+    r = math.radians
+    segs = (
+        S("rest", duration=16.0),
+        S("accelerate", duration=2.0, dspeed=1.4),
+        S("cruise", hold=14.0),
+        S("turn", duration=5.0, dheading=r(90.0)),
+        S("cruise", hold=20.0),
+        S("turn", duration=4.0, dheading=r(-90.0)),
+        S("cruise", hold=15.0),
+        S("turn", duration=6.0, dheading=r(180.0)),
+        S("cruise", hold=38.0),
+    )
+    return sim.TrajectorySpec(lat=r(40.1), lon=r(-105.2), h=1600.0, heading=r(30.0), speed=0.0, segments=segs)
+
+
 def write_car(
     folder,
     *,
@@ -69,15 +107,21 @@ def write_car(
     vibration=1.0,
     spec=None,
     imu_start_s=0.0,
+    gyro_white=math.radians(0.15) / 60,
+    accel_white=0.04 / 60,
+    gyro_bias=math.radians(5.0) / 3600,
+    accel_bias=2e-3 * 9.81,
 ) -> Recording:
     """Simulate the car (industrial-grade IMU errors, RTK-level GNSS) and write ``imu.txt`` / ``gnss.txt``;
     ``vibration`` scales the engine and road vibration while moving (0: a perfectly smooth road);
     ``spec``: another :class:`jaxnav.sim.TrajectorySpec` (default :func:`car_spec`);
-    ``imu_start_s``: the IMU log starts at this true time, s (GNSS starts at 1 s)."""
+    ``imu_start_s``: the IMU log starts at this true time, s (GNSS starts at 1 s); ``gyro_white`` rad/sqrt(s),
+    ``accel_white`` m/s/sqrt(s): the sensors' white noise densities (ARW, VRW), ``gyro_bias`` rad/s,
+    ``accel_bias`` m/s^2: the 1-sigma of their constant biases."""
     truth = sim.generate_trajectory(car_spec() if spec is None else spec, imu_rate_hz=imu_rate)
     dt = float(truth.dt)
-    model_g = sim.SensorErrorModel(bias_sigma=math.radians(5.0) / 3600, white=math.radians(0.15) / 60)
-    model_a = sim.SensorErrorModel(bias_sigma=2e-3 * 9.81, white=0.04 / 60)
+    model_g = sim.SensorErrorModel(bias_sigma=gyro_bias, white=gyro_white)
+    model_a = sim.SensorErrorModel(bias_sigma=accel_bias, white=accel_white)
     kg, ka, kn = jax.random.split(jax.random.PRNGKey(seed), 3)
     dth = np.array(sim.corrupt_increments(kg, truth.dtheta, dt, model_g)[0])
     dv = np.array(sim.corrupt_increments(ka, truth.dv, dt, model_a)[0])
@@ -140,9 +184,31 @@ def write_car(
     return Recording(imu_file=imu_file, gnss_file=gnss_file, truth=truth, t_gnss=tg, tag_error_s=tag_error_s)
 
 
-def car_config(rec: Recording, folder, *, time_offset="estimate", states=15, extra="", evaluate_extra="") -> str:
+def car_config(
+    rec: Recording,
+    folder,
+    *,
+    time_offset="estimate",
+    states=15,
+    extra="",
+    evaluate_extra="",
+    noise=None,
+    tune=None,
+    evaluate="first_s = 60.0\noutage_s = 20.0\ngap_s = 40.0\nend_margin_s = 10.0",
+    min_speed=3.0,
+) -> str:
     """A ``jaxnav ins`` TOML for the recording (paths relative to ``folder``); ``evaluate_extra``: more
-    ``[evaluate]`` keys (e.g. a reference trajectory), ``extra``: further sections."""
+    ``[evaluate]`` keys (e.g. a reference trajectory), ``extra``: further sections; ``noise``: the
+    ``[noise]`` keys instead of the industrial grade's with the simulated densities; ``tune``: the
+    ``[tune]`` keys (default ``calibrate = false``: these runs test other things than calibration);
+    ``evaluate``: the outage keys of ``[evaluate]``; ``min_speed``: ``alignment.min_speed_m_s``."""
+    if noise is None:
+        noise = (
+            'grade = "industrial"\narw_deg_per_sqrt_h = 0.15\nvrw_m_per_s_per_sqrt_h = 0.04\n'
+            "init_gyro_bias_deg_per_s = 0.01\ninit_accel_bias_mg = 5.0\ninit_attitude_deg = [1.0, 5.0]"
+        )
+    if tune is None:
+        tune = "calibrate = false"
     text = f"""
 [run]
 name = "simulated car"
@@ -164,25 +230,20 @@ pos_sigma_floor_m = 0.02
 vel_sigma_floor_m_s = 0.03
 
 [noise]
-grade = "industrial"
 states = {states}
-arw_deg_per_sqrt_h = 0.15
-vrw_m_per_s_per_sqrt_h = 0.04
-init_gyro_bias_deg_per_s = 0.01
-init_accel_bias_mg = 5.0
-init_attitude_deg = [1.0, 5.0]
+{noise}
 
 [alignment]
 static_s = 15.0
 heading = "gnss"
-min_speed_m_s = 3.0
+min_speed_m_s = {min_speed}
 
 [evaluate]
-first_s = 60.0
-outage_s = 20.0
-gap_s = 40.0
-end_margin_s = 10.0
+{evaluate}
 {evaluate_extra}
+
+[tune]
+{tune}
 {extra}
 """
     p = folder / "car.toml"

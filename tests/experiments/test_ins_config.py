@@ -56,6 +56,8 @@ BAD = [
     (BASE.replace('grade = "consumer"', "states = 15"), "noise.grade is required unless"),
     (BASE.replace('grade = "consumer"', 'grade = "consumer"\nstates = 16'), "noise.states must be one of"),
     (BASE + "[tune]\nparams = ['arw', 'b']\n", "tune.params must be a non-empty list"),
+    (BASE + "[tune]\ncalibrate = 'yes'\n", "tune.calibrate must be 'auto', true or false"),
+    (BASE + "[tune]\ncalibrate_steps = 0\n", "tune.calibrate_steps"),
     (BASE + "[constraints]\nzupt = true\n", "constraints.zupt must be 'auto' or false"),
     (BASE + "[alignment]\nheading = 'north'\n", "alignment.heading must be"),
     (BASE.replace('file = "imu.csv"', 'file = "${JAXNAV_NOT_SET_HERE}/imu.csv"'), "JAXNAV_NOT_SET_HERE"),
@@ -123,3 +125,11 @@ def test_walk_config_reproduces_the_walk_mounting(monkeypatch):
     np.testing.assert_allclose(sensor_to_body(cfg.imu.mounting), WALK_SENSOR_TO_BODY, atol=1e-12)
     np.testing.assert_allclose(C_RFU_FRD @ cfg.gnss.lever_arm_frd, WALK_LEVER_RFU, atol=1e-12)
     assert cfg.evaluate is not None and cfg.evaluate.outage_s == 15.0
+
+
+def test_calibrate_default_and_keys(tmp_path):
+    """``[tune] calibrate`` is "auto" unless given; true, false and ``calibrate_steps`` are read as given."""
+    assert load_ins_config(_write(tmp_path, BASE)).tune.calibrate == "auto"
+    t = load_ins_config(_write(tmp_path, BASE + "[tune]\ncalibrate = false\ncalibrate_steps = 5\n", "f.toml")).tune
+    assert t.calibrate is False and t.calibrate_steps == 5
+    assert load_ins_config(_write(tmp_path, BASE + "[tune]\ncalibrate = true\n", "t.toml")).tune.calibrate is True
