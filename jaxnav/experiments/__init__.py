@@ -39,7 +39,6 @@ from jaxnav.experiments.s0 import (
     S0_LOSSES,
     S0_PARAMS,
     S0Setup,
-    cut_timeline,
     filter_params,
     format_s0,
     inflated_states,
@@ -51,6 +50,7 @@ from jaxnav.experiments.s0 import (
     s0_rule,
     scenario,
 )
+from jaxnav.sim import cut_timeline  # also here: the INS guide's short S0 runs import it from experiments
 from jaxnav.experiments.s1 import (
     S1_PUBLISHED,
     S1Settings,

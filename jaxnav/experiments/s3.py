@@ -53,19 +53,19 @@ _AR2_PHI = (0.6, -0.3)
 def grade_params(scn, pipe: dict):
     """S3 pipeline parameters (:class:`jaxnav.survey.CadastralParams`, SI) from a scenario's IMU grade and the
     config's [pipeline] table (outlier_k, lowpass_hz, velocity/position/ZUPT sigmas)."""
-    g, a, ie = scn.grade.gyro, scn.grade.accel, scn.grade.initial_errors
+    nz, ie = scn.grade.noise, scn.grade.initial_errors
     pre = PreprocessParams(
         k_gyro=float(pipe.get("outlier_k", 6.0)),
         k_accel=float(pipe.get("outlier_k", 6.0)),
         cutoff_hz=float(pipe.get("lowpass_hz", 20.0)),
     )
     return cadastral_params(
-        gyro_bias=g.bias_sigma,
-        gyro_markov=g.markov_sigma,
-        gyro_tau=g.markov_tau,
-        gyro_arw=g.white,
-        accel_bias=a.bias_sigma,
-        accel_vrw=a.white,
+        gyro_bias=nz.gyro_bias_initial,
+        gyro_markov=nz.gyro_bias_instability,
+        gyro_tau=nz.gyro_bias_tau,
+        gyro_arw=nz.gyro_arw,
+        accel_bias=nz.accel_bias_initial,
+        accel_vrw=nz.accel_vrw,
         attitude_sigma=tuple(max(x, 1e-6) for x in ie.attitude),
         velocity_sigma=float(pipe.get("velocity_sigma0_mps", 0.01)),
         position_sigma=float(pipe.get("position_sigma0_m", 0.005)),
@@ -79,8 +79,8 @@ def detector_params_for(scn):
     std at the IMU rate (m/s^2, rad/s; floored at 0.005, 5e-4); threshold 10
     (a static window averages ~5: 6 degrees of freedom less the 3 of the estimated mean force)."""
     fs = scn.imu_rate_hz
-    sa = max(max(scn.grade.accel.white) * math.sqrt(fs), 0.005)
-    sg = max(max(scn.grade.gyro.white) * math.sqrt(fs), 5e-4)
+    sa = max(max(scn.grade.noise.accel_vrw) * math.sqrt(fs), 0.005)
+    sg = max(max(scn.grade.noise.gyro_arw) * math.sqrt(fs), 5e-4)
     return DetectorParams(sigma_a=sa, sigma_g=sg, threshold=10.0)
 
 
