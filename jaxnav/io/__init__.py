@@ -29,7 +29,16 @@ from jaxnav.io._solution_files import (
     write_pos,
     write_trajectory_csv,
 )
-from jaxnav.io._steps_file import STEP_KINDS, KnownStep, date_to_epoch, parse_postseismic, read_steps_file
+from jaxnav.io._station_record import station_fit_record
+from jaxnav.io._steps_file import (
+    STEP_KINDS,
+    KnownStep,
+    date_to_epoch,
+    explicit_step,
+    merge_known_steps,
+    parse_postseismic,
+    read_steps_file,
+)
 from jaxnav.io._stop_list import read_stop_list, write_stop_list
 from jaxnav.io._survey_files import (
     ControlPoints,
@@ -43,6 +52,7 @@ from jaxnav.io._survey_files import (
     write_levelling,
 )
 from jaxnav.io._truth import TruthTrajectory, read_csv_truth, read_kfgins_truth
+from jaxnav.io._velocity_table import write_velocity_table
 
 __all__ = [
     "GPS_EPOCH",
@@ -91,6 +101,10 @@ __all__ = [
     "date_to_epoch",
     "parse_postseismic",
     "read_steps_file",
+    "explicit_step",
+    "merge_known_steps",
+    "write_velocity_table",
+    "station_fit_record",
 ]
 __all__ += [
     "TRAJECTORY_COLUMNS",
