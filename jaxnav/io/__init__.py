@@ -17,6 +17,7 @@ from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, r
 from jaxnav.io._json import json_ready, write_json
 from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
 from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
+from jaxnav.io._rtk_epochs import read_rtk_epochs
 from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
 from jaxnav.io._rtklib import GPS_EPOCH, PosSolution, read_pos
 from jaxnav.io._solution_files import (
@@ -105,6 +106,7 @@ __all__ = [
     "merge_known_steps",
     "write_velocity_table",
     "station_fit_record",
+    "read_rtk_epochs",
 ]
 __all__ += [
     "TRAJECTORY_COLUMNS",

@@ -72,6 +72,7 @@ from jaxnav.survey.rtk import (
     pack_points,
     point_sigmas,
     process_points,
+    sampling_grid,
     windows_from_pos,
 )
 
@@ -92,6 +93,7 @@ __all__ = [
     "motion_segments",
     "pack_points",
     "point_sigmas",
+    "sampling_grid",
     "process_points",
     "windows_from_pos",
     "cadastral",
