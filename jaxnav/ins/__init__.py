@@ -98,6 +98,7 @@ from jaxnav.ins.mechanization import (
 )
 from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU body)
     C_RFU_FRD,
+    gyro_course_rate_correlation,
     mounting_from_dcm,
     mounting_from_groves,
     mounting_from_groves_deg,
@@ -202,6 +203,7 @@ __all__ = [
     "mounting_from_rpy_deg",
     "mounting_to_rpy",
     "sensor_to_body",
+    "gyro_course_rate_correlation",
     "NOISE_GRADES",
     "ImuNoise",
     "AllanFit",
