@@ -29,6 +29,7 @@ from jaxnav.survey import (
     ar_kalman,
     cadastral_params,
     detect_stops,
+    detection_scores,
     fit_ar,
     match_stops,
     plan_survey,
@@ -369,23 +370,7 @@ def run_cadastral(
         # stop detection on the simulated data
         t_imu = truth.t_imu
         true_spans = np.stack([truth.stops.t_start, truth.stops.t_end], 1)
-        scores = []
-        for i in range(seeds):
-            sp = static_spans(res["static"][i], t_imu, min_duration=2.0, min_gap=0.5)
-            scores.append(match_stops(sp, true_spans, t=t_imu, static=res["static"][i]))
-        det = {
-            "precision_mean": float(np.mean([s.precision for s in scores])),
-            "recall_mean": float(np.mean([s.recall for s in scores])),
-            "precision_min": float(np.min([s.precision for s in scores])),
-            "recall_min": float(np.min([s.recall for s in scores])),
-            "sample_precision_mean": float(np.mean([s.sample_precision for s in scores])),
-            "sample_recall_mean": float(np.mean([s.sample_recall for s in scores])),
-            "boundary_error_s_mean_abs": float(
-                np.mean(np.abs(np.concatenate([np.concatenate([s.start_error, s.end_error]) for s in scores])))
-            ),
-            "n_true_stops": len(true_spans),
-            "threshold": float(mc["detector"].threshold),
-        }
+        det = {**detection_scores(res["static"], t_imu, true_spans), "threshold": float(mc["detector"].threshold)}
         a, c = summ["forward"], summ["fused"]
         check = {
             "fused_over_forward_h": c["rms_h"] / a["rms_h"],
