@@ -13,8 +13,12 @@ def write_velocity_table(path, records: dict, *, command: str = "") -> pathlib.P
     """``velocities.csv``: one row per station (coordinates, model and MIDAS rates with sigmas, noise, span).
 
     Args:
-      path: output file.  records: {station: :func:`jaxnav.experiments.velocities.station_record` dict with latitude_deg, longitude_deg}.
+      path: output file.
+      records: {station: :func:`jaxnav.io.station_fit_record` dict with ``latitude_deg``, ``longitude_deg``
+        (deg or None), ``first_day`` and ``last_day`` (ISO dates) added}.
       command: the command line, for the header.
+    Returns:
+      The path written.
     """
     cols = [
         "station",
