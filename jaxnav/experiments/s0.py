@@ -356,18 +356,11 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
     table = {}
     for name in FILTERS:
         r = rms[name]
+        parts = dict(pos_rms_m=r[:, :3], vel_rms_mps=r[:, 3:6], att_rms_rad=r[:, 6:])
         table[name] = dict(
-            per_seed=dict(pos_rms_m=r[:, :3].tolist(), vel_rms_mps=r[:, 3:6].tolist(), att_rms_rad=r[:, 6:].tolist()),
-            mean=dict(
-                pos_rms_m=r[:, :3].mean(0).tolist(),
-                vel_rms_mps=r[:, 3:6].mean(0).tolist(),
-                att_rms_rad=r[:, 6:].mean(0).tolist(),
-            ),
-            std=dict(
-                pos_rms_m=r[:, :3].std(0).tolist(),
-                vel_rms_mps=r[:, 3:6].std(0).tolist(),
-                att_rms_rad=r[:, 6:].std(0).tolist(),
-            ),
+            per_seed={k: v.tolist() for k, v in parts.items()},
+            mean={k: v.mean(0).tolist() for k, v in parts.items()},
+            std={k: v.std(0).tolist() for k, v in parts.items()},
             mean_pos_rms_m=float(r[:, :3].mean()),
             published=dict(pos_rms_m=pub[name][:3], vel_rms_mps=pub[name][3:]),
         )
