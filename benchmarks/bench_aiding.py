@@ -100,25 +100,25 @@ def _setup(duration):
         lever=np.zeros((M, 3)),
     )
     v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
-    g, a = cfg.gyro, cfg.accel
+    nz = cfg.noise
     kw = dict(
         att=v3(cfg.initial_errors.attitude),
         vel=0.1,
         pos_enu=1.0,
-        gyro_bias=v3(g.bias_sigma),
-        accel_bias=v3(a.bias_sigma),
+        gyro_bias=v3(nz.gyro_bias_initial),
+        accel_bias=v3(nz.accel_bias_initial),
     )
     p15 = LCParams(
         P0=ins.ERROR_MODEL_15.P0(truth.pos[0], **kw),
-        Qc=ins.ERROR_MODEL_15.Qc(ins.ImuNoise(gyro_arw=v3(g.white), accel_vrw=v3(a.white))),
+        Qc=ins.ERROR_MODEL_15.Qc(ins.ImuNoise(gyro_arw=v3(nz.gyro_arw), accel_vrw=v3(nz.accel_vrw))),
         tau_markov=300.0,
     )
     noise21 = ins.ImuNoise(
-        gyro_arw=v3(g.white),
-        accel_vrw=v3(a.white),
-        gyro_bias_instability=v3(g.bias_sigma) * 0.1,
+        gyro_arw=v3(nz.gyro_arw),
+        accel_vrw=v3(nz.accel_vrw),
+        gyro_bias_instability=v3(nz.gyro_bias_initial) * 0.1,
         gyro_bias_tau=3600.0,
-        accel_bias_instability=v3(a.bias_sigma) * 0.1,
+        accel_bias_instability=v3(nz.accel_bias_initial) * 0.1,
         accel_bias_tau=3600.0,
     )
     p21 = LCParams(

@@ -153,16 +153,16 @@ class PyinsCase:
             name=t[0],
         )
         cfg = S.cfg
-        ie, g, a = cfg.initial_errors, cfg.gyro, cfg.accel
+        ie, nz = cfg.initial_errors, cfg.noise
         self.sd = dict(
             position_sd=float(np.mean(v3(ie.position))),
             velocity_sd=float(np.mean(v3(ie.velocity))),
             level_sd=float(np.mean(v3(ie.attitude))) / DEG,
             azimuth_sd=float(v3(ie.attitude)[2]) / DEG,
         )
-        gb, gm, gt = v3(g.bias_sigma), v3(g.markov_sigma), v3(g.markov_tau)
-        self.gyro_kw = dict(bias_sd=np.sqrt(gb**2 + gm**2), noise=v3(g.white), bias_walk=np.sqrt(2 * gm**2 / gt))
-        self.accel_kw = dict(bias_sd=v3(a.bias_sigma), noise=v3(a.white))
+        gb, gm, gt = v3(nz.gyro_bias_initial), v3(nz.gyro_bias_instability), v3(nz.gyro_bias_tau)
+        self.gyro_kw = dict(bias_sd=np.sqrt(gb**2 + gm**2), noise=v3(nz.gyro_arw), bias_walk=np.sqrt(2 * gm**2 / gt))
+        self.accel_kw = dict(bias_sd=v3(nz.accel_bias_initial), noise=v3(nz.accel_vrw))
         self.pos_sd, self.vel_sd = float(np.mean(v3(cfg.gnss.pos_sigma))), float(np.mean(v3(cfg.gnss.vel_sigma)))
 
     def run(self):

@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     e0 = np.asarray(dv[0, :1000] - tr.dv[:1000])
     e1 = np.asarray(dv[1, :1000] - tr.dv[:1000])
     resid = np.asarray(jnp.mean(dv[:, 5000:5100] - tr.dv[5000:5100], axis=0))
-    bound = 6 * math.hypot(cfg.accel.white[0] * math.sqrt(0.01), 0.1 * units.MG * 0.01) / math.sqrt(B)
+    bound = 6 * math.hypot(cfg.noise.accel_vrw[0] * math.sqrt(0.01), 0.1 * units.MG * 0.01) / math.sqrt(B)
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
     print(f"B = {B} keys x {n} samples x 3: output {dv.nbytes / 1e9:.2f} GB")
     print(f"compile {t1 - t0:.1f} s, run {t2 - t1:.1f} s, peak RSS {peak_gb:.2f} GB, load {loadavg()[0]:.1f}")

@@ -39,7 +39,6 @@ from jaxnav.experiments.s0 import (
     S0_LOSSES,
     S0_PARAMS,
     S0Setup,
-    cut_timeline,
     filter_params,
     format_s0,
     inflated_states,
@@ -72,7 +71,7 @@ from jaxnav.experiments.s3 import (
     walk_detection,
 )
 from jaxnav.experiments.tuning import CONFIGS, Problem, format_sweep, format_tune, load_config, run_sweep, run_tune
-from jaxnav.experiments.velocities import run_monitor_velocities, station_record
+from jaxnav.experiments.velocities import run_monitor_velocities
 from jaxnav.experiments.walk import (
     WALK_LEVER_RFU,
     WALK_SENSOR_TO_BODY,
@@ -84,6 +83,7 @@ from jaxnav.experiments.walk import (
     walk_config,
     write_walk_scores,
 )
+from jaxnav.sim import cut_timeline  # also here: the INS guide's short S0 runs import it from experiments
 
 __all__ = [
     "CONFIGS",
@@ -111,7 +111,6 @@ __all__ = [
     "run_monitor_files",
     "run_monitor_simulation",
     "run_monitor_velocities",
-    "station_record",
     "run_s0",
     "run_s1_simulation",
     "run_sweep",

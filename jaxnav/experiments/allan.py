@@ -14,13 +14,16 @@ import pathlib
 import numpy as np
 
 from jaxnav import units
-from jaxnav.experiments.ins_config import GRADES, IMU_FORMATS, RANGES
-from jaxnav.ins import allan_noise_fit, imu_noise_from_allan, noise_preset, uniform_rates
+from jaxnav.experiments.ins_config import IMU_FORMATS, RANGES
+from jaxnav.ins import (
+    allan_fit_datasheet,
+    allan_noise_fit,
+    imu_noise_from_allan,
+    nearest_grade,
+    static_check,
+    uniform_rates,
+)
 from jaxnav.io import read_csv_imu, read_kfgins_imu, read_rtklib_imu, write_json
-
-#: the largest deviation from standstill accepted: |mean specific force| within this of g (m/s^2) and
-#: the rms of the gyro about its mean (rad/s) and of the accelerometers about theirs (m/s^2)
-STATIC_LIMITS = {"gravity_m_s2": 1.0, "gyro_rms_rad_s": 0.05, "accel_rms_m_s2": 0.5}
 
 
 def read_imu(path, fmt: str, *, tag=None, columns=None, units_map=None, delimiter=",", gps_week=None):
@@ -35,54 +38,6 @@ def read_imu(path, fmt: str, *, tag=None, columns=None, units_map=None, delimite
     if not columns:
         raise ValueError("format csv needs a column map (--columns t=0,gx=1,...)")
     return read_csv_imu(path, columns, units_map, delimiter=delimiter)
-
-
-def _nearest_grade(arw):
-    """The preset grade whose ARW is nearest (in log) to ``arw`` rad/sqrt(s)."""
-    return min(GRADES, key=lambda g: abs(math.log(max(arw, 1e-30) / float(noise_preset(g).gyro_arw))))
-
-
-def _edge(fit, sensor):
-    """Per-axis values of an :class:`jaxnav.ins.AllanFit` in datasheet units (lists; unit in each key)."""
-    if sensor == "gyro":
-        conv = (
-            units.rad_per_sqrt_s_to_deg_per_sqrt_hour,
-            units.rad_per_s_to_deg_per_hour,
-            units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour,
-        )
-        heads = ("arw", "bias_instability", "rate_rw")
-        tails = ("_deg_per_sqrt_h", "_deg_per_h", "_deg_per_h_per_sqrt_h")
-        dev = ("adev", "_deg_per_h", units.rad_per_s_to_deg_per_hour)
-    else:
-        conv = (units.mps_per_sqrt_s_to_mps_per_sqrt_hour, units.mps2_to_mg, units.mps2_per_sqrt_s_to_mg_per_sqrt_hour)
-        heads = ("vrw", "bias_instability", "rate_rw")
-        tails = ("_m_per_s_per_sqrt_h", "_mg", "_mg_per_sqrt_h")
-        dev = ("adev", "_mg", units.mps2_to_mg)
-    lst = lambda a: [float(v) for v in np.asarray(a, float).reshape(-1)]  # noqa: E731
-    out = {}
-    for j, (c, h, t, v, s) in enumerate(
-        zip(
-            conv,
-            heads,
-            tails,
-            (fit.white, fit.bias_instability, fit.rate_rw),
-            (fit.white_sigma, fit.bias_instability_sigma, fit.rate_rw_sigma),
-        )
-    ):
-        out[h + t] = lst(c(np.asarray(v)))
-        out[h + "_sigma" + t] = lst(c(np.asarray(s)))
-        out[h + "_upper_2sigma" + t] = lst(c(np.asarray(fit.upper)[..., j]))
-    out["resolved_white_bi_rrw"] = [[bool(x) for x in r] for r in np.asarray(fit.resolved)]
-    out["tau_floor_s"] = lst(fit.tau_floor)
-    out["fit_chi2_per_dof"] = lst(fit.chi2)
-    out["tau_s"] = lst(fit.taus)
-    av = np.asarray(fit.avar)
-    out[dev[0] + dev[1]] = [lst(dev[2](np.sqrt(a))) for a in av]
-    out[dev[0] + "_sigma" + dev[1]] = [
-        lst(dev[2](s / (2.0 * np.sqrt(np.maximum(a, 1e-300))))) for a, s in zip(av, np.asarray(fit.avar_sigma))
-    ]
-    out["fitted"] = [bool(x) for x in fit.fitted]
-    return out
 
 
 #: a recording shorter than this (s) is warned about in the TOML: its bias terms are bounds at short taus
@@ -135,7 +90,7 @@ def noise_toml(gyro, accel, *, source: str) -> str:
         ]
     lines += [
         "[noise]",
-        f'grade = "{_nearest_grade(float(n.gyro_arw))}"  # nearest preset in ARW: turn-on bias and scale-factor '
+        f'grade = "{nearest_grade(n.gyro_arw)}"  # nearest preset in ARW: turn-on bias and scale-factor '
         "sigmas (not measurable from a static recording)",
     ]
     for key, v, what in vals:
@@ -148,20 +103,6 @@ def noise_toml(gyro, accel, *, source: str) -> str:
         else:
             lines.append(f"# {key} = {v:.4g}  # {what}; outside the config's range [{lo:g}, {hi:g}], left to the grade")
     return "\n".join(lines) + "\n"
-
-
-def check_static(imu, limits=STATIC_LIMITS):
-    """None if the log looks static (``STATIC_LIMITS``), else a sentence saying which test fails."""
-    g = float(np.linalg.norm(np.mean(imu.f_b, axis=0)))
-    wr = float(np.sqrt(np.mean((imu.w_b - imu.w_b.mean(0)) ** 2)))
-    ar = float(np.sqrt(np.mean((imu.f_b - imu.f_b.mean(0)) ** 2)))
-    if abs(g - units.G0) > limits["gravity_m_s2"]:
-        return f"the mean specific force is {g:.3f} m/s^2, not about g = 9.81 (wrong accelerometer unit?)"
-    if wr > limits["gyro_rms_rad_s"]:
-        return f"the angular rate varies by {units.rad_to_deg(wr):.3g} deg/s rms: the IMU moved"
-    if ar > limits["accel_rms_m_s2"]:
-        return f"the specific force varies by {ar:.3g} m/s^2 rms: the IMU moved"
-    return None
 
 
 def run_allan(imu, out, *, source: str, start_s=None, end_s=None, tau_range=None, title=None) -> dict:
@@ -193,7 +134,7 @@ def run_allan(imu, out, *, source: str, start_s=None, end_s=None, tau_range=None
             f"[{start_s or 0:g}, {end_s if end_s is not None else rel[-1]:g}] s; need >= 64"
         )
     sel = imu._replace(t=t[keep], f_b=np.asarray(imu.f_b)[keep], w_b=np.asarray(imu.w_b)[keep])
-    bad = check_static(sel)
+    bad = static_check(sel.w_b, sel.f_b)
     if bad:
         raise ValueError(f"{source}: not a static recording: {bad} (choose a still stretch with --start/--end)")
     dt, y = uniform_rates(sel.t, np.hstack([sel.w_b, sel.f_b]))
@@ -201,43 +142,30 @@ def run_allan(imu, out, *, source: str, start_s=None, end_s=None, tau_range=None
     fit_a = allan_noise_fit(y[3:], dt, tau_range=tau_range)
     toml = noise_toml(fit_g, fit_a, source=source)
     (out / "noise.toml").write_text(toml, encoding="utf-8")
-    eg, ea = _edge(fit_g, "gyro"), _edge(fit_a, "accel")
+    eg, ea = allan_fit_datasheet(fit_g, "gyro"), allan_fit_datasheet(fit_a, "accel")
     dur = float(sel.t[-1] - sel.t[0])
     name = title or source
-    plot_allan(
-        fit_g.taus,
-        units.rad_per_s_to_deg_per_hour(np.sqrt(fit_g.avar)),
-        units.rad_per_s_to_deg_per_hour(fit_g.avar_sigma / (2 * np.sqrt(fit_g.avar))),
-        fit_g.fitted,
-        units.rad_per_s_to_deg_per_hour(fit_g.white),
-        units.rad_per_s_to_deg_per_hour(fit_g.bias_instability),
-        units.rad_per_s_to_deg_per_hour(fit_g.rate_rw),
-        out / "allan_gyro.png",
-        title=f"gyro Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)",
-        adev_unit="deg/h",
-        white_label=_labels(eg, 0, "deg/sqrt(h)"),
-        bi_label=_labels(eg, 1, "deg/h"),
-        rrw_label=_labels(eg, 2, "deg/h/sqrt(h)"),
-        resolved=fit_g.resolved,
-        bounds=np.stack([units.rad_per_s_to_deg_per_hour(fit_g.upper[..., j]) for j in range(3)], -1),
-    )
-    plot_allan(
-        fit_a.taus,
-        units.mps2_to_mg(np.sqrt(fit_a.avar)),
-        units.mps2_to_mg(fit_a.avar_sigma / (2 * np.sqrt(fit_a.avar))),
-        fit_a.fitted,
-        units.mps2_to_mg(fit_a.white),
-        units.mps2_to_mg(fit_a.bias_instability),
-        units.mps2_to_mg(fit_a.rate_rw),
-        out / "allan_accel.png",
-        title=f"accelerometer Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)",
-        adev_unit="mg",
-        white_label=_labels(ea, 0, "m/s/sqrt(h)"),
-        bi_label=_labels(ea, 1, "mg"),
-        rrw_label=_labels(ea, 2, "mg/sqrt(h)"),
-        resolved=fit_a.resolved,
-        bounds=np.stack([units.mps2_to_mg(fit_a.upper[..., j]) for j in range(3)], -1),
-    )
+    for sensor, fit, e, to, adev_unit, units3 in (
+        ("gyro", fit_g, eg, units.rad_per_s_to_deg_per_hour, "deg/h", ("deg/sqrt(h)", "deg/h", "deg/h/sqrt(h)")),
+        ("accelerometer", fit_a, ea, units.mps2_to_mg, "mg", ("m/s/sqrt(h)", "mg", "mg/sqrt(h)")),
+    ):
+        plot_allan(
+            fit.taus,
+            to(np.sqrt(fit.avar)),
+            to(fit.avar_sigma / (2 * np.sqrt(fit.avar))),
+            fit.fitted,
+            to(fit.white),
+            to(fit.bias_instability),
+            to(fit.rate_rw),
+            out / f"allan_{sensor[:5]}.png",
+            title=f"{sensor} Allan deviation: {name} ({dur:.0f} s at {1 / dt:.0f} Hz)",
+            adev_unit=adev_unit,
+            white_label=_labels(e, 0, units3[0]),
+            bi_label=_labels(e, 1, units3[1]),
+            rrw_label=_labels(e, 2, units3[2]),
+            resolved=fit.resolved,
+            bounds=np.stack([to(fit.upper[..., j]) for j in range(3)], -1),
+        )
     summary = {
         "input": {
             "file": source,

@@ -93,21 +93,6 @@ def scenario(exp: dict):
     return cfg
 
 
-def cut_timeline(cfg, duration: float):
-    """The scenario ``cfg`` keeping only the trajectory segments that end by ``duration`` (s)."""
-    segs, t = [], 0.0
-    for seg in cfg.trajectory.segments:
-        if t + seg.duration + seg.hold > duration + 1e-9:
-            break
-        segs.append(seg)
-        t += seg.duration + seg.hold
-    if not segs:
-        raise ValueError(f"duration {duration} s is shorter than the first trajectory segment")
-    return dataclasses.replace(
-        cfg, duration=float(duration), trajectory=dataclasses.replace(cfg.trajectory, segments=tuple(segs))
-    )
-
-
 def filter_params(cfg, exp: dict) -> LCParams:
     """P0 and Qc from the scenario's sigmas (:func:`jaxnav.ins.lc_params` of :func:`jaxnav.sim.imu_noise`), Qc and R
     scaled by the experiment's mismatch."""
@@ -169,7 +154,7 @@ class S0Setup:
 
     def __init__(self, exp, duration=None):
         self.exp = exp
-        self.cfg = scenario(exp) if duration is None else cut_timeline(scenario(exp), duration)
+        self.cfg = scenario(exp) if duration is None else sim.cut_timeline(scenario(exp), duration)
         self.truth = sim.make_trajectory(self.cfg)
         self.t_imu = np.asarray(self.truth.t[1:])
         g0 = sim.simulate(self.cfg, jax.random.PRNGKey(0), trajectory=self.truth).gnss
@@ -187,14 +172,9 @@ class S0Setup:
             leaves, differentiable).  remat: checkpoint each epoch (reverse-mode gradients).
         """
         r = sim.simulate(self.cfg, key, trajectory=self.truth)
-        meas = s0_measurements(self.cfg, r.gnss, self.t_gnss)
         params = self.params._replace(Qc=self.params.Qc * q_scale, R_scale=self.params.R_scale * r_scale)
         return loosely_coupled(
-            r.nav0,
-            self.t_imu,
-            r.imu.dtheta,
-            r.imu.dv,
-            meas,
+            *sim.lc_inputs(self.cfg, r, t_imu=self.t_imu, t_gnss=self.t_gnss),
             params,
             dt_imu=self.cfg.dt,
             error_model=ins.error_model_for(self.exp["filter"]["n_states"]),
@@ -376,18 +356,11 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
     table = {}
     for name in FILTERS:
         r = rms[name]
+        parts = dict(pos_rms_m=r[:, :3], vel_rms_mps=r[:, 3:6], att_rms_rad=r[:, 6:])
         table[name] = dict(
-            per_seed=dict(pos_rms_m=r[:, :3].tolist(), vel_rms_mps=r[:, 3:6].tolist(), att_rms_rad=r[:, 6:].tolist()),
-            mean=dict(
-                pos_rms_m=r[:, :3].mean(0).tolist(),
-                vel_rms_mps=r[:, 3:6].mean(0).tolist(),
-                att_rms_rad=r[:, 6:].mean(0).tolist(),
-            ),
-            std=dict(
-                pos_rms_m=r[:, :3].std(0).tolist(),
-                vel_rms_mps=r[:, 3:6].std(0).tolist(),
-                att_rms_rad=r[:, 6:].std(0).tolist(),
-            ),
+            per_seed={k: v.tolist() for k, v in parts.items()},
+            mean={k: v.mean(0).tolist() for k, v in parts.items()},
+            std={k: v.std(0).tolist() for k, v in parts.items()},
             mean_pos_rms_m=float(r[:, :3].mean()),
             published=dict(pos_rms_m=pub[name][:3], vel_rms_mps=pub[name][3:]),
         )

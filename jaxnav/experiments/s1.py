@@ -16,7 +16,7 @@ from __future__ import annotations
 import pathlib
 import time
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -90,44 +90,23 @@ class S1Settings(NamedTuple):
     skip: int = 60
 
 
-class _Numbers(NamedTuple):
-    """The numeric settings as traced leaves (one compilation serves every value)."""
-
-    sigma: Any
-    accel_std: Any
-    w_max: Any
-    time_constant: Any
-    onset: Any
-    gross_frac: Any
-    gross_size: Any
+#: the settings passed as traced leaves (one compilation serves every value)
+_TRACED = ("sigma", "accel_std", "w_max", "time_constant", "onset", "gross_frac", "gross_size")
 
 
-def _numbers(st: S1Settings) -> _Numbers:
-    f = lambda a: jnp.asarray(a, float)  # noqa: E731
-    return _Numbers(
-        sigma=f(st.sigma),
-        accel_std=f(st.accel_std),
-        w_max=f(st.w_max),
-        time_constant=f(st.time_constant),
-        onset=f(st.onset),
-        gross_frac=f(st.gross_frac),
-        gross_size=f(st.gross_size),
-    )
-
-
-def _period_run(key, num: _Numbers, S: int, T: int, filters: dict):
+def _period_run(key, num: dict, S: int, T: int, filters: dict):
     """One period: simulate, add gross errors, run every filter (pure; vmapped over keys)."""
     ko, kt, kw, ks, kg = jax.random.split(key, 5)
     cfg = subsidence_config(S)
     u = lambda k, lo_hi: jax.random.uniform(k, (S,), minval=lo_hi[0], maxval=lo_hi[1])  # noqa: E731
-    cfg = cfg._replace(onset=u(ko, num.onset) * T, rate=1.0 / u(kt, num.time_constant), w_max=u(kw, num.w_max))
+    cfg = cfg._replace(onset=u(ko, num["onset"]) * T, rate=1.0 / u(kt, num["time_constant"]), w_max=u(kw, num["w_max"]))
     simu = simulate_subsidence(ks, cfg, T)
-    sig = jnp.tile(num.sigma, S)
+    sig = jnp.tile(num["sigma"], S)
     k1, k2 = jax.random.split(kg)
-    hit = jax.random.uniform(k1, simu.zs.shape) < num.gross_frac
+    hit = jax.random.uniform(k1, simu.zs.shape) < num["gross_frac"]
     sign = jnp.where(jax.random.uniform(k2, simu.zs.shape) < 0.5, -1.0, 1.0)
-    zs = simu.zs + jnp.where(hit, num.gross_size * sig * sign, 0.0)
-    model = network_model(S, 1.0, sigma=num.sigma, accel_var=num.accel_std**2)
+    zs = simu.zs + jnp.where(hit, num["gross_size"] * sig * sign, 0.0)
+    model = network_model(S, 1.0, sigma=num["sigma"], accel_var=num["accel_std"] ** 2)
     x0, P0 = initial_state(zs[0], sigma_pos=sig, sigma_vel=1e-4)
     out = {}
     for name, kw_ in filters.items():
@@ -141,7 +120,7 @@ def _period_run(key, num: _Numbers, S: int, T: int, filters: dict):
 
 
 @partial(jax.jit, static_argnames=("static",))
-def _chunk(keys, num: _Numbers, static):
+def _chunk(keys, num: dict, static):
     """Statistics (and full series) of a chunk of periods, vmapped; one compilation per ``static``."""
     S, T, window, horizon, skip, robust = static
     filters = s1_filters(window=window, horizon=horizon, robust=robust)
@@ -198,7 +177,7 @@ def run_s1_simulation(
     """
     st = settings
     static = (int(st.n_stations), int(st.period), int(st.window), int(st.horizon), int(st.skip), bool(robust))
-    num = _numbers(st)
+    num = {k: jnp.asarray(getattr(st, k), float) for k in _TRACED}
     P = int(st.n_periods)
     keys = jax.random.split(key, P)
     series = []

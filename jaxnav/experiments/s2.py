@@ -20,9 +20,8 @@ from jaxnav.geodesy import zone_central_meridian
 from jaxnav.io import (
     gpst_iso,
     read_control_points,
-    read_epoch_log,
     read_levelling,
-    read_pos,
+    read_rtk_epochs,
     write_control_points,
     write_epoch_log,
     write_json,
@@ -38,79 +37,11 @@ from jaxnav.survey.rtk import (
     pack_points,
     point_sigmas,
     process_points,
-    windows_from_pos,
+    sampling_grid,
 )
 from jaxnav.units import CM, MM, rad_to_deg
 
 _log = logging.getLogger(__name__)
-
-
-def _read_inputs(files, *, step, window, min_epochs, fixed_only, motion):
-    """Flat epoch arrays (S2 input) from .pos files (cut into static occupations) and/or CSV epoch logs.
-
-    Returns:
-      (dict of N epochs: point (N,) names, t (N,) s, lat, lon (N,) rad, H (N,) m, sigma (N, 3) m,
-      mask (N,) bool, h_terminal (N,) m and xy_terminal (N, 2) m (NaN for .pos files), segment (N,)
-      static-segment labels, grid (N,) sampling-grid indices (-1: to be derived per point);
-      list of per-file motion counts).
-    """
-    parts, motion_counts = [], []
-    for f in files:
-        f = pathlib.Path(f)
-        if f.suffix.lower() == ".pos":
-            w = windows_from_pos(
-                read_pos(f), step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only, motion=motion
-            )
-            motion_counts.append(
-                dict(
-                    file=str(f),
-                    n_epochs=w.pop("n_epochs"),
-                    n_moving=w.pop("n_moving"),
-                    n_short_static=w.pop("n_short_static"),
-                    n_segments=w.pop("n_segments"),
-                )
-            )
-            n = len(w["t"])
-            w["h_terminal"] = np.full(n, np.nan)
-            w["xy_terminal"] = np.full((n, 2), np.nan)
-            parts.append(w)
-        else:
-            log = read_epoch_log(f)
-            parts.append(
-                dict(
-                    point=log.point,
-                    t=log.t,
-                    lat=log.lat,
-                    lon=log.lon,
-                    H=log.H,
-                    sigma=log.sigma,
-                    mask=np.ones(len(log.t), bool),
-                    h_terminal=log.h,
-                    xy_terminal=np.stack([log.x, log.y], -1),
-                    segment=np.array([f"{f.stem}/{p}" for p in log.point]),
-                    grid=np.full(len(log.t), -1, np.int64),
-                )
-            )
-    names_seen = {}
-    for f, p in zip(files, parts):
-        for name in dict.fromkeys(p["point"]):
-            if name in names_seen:
-                raise ValueError(f"{f}: point {str(name)!r} also appears in {names_seen[name]}")
-            names_seen[name] = f
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, motion_counts
-
-
-def _point_grid(t, mask, grid):
-    """(P, T) sampling-grid indices: given ones (.pos windows) or round((t - t_0) / median dt) per point."""
-    out = np.array(grid, np.int64)
-    for p in range(t.shape[0]):
-        if out[p, 0] >= 0:
-            continue
-        tv = t[p][mask[p]]
-        dt = float(np.median(np.diff(tv))) if tv.size > 1 else 1.0
-        dt = dt if dt > 0 else 1.0
-        out[p] = np.round((t[p] - (tv[0] if tv.size else t[p, 0])) / dt).astype(np.int64)
-    return out
 
 
 def _ratio(a: float, b: float) -> float:
@@ -167,7 +98,7 @@ def run_rtk(
     if not files:
         raise ValueError("jaxnav rtk: give at least one .pos or CSV epoch-log file")
     _log.info("reading %d file(s): %s", len(files), ", ".join(f.name for f in files))
-    ep, motion_counts = _read_inputs(
+    ep, motion_counts = read_rtk_epochs(
         files, step=step, window=window, min_epochs=min_epochs, fixed_only=fixed_only, motion=motion
     )
     if not len(ep["t"]):
@@ -193,11 +124,6 @@ def run_rtk(
     )
     first = {n: i for i, n in reversed(list(enumerate(ep["point"])))}
     point_segment = np.array([ep["segment"][first[n]] for n in names])
-    grid = np.full(np.shape(series.t), -1, np.int64)
-    for i, n in enumerate(names):
-        g = ep["grid"][ep["point"] == n]
-        grid[i, : len(g)] = g
-        grid[i, len(g) :] = g[-1] if len(g) else -1
     if lon0_deg is None:  # each point in its own zone
         lon_pt = np.array([np.nanmean(np.where(m, lo, np.nan)) for lo, m in zip(series.lon, series.mask)])
         lon0 = np.asarray(zone_central_meridian(jnp.asarray(lon_pt), zone_width)[0])
@@ -261,7 +187,7 @@ def run_rtk(
     )
     res = process_points(series, lon0=jnp.asarray(lon0), transform=transform, anomaly=anomaly, smoother=smoother)
     res = type(res)(*[np.asarray(a) if not isinstance(a, tuple) else a for a in res])
-    grid = _point_grid(np.asarray(series.t), np.asarray(series.mask), grid)
+    grid = sampling_grid(np.asarray(series.t), np.asarray(series.mask), names, ep["point"], ep["grid"])
     # precision with time-correlated epochs, on the filter's measurements (WGS-84 GK x, y, H)
     ps = point_sigmas(res.gk, np.asarray(series.mask) & (res.n[:, None] > 0), grid, point_segment)
     t_arr, m_arr = np.asarray(series.t), np.asarray(series.mask)

@@ -29,6 +29,7 @@ from jaxnav.survey import (
     ar_kalman,
     cadastral_params,
     detect_stops,
+    detection_scores,
     fit_ar,
     match_stops,
     plan_survey,
@@ -53,19 +54,19 @@ _AR2_PHI = (0.6, -0.3)
 def grade_params(scn, pipe: dict):
     """S3 pipeline parameters (:class:`jaxnav.survey.CadastralParams`, SI) from a scenario's IMU grade and the
     config's [pipeline] table (outlier_k, lowpass_hz, velocity/position/ZUPT sigmas)."""
-    g, a, ie = scn.grade.gyro, scn.grade.accel, scn.grade.initial_errors
+    nz, ie = scn.grade.noise, scn.grade.initial_errors
     pre = PreprocessParams(
         k_gyro=float(pipe.get("outlier_k", 6.0)),
         k_accel=float(pipe.get("outlier_k", 6.0)),
         cutoff_hz=float(pipe.get("lowpass_hz", 20.0)),
     )
     return cadastral_params(
-        gyro_bias=g.bias_sigma,
-        gyro_markov=g.markov_sigma,
-        gyro_tau=g.markov_tau,
-        gyro_arw=g.white,
-        accel_bias=a.bias_sigma,
-        accel_vrw=a.white,
+        gyro_bias=nz.gyro_bias_initial,
+        gyro_markov=nz.gyro_bias_instability,
+        gyro_tau=nz.gyro_bias_tau,
+        gyro_arw=nz.gyro_arw,
+        accel_bias=nz.accel_bias_initial,
+        accel_vrw=nz.accel_vrw,
         attitude_sigma=tuple(max(x, 1e-6) for x in ie.attitude),
         velocity_sigma=float(pipe.get("velocity_sigma0_mps", 0.01)),
         position_sigma=float(pipe.get("position_sigma0_m", 0.005)),
@@ -79,8 +80,8 @@ def detector_params_for(scn):
     std at the IMU rate (m/s^2, rad/s; floored at 0.005, 5e-4); threshold 10
     (a static window averages ~5: 6 degrees of freedom less the 3 of the estimated mean force)."""
     fs = scn.imu_rate_hz
-    sa = max(max(scn.grade.accel.white) * math.sqrt(fs), 0.005)
-    sg = max(max(scn.grade.gyro.white) * math.sqrt(fs), 5e-4)
+    sa = max(max(scn.grade.noise.accel_vrw) * math.sqrt(fs), 0.005)
+    sg = max(max(scn.grade.noise.gyro_arw) * math.sqrt(fs), 5e-4)
     return DetectorParams(sigma_a=sa, sigma_g=sg, threshold=10.0)
 
 
@@ -369,23 +370,7 @@ def run_cadastral(
         # stop detection on the simulated data
         t_imu = truth.t_imu
         true_spans = np.stack([truth.stops.t_start, truth.stops.t_end], 1)
-        scores = []
-        for i in range(seeds):
-            sp = static_spans(res["static"][i], t_imu, min_duration=2.0, min_gap=0.5)
-            scores.append(match_stops(sp, true_spans, t=t_imu, static=res["static"][i]))
-        det = {
-            "precision_mean": float(np.mean([s.precision for s in scores])),
-            "recall_mean": float(np.mean([s.recall for s in scores])),
-            "precision_min": float(np.min([s.precision for s in scores])),
-            "recall_min": float(np.min([s.recall for s in scores])),
-            "sample_precision_mean": float(np.mean([s.sample_precision for s in scores])),
-            "sample_recall_mean": float(np.mean([s.sample_recall for s in scores])),
-            "boundary_error_s_mean_abs": float(
-                np.mean(np.abs(np.concatenate([np.concatenate([s.start_error, s.end_error]) for s in scores])))
-            ),
-            "n_true_stops": len(true_spans),
-            "threshold": float(mc["detector"].threshold),
-        }
+        det = {**detection_scores(res["static"], t_imu, true_spans), "threshold": float(mc["detector"].threshold)}
         a, c = summ["forward"], summ["fused"]
         check = {
             "fused_over_forward_h": c["rms_h"] / a["rms_h"],

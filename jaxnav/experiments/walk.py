@@ -43,6 +43,7 @@ from jaxnav.ins import (
     OutageScores,
     SensorBiases,
     coarse_alignment,
+    gyro_course_rate_correlation,
     loosely_coupled,
     mounting_from_groves_deg,
     sensor_to_body,
@@ -214,25 +215,9 @@ def frame_check(
         "loglik": {},
         "heading_minus_course_deg": {},
     }
-    # gyro sign: body-up rate (device held roughly level) against the GNSS course rate while walking;
-    # yaw (counter-clockwise) rate = -heading rate, so the correlation must be strongly positive
     ps = data.pos
-    gt = np.asarray(ps.t, float)
-    v = np.asarray(ps.v_enu, float)
-    walk = (np.hypot(v[:, 0], v[:, 1]) > 0.5) & (gt > t0) & (gt < float(np.asarray(data.imu.t)[-1]))
-    course = np.unwrap(np.arctan2(v[walk, 0], v[walk, 1]))
-    tw = gt[walk]
     w_up = (np.asarray(data.imu.w_b) @ np.asarray(C_bs).T)[:, 2]
-    edges = np.arange(tw[0], tw[-1], 1.0)
-    ti = np.asarray(data.imu.t)
-    g_rate, c_rate = [], []
-    for a in edges[:-1]:
-        si = (ti >= a) & (ti < a + 1.0)
-        sg = (tw >= a) & (tw < a + 1.0)
-        if sg.sum() >= 3 and np.all(np.diff(tw[sg]) < 0.3) and si.any():
-            g_rate.append(w_up[si].mean())
-            c_rate.append(-np.polyfit(tw[sg] - a, course[sg], 1)[0])
-    out["gyro_up_vs_course_rate_corr"] = float(np.corrcoef(g_rate, c_rate)[0, 1])
+    out["gyro_up_vs_course_rate_corr"] = gyro_course_rate_correlation(data.imu.t, w_up, ps.t, ps.v_enu)
     for yaw in candidates or ():
         c, s_ = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
         Rz = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])

@@ -7,13 +7,16 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 from jaxnav.ins import attitude, earth, error_model, integration, measurements
 from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
 from jaxnav.ins.allan import (  # Allan variance and noise identification from a static recording
+    STATIC_LIMITS,
     AllanFit,
     allan_deviation,
+    allan_fit_datasheet,
     allan_model,
     allan_noise_fit,
     allan_variance,
     allan_variance_sigma,
     imu_noise_from_allan,
+    static_check,
     uniform_rates,
 )
 from jaxnav.ins.earth import EarthParams, earth_params, gravity_minus_coriolis, normal_gravity, position_rate
@@ -95,6 +98,7 @@ from jaxnav.ins.mechanization import (
 )
 from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU body)
     C_RFU_FRD,
+    gyro_course_rate_correlation,
     mounting_from_dcm,
     mounting_from_groves,
     mounting_from_groves_deg,
@@ -103,7 +107,14 @@ from jaxnav.ins.mounting import (  # IMU mounting (sensor -> FRD vehicle -> RFU 
     mounting_to_rpy,
     sensor_to_body,
 )
-from jaxnav.ins.noise import NOISE_GRADES, ImuNoise, imu_noise_from_datasheet, imu_noise_to_datasheet, noise_preset
+from jaxnav.ins.noise import (
+    NOISE_GRADES,
+    ImuNoise,
+    imu_noise_from_datasheet,
+    imu_noise_to_datasheet,
+    nearest_grade,
+    noise_preset,
+)
 from jaxnav.ins.resample import interpolate_on_samples, nearest_samples
 from jaxnav.ins.standstill import (
     PLATFORMS,
@@ -192,15 +203,19 @@ __all__ = [
     "mounting_from_rpy_deg",
     "mounting_to_rpy",
     "sensor_to_body",
+    "gyro_course_rate_correlation",
     "NOISE_GRADES",
     "ImuNoise",
     "AllanFit",
+    "STATIC_LIMITS",
     "allan_deviation",
+    "allan_fit_datasheet",
     "allan_model",
     "allan_noise_fit",
     "allan_variance",
     "allan_variance_sigma",
     "imu_noise_from_allan",
+    "static_check",
     "uniform_rates",
     "TrajectoryErrors",
     "error_statistics",
@@ -208,6 +223,7 @@ __all__ = [
     "wrap_angle",
     "imu_noise_from_datasheet",
     "imu_noise_to_datasheet",
+    "nearest_grade",
     "noise_preset",
     "DetectionScores",
     "StandstillParams",

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav import units
 from jaxnav._numerics import check_float64
 
 
@@ -424,3 +425,79 @@ def imu_noise_from_allan(gyro: AllanFit, accel: AllanFit, *, reduce=None):
         gyro_bias_rw=pick(gyro, 2),
         accel_bias_rw=pick(accel, 2),
     )
+
+
+#: the largest deviation from standstill :func:`static_check` accepts: |mean specific force| within this of
+#: g (m/s^2) and the rms of the gyro about its mean (rad/s) and of the accelerometers about theirs (m/s^2)
+STATIC_LIMITS = {"gravity_m_s2": 1.0, "gyro_rms_rad_s": 0.05, "accel_rms_m_s2": 0.5}
+
+
+def static_check(w_b, f_b, limits=STATIC_LIMITS) -> str | None:
+    """None if an IMU recording looks static (:data:`STATIC_LIMITS`), else a sentence saying which test fails.
+
+    Args:
+      w_b: (N, 3) angular rates, rad/s.  f_b: (N, 3) specific forces, m/s^2.  limits: dict as :data:`STATIC_LIMITS`.
+    """
+    w_b, f_b = np.asarray(w_b, float), np.asarray(f_b, float)
+    g = float(np.linalg.norm(np.mean(f_b, axis=0)))
+    wr = float(np.sqrt(np.mean((w_b - w_b.mean(0)) ** 2)))
+    ar = float(np.sqrt(np.mean((f_b - f_b.mean(0)) ** 2)))
+    if abs(g - units.G0) > limits["gravity_m_s2"]:
+        return f"the mean specific force is {g:.3f} m/s^2, not about g = 9.81 (wrong accelerometer unit?)"
+    if wr > limits["gyro_rms_rad_s"]:
+        return f"the angular rate varies by {units.rad_to_deg(wr):.3g} deg/s rms: the IMU moved"
+    if ar > limits["accel_rms_m_s2"]:
+        return f"the specific force varies by {ar:.3g} m/s^2 rms: the IMU moved"
+    return None
+
+
+def allan_fit_datasheet(fit: AllanFit, sensor: str) -> dict:
+    """A fit's per-axis values in datasheet units, JSON-ready (lists; the unit in each key).
+
+    Args:
+      fit: :class:`AllanFit` of (3,) axes (rad/s or m/s^2).  sensor: ``"gyro"`` (deg/sqrt(h), deg/h,
+        deg/h/sqrt(h)) or ``"accel"`` (m/s/sqrt(h), mg, mg/sqrt(h)).
+    Returns:
+      dict: per term (``arw`` / ``vrw``, ``bias_instability``, ``rate_rw``) the value, its sigma and
+      its 2-sigma upper bound; ``resolved_white_bi_rrw``, ``tau_floor_s``, ``fit_chi2_per_dof``,
+      ``tau_s``, the Allan deviation ``adev_*`` and its sigma per axis and tau, ``fitted``.
+    """
+    if sensor == "gyro":
+        conv = (
+            units.rad_per_sqrt_s_to_deg_per_sqrt_hour,
+            units.rad_per_s_to_deg_per_hour,
+            units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour,
+        )
+        heads = ("arw", "bias_instability", "rate_rw")
+        tails = ("_deg_per_sqrt_h", "_deg_per_h", "_deg_per_h_per_sqrt_h")
+        dev = ("adev", "_deg_per_h", units.rad_per_s_to_deg_per_hour)
+    else:
+        conv = (units.mps_per_sqrt_s_to_mps_per_sqrt_hour, units.mps2_to_mg, units.mps2_per_sqrt_s_to_mg_per_sqrt_hour)
+        heads = ("vrw", "bias_instability", "rate_rw")
+        tails = ("_m_per_s_per_sqrt_h", "_mg", "_mg_per_sqrt_h")
+        dev = ("adev", "_mg", units.mps2_to_mg)
+    lst = lambda a: [float(v) for v in np.asarray(a, float).reshape(-1)]  # noqa: E731
+    out = {}
+    for j, (c, h, t, v, s) in enumerate(
+        zip(
+            conv,
+            heads,
+            tails,
+            (fit.white, fit.bias_instability, fit.rate_rw),
+            (fit.white_sigma, fit.bias_instability_sigma, fit.rate_rw_sigma),
+        )
+    ):
+        out[h + t] = lst(c(np.asarray(v)))
+        out[h + "_sigma" + t] = lst(c(np.asarray(s)))
+        out[h + "_upper_2sigma" + t] = lst(c(np.asarray(fit.upper)[..., j]))
+    out["resolved_white_bi_rrw"] = [[bool(x) for x in r] for r in np.asarray(fit.resolved)]
+    out["tau_floor_s"] = lst(fit.tau_floor)
+    out["fit_chi2_per_dof"] = lst(fit.chi2)
+    out["tau_s"] = lst(fit.taus)
+    av = np.asarray(fit.avar)
+    out[dev[0] + dev[1]] = [lst(dev[2](np.sqrt(a))) for a in av]
+    out[dev[0] + "_sigma" + dev[1]] = [
+        lst(dev[2](s / (2.0 * np.sqrt(np.maximum(a, 1e-300))))) for a, s in zip(av, np.asarray(fit.avar_sigma))
+    ]
+    out["fitted"] = [bool(x) for x in fit.fitted]
+    return out

@@ -153,3 +153,32 @@ def sensor_to_body(C_vs) -> np.ndarray:
     C = C_RFU_FRD @ mounting_from_dcm(C_vs)
     C[np.abs(C) < 1e-12] = 0.0
     return C
+
+
+def gyro_course_rate_correlation(t_imu, w_up, t_gnss, v_enu, *, min_speed=0.5, bin_s=1.0, max_gap=0.3) -> float:
+    """Correlation of the body-up gyro rate with the GNSS course rate while moving: a check of a sensor -> body rotation.
+
+    Over bins of ``bin_s`` s holding at least 3 GNSS epochs (steps < ``max_gap`` s) at horizontal speed
+    above ``min_speed`` inside the IMU span: the bin's mean body-up rate against minus the slope of the
+    unwrapped course atan2(v_E, v_N) (a counter-clockwise yaw rate is minus the heading rate). With the
+    device held roughly level and the right axes the correlation is close to +1; a wrong up axis or sign
+    makes it small or negative.
+
+    Args:
+      t_imu: (N,) s.  w_up: (N,) body-up angular rate, rad/s.  t_gnss: (M,) s.  v_enu: (M, 3) m/s.
+    Returns:
+      The Pearson correlation over the bins (NaN with fewer than 2).
+    """
+    ti, w_up = np.asarray(t_imu, float), np.asarray(w_up, float)
+    gt, v = np.asarray(t_gnss, float), np.asarray(v_enu, float)
+    walk = (np.hypot(v[:, 0], v[:, 1]) > min_speed) & (gt > ti[0]) & (gt < ti[-1])
+    course = np.unwrap(np.arctan2(v[walk, 0], v[walk, 1]))
+    tw = gt[walk]
+    g_rate, c_rate = [], []
+    for a in np.arange(tw[0], tw[-1], bin_s)[:-1]:
+        si = (ti >= a) & (ti < a + bin_s)
+        sg = (tw >= a) & (tw < a + bin_s)
+        if sg.sum() >= 3 and np.all(np.diff(tw[sg]) < max_gap) and si.any():
+            g_rate.append(w_up[si].mean())
+            c_rate.append(-np.polyfit(tw[sg] - a, course[sg], 1)[0])
+    return float(np.corrcoef(g_rate, c_rate)[0, 1])

@@ -236,3 +236,8 @@ def noise_preset(grade: str) -> ImuNoise:
     if grade not in _PRESETS:
         raise ValueError(f"unknown IMU grade {grade!r}; known: {', '.join(NOISE_GRADES)}")
     return imu_noise_from_datasheet(**_PRESETS[grade])
+
+
+def nearest_grade(arw) -> str:
+    """The grade of :data:`NOISE_GRADES` whose preset ARW is nearest to ``arw`` (rad/sqrt(s)) in log scale."""
+    return min(NOISE_GRADES, key=lambda g: abs(math.log(max(float(arw), 1e-30) / float(noise_preset(g).gyro_arw))))

@@ -17,6 +17,7 @@ from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, r
 from jaxnav.io._json import json_ready, write_json
 from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
 from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
+from jaxnav.io._rtk_epochs import read_rtk_epochs
 from jaxnav.io._rtk_results import RTK_RESULT_COLUMNS, write_rtk_results
 from jaxnav.io._rtklib import GPS_EPOCH, PosSolution, read_pos
 from jaxnav.io._solution_files import (
@@ -29,7 +30,16 @@ from jaxnav.io._solution_files import (
     write_pos,
     write_trajectory_csv,
 )
-from jaxnav.io._steps_file import STEP_KINDS, KnownStep, date_to_epoch, parse_postseismic, read_steps_file
+from jaxnav.io._station_record import station_fit_record
+from jaxnav.io._steps_file import (
+    STEP_KINDS,
+    KnownStep,
+    date_to_epoch,
+    explicit_step,
+    merge_known_steps,
+    parse_postseismic,
+    read_steps_file,
+)
 from jaxnav.io._stop_list import read_stop_list, write_stop_list
 from jaxnav.io._survey_files import (
     ControlPoints,
@@ -43,6 +53,7 @@ from jaxnav.io._survey_files import (
     write_levelling,
 )
 from jaxnav.io._truth import TruthTrajectory, read_csv_truth, read_kfgins_truth
+from jaxnav.io._velocity_table import write_velocity_table
 
 __all__ = [
     "GPS_EPOCH",
@@ -91,6 +102,11 @@ __all__ = [
     "date_to_epoch",
     "parse_postseismic",
     "read_steps_file",
+    "explicit_step",
+    "merge_known_steps",
+    "write_velocity_table",
+    "station_fit_record",
+    "read_rtk_epochs",
 ]
 __all__ += [
     "TRAJECTORY_COLUMNS",

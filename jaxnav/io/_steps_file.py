@@ -26,6 +26,8 @@ import os
 import re
 from typing import NamedTuple
 
+import numpy as np
+
 from jaxnav.io._errors import ReaderError, text_lines
 from jaxnav.monitoring._trajectory import POSTSEISMIC_FORMS  # the module, not the package
 from jaxnav.units import DAY, YEAR
@@ -160,4 +162,47 @@ def read_steps_file(path) -> list:
         out.append(KnownStep(station, epoch, kind, tuple(terms), f"{p}:{lineno}"))
     if not out:
         raise ReaderError(p, None, "no step in the file (only comments or blank lines)")
+    return out
+
+
+def explicit_step(k: KnownStep) -> bool:
+    """A step given on the command line (an option, not a file): its mistakes are errors, not warnings."""
+    return k.origin.startswith("--")
+
+
+_KIND_RANK = {"unknown": 0, "equipment": 1, "earthquake": 2}
+
+
+def merge_known_steps(items) -> list[KnownStep]:
+    """Known steps of one station merged by calendar day, in time order.
+
+    Steps on the same day (a steps file and ``--step``, or two files) become one: the earliest
+    epoch, the most specific kind (earthquake > equipment > unknown), the post-seismic terms of
+    all with one per form (a command-line option's before a file's), the origins joined by "; "
+    (options first).
+
+    Args:
+      items: :class:`jaxnav.io.KnownStep` of one station.
+    Returns:
+      list of :class:`jaxnav.io.KnownStep`.
+    """
+    groups = {}
+    for k in items:
+        groups.setdefault(int(np.floor(k.epoch / DAY + 0.5)), []).append(k)  # a date's epoch: its start, -0.5 d
+    out = []
+    for day in sorted(groups):
+        g = sorted(groups[day], key=lambda k: (not explicit_step(k), k.epoch))
+        terms = {}
+        for k in g:
+            for form, tau in k.postseismic:
+                terms.setdefault(form, tau)
+        out.append(
+            KnownStep(
+                g[0].station,
+                min(k.epoch for k in g),
+                max((k.kind for k in g), key=_KIND_RANK.get),
+                tuple(terms.items()),
+                "; ".join(k.origin for k in g),
+            )
+        )
     return out

@@ -10,6 +10,7 @@ components); :func:`fit_series_batch` runs it over a batch of series in one ``vm
 from __future__ import annotations
 
 import datetime as _dt
+import math
 from functools import partial
 from typing import Any, NamedTuple
 
@@ -17,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxnav.monitoring._midas import midas_velocity
 from jaxnav.monitoring._trajectory import (
     AT_BOUND_TOL,
     COMPONENTS,
@@ -30,7 +32,7 @@ from jaxnav.monitoring._trajectory import (
     robust_scale,
     start_and_box,
 )
-from jaxnav.units import DAY, YEAR
+from jaxnav.units import DAY, MM, YEAR
 
 #: the daily grid is padded (masked epochs) to a multiple of this many days, so stations of
 #: similar length share one compiled program
@@ -882,3 +884,46 @@ def fit_station(
         poly_degree=int(poly_degree),
         postseismic=tuple(terms),
     )
+
+
+def midas_check(fit: StationFit):
+    """MIDAS rates (Blewitt et al. 2016) of a fitted station's screened daily values, checked against the fit.
+
+    Where the fit has post-seismic terms, MIDAS (whose model is a rate and steps) runs on the
+    values less the fitted transients, so that the comparison tests the rest of the model.
+
+    Args:
+      fit: :class:`StationFit` (its grid, steps, design and rates).
+    Returns:
+      (:class:`jaxnav.monitoring.MidasVelocity`: rates and sigmas (3,) m/yr with the fit's steps;
+      warnings): a warning per component where MIDAS and the model rate differ by more than their combined sigma sqrt(s_midas^2 + s_fit^2), and where
+      the ordinary least-squares rate of the residuals exceeds 3 MIDAS sigmas (a misfit that an
+      inflated random walk would hide from the model's own sigma).
+    """
+    g = fit.grid
+    t_yr = decimal_year(g.t[: g.n_days])
+    y = np.where(g.valid, g.y, np.nan)[: g.n_days]
+    for i, nm in enumerate(fit.design_names):  # MIDAS has no transient: it sees the series less the fitted ones
+        if nm.startswith("postseismic_"):
+            y = y - np.outer(fit.A[: g.n_days, i], np.asarray(fit.noise.beta)[:, i])
+    m = midas_velocity(t_yr, y, decimal_year(fit.steps))
+    v_fit, s_fit = fit.velocity * YEAR, fit.velocity_sigma * YEAR
+    warnings = []
+    for c, comp in enumerate(COMPONENTS):
+        d, s = m.velocity[c] - v_fit[c], math.hypot(m.sigma[c], s_fit[c])
+        if np.isfinite(d) and abs(d) > s:
+            warnings.append(
+                f"{comp}: MIDAS rate {m.velocity[c] / MM:+.2f} +- {m.sigma[c] / MM:.2f} mm/yr differs from "
+                f"the model rate {v_fit[c] / MM:+.2f} +- {s_fit[c] / MM:.2f} mm/yr by more than their "
+                "combined sigma: a step, transient or outliers the model misses?"
+            )
+    span = (g.n_days - 1) / 365.25
+    for c, comp in enumerate(COMPONENTS):
+        r = float(fit.residual_trend[c] * YEAR)
+        if np.isfinite(r) and np.isfinite(m.sigma[c]) and abs(r) > 3.0 * m.sigma[c]:
+            warnings.append(
+                f"{comp}: the residuals keep a trend of {r / MM:+.2f} mm/yr ({r * span / MM:+.0f} mm over "
+                f"{span:.1f} yr), more than 3 x the MIDAS rate sigma {m.sigma[c] / MM:.2f} mm/yr: the "
+                "model misfits (a missed step or transient, absorbed by the noise model?)"
+            )
+    return m, warnings

@@ -37,13 +37,14 @@ from jaxnav.sim._filter_inputs import LCInputs, imu_noise, lc_inputs
 from jaxnav.sim._gnss import GnssConfig, GnssData, GnssEpochs, gnss_epochs, simulate_gnss
 from jaxnav.sim._imu import (
     SensorDraw,
-    SensorErrorModel,
+    SensorLimits,
     allan_variance_theory,
     apply_sensor_errors,
     corrupt_increments,
     draw_sensor_errors,
     lowpass,
     markov_ar1,
+    simulator_noise,
 )
 from jaxnav.sim._linear import CVScenario, simulate_cv_scenario, simulate_linear
 from jaxnav.sim._rtk_points import RtkPointsConfig, RtkPointsSim, simulate_rtk_points, true_height_anomaly
@@ -54,6 +55,7 @@ from jaxnav.sim._scenario import (
     ScenarioConfig,
     SensorErrors,
     SimResult,
+    cut_timeline,
     dumps_scenario,
     load_scenario,
     loads_scenario,
@@ -107,7 +109,7 @@ __all__ = [
     "Segment",
     "SegmentTable",
     "SensorDraw",
-    "SensorErrorModel",
+    "SensorLimits",
     "SensorErrors",
     "SimResult",
     "Trajectory",
@@ -118,6 +120,7 @@ __all__ = [
     "allan_variance_theory",
     "apply_sensor_errors",
     "corrupt_increments",
+    "cut_timeline",
     "draw_sensor_errors",
     "dumps_scenario",
     "generate_trajectory",
@@ -128,6 +131,7 @@ __all__ = [
     "lowpass",
     "make_trajectory",
     "markov_ar1",
+    "simulator_noise",
     "perturb_nav",
     "s0_scenario",
     "scenario_from_dict",

@@ -24,13 +24,15 @@ import numpy as np
 
 from jaxnav import units
 from jaxnav._config import Table, load_toml, loads_toml
-from jaxnav.sim._imu import SensorErrorModel
+from jaxnav.ins.noise import ImuNoise
+from jaxnav.sim._imu import SensorLimits, simulator_noise
 from jaxnav.sim._scenario import (
     _ACCEL,
     _GYRO,
     _INIT,
     InitialErrorConfig,
     ScenarioConfig,
+    _imu_records,
     _read,
     make_trajectory,
     simulate,
@@ -61,12 +63,15 @@ class Leg:
 
 @dataclass(frozen=True)
 class ImuGrade:
-    """A sensor grade: gyro and accelerometer error models, initial alignment errors."""
+    """A sensor grade: its :class:`jaxnav.ins.ImuNoise`, :class:`SensorLimits`, initial alignment errors."""
 
     name: str
-    gyro: SensorErrorModel
-    accel: SensorErrorModel
+    noise: ImuNoise
+    limits: SensorLimits = field(default_factory=SensorLimits)
     initial_errors: InitialErrorConfig = field(default_factory=InitialErrorConfig)
+
+    def __post_init__(self):
+        object.__setattr__(self, "noise", simulator_noise(self.noise))
 
 
 @dataclass(frozen=True)
@@ -185,8 +190,8 @@ class CadastralScenario:
             trajectory=spec,
             duration=self.duration,
             imu_rate_hz=self.imu_rate_hz,
-            gyro=self.grade.gyro,
-            accel=self.grade.accel,
+            noise=self.grade.noise,
+            limits=self.grade.limits,
             initial_errors=self.grade.initial_errors,
             name="cadastral",
             description=f"S3 cadastral survey, {self.grade.name} IMU",
@@ -507,9 +512,8 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
         g = _read(gt.table("gyro") or Table({}, f"imu.{gname}.gyro", error=ScenarioError), _GYRO)
         a = _read(gt.table("accel") or Table({}, f"imu.{gname}.accel", error=ScenarioError), _ACCEL)
         ie = _read(gt.table("initial_errors") or Table({}, f"imu.{gname}.initial_errors", error=ScenarioError), _INIT)
-        grade = ImuGrade(
-            name=gname, gyro=SensorErrorModel(**g), accel=SensorErrorModel(**a), initial_errors=InitialErrorConfig(**ie)
-        )
+        noise, limits = _imu_records({**g, **a})
+        grade = ImuGrade(name=gname, noise=noise, limits=limits, initial_errors=InitialErrorConfig(**ie))
         out[gname] = CadastralScenario(grade=grade, **kw)
     for scn in list(out.values())[:1]:  # the route is the grades' common one: expand it once, here, so that a
         c = scn.scenario_config()  # route the IMU rate cannot sample is refused with the file, not mid-run
@@ -604,9 +608,9 @@ def calibration_record(scn: CadastralScenario, key, n: int) -> CalibrationRecord
     kg, ka, kw = jax.random.split(key, 3)
     z = jnp.zeros((n, 3))
     out = []
-    for k, model in ((kg, scn.grade.gyro), (ka, scn.grade.accel)):
-        d = draw_sensor_errors(k, model, n, dt)
-        meas = apply_sensor_errors(z, dt, model, d) / dt
+    for k, sensor in ((kg, "gyro"), (ka, "accel")):
+        d = draw_sensor_errors(k, scn.grade.noise, sensor, n, dt)
+        meas = apply_sensor_errors(z, dt, d, sensor, scn.grade.limits) / dt
         col = d.bias + (d.markov if d.markov is not None else 0.0)
         out.append((meas, jnp.broadcast_to(col, (n, 3))))
     k1, k2, k3, k4 = jax.random.split(kw, 4)

@@ -1,7 +1,7 @@
 """What a loosely coupled filter needs from a simulated run: the IMU noise record and the inputs.
 
 A simulated run is filtered in three lines (README "INS/GNSS on a simulated run"): the scenario's
-sensor errors as an :class:`jaxnav.ins.ImuNoise` (:func:`imu_noise`), the filter parameters from
+IMU noise as an :class:`jaxnav.ins.ImuNoise` of arrays (:func:`imu_noise`), the filter parameters from
 :func:`jaxnav.ins.lc_params`, the inputs from :func:`lc_inputs`.
 """
 
@@ -21,28 +21,12 @@ def _v3(x):
 
 
 def imu_noise(cfg) -> ImuNoise:
-    """The scenario's gyro and accelerometer errors as an :class:`jaxnav.ins.ImuNoise` ((3,) per axis, SI).
-
-    ``white`` is the angle / velocity random walk, ``markov_sigma`` and ``markov_tau`` the bias
-    instability and its correlation time, ``bias_sigma`` the turn-on bias, ``scale_sigma`` the
-    scale-factor sigma.
+    """The scenario's :class:`jaxnav.ins.ImuNoise` (``cfg.noise``) with (3,) float arrays for leaves.
 
     Args:
-      cfg: :class:`ScenarioConfig`.
+      cfg: :class:`ScenarioConfig` (or :class:`ImuGrade`): its ``noise`` holds (3,) tuples, SI.
     """
-    g, a = cfg.gyro, cfg.accel
-    return ImuNoise(
-        gyro_arw=_v3(g.white),
-        accel_vrw=_v3(a.white),
-        gyro_bias_instability=_v3(g.markov_sigma),
-        gyro_bias_tau=_v3(g.markov_tau),
-        accel_bias_instability=_v3(a.markov_sigma),
-        accel_bias_tau=_v3(a.markov_tau),
-        gyro_bias_initial=_v3(g.bias_sigma),
-        accel_bias_initial=_v3(a.bias_sigma),
-        gyro_sf=_v3(g.scale_sigma),
-        accel_sf=_v3(a.scale_sigma),
-    )
+    return ImuNoise(*(np.asarray(v, float) for v in cfg.noise))
 
 
 class LCInputs(NamedTuple):

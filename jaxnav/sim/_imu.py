@@ -1,8 +1,9 @@
-"""IMU sensor error models applied to ideal increments (gyro and accelerometer alike).
+"""IMU sensor errors applied to ideal increments (gyro and accelerometer alike).
 
-Per axis, in SI: random constant bias (drawn once per run), first-order Gauss-Markov drift
-(exact discrete AR(1)), white noise given as angle/velocity random walk, optional scale-factor
-error, and two deliberately *unmodelled* effects: a first-order bandwidth limit and saturation.
+The noise terms are those of :class:`jaxnav.ins.ImuNoise`, per axis, in SI: turn-on bias (a random
+constant drawn once per run), first-order Gauss-Markov bias instability (exact discrete AR(1)),
+angle / velocity random walk (white noise), scale-factor error. :class:`SensorLimits` adds two
+deliberately *unmodelled* effects: a first-order bandwidth limit and saturation.
 """
 
 from __future__ import annotations
@@ -15,47 +16,77 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.sim._trajectory import _vec3
+from jaxnav.ins.noise import ImuNoise
+from jaxnav.sim._trajectory import ScenarioError, _vec3
+
+#: the :class:`jaxnav.ins.ImuNoise` random walks the simulator does not draw (they must be 0)
+_NOT_SIMULATED = ("gyro_bias_rw", "accel_bias_rw", "gyro_sf_rw", "accel_sf_rw")
+
+
+def simulator_noise(noise: ImuNoise) -> ImuNoise:
+    """``noise`` with every term a (3,) tuple of floats (hashable: a static argument of ``jit``).
+
+    Raises:
+      ScenarioError: for a negative term, a non-positive correlation time, or a non-zero bias or
+        scale-factor random walk (the simulator draws none).
+    """
+    if not isinstance(noise, ImuNoise):
+        raise TypeError(f"noise must be a jaxnav.ins.ImuNoise, got {type(noise).__name__}")
+    out = {f: _vec3(v, f"noise.{f}", nonneg=True, positive=f.endswith("_tau")) for f, v in zip(ImuNoise._fields, noise)}
+    for f in _NOT_SIMULATED:
+        if any(out[f]):
+            raise ScenarioError(f"noise.{f} = {out[f]} is not simulated: the simulator draws no random walk of it")
+    return ImuNoise(**out)
 
 
 @dataclass(frozen=True)
-class SensorErrorModel:
-    """Error model of one sensor triad (SI; every entry per axis, scalars broadcast to 3).
-
-    The noise terms are those of :class:`jaxnav.ins.ImuNoise`, per triad: ``bias_sigma`` is its turn-on
-    bias, ``markov_sigma`` / ``markov_tau`` its bias instability and correlation time, ``white`` its
-    ARW / VRW, ``scale_sigma`` its scale-factor sigma; :func:`jaxnav.sim.imu_noise` gives a scenario's
-    gyro and accelerometer as that record.
+class SensorLimits:
+    """Sensor effects outside :class:`jaxnav.ins.ImuNoise` (unmodelled by the filters); None = absent.
 
     Attributes:
-      bias_sigma: std of the random constant bias, drawn per run from N(0, sigma^2)
-        (rad/s for a gyro, m/s^2 for an accelerometer).
-      markov_sigma: steady-state std of the first-order Gauss-Markov drift (same unit).
-      markov_tau: correlation time of the Gauss-Markov drift, s.
-      white: white noise density: angle random walk, rad/sqrt(s), or velocity random walk,
-        m/s/sqrt(s) (= m/s^2/sqrt(Hz)). The increment noise std is ``white * sqrt(dt)``.
-      scale_sigma: std of the random scale-factor error (dimensionless; 1e-6 = 1 ppm).
-      saturation: None, or the largest |rate| / |specific force| the sensor reports (the
-        interval-mean output is clipped).
-      bandwidth: None, or the -3 dB cut-off (Hz) of a first-order low-pass on the sensed rate.
+      gyro_saturation: largest |rate| the gyro reports, rad/s, (3,) (the interval-mean output is clipped).
+      accel_saturation: largest |specific force| the accelerometer reports, m/s^2, (3,).
+      gyro_bandwidth, accel_bandwidth: -3 dB cut-off of a first-order low-pass on the sensed rate, Hz, (3,).
     """
 
-    bias_sigma: tuple = (0.0, 0.0, 0.0)
-    markov_sigma: tuple = (0.0, 0.0, 0.0)
-    markov_tau: tuple = (3600.0, 3600.0, 3600.0)
-    white: tuple = (0.0, 0.0, 0.0)
-    scale_sigma: tuple = (0.0, 0.0, 0.0)
-    saturation: tuple | None = None
-    bandwidth: tuple | None = None
+    gyro_saturation: tuple | None = None
+    accel_saturation: tuple | None = None
+    gyro_bandwidth: tuple | None = None
+    accel_bandwidth: tuple | None = None
 
     def __post_init__(self):
-        for f in ("bias_sigma", "markov_sigma", "white", "scale_sigma"):
-            object.__setattr__(self, f, _vec3(getattr(self, f), f"sensor.{f}", nonneg=True))
-        object.__setattr__(self, "markov_tau", _vec3(self.markov_tau, "sensor.markov_tau", positive=True))
-        for f in ("saturation", "bandwidth"):
+        for f in ("gyro_saturation", "accel_saturation", "gyro_bandwidth", "accel_bandwidth"):
             v = getattr(self, f)
             if v is not None:
-                object.__setattr__(self, f, _vec3(v, f"sensor.{f}", positive=True))
+                object.__setattr__(self, f, _vec3(v, f"limits.{f}", positive=True))
+
+
+class _Triad(NamedTuple):
+    """One sensor triad's terms, (3,) tuples (``saturation`` / ``bandwidth`` None when absent)."""
+
+    bias_sigma: tuple
+    markov_sigma: tuple
+    markov_tau: tuple
+    white: tuple
+    scale_sigma: tuple
+    saturation: tuple | None
+    bandwidth: tuple | None
+
+
+def _triad(noise: ImuNoise, sensor: str, limits: SensorLimits | None) -> _Triad:
+    if sensor not in ("gyro", "accel"):
+        raise ValueError(f"sensor must be 'gyro' or 'accel', got {sensor!r}")
+    n, lim = simulator_noise(noise), limits or SensorLimits()
+    white = n.gyro_arw if sensor == "gyro" else n.accel_vrw
+    return _Triad(
+        bias_sigma=getattr(n, f"{sensor}_bias_initial"),
+        markov_sigma=getattr(n, f"{sensor}_bias_instability"),
+        markov_tau=getattr(n, f"{sensor}_bias_tau"),
+        white=white,
+        scale_sigma=getattr(n, f"{sensor}_sf"),
+        saturation=getattr(lim, f"{sensor}_saturation"),
+        bandwidth=getattr(lim, f"{sensor}_bandwidth"),
+    )
 
 
 class SensorDraw(NamedTuple):
@@ -136,40 +167,46 @@ def lowpass(rate, dt, cutoff_hz):
     return ys
 
 
-def draw_sensor_errors(key, model: SensorErrorModel, n: int, dt, dtype=jnp.float64) -> SensorDraw:
-    """Draw one run's random sensor errors.
+def draw_sensor_errors(key, noise: ImuNoise, sensor: str, n: int, dt, dtype=jnp.float64) -> SensorDraw:
+    """Draw one run's random errors of one sensor triad.
 
     The key is split into fixed sub-keys (constants, Markov, white noise): switching one term on
     or off does not change the draws of the others. One (2, 3) standard-normal draw gives the
     bias (row 0) and the scale factor (row 1).
+
+    Args:
+      key: PRNG key.  noise: :class:`jaxnav.ins.ImuNoise` (concrete values).
+      sensor: ``"gyro"`` or ``"accel"``.  n: number of intervals (static).  dt: s.
     """
+    m = _triad(noise, sensor, None)
     kc, km, kw = jax.random.split(key, 3)
     small = jax.random.normal(kc, (2, 3), dtype)
-    bias = jnp.asarray(model.bias_sigma, dtype) * small[0]
-    scale = jnp.asarray(model.scale_sigma, dtype) * small[1] if _any(model.scale_sigma) else None
-    markov = markov_ar1(km, n, dt, model.markov_sigma, model.markov_tau, dtype) if _any(model.markov_sigma) else None
+    bias = jnp.asarray(m.bias_sigma, dtype) * small[0]
+    scale = jnp.asarray(m.scale_sigma, dtype) * small[1] if _any(m.scale_sigma) else None
+    markov = markov_ar1(km, n, dt, m.markov_sigma, m.markov_tau, dtype) if _any(m.markov_sigma) else None
     white = (
-        jnp.asarray(model.white, dtype) * jnp.sqrt(jnp.asarray(dt, dtype)) * jax.random.normal(kw, (n, 3), dtype)
-        if _any(model.white)
+        jnp.asarray(m.white, dtype) * jnp.sqrt(jnp.asarray(dt, dtype)) * jax.random.normal(kw, (n, 3), dtype)
+        if _any(m.white)
         else None
     )
     return SensorDraw(bias=bias, markov=markov, scale=scale, white=white)
 
 
-def apply_sensor_errors(ideal, dt, model: SensorErrorModel, draw: SensorDraw, unsensed=None):
+def apply_sensor_errors(ideal, dt, draw: SensorDraw, sensor: str, limits: SensorLimits | None = None, *, unsensed=None):
     """Measured increments from ideal ones (all (N, 3)).
 
     Order: r = (ideal - unsensed) / dt (interval-mean rate); r = lowpass(r) [bandwidth];
     r = (1 + scale) r + bias + markov_k; inc = r dt + white; inc = clip(inc, +-saturation dt).
 
     Args:
-      ideal: (N, 3) ideal increments (rad or m/s).  dt: s.
-      model: :class:`SensorErrorModel`.  draw: :class:`SensorDraw`.
+      ideal: (N, 3) ideal increments (rad or m/s).  dt: s.  draw: :class:`SensorDraw`.
+      sensor: ``"gyro"`` or ``"accel"`` (which limits apply).  limits: :class:`SensorLimits` or None.
       unsensed: optional (N, 3) part of ``ideal`` the sensor does not see.
     """
+    m = _triad(ImuNoise(0.0, 0.0), sensor, limits)
     x = ideal if unsensed is None else ideal - unsensed
-    if model.bandwidth is not None:
-        x = lowpass(x / dt, dt, model.bandwidth) * dt
+    if m.bandwidth is not None:
+        x = lowpass(x / dt, dt, m.bandwidth) * dt
     if draw.scale is not None:
         x = x * (1.0 + draw.scale)
     x = x + draw.bias * dt
@@ -177,16 +214,24 @@ def apply_sensor_errors(ideal, dt, model: SensorErrorModel, draw: SensorDraw, un
         x = x + draw.markov * dt
     if draw.white is not None:
         x = x + draw.white
-    if model.saturation is not None:
-        lim = jnp.asarray(model.saturation, x.dtype) * dt
+    if m.saturation is not None:
+        lim = jnp.asarray(m.saturation, x.dtype) * dt
         x = jnp.clip(x, -lim, lim)
     return x
 
 
-def corrupt_increments(key, ideal, dt, model: SensorErrorModel, unsensed=None):
-    """Draw sensor errors and apply them: returns (measured (N, 3), :class:`SensorDraw`)."""
-    draw = draw_sensor_errors(key, model, ideal.shape[0], dt, ideal.dtype)
-    return apply_sensor_errors(ideal, dt, model, draw, unsensed), draw
+def corrupt_increments(
+    key, ideal, dt, noise: ImuNoise, sensor: str, limits: SensorLimits | None = None, *, unsensed=None
+):
+    """Draw one triad's sensor errors and apply them: returns (measured (N, 3), :class:`SensorDraw`).
+
+    Args:
+      key: PRNG key.  ideal: (N, 3) ideal increments (rad or m/s).  dt: s.
+      noise: :class:`jaxnav.ins.ImuNoise`.  sensor: ``"gyro"`` or ``"accel"``.
+      limits: :class:`SensorLimits` or None.  unsensed: optional (N, 3) part of ``ideal`` not sensed.
+    """
+    draw = draw_sensor_errors(key, noise, sensor, ideal.shape[0], dt, ideal.dtype)
+    return apply_sensor_errors(ideal, dt, draw, sensor, limits, unsensed=unsensed), draw
 
 
 # ------------------------------------------------------------------------------------------

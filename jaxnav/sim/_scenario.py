@@ -9,6 +9,7 @@ sensor errors.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import importlib.resources
 import json
@@ -25,8 +26,9 @@ from jaxnav._config import Table, load_toml, loads_toml
 from jaxnav.geodesy import WGS84, meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import quat_mul, rv_to_quat
 from jaxnav.ins.mechanization import NavState
+from jaxnav.ins.noise import ImuNoise
 from jaxnav.sim._gnss import GnssConfig, GnssData, gnss_epochs, simulate_gnss
-from jaxnav.sim._imu import SensorErrorModel, corrupt_increments
+from jaxnav.sim._imu import SensorLimits, corrupt_increments, simulator_noise
 from jaxnav.sim._trajectory import (
     SEGMENT_KINDS,
     ScenarioError,
@@ -73,7 +75,9 @@ class ScenarioConfig:
       trajectory: :class:`TrajectorySpec` (start state and segments).
       duration: s (segments shorter than this are filled up with a cruise).
       imu_rate_hz: IMU rate, Hz.
-      gyro, accel: :class:`SensorErrorModel` (gyro in rad/s, accelerometer in m/s^2).
+      noise: :class:`jaxnav.ins.ImuNoise` of the gyro and accelerometer (SI; each term stored as a
+        (3,) tuple; the bias and scale-factor random walks must be 0, the simulator draws none).
+      limits: :class:`SensorLimits` (saturation and bandwidth, not modelled by the filters).
       gnss: :class:`GnssConfig`.
       initial_errors: :class:`InitialErrorConfig`.
       rk4_substeps: RK4 steps per IMU interval for the true position.
@@ -82,13 +86,16 @@ class ScenarioConfig:
     trajectory: TrajectorySpec
     duration: float
     imu_rate_hz: float = 100.0
-    gyro: SensorErrorModel = field(default_factory=SensorErrorModel)
-    accel: SensorErrorModel = field(default_factory=SensorErrorModel)
+    noise: ImuNoise = ImuNoise(0.0, 0.0)
+    limits: SensorLimits = field(default_factory=SensorLimits)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     initial_errors: InitialErrorConfig = field(default_factory=InitialErrorConfig)
     rk4_substeps: int = 1
     name: str = ""
     description: str = ""
+
+    def __post_init__(self):
+        object.__setattr__(self, "noise", simulator_noise(self.noise))
 
     @property
     def dt(self) -> float:
@@ -188,6 +195,25 @@ def make_trajectory(config: ScenarioConfig) -> Trajectory:
     return _cached_trajectory(config.trajectory, config.imu_rate_hz, config.duration, config.rk4_substeps)
 
 
+def cut_timeline(cfg: ScenarioConfig, duration: float) -> ScenarioConfig:
+    """The scenario ``cfg`` cut to ``duration`` s: the trajectory segments (change + hold) that end by then.
+
+    Raises:
+      ValueError: if the first segment ends after ``duration``.
+    """
+    segs, t = [], 0.0
+    for seg in cfg.trajectory.segments:
+        if t + seg.duration + seg.hold > duration + 1e-9:
+            break
+        segs.append(seg)
+        t += seg.duration + seg.hold
+    if not segs:
+        raise ValueError(f"duration {duration} s is shorter than the first trajectory segment")
+    return dataclasses.replace(
+        cfg, duration=float(duration), trajectory=dataclasses.replace(cfg.trajectory, segments=tuple(segs))
+    )
+
+
 def perturb_nav(nav: NavState, attitude, velocity, position_enu, ellipsoid=WGS84) -> NavState:
     """Apply ENU attitude (phi, rad), velocity (m/s) and position (m) errors to a navigation state.
 
@@ -208,8 +234,8 @@ def perturb_nav(nav: NavState, attitude, velocity, position_enu, ellipsoid=WGS84
 def _simulate_random(key, truth: Trajectory, config: ScenarioConfig):
     kg, ka, kn, ki = jax.random.split(key, 4)
     dt = truth.dt
-    dth, gd = corrupt_increments(kg, truth.dtheta, dt, config.gyro)
-    dv, ad = corrupt_increments(ka, truth.dv, dt, config.accel, unsensed=truth.dv_unsensed)
+    dth, gd = corrupt_increments(kg, truth.dtheta, dt, config.noise, "gyro", config.limits)
+    dv, ad = corrupt_increments(ka, truth.dv, dt, config.noise, "accel", config.limits, unsensed=truth.dv_unsensed)
     epochs = gnss_epochs(config.gnss, config.dt, truth.dtheta.shape[0])
     gnss = simulate_gnss(kn, config.gnss, truth, epochs, jnp.asarray(config.origin))
     ie = config.initial_errors
@@ -297,24 +323,41 @@ _SEGMENT = [
     ("dv_enu_mps", "dv_enu", 1.0, "vec3"),
     ("sensed", "sensed", None, "bool"),
 ]
+# the [gyro] and [accel] tables: fields of jaxnav.ins.ImuNoise and of SensorLimits
 _GYRO = [
-    ("bias_deg_per_h", "bias_sigma", units.DEG_PER_HOUR, "vec3>=0"),
-    ("markov_deg_per_h", "markov_sigma", units.DEG_PER_HOUR, "vec3>=0"),
-    ("markov_tau_s", "markov_tau", 1.0, "vec3>0"),
-    ("arw_deg_per_sqrt_h", "white", units.DEG_PER_SQRT_HOUR, "vec3>=0"),
-    ("scale_factor_ppm", "scale_sigma", PPM, "vec3>=0"),
-    ("saturation_deg_per_s", "saturation", units.DEG, "vec3>0"),
-    ("bandwidth_hz", "bandwidth", 1.0, "vec3>0"),
+    ("bias_deg_per_h", "gyro_bias_initial", units.DEG_PER_HOUR, "vec3>=0"),
+    ("markov_deg_per_h", "gyro_bias_instability", units.DEG_PER_HOUR, "vec3>=0"),
+    ("markov_tau_s", "gyro_bias_tau", 1.0, "vec3>0"),
+    ("arw_deg_per_sqrt_h", "gyro_arw", units.DEG_PER_SQRT_HOUR, "vec3>=0"),
+    ("scale_factor_ppm", "gyro_sf", PPM, "vec3>=0"),
+    ("saturation_deg_per_s", "gyro_saturation", units.DEG, "vec3>0"),
+    ("bandwidth_hz", "gyro_bandwidth", 1.0, "vec3>0"),
 ]
 _ACCEL = [
-    ("bias_mg", "bias_sigma", units.MG, "vec3>=0"),
-    ("markov_mg", "markov_sigma", units.MG, "vec3>=0"),
-    ("markov_tau_s", "markov_tau", 1.0, "vec3>0"),
-    ("vrw_ug_per_sqrt_hz", "white", units.UG, "vec3>=0"),
-    ("scale_factor_ppm", "scale_sigma", PPM, "vec3>=0"),
-    ("saturation_g", "saturation", units.G0, "vec3>0"),
-    ("bandwidth_hz", "bandwidth", 1.0, "vec3>0"),
+    ("bias_mg", "accel_bias_initial", units.MG, "vec3>=0"),
+    ("markov_mg", "accel_bias_instability", units.MG, "vec3>=0"),
+    ("markov_tau_s", "accel_bias_tau", 1.0, "vec3>0"),
+    ("vrw_ug_per_sqrt_hz", "accel_vrw", units.UG, "vec3>=0"),
+    ("scale_factor_ppm", "accel_sf", PPM, "vec3>=0"),
+    ("saturation_g", "accel_saturation", units.G0, "vec3>0"),
+    ("bandwidth_hz", "accel_bandwidth", 1.0, "vec3>0"),
 ]
+
+
+def _imu_records(fields: dict):
+    """(:class:`jaxnav.ins.ImuNoise`, :class:`SensorLimits`) from the read [gyro] and [accel] fields."""
+    noise = {k: v for k, v in fields.items() if k in ImuNoise._fields}
+    limits = {k: v for k, v in fields.items() if k not in ImuNoise._fields}
+    return ImuNoise(**{"gyro_arw": 0.0, "accel_vrw": 0.0, **noise}), SensorLimits(**limits)
+
+
+class _ImuFields:
+    """Attribute view of a config's noise and limits, for writing the [gyro] and [accel] tables."""
+
+    def __init__(self, noise: ImuNoise, limits: SensorLimits):
+        self.__dict__.update(noise._asdict(), **limits.__dict__)
+
+
 _GNSS = [
     ("rate_hz", "rate_hz", 1.0, "num>0"),
     ("first_epoch_s", "first_epoch", 1.0, "num>=0"),
@@ -416,13 +459,14 @@ def scenario_from_dict(d: dict, *, validate: bool = True) -> ScenarioConfig:
         segs.append(Segment(**s))
     spec = TrajectorySpec(segments=tuple(segs), **sec["start"])
     t = sec["time"]
+    noise, limits = _imu_records({**sec["gyro"], **sec["accel"]})
     cfg = ScenarioConfig(
         trajectory=spec,
         duration=t["duration"],
         imu_rate_hz=t["imu_rate_hz"],
         rk4_substeps=t.get("rk4_substeps", 1),
-        gyro=SensorErrorModel(**sec["gyro"]),
-        accel=SensorErrorModel(**sec["accel"]),
+        noise=noise,
+        limits=limits,
         gnss=GnssConfig(**sec["gnss"]),
         initial_errors=InitialErrorConfig(**sec["initial_errors"]),
         **top,
@@ -482,8 +526,9 @@ def scenario_to_dict(cfg: ScenarioConfig) -> dict:
     d = _write(cfg, _TOP)
     d["time"] = {"duration_s": cfg.duration, "imu_rate_hz": cfg.imu_rate_hz, "rk4_substeps": cfg.rk4_substeps}
     d["start"] = _write(tr, _START)
-    d["gyro"] = _write(cfg.gyro, _GYRO)
-    d["accel"] = _write(cfg.accel, _ACCEL)
+    imu = _ImuFields(cfg.noise, cfg.limits)
+    d["gyro"] = _write(imu, _GYRO)
+    d["accel"] = _write(imu, _ACCEL)
     d["gnss"] = _write(cfg.gnss, _GNSS)
     d["initial_errors"] = _write(cfg.initial_errors, _INIT)
     segs = []

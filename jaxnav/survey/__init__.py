@@ -37,6 +37,7 @@ from jaxnav.survey._stops import (
     StopList,
     classify,
     detect_stops,
+    detection_scores,
     make_stop_list,
     match_stops,
     stance_statistic,
@@ -72,6 +73,7 @@ from jaxnav.survey.rtk import (
     pack_points,
     point_sigmas,
     process_points,
+    sampling_grid,
     windows_from_pos,
 )
 
@@ -92,6 +94,7 @@ __all__ = [
     "motion_segments",
     "pack_points",
     "point_sigmas",
+    "sampling_grid",
     "process_points",
     "windows_from_pos",
     "cadastral",
@@ -127,6 +130,7 @@ __all__ = [
     "detect_stops",
     "make_stop_list",
     "match_stops",
+    "detection_scores",
     "stance_statistic",
     "static_spans",
     "validate_stops",

@@ -302,3 +302,33 @@ def match_stops(detected, true, *, min_overlap: float = 0.5, t=None, static=None
         start_error=np.array(se),
         end_error=np.array(ee),
     )
+
+
+def detection_scores(static, t, true_spans, *, min_duration: float = 2.0, min_gap: float = 0.5) -> dict:
+    """Stop-detection scores over Monte Carlo runs: :func:`static_spans` of each run, :func:`match_stops`.
+
+    Args:
+      static: (S, N) bool per-sample static decisions of S runs.  t: (N,) sample times, s.
+      true_spans: (K, 2) true stops [start, end], s.  min_duration, min_gap: of :func:`static_spans`, s.
+    Returns:
+      dict: ``precision_mean``, ``recall_mean``, ``precision_min``, ``recall_min``,
+      ``sample_precision_mean``, ``sample_recall_mean``, ``boundary_error_s_mean_abs`` (mean |detected -
+      true| start and end time over the matched stops, s), ``n_true_stops``.
+    """
+    true_spans = np.asarray(true_spans, float).reshape(-1, 2)
+    scores = [
+        match_stops(static_spans(st, t, min_duration=min_duration, min_gap=min_gap), true_spans, t=t, static=st)
+        for st in np.asarray(static, bool)
+    ]
+    return {
+        "precision_mean": float(np.mean([s.precision for s in scores])),
+        "recall_mean": float(np.mean([s.recall for s in scores])),
+        "precision_min": float(np.min([s.precision for s in scores])),
+        "recall_min": float(np.min([s.recall for s in scores])),
+        "sample_precision_mean": float(np.mean([s.sample_precision for s in scores])),
+        "sample_recall_mean": float(np.mean([s.sample_recall for s in scores])),
+        "boundary_error_s_mean_abs": float(
+            np.mean(np.abs(np.concatenate([np.concatenate([s.start_error, s.end_error]) for s in scores])))
+        ),
+        "n_true_stops": len(true_spans),
+    }

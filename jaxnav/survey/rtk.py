@@ -733,6 +733,33 @@ def windows_from_pos(
     return res
 
 
+def sampling_grid(t, mask, names, point, grid) -> np.ndarray:
+    """(P, T) sampling-grid index of each packed epoch (the ``grid`` of :func:`point_sigmas`).
+
+    A point's epoch indices are those given per epoch (``.pos`` occupations cut from one static
+    segment, :func:`windows_from_pos`), padded with the last; where they are -1 (an epoch log) they
+    are round((t - t_0) / dt) with dt the median step of the point's valid epochs (1 s if none).
+
+    Args:
+      t: (P, T) packed epoch times, s.  mask: (P, T) bool valid epochs (:func:`pack_points`).
+      names: (P,) point names in packed order.  point: (N,) point name of each input epoch.
+      grid: (N,) int grid index of each input epoch, or -1 (to be derived).
+    """
+    t, mask, point, grid = np.asarray(t, float), np.asarray(mask, bool), np.asarray(point), np.asarray(grid)
+    out = np.full(t.shape, -1, np.int64)
+    for p, name in enumerate(names):
+        g = grid[point == name]
+        out[p, : len(g)] = g
+        out[p, len(g) :] = g[-1] if len(g) else -1
+        if out[p, 0] >= 0:
+            continue
+        tv = t[p][mask[p]]
+        dt = float(np.median(np.diff(tv))) if tv.size > 1 else 1.0
+        dt = dt if dt > 0 else 1.0
+        out[p] = np.round((t[p] - (tv[0] if tv.size else t[p, 0])) / dt).astype(np.int64)
+    return out
+
+
 class PointSigmas(NamedTuple):
     """Precision of P point means under time-correlated epoch errors (:func:`point_sigmas`).
 

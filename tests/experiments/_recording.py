@@ -15,7 +15,7 @@ import numpy as np
 
 from jaxnav import sim
 from jaxnav.geodesy import enu_to_curvilinear
-from jaxnav.ins import C_RFU_FRD, mounting_from_rpy_deg
+from jaxnav.ins import C_RFU_FRD, ImuNoise, mounting_from_rpy_deg
 from jaxnav.ins.attitude import quat_to_dcm
 
 WEEK = 2380
@@ -120,11 +120,15 @@ def write_car(
     ``accel_bias`` m/s^2: the 1-sigma of their constant biases."""
     truth = sim.generate_trajectory(car_spec() if spec is None else spec, imu_rate_hz=imu_rate)
     dt = float(truth.dt)
-    model_g = sim.SensorErrorModel(bias_sigma=gyro_bias, white=gyro_white)
-    model_a = sim.SensorErrorModel(bias_sigma=accel_bias, white=accel_white)
+    noise = ImuNoise(
+        gyro_arw=gyro_white,
+        accel_vrw=accel_white,
+        gyro_bias_initial=gyro_bias,
+        accel_bias_initial=accel_bias,
+    )
     kg, ka, kn = jax.random.split(jax.random.PRNGKey(seed), 3)
-    dth = np.array(sim.corrupt_increments(kg, truth.dtheta, dt, model_g)[0])
-    dv = np.array(sim.corrupt_increments(ka, truth.dv, dt, model_a)[0])
+    dth = np.array(sim.corrupt_increments(kg, truth.dtheta, dt, noise, "gyro")[0])
+    dv = np.array(sim.corrupt_increments(ka, truth.dv, dt, noise, "accel")[0])
     # engine and road vibration while the car moves (zero-mean sinusoids: 0.3 m/s^2 at 23 Hz vertical,
     # 0.15 m/s^2 at 31 Hz lateral, 0.01 rad/s at 17 Hz in roll); none at standstill, engine off
     t_end = np.asarray(truth.t)

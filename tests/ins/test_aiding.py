@@ -222,14 +222,14 @@ def car():
     cfg = sim.loads_scenario(CAR)
     truth = sim.make_trajectory(cfg)
     r = sim.simulate(cfg, jax.random.PRNGKey(3), trajectory=truth)
-    g, a = cfg.gyro, cfg.accel
+    nz = cfg.noise
     P0 = ins.ERROR_MODEL_15.P0(
         truth.pos[0],
         att=_v3(cfg.initial_errors.attitude),
         vel=0.1,
         pos_enu=1.0,
-        gyro_bias=_v3(g.bias_sigma),
-        accel_bias=_v3(a.bias_sigma),
+        gyro_bias=_v3(nz.gyro_bias_initial),
+        accel_bias=_v3(nz.accel_bias_initial),
     )
     params = LCParams(P0=P0, Qc=ins.ERROR_MODEL_15.Qc(sim.imu_noise(cfg)), tau_markov=300.0)
     meas = _gnss_meas(r.gnss)
@@ -346,8 +346,8 @@ def test_21_state_model_recovers_an_injected_gyro_scale_factor(car):
     cfg, truth, r, params, meas, t_imu, base = car
     s_true = np.array([3e-3, -3e-3, 1e-2])
     dth = r.imu.dtheta * (1.0 + s_true)  # measured = (1 + s) true + bias ... (bias scaled: 0.5 % of 30 deg/h)
-    g, a = cfg.gyro, cfg.accel
-    bias_sd = jnp.concatenate([jnp.asarray(_v3(g.bias_sigma)), jnp.asarray(_v3(a.bias_sigma))])
+    nz = cfg.noise
+    bias_sd = jnp.concatenate([jnp.asarray(_v3(nz.gyro_bias_initial)), jnp.asarray(_v3(nz.accel_bias_initial))])
     P0 = ins.ERROR_MODEL_21.P0(
         truth.pos[0],
         att=_v3(cfg.initial_errors.attitude),
@@ -359,7 +359,7 @@ def test_21_state_model_recovers_an_injected_gyro_scale_factor(car):
         accel_scale=1e-3,
     )
     Qc = ins.ERROR_MODEL_21.Qc(
-        ins.ImuNoise(gyro_arw=_v3(g.white), accel_vrw=_v3(a.white))
+        ins.ImuNoise(gyro_arw=_v3(nz.gyro_arw), accel_vrw=_v3(nz.accel_vrw))
     )  # random-constant biases, scale factors
     p21 = LCParams(P0=P0, Qc=Qc, tau_markov=jnp.full(6, jnp.inf))
     res = loosely_coupled(
@@ -472,14 +472,14 @@ def test_zupt_and_zaru_cut_the_drift_of_a_stop_and_go_walk():
     r = sim.simulate(cfg, jax.random.PRNGKey(5), trajectory=truth)
     v = np.linalg.norm(np.asarray(truth.v_n), axis=1)
     still = (v[1:] < 1e-9) & (v[:-1] < 1e-9)  # per IMU sample: at rest over the whole interval
-    g, a = cfg.gyro, cfg.accel
+    nz = cfg.noise
     P0 = ins.ERROR_MODEL_15.P0(
         truth.pos[0],
         att=_v3(cfg.initial_errors.attitude),
         vel=0.1,
         pos_enu=2.0,
-        gyro_bias=_v3(g.bias_sigma),
-        accel_bias=_v3(a.bias_sigma),
+        gyro_bias=_v3(nz.gyro_bias_initial),
+        accel_bias=_v3(nz.accel_bias_initial),
     )
     params = LCParams(P0=P0, Qc=ins.ERROR_MODEL_15.Qc(sim.imu_noise(cfg)), tau_markov=300.0)
     gn = r.gnss
@@ -514,7 +514,7 @@ def test_zupt_and_zaru_cut_the_drift_of_a_stop_and_go_walk():
     assert m0 > 20.0 and m0 > 10.0 * m1, (m0, m1)
     # the z gyro bias (unobservable by GNSS without turns) is held by ZARU through the outage
     err_z = abs(float(aided.final_biases.gyro[2] - r.errors.gyro_bias[2]))
-    assert err_z < 0.1 * cfg.gyro.bias_sigma[2], err_z
+    assert err_z < 0.1 * cfg.noise.gyro_bias_initial[2], err_z
     with pytest.raises(ValueError, match="active must be a"):
         run((ins.zupt(still[:-1]),))
 
@@ -688,8 +688,8 @@ def test_odometer_scale_factor_state_recovered_and_outage_drift_cut(car):
         att=_v3(cfg.initial_errors.attitude),
         vel=0.1,
         pos_enu=1.0,
-        gyro_bias=_v3(cfg.gyro.bias_sigma),
-        accel_bias=_v3(cfg.accel.bias_sigma),
+        gyro_bias=_v3(cfg.noise.gyro_bias_initial),
+        accel_bias=_v3(cfg.noise.accel_bias_initial),
         odo_scale=0.05,
     )
     aids = (ins.odometer(speed, sigma=0.05), ins.nhc(sigma=0.1))

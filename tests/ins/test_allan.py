@@ -213,3 +213,21 @@ def test_allan_command_reads_a_csv_with_a_column_map(tmp_path):
 
     res = json.loads((out / "results.json").read_text())
     assert res["gyro"]["arw_deg_per_sqrt_h"] == pytest.approx([ARW_DEG_SQRT_H] * 3, rel=0.05)
+
+
+def test_static_check_nearest_grade_and_datasheet_record():
+    """static_check names the failing test (gravity, gyro or accelerometer spread); nearest_grade picks the preset
+    nearest in log ARW; allan_fit_datasheet gives per-axis lists in datasheet units."""
+    rng = np.random.default_rng(1)
+    w = 1e-4 * rng.standard_normal((1000, 3))
+    f = np.array([0.0, 0.0, units.G0]) + 1e-3 * rng.standard_normal((1000, 3))
+    assert ins.static_check(w, f) is None
+    assert "mean specific force" in ins.static_check(w, f / units.G0)
+    assert "angular rate varies" in ins.static_check(w + np.linspace(0, 1, 1000)[:, None], f)
+    assert "specific force varies" in ins.static_check(w, f + 2.0 * np.sin(np.arange(1000))[:, None])
+    for g in ins.NOISE_GRADES:
+        assert ins.nearest_grade(float(ins.noise_preset(g).gyro_arw) * 1.1) == g
+    fit = ins.allan_noise_fit(0.01 * rng.standard_normal((3, 4096)), 0.01)
+    e = ins.allan_fit_datasheet(fit, "gyro")
+    np.testing.assert_allclose(e["arw_deg_per_sqrt_h"], units.rad_per_sqrt_s_to_deg_per_sqrt_hour(fit.white))
+    assert len(e["adev_deg_per_h"]) == 3 and "vrw_m_per_s_per_sqrt_h" in ins.allan_fit_datasheet(fit, "accel")

@@ -83,7 +83,7 @@ SEEDS = 64
 def _params(cfg, n_states=18):
     """The filter's model matches the simulation (P0 from the initial-error and sensor sigmas)."""
     v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
-    ie, g, a = cfg.initial_errors, cfg.gyro, cfg.accel
+    ie, nz = cfg.initial_errors, cfg.noise
     lat, h = np.radians(39.0), 205.8795
     RM = float(jaxnav.geodesy.meridian_radius(lat)) + h
     RN = float(jaxnav.geodesy.prime_vertical_radius(lat)) + h
@@ -92,13 +92,13 @@ def _params(cfg, n_states=18):
         v3(ie.attitude) ** 2,
         v3(ie.velocity) ** 2,
         np.array([pe[1] / RM, pe[0] / (RN * np.cos(lat)), pe[2]]) ** 2,
-        v3(g.bias_sigma) ** 2,
+        v3(nz.gyro_bias_initial) ** 2,
     ]
     if n_states == 18:
-        p0.append(v3(g.markov_sigma) ** 2)
-    p0.append(v3(a.bias_sigma) ** 2)
+        p0.append(v3(nz.gyro_bias_instability) ** 2)
+    p0.append(v3(nz.accel_bias_initial) ** 2)
     Qc = ins.error_model_for(n_states).Qc(sim.imu_noise(cfg))
-    return LCParams(P0=jnp.diag(jnp.asarray(np.concatenate(p0))), Qc=Qc, tau_markov=jnp.asarray(v3(g.markov_tau)))
+    return LCParams(P0=jnp.diag(jnp.asarray(np.concatenate(p0))), Qc=Qc, tau_markov=jnp.asarray(v3(nz.gyro_bias_tau)))
 
 
 def _meas(cfg, gnss):

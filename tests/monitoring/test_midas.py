@@ -127,13 +127,11 @@ def test_monitor_detects_the_lhas_1995_step_by_default(lhas_start, tmp_path):
 
 
 def test_misfit_warnings_name_a_step_the_model_left_out():
-    """station_midas on a 4-year series (2 mm/yr) with a 30 mm up step the model left out. A least-squares rate
+    """midas_check on a 4-year series (2 mm/yr) with a 30 mm up step the model left out. A least-squares rate
     that absorbed the step (about 14 mm/yr) differs from MIDAS (given the step) by more than the combined sigma;
     a model line pulled the other way (-3 +- 6 mm/yr, as an inflated random walk allows) is within the combined
     sigma but leaves a trend in the residuals: each case warns once, in the up component only."""
     from types import SimpleNamespace
-
-    from jaxnav.experiments.velocities import station_midas
 
     n = 1461
     rng = np.random.default_rng(5)
@@ -157,6 +155,6 @@ def test_misfit_warnings_name_a_step_the_model_left_out():
             A=A,
             residual_trend=mon.residual_trend(grid, A, b) / YEAR,
         )
-        m, warn = station_midas(fit)
+        m, warn = mon.midas_check(fit)
         assert np.all(np.abs(m.velocity / MM - 2.0) < 2 * m.sigma / MM), m
         assert len(warn) == 1 and warn[0].startswith(start), warn

@@ -30,7 +30,7 @@ def _record(v, lat):
 def test_velocity_table_has_units_header_and_one_row_per_station(tmp_path):
     """velocities.csv: '#' lines naming units and frame, then a header row and one row per station; a station
     without coordinates has empty latitude/longitude cells."""
-    from jaxnav.experiments.velocities import write_velocity_table
+    from jaxnav.io import write_velocity_table
 
     recs = {"AAAA": _record((45.4, 16.3, 0.2), 29.65), "BBBB": _record((-1.0, 1.2, -17.1), None)}
     p = write_velocity_table(tmp_path / "velocities.csv", recs, command="jaxnav m")

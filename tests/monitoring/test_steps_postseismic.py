@@ -229,7 +229,7 @@ def test_cli_steps_file_postseismic_and_poly_degree(tmp_path, capsys):
 def test_known_steps_on_one_day_merge():
     """A --step and a file's earthquake on the same day are one step: the more specific kind, the terms of
     both (one per form, an option's before a file's), all origins; other days stay apart, in time order."""
-    from jaxnav.experiments.velocities import merge_known_steps
+    from jaxnav.io import merge_known_steps
 
     d = io.date_to_epoch("2011-03-11")
     ks = [

@@ -8,12 +8,11 @@ import numpy as np
 import pytest
 
 from jaxnav import geodesy, ins, sim
-from jaxnav.experiments import cut_timeline
 
 
 @pytest.fixture(scope="module")
 def short_run():
-    cfg = cut_timeline(sim.s0_scenario(), 100.0)
+    cfg = sim.cut_timeline(sim.s0_scenario(), 100.0)
     cfg = dataclasses.replace(cfg, gnss=dataclasses.replace(cfg.gnss, outages=((40.0, 55.0),)))
     run = sim.simulate(cfg, jax.random.PRNGKey(3), trajectory=sim.make_trajectory(cfg))
     return cfg, run
@@ -28,7 +27,7 @@ def test_lc_params_follow_the_scenario_sigmas(short_run):
     cfg, _ = short_run
     p = _params(cfg)
     sd = np.sqrt(np.diag(np.asarray(p.P0)))
-    ie, g, a = cfg.initial_errors, cfg.gyro, cfg.accel
+    ie, nz = cfg.initial_errors, cfg.noise
     np.testing.assert_allclose(sd[0:3], np.broadcast_to(ie.attitude, 3), rtol=1e-12)
     np.testing.assert_allclose(sd[3:6], np.broadcast_to(ie.velocity, 3), rtol=1e-12)
     lat, h = float(cfg.origin[0]), float(cfg.origin[2])
@@ -36,13 +35,21 @@ def test_lc_params_follow_the_scenario_sigmas(short_run):
     RN = float(geodesy.prime_vertical_radius(lat)) + h
     pe = np.broadcast_to(ie.position, 3)
     np.testing.assert_allclose(sd[6:9] * [RM, RN * np.cos(lat), 1.0], [pe[1], pe[0], pe[2]], rtol=1e-12)
-    np.testing.assert_allclose(sd[9:18], np.concatenate([g.bias_sigma, g.markov_sigma, a.bias_sigma]), rtol=1e-12)
+    np.testing.assert_allclose(
+        sd[9:18], np.concatenate([nz.gyro_bias_initial, nz.gyro_bias_instability, nz.accel_bias_initial]), rtol=1e-12
+    )
     np.testing.assert_allclose(
         np.diag(np.asarray(p.Qc)),
-        np.concatenate([np.square(g.white), 2 * np.square(g.markov_sigma) / g.markov_tau, np.square(a.white)]),
+        np.concatenate(
+            [
+                np.square(nz.gyro_arw),
+                2 * np.square(nz.gyro_bias_instability) / nz.gyro_bias_tau,
+                np.square(nz.accel_vrw),
+            ]
+        ),
         rtol=1e-12,
     )
-    np.testing.assert_array_equal(p.tau_markov, g.markov_tau)
+    np.testing.assert_array_equal(p.tau_markov, nz.gyro_bias_tau)
     assert _params(cfg, ins.ERROR_MODEL_15).P0.shape == (15, 15) and _params(cfg, ins.ERROR_MODEL_21).Qc.shape == (
         18,
         18,

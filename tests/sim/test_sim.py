@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxnav import sim, units
+from jaxnav import ins, sim, units
 from jaxnav.ins import NavState, earth_params, mechanize
 from jaxnav.ins.attitude import euler_to_dcm, yaw_to_heading
 
@@ -133,10 +133,10 @@ def test_ideal_imu_at_rest_and_body_rate_closed_form():
 # 2. sensor noise vs configuration (Allan deviation)
 
 
-def _error_rates(key, model, n, dt, nkeys=1):
+def _error_rates(key, noise, sensor, n, dt, nkeys=1):
     """(nkeys, 3, n) simulated error rates (measured - ideal) / dt for a zero input."""
     zeros = jnp.zeros((n, 3))
-    f = jax.jit(jax.vmap(lambda k: sim.corrupt_increments(k, zeros, dt, model)[0] / dt))
+    f = jax.jit(jax.vmap(lambda k: sim.corrupt_increments(k, zeros, dt, noise, sensor)[0] / dt))
     return np.swapaxes(np.asarray(f(jax.random.split(key, nkeys))), 1, 2)
 
 
@@ -152,14 +152,16 @@ def test_allan_s0_gyro_and_accel_white_noise(s0):
     r = sim.simulate(cfg, jax.random.key(7), trajectory=tr)
     dt = 0.01
     ms = (1, 10, 100)
-    for meas, ideal, model in ((r.imu.dtheta, tr.dtheta, cfg.gyro), (r.imu.dv, tr.dv, cfg.accel)):
+    n = cfg.noise
+    for meas, ideal, (white, markov, tau) in (
+        (r.imu.dtheta, tr.dtheta, (n.gyro_arw, n.gyro_bias_instability, n.gyro_bias_tau)),
+        (r.imu.dv, tr.dv, (n.accel_vrw, n.accel_bias_instability, n.accel_bias_tau)),
+    ):
         err = np.asarray(meas - ideal).T / dt
         taus, adev = sim.allan_deviation(err, dt, ms)
         for ax in range(3):
             th = np.sqrt(
-                sim.allan_variance_theory(
-                    dt, ms, white=model.white[ax], markov_sigma=model.markov_sigma[ax], markov_tau=model.markov_tau[ax]
-                )
+                sim.allan_variance_theory(dt, ms, white=white[ax], markov_sigma=markov[ax], markov_tau=tau[ax])
             )
             np.testing.assert_allclose(adev[ax], th, rtol=0.10)
     # gyro ADEV(1 s) is the ARW: 0.01 deg/sqrt(h) = 0.6 deg/h at 1 s
@@ -174,12 +176,12 @@ def test_allan_s0_gyro_markov_plateau():
     including the plateau (max 0.0616 deg/h = 0.616 sigma at 640 s). Measured ratios over 4 seeds:
     0.96-1.02 (up to 6 % off at 2560 s, which is therefore not asserted)."""
     cfg = sim.s0_scenario()
-    model = dataclasses.replace(cfg.gyro, white=0.0, bias_sigma=0.0)
-    err = _error_rates(jax.random.key(11), model, 20000, 1.0, nkeys=16).reshape(48, -1)
+    noise = cfg.noise._replace(gyro_arw=0.0, gyro_bias_initial=0.0)
+    err = _error_rates(jax.random.key(11), noise, "gyro", 20000, 1.0, nkeys=16).reshape(48, -1)
     ms = (10, 40, 160, 320, 640, 1280)
     _, av = sim.allan_variance(err, 1.0, ms)
     adev = np.sqrt(np.asarray(av).mean(0))
-    th = np.sqrt(sim.allan_variance_theory(1.0, ms, markov_sigma=model.markov_sigma[0], markov_tau=300.0))
+    th = np.sqrt(sim.allan_variance_theory(1.0, ms, markov_sigma=noise.gyro_bias_instability[0], markov_tau=300.0))
     np.testing.assert_allclose(adev, th, rtol=0.10)
     peak = th.max() / units.DEG_PER_HOUR
     assert 0.055 < peak < 0.065  # 0.618 x 0.1 deg/h
@@ -189,16 +191,22 @@ def test_allan_markov_plus_white_accel_and_allantools():
     """Accelerometer with Markov (0.05 mg, 2 s) + VRW 20 ug/sqrt(Hz) + bias, 100 Hz, 4 keys x 3 axes:
     Allan deviation within 10 % of theory from 0.01 s to 20 s (measured ratios 0.975-1.025 over
     4 seeds); jaxnav's overlapping ADEV equals allantools.oadev on the same data to 1e-9."""
-    model = sim.SensorErrorModel(
-        bias_sigma=0.1 * units.MG, markov_sigma=0.05 * units.MG, markov_tau=2.0, white=20 * units.UG
+    noise = ins.ImuNoise(
+        gyro_arw=0.0,
+        accel_bias_initial=0.1 * units.MG,
+        accel_bias_instability=0.05 * units.MG,
+        accel_bias_tau=2.0,
+        accel_vrw=20 * units.UG,
     )
     dt = 0.01
-    err = _error_rates(jax.random.key(5), model, 200000, dt, nkeys=4).reshape(12, -1)
+    err = _error_rates(jax.random.key(5), noise, "accel", 200000, dt, nkeys=4).reshape(12, -1)
     ms = (1, 10, 50, 100, 200, 400, 800, 2000)
     taus, av = sim.allan_variance(err, dt, ms)
     adev = np.sqrt(np.asarray(av).mean(0))
     th = np.sqrt(
-        sim.allan_variance_theory(dt, ms, white=model.white[0], markov_sigma=model.markov_sigma[0], markov_tau=2.0)
+        sim.allan_variance_theory(
+            dt, ms, white=noise.accel_vrw, markov_sigma=noise.accel_bias_instability, markov_tau=2.0
+        )
     )
     np.testing.assert_allclose(adev, th, rtol=0.10)
     # against allantools on the same series
@@ -214,7 +222,7 @@ def test_allan_markov_plus_white_accel_and_allantools():
 
 def test_random_constants_scale_factor_and_initial_errors_have_configured_std():
     cfg = sim.s0_scenario()
-    cfg = dataclasses.replace(cfg, gyro=dataclasses.replace(cfg.gyro, scale_sigma=50e-6))
+    cfg = dataclasses.replace(cfg, noise=cfg.noise._replace(gyro_sf=50e-6))
     keys = jax.random.split(jax.random.key(2), 2000)
     tr = sim.make_trajectory(cfg)
 
@@ -233,7 +241,7 @@ def test_random_constants_scale_factor_and_initial_errors_have_configured_std():
         (ie.position, 10.0),
     ):
         assert abs(np.std(np.asarray(x)) / s - 1) < 4 / math.sqrt(2 * n)
-    assert cfg.accel.markov_sigma == (0.0, 0.0, 0.0)
+    assert cfg.noise.accel_bias_instability == (0.0, 0.0, 0.0)
 
 
 # ------------------------------------------------------------------------------------------
@@ -253,7 +261,7 @@ def test_vmap_16_keys_full_s0(s0):
     e1 = np.asarray(dv[1, :1000] - tr.dv[:1000])
     assert not np.allclose(e0, e1)
     resid = np.asarray(jnp.mean(dv[:, 5000:5100] - tr.dv[5000:5100], axis=0))
-    vrw = cfg.accel.white[0] * math.sqrt(0.01)
+    vrw = cfg.noise.accel_vrw[0] * math.sqrt(0.01)
     assert np.abs(resid).max() < 6 * math.hypot(vrw, 0.1 * units.MG * 0.01) / math.sqrt(B)
     del dv
 
@@ -280,9 +288,9 @@ def test_s0_config_values_are_the_papers():
     assert (math.degrees(tr.lat), math.degrees(tr.lon), tr.h) == pytest.approx((39.0, 108.0, 205.8795), abs=1e-12)
     assert math.degrees(tr.heading) == pytest.approx(30.0)
     assert cfg.duration == 2000.0 and cfg.imu_rate_hz == 100.0 and cfg.gnss.rate_hz == 1.0
-    for v in cfg.gyro.bias_sigma + cfg.gyro.markov_sigma:
+    for v in cfg.noise.gyro_bias_initial + cfg.noise.gyro_bias_instability:
         assert v / units.DEG_PER_HOUR == pytest.approx(0.1)
-    for v in cfg.accel.bias_sigma:
+    for v in cfg.noise.accel_bias_initial:
         assert v / units.MG == pytest.approx(0.1)
     ie = cfg.initial_errors
     assert [a / units.ARCSEC for a in ie.attitude] == pytest.approx([30.0] * 3)
@@ -375,8 +383,8 @@ def test_unsensed_velocity_step_is_missing_from_measured_imu_only():
 def test_saturation_and_bandwidth():
     dt = 0.01
     ideal = jnp.concatenate([jnp.zeros((100, 3)), jnp.ones((300, 3)) * 5.0 * dt])  # step to 5 units/s
-    m = sim.SensorErrorModel(saturation=(10.0, 3.0, 10.0), bandwidth=(1e6, 1.0, 1.0))
-    out = np.asarray(sim.corrupt_increments(jax.random.key(0), ideal, dt, m)[0]) / dt
+    lim = sim.SensorLimits(gyro_saturation=(10.0, 3.0, 10.0), gyro_bandwidth=(1e6, 1.0, 1.0))
+    out = np.asarray(sim.corrupt_increments(jax.random.key(0), ideal, dt, ins.ImuNoise(0.0, 0.0), "gyro", lim)[0]) / dt
     assert out[:, 1].max() == pytest.approx(3.0)  # clipped axis
     np.testing.assert_allclose(out[150:, 0], 5.0, rtol=1e-12)  # wide band, no clip: unchanged
     tau = 1.0 / (2 * math.pi)  # 1 Hz first-order lag: 63.2 % after tau
@@ -466,7 +474,7 @@ def test_toml_round_trip(tmp_path):
     cfg = dataclasses.replace(
         cfg,
         gnss=dataclasses.replace(cfg.gnss, outages=((10.0, 20.0),), outlier_prob=0.01),
-        accel=dataclasses.replace(cfg.accel, saturation=(2 * units.G0,) * 3, bandwidth=(20.0,) * 3),
+        limits=sim.SensorLimits(accel_saturation=(2 * units.G0,) * 3, accel_bandwidth=(20.0,) * 3),
     )
     text = sim.dumps_scenario(cfg)
     back = sim.loads_scenario(text)
@@ -522,9 +530,25 @@ def test_bad_config_names_the_field(bad, field):
 
 def test_good_config_loads_and_bad_toml_syntax():
     cfg = sim.loads_scenario(_GOOD)
-    assert cfg.gyro.white[0] == pytest.approx(0.01 * units.DEG_PER_SQRT_HOUR)
+    assert cfg.noise.gyro_arw[0] == pytest.approx(0.01 * units.DEG_PER_SQRT_HOUR)
     assert cfg.gnss.rate_hz == 1.0 and cfg.initial_errors.mode == "random"
     with pytest.raises(sim.ScenarioError, match="invalid TOML"):
         sim.loads_scenario("[time\n")
     with pytest.raises(sim.ScenarioError, match="kind"):
         sim.Segment("loop", 1.0)
+
+
+def test_scenario_noise_is_the_ins_record_and_refuses_what_it_cannot_draw():
+    """The scenario's IMU noise is a jaxnav.ins.ImuNoise of (3,) tuples (hashable); sim.imu_noise gives arrays;
+    the bias / scale-factor random walks, which the simulator does not draw, are refused by name."""
+    cfg = sim.s0_scenario()
+    assert isinstance(cfg.noise, ins.ImuNoise) and all(isinstance(v, tuple) and len(v) == 3 for v in cfg.noise)
+    hash(cfg)
+    arr = sim.imu_noise(cfg)
+    np.testing.assert_array_equal(arr.gyro_arw, np.asarray(cfg.noise.gyro_arw))
+    with pytest.raises(sim.ScenarioError, match="noise.gyro_bias_rw"):
+        dataclasses.replace(cfg, noise=cfg.noise._replace(gyro_bias_rw=1e-6))
+    with pytest.raises(sim.ScenarioError, match="noise.accel_bias_tau"):
+        dataclasses.replace(cfg, noise=cfg.noise._replace(accel_bias_tau=0.0))
+    with pytest.raises(sim.ScenarioError, match="limits.gyro_saturation"):
+        sim.SensorLimits(gyro_saturation=-1.0)

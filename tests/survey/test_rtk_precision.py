@@ -191,3 +191,15 @@ def test_cli_on_a_drive_only_file_says_why_nothing_is_left(tmp_path, capsys):
     # the stage line of the reading, then the one-line error (-q: the error alone)
     assert err[0].startswith("reading 1 file(s)") and len(err) == 2
     assert "no window of 30 epochs" in err[1] and "506 moving" in err[1]
+
+
+def test_sampling_grid_given_and_derived():
+    """Given epoch indices are kept (padded with the last); -1 ones are derived from the median time step."""
+    from jaxnav.survey import sampling_grid
+
+    t = np.array([[0.0, 1.0, 2.0, 0.0], [10.0, 12.0, 16.0, 18.0]])
+    mask = np.array([[True, True, True, False], [True, True, True, True]])
+    point = np.array(["a", "a", "a", "b", "b", "b", "b"])
+    grid = np.array([5, 6, 8, -1, -1, -1, -1])
+    got = sampling_grid(t, mask, ["a", "b"], point, grid)
+    np.testing.assert_array_equal(got, [[5, 6, 8, 8], [0, 1, 3, 4]])

@@ -135,3 +135,17 @@ def test_detector_on_real_walk_set():
     assert abs(end[0] - 113.8) < 2.0 and end[1] > 130.0
     assert spans[0][0] < 0.5 and 2.0 < spans[0][1] < 5.0
     assert r["recall"] >= 0.5 and r["precision"] >= 0.5
+
+
+def test_detection_scores_over_runs():
+    """detection_scores averages match_stops over runs: one perfect run and one that misses the second stop."""
+    from jaxnav.survey import detection_scores
+
+    t = np.arange(0.0, 60.0, 0.1)
+    true = np.array([[10.0, 20.0], [35.0, 45.0]])
+    perfect = ((t > 10.0) & (t <= 20.0)) | ((t > 35.0) & (t <= 45.0))
+    half = (t > 10.0) & (t <= 20.0)
+    d = detection_scores(np.stack([perfect, half]), t, true)
+    assert d["recall_mean"] == pytest.approx(0.75) and d["recall_min"] == pytest.approx(0.5)
+    assert d["precision_mean"] == pytest.approx(1.0) and d["n_true_stops"] == 2
+    assert d["boundary_error_s_mean_abs"] < 0.2
