@@ -46,7 +46,7 @@ GRADES = ("consumer", "industrial", "tactical", "navigation")
 STATE_CHOICES = (15, 18, 21)
 #: parameters ``--tune`` can estimate (``[tune] params``): noise densities, a factor on the GNSS
 #: position sigmas, the lever arm
-TUNABLE = ("arw", "vrw", "gyro_bias_instability", "pos_sigma_scale", "lever_arm")
+TUNABLE = ("arw", "vrw", "gyro_bias_instability", "pos_sigma_scale", "vel_sigma_scale", "lever_arm")
 
 _NUM = (int, float)
 
@@ -253,9 +253,9 @@ class TuneSection(NamedTuple):
     """[tune]: parameters tuned by ``--tune`` (names of :data:`TUNABLE`), L-BFGS evaluations (``steps``),
     gradient mode, and the loss: "innovations" (GNSS innovation likelihood over the run) or "outages"
     (predictive likelihood of fixes withheld on training windows between the evaluation windows).
-    ``calibrate``: the default noise self-calibration, "auto" (only when the GNSS position NIS of the
-    configured noise is outside its band), True (always) or False (never); ``calibrate_steps``: its
-    L-BFGS evaluations."""
+    ``calibrate``: the default noise self-calibration, "auto" (only when the GNSS position or velocity
+    NIS of the configured noise is outside its band, or too many epochs lie beyond the gate), True
+    (always) or False (never); ``calibrate_steps``: its L-BFGS evaluations."""
 
     params: tuple
     steps: int

@@ -316,6 +316,7 @@ def _densities_dict(d) -> dict:
         "init_gyro_bias_deg_per_s": float(n.gyro_bias_initial) / DEG,
         "init_accel_bias_mg": float(n.accel_bias_initial) / MG,
         "pos_sigma_scale": float(d.pos_sigma_scale),
+        "vel_sigma_scale": float(d.vel_sigma_scale),
     }
 
 
@@ -404,7 +405,10 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
     prep = prepare(cfg, progress=progress)
     mode = cfg.tune.calibrate if calibrate is None else calibrate
     if mode is not False:
-        say(f"checking the noise: GNSS position NIS of the configured noise without the gate (calibrate = {mode})")
+        say(
+            f"checking the noise: GNSS position and velocity NIS of the configured noise without the gate "
+            f"(calibrate = {mode})"
+        )
     dens, cal = calibrate_noise(prep, mode, progress=progress)
     prep = prep._replace(densities=dens)
     say(
@@ -684,6 +688,12 @@ def _calibration_lines(c) -> list:
             f"  noise calibrated ({c['reason']}): {vals}; fitted on {c['n_epochs']} {c['fitted_on']} "
             f"(innovation likelihood without the gate, {c['n_evals']} evaluations, {c['wall_time_s']:.1f} s); "
             f"GNSS position NIS per dof {c['nis_before_per_dof']:.2f} -> {c['nis_after_per_dof']:.2f}"
+            + (
+                f", velocity {c['nis_vel_before_per_dof']:.2f} -> {c['nis_vel_after_per_dof']:.2f}"
+                if c.get("n_nis_vel_epochs")
+                else ""
+            )
+            + f"; beyond the gate {100 * c['share_above_gate_before']:.1f} -> {100 * c['share_above_gate_after']:.1f} %"
         ]
     else:
         nis = f" (GNSS position NIS per dof {c['nis_before_per_dof']:.2f})" if "nis_before_per_dof" in c else ""

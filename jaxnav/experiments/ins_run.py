@@ -224,7 +224,7 @@ class RunNoise(NamedTuple):
       imu: :class:`jaxnav.ins.ImuNoise`; which of its densities enter the filter depends on
         ``noise.states`` (:meth:`jaxnav.ins.ErrorModel.Qc`).
       init_att: (2,) rad (roll/pitch, heading).  init_vel: m/s.  init_pos: m.
-      pos_sigma_scale: factor on the GNSS position sigmas.
+      pos_sigma_scale: factor on the GNSS position sigmas.  vel_sigma_scale: factor on the GNSS velocity sigmas.
     """
 
     imu: ImuNoise
@@ -232,6 +232,7 @@ class RunNoise(NamedTuple):
     init_vel: Any
     init_pos: Any
     pos_sigma_scale: Any = 1.0
+    vel_sigma_scale: Any = 1.0
 
 
 #: ``[noise]`` keys (SI) -> :class:`jaxnav.ins.ImuNoise` fields
@@ -557,7 +558,9 @@ def run_filter(prep: Prepared, d: RunNoise | None = None, *, meas=None, save=_SA
         d, prep.alignment.nav0.pos, model, odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else 0.0
     )
     m = prep.meas if meas is None else meas
-    m = m._replace(R=jnp.asarray(m.R).at[:, :3, :3].multiply(jnp.square(d.pos_sigma_scale)))
+    # R -> D R D, D = diag(pos_sigma_scale x 3, vel_sigma_scale x 3): the sigmas scaled, correlations kept
+    s = jnp.concatenate([jnp.broadcast_to(d.pos_sigma_scale, (3,)), jnp.broadcast_to(d.vel_sigma_scale, (3,))])
+    m = m._replace(R=jnp.asarray(m.R) * (s[:, None] * s[None, :]))
     g = prep.cfg.gnss
     gate = None if g.gate_probability is None else LCGate(g.gate_probability, g.gate_max_run)
     z3 = np.zeros(3)
@@ -813,6 +816,7 @@ _TUNE_MAP = {
     "vrw": ("accel_vrw", "log"),
     "gyro_bias_instability": ("gyro_bias_instability", "log"),
     "pos_sigma_scale": ("pos_sigma_scale", "log"),
+    "vel_sigma_scale": ("vel_sigma_scale", "log"),
     "lever_arm": ("lever_arm", "real"),
 }
 
@@ -876,6 +880,8 @@ def tune_noise(
         raise ValueError(f"cannot tune {unknown}; tunable: {sorted(_TUNE_MAP)}")
     if "gyro_bias_instability" in names and prep.cfg.noise.states not in (18, 21):
         raise ValueError("gyro_bias_instability is a parameter of the 18- and 21-state models (noise.states)")
+    if "vel_sigma_scale" in names and not prep.cfg.gnss.use_velocity:
+        raise ValueError("vel_sigma_scale scales the GNSS velocity sigmas: it needs gnss.use_velocity = true")
     if loss_kind not in ("innovations", "outages"):
         raise ValueError(f"loss must be 'innovations' or 'outages', got {loss_kind!r}")
     # only the epochs the filter may see: the [evaluate] outages stay withheld, scored once after tuning
@@ -966,7 +972,7 @@ def tune_noise(
     )
 
 
-#: band of the mean GNSS position NIS per degree of freedom inside which the noise counts as consistent
+#: band of the mean GNSS position (and velocity) NIS per degree of freedom inside which the noise counts as consistent
 #: (a factor 1.25 either way in innovation variance; docs/guide/ins.md "Noise self-calibration")
 NIS_BAND = (0.8, 1.25)
 #: largest share of GNSS epochs whose NIS exceeds the gate's chi-square quantile for consistent noise
@@ -975,6 +981,51 @@ NIS_GATE_SHARE_MAX = 0.01
 MIN_CALIBRATION_EPOCHS = 50
 #: gated share of the GNSS epochs above which a run warns
 GATED_SHARE_WARN = 0.05
+
+
+def _block_nis(nu, S, use):
+    """nu' S^-1 nu over the components ``use`` (K, m) bool of (K, m) innovations with (K, m, m) covariances;
+    the others are left out (their rows and columns replaced by the identity, their innovations by 0)."""
+    u = use[..., :, None] & use[..., None, :]
+    eye = np.broadcast_to(np.eye(S.shape[-1]), S.shape)
+    Sm = np.where(u, S, eye)
+    L = np.linalg.cholesky(Sm)
+    w = np.linalg.solve(L, np.where(use, nu, 0.0)[..., None])[..., 0]
+    return np.sum(w * w, -1)
+
+
+def gnss_nis(res, mask) -> dict:
+    """NIS of the GNSS innovations per GNSS epoch: position, velocity and the whole epoch (the gate's statistic).
+
+    Args:
+      res: :class:`jaxnav.ins.LCResult` saved with "innovations", "innov_covs" (rows 0-2 of each epoch's
+        stacked measurement are the GNSS position components, m, rows 3-5 the velocity, m/s).
+      mask: (M, 6) bool GNSS mask (PVMeasurements).
+    Returns:
+      dict of (M,) arrays: ``pos`` (3 dof; NaN unless the three position components were used), ``vel``
+      (3 dof; NaN unless the three velocity components were used), ``epoch`` (nu' S^-1 nu over every GNSS
+      component used at the epoch, as :class:`jaxnav.ins.LCGate` computes it; NaN where none) and ``dof``
+      (its number of components, 0 where none).
+    """
+    ep = res.epochs
+    row = np.asarray(ep.gnss_row)
+    g = np.nonzero(row >= 0)[0]
+    nu = np.asarray(ep.innovations, float)[g, :6]
+    S = np.asarray(ep.innov_covs, float)[g, :6, :6]
+    M = np.asarray(mask).shape[0]
+    used = np.asarray(mask, bool)[row[g], :6] & np.isfinite(nu)
+    out = {k: np.full(M, np.nan) for k in ("pos", "vel", "epoch")}
+    out["dof"] = np.zeros(M, int)
+    for key, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6))):
+        ok = used[:, sl].all(-1)
+        if ok.any():
+            out[key][row[g][ok]] = _block_nis(nu[ok][:, sl], S[ok][:, sl, sl], used[ok][:, sl])
+    k = used.sum(-1)
+    ok = k > 0
+    if ok.any():
+        out["epoch"][row[g][ok]] = _block_nis(nu[ok], S[ok], used[ok])
+        out["dof"][row[g][ok]] = k[ok]
+    return out
 
 
 def position_nis(res, mask) -> np.ndarray:
@@ -986,33 +1037,28 @@ def position_nis(res, mask) -> np.ndarray:
     Returns:
       (M,) NIS (3 degrees of freedom), NaN at the epochs whose three position components were not all used.
     """
-    ep = res.epochs
-    row = np.asarray(ep.gnss_row)
-    g = np.nonzero(row >= 0)[0]
-    nu = np.asarray(ep.innovations, float)[g, :3]
-    S = np.asarray(ep.innov_covs, float)[g, :3, :3]
-    valid = np.asarray(mask, bool)[row[g], :3].all(-1) & np.isfinite(nu).all(-1)
-    out = np.full(np.asarray(mask).shape[0], np.nan)
-    if valid.any():
-        L = np.linalg.cholesky(S[valid])
-        w = np.linalg.solve(L, nu[valid][..., None])[..., 0]
-        out[row[g][valid]] = np.sum(w * w, -1)
-    return out
+    return gnss_nis(res, mask)["pos"]
 
 
 def nis_check(prep: Prepared, d: RunNoise | None = None) -> dict:
-    """Mean GNSS position NIS per degree of freedom of the filter WITHOUT the chi-square gate.
+    """Mean GNSS NIS per degree of freedom (position, velocity) of the filter WITHOUT the chi-square gate,
+    and the share of epochs the gate would reject.
 
     Only the GNSS epochs the filter sees (the ``[evaluate]`` outages stay withheld). Expected 1 for a
-    consistent filter; consistent here: the mean inside :data:`NIS_BAND` and at most
-    :data:`NIS_GATE_SHARE_MAX` of the epochs beyond the gate's quantile (docs/guide/ins.md, "Noise
-    self-calibration": thousands of time-correlated epochs make the chi-square band of the mean far
-    too narrow to use, and GNSS noise dominating the innovations makes a wide band blind).
+    consistent filter; consistent here: the mean position NIS per dof inside :data:`NIS_BAND`, the mean
+    velocity NIS per dof too (where the run uses GNSS velocity), and at most :data:`NIS_GATE_SHARE_MAX`
+    of the epochs beyond the gate's quantile — the whole epoch's NIS (every GNSS component used) against
+    the chi-square quantile for its number of components, as the gate judges it (docs/guide/ins.md,
+    "Noise self-calibration": thousands of time-correlated epochs make the chi-square band of the mean
+    far too narrow to use, and GNSS noise dominating the innovations makes a wide band blind).
 
     Returns:
-      dict: ``nis_per_dof`` (mean NIS / 3), ``nis_median_per_dof`` (median NIS / 2.366, the chi-square(3)
-      median; robust to outliers), ``n_epochs``, ``share_above_gate`` (NIS above the chi-square(3) quantile
-      of ``gnss.gate_probability``, or 0.9999 without a gate), ``consistent`` (bool).
+      dict: ``nis_per_dof`` (mean position NIS / 3), ``nis_median_per_dof`` (median position NIS / 2.366,
+      the chi-square(3) median; robust to outliers), ``n_epochs`` (epochs with a position NIS),
+      ``nis_vel_per_dof``, ``nis_vel_median_per_dof``, ``n_vel_epochs`` (the same for the velocity; NaN
+      and 0 without GNSS velocity), ``share_above_gate`` (epoch NIS above the chi-square quantile of
+      ``gnss.gate_probability``, or 0.9999 without a gate, for its number of components; over the epochs
+      with any GNSS component), ``consistent`` (bool), ``loglik``.
     """
     from jaxnav.ins.integration import chi2_quantile
 
@@ -1022,26 +1068,36 @@ def nis_check(prep: Prepared, d: RunNoise | None = None) -> dict:
         cfg=prep.cfg._replace(gnss=g._replace(gate_probability=None if g.gate_probability is None else 1.0))
     )
     res = run_filter(ungated, d)
-    nis = position_nis(res, prep.meas.mask)
-    ok = np.isfinite(nis)
-    n = int(ok.sum())
-    thr = chi2_quantile(g.gate_probability if g.gate_probability is not None else 0.9999, 3)
-    mean = float(np.mean(nis[ok]) / 3.0) if n else float("nan")
+    nis = gnss_nis(res, prep.meas.mask)
+    p, v, e, k = nis["pos"], nis["vel"], nis["epoch"], nis["dof"]
+    ok, okv, oke = np.isfinite(p), np.isfinite(v), np.isfinite(e)
+    n, nv = int(ok.sum()), int(okv.sum())
+    prob = g.gate_probability if g.gate_probability is not None else 0.9999
+    thr = np.array([np.inf] + [chi2_quantile(prob, j) for j in range(1, 7)])
+    mean = float(np.mean(p[ok]) / 3.0) if n else float("nan")
+    mean_v = float(np.mean(v[okv]) / 3.0) if nv else float("nan")
+    share = float(np.mean(e[oke] > thr[k[oke]])) if oke.any() else float("nan")
+    lo, hi = NIS_BAND
     return {
         "nis_per_dof": mean,
-        "nis_median_per_dof": float(np.median(nis[ok]) / 2.366) if n else float("nan"),
+        "nis_median_per_dof": float(np.median(p[ok]) / 2.366) if n else float("nan"),
         "n_epochs": n,
-        "share_above_gate": float(np.mean(nis[ok] > thr)) if n else float("nan"),
-        "consistent": bool(n and NIS_BAND[0] <= mean <= NIS_BAND[1] and np.mean(nis[ok] > thr) <= NIS_GATE_SHARE_MAX),
+        "nis_vel_per_dof": mean_v,
+        "nis_vel_median_per_dof": float(np.median(v[okv]) / 2.366) if nv else float("nan"),
+        "n_vel_epochs": nv,
+        "share_above_gate": share,
+        "consistent": bool(n and lo <= mean <= hi and (nv == 0 or lo <= mean_v <= hi) and share <= NIS_GATE_SHARE_MAX),
         "loglik": float(res.loglik),
     }
 
 
 def calibration_params(cfg: InsConfig) -> tuple:
-    """The densities the default calibration fits: ARW, VRW and the GNSS position sigma factor, and the gyro
-    bias instability where the model has a state for it (``noise.states`` 18 or 21)."""
+    """The densities the default calibration fits: ARW, VRW and the GNSS position sigma factor, the GNSS
+    velocity sigma factor where the run uses GNSS velocity (``gnss.use_velocity``), and the gyro bias
+    instability where the model has a state for it (``noise.states`` 18 or 21)."""
+    vel = ("vel_sigma_scale",) if cfg.gnss.use_velocity else ()
     extra = ("gyro_bias_instability",) if cfg.noise.states in (18, 21) else ()
-    return ("arw", "vrw", "pos_sigma_scale", *extra)
+    return ("arw", "vrw", "pos_sigma_scale", *vel, *extra)
 
 
 def _display(name: str, v) -> float:
@@ -1053,6 +1109,7 @@ def _display(name: str, v) -> float:
         "vrw": math.sqrt(HOUR),
         "gyro_bias_instability": 1.0 / DEG_PER_HOUR,
         "pos_sigma_scale": 1.0,
+        "vel_sigma_scale": 1.0,
     }[name]
     return float(v) * scale
 
@@ -1063,15 +1120,39 @@ DISPLAY_UNITS = {
     "vrw": "m/s/sqrt(h)",
     "gyro_bias_instability": "deg/h",
     "pos_sigma_scale": "1",
+    "vel_sigma_scale": "1",
 }
+
+
+def _nis_words(chk: dict) -> tuple:
+    """(what the check measured, what fails) of a :func:`nis_check` result, as short phrases."""
+    lo, hi = NIS_BAND
+    said, bad = [], []
+    for what, key in (("position", "nis_per_dof"), ("velocity", "nis_vel_per_dof")):
+        x = chk[key]
+        if what == "velocity" and not chk["n_vel_epochs"]:
+            continue
+        inside = lo <= x <= hi
+        said.append(f"GNSS {what} NIS per dof {x:.2f} {'inside' if inside else 'outside'} {lo:g}-{hi:g}")
+        if not inside:
+            bad.append(f"the GNSS {what} NIS per dof is {x:.2f}, outside {lo:g}-{hi:g}")
+    sh = chk["share_above_gate"]
+    if sh > NIS_GATE_SHARE_MAX:
+        said.append(f"{100 * sh:.1f} % of the epochs beyond the gate")
+        bad.append(
+            f"{100 * sh:.1f} % of the GNSS epochs are beyond the gate (at most {100 * NIS_GATE_SHARE_MAX:g} % "
+            "for consistent noise)"
+        )
+    return ", ".join(said), bad
 
 
 def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
     """Self-calibration of the noise densities: NIS check of the configured noise, ML fit where it fails.
 
     1. The filter runs with the configured noise WITHOUT the chi-square gate; the mean NIS per degree of
-       freedom of its GNSS position innovations (:func:`nis_check`, the epochs the filter sees) is
-       compared with :data:`NIS_BAND`.
+       freedom of its GNSS position and velocity innovations (:func:`nis_check`, the epochs the filter
+       sees) is compared with :data:`NIS_BAND`, the share of epochs beyond the gate's quantile with
+       :data:`NIS_GATE_SHARE_MAX`.
     2. ``mode`` "auto": inside the band the configured noise is kept (one extra forward run). Outside it
        (or ``mode`` True), :func:`tune_noise` with the innovations loss fits :func:`calibration_params`
        (L-BFGS, forward-mode gradients, ``[tune] calibrate_steps`` evaluations) on the same epochs, ungated: the ``[evaluate]``
@@ -1106,6 +1187,9 @@ def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
         nis_before_per_dof=before["nis_per_dof"],
         nis_median_before_per_dof=before["nis_median_per_dof"],
         n_nis_epochs=n,
+        nis_vel_before_per_dof=before["nis_vel_per_dof"],
+        nis_vel_median_before_per_dof=before["nis_vel_median_per_dof"],
+        n_nis_vel_epochs=before["n_vel_epochs"],
         share_above_gate_before=before["share_above_gate"],
         min_epochs=MIN_CALIBRATION_EPOCHS,
     )
@@ -1124,14 +1208,7 @@ def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
         say(f"warning: {rep['warning']}")
         rep["wall_time_s"] = time.perf_counter() - t0
         return prep.densities, rep
-    lo, hi = NIS_BAND
-    why = (
-        f"GNSS position NIS per dof {before['nis_per_dof']:.2f} inside {lo:g}-{hi:g}"
-        if lo <= before["nis_per_dof"] <= hi
-        else f"GNSS position NIS per dof {before['nis_per_dof']:.2f} outside {lo:g}-{hi:g}"
-    )
-    if before["share_above_gate"] > NIS_GATE_SHARE_MAX:
-        why += f", {100 * before['share_above_gate']:.1f} % of the epochs beyond the gate"
+    why = _nis_words(before)[0]
     if mode == "auto" and before["consistent"]:
         rep["reason"] = f"{why}: the configured noise is consistent and kept"
         rep["wall_time_s"] = time.perf_counter() - t0
@@ -1159,20 +1236,15 @@ def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
         loglik_after=tr.loglik_after,
         nis_after_per_dof=after["nis_per_dof"],
         nis_median_after_per_dof=after["nis_median_per_dof"],
+        nis_vel_after_per_dof=after["nis_vel_per_dof"],
+        nis_vel_median_after_per_dof=after["nis_vel_median_per_dof"],
         share_above_gate_after=after["share_above_gate"],
         fitted_on=where,
         n_epochs=tr.n_epochs,
         n_evals=tr.n_evals,
     )
     if not after["consistent"]:
-        bits = []
-        if not lo <= after["nis_per_dof"] <= hi:
-            bits.append(f"the GNSS position NIS per dof is {after['nis_per_dof']:.2f}, outside {lo:g}-{hi:g}")
-        if after["share_above_gate"] > NIS_GATE_SHARE_MAX:
-            bits.append(
-                f"{100 * after['share_above_gate']:.1f} % of the GNSS epochs are beyond the gate (at most "
-                f"{100 * NIS_GATE_SHARE_MAX:g} % for consistent noise)"
-            )
+        bits = _nis_words(after)[1]
         rep["warning"] = (
             f"after calibration {' and '.join(bits)}: the uncertainties may still be wrong (errors the "
             "error model has no state for?)"

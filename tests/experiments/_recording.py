@@ -104,6 +104,7 @@ def write_car(
     gnss_rate=2.0,
     pos_sigma=0.02,
     vel_sigma=0.03,
+    vel_sigma_stated=None,
     vibration=1.0,
     spec=None,
     imu_start_s=0.0,
@@ -117,7 +118,8 @@ def write_car(
     ``spec``: another :class:`jaxnav.sim.TrajectorySpec` (default :func:`car_spec`);
     ``imu_start_s``: the IMU log starts at this true time, s (GNSS starts at 1 s); ``gyro_white`` rad/sqrt(s),
     ``accel_white`` m/s/sqrt(s): the sensors' white noise densities (ARW, VRW), ``gyro_bias`` rad/s,
-    ``accel_bias`` m/s^2: the 1-sigma of their constant biases."""
+    ``accel_bias`` m/s^2: the 1-sigma of their constant biases; ``vel_sigma_stated``: the GNSS velocity sigma
+    written to the file (default ``vel_sigma``, the simulated one)."""
     truth = sim.generate_trajectory(car_spec() if spec is None else spec, imu_rate_hz=imu_rate)
     dt = float(truth.dt)
     noise = ImuNoise(
@@ -169,7 +171,7 @@ def write_car(
     gnss_file = folder / "gnss.txt"
     tg = np.asarray(truth.t)[idx]
     sd = np.tile([pos_sigma, pos_sigma, pos_sigma], (idx.size, 1))
-    vsd = np.tile([vel_sigma] * 3, (idx.size, 1))
+    vsd = np.tile([vel_sigma if vel_sigma_stated is None else vel_sigma_stated] * 3, (idx.size, 1))
     # 13 columns: sow, lat, lon, h, vN, vE, vD, sdN, sdE, sdD, sdvN, sdvE, sdvD
     g = np.column_stack(
         [

@@ -18,13 +18,16 @@ CONSUMER_VRW = 0.1 / 60  # m/s/sqrt(s), the consumer preset's 0.1 m/s/sqrt(h)
 EVALUATE = "first_s = 40.0\noutage_s = 15.0\ngap_s = 20.0\nend_margin_s = 5.0"
 
 
-def _car(folder, factor):
-    """The short car with IMU white noise ``factor`` times the consumer preset's; its config (consumer preset)."""
+def _car(folder, factor, vel_factor=1.0):
+    """The short car with IMU white noise ``factor`` times the consumer preset's and GNSS velocity noise
+    ``vel_factor`` times the sigma its file states (0.03 m/s); its config (consumer preset)."""
     rec = write_car(
         folder,
         spec=short_car_spec(),
         imu_rate=25.0,
         vibration=0.0,
+        vel_sigma=vel_factor * 0.03,
+        vel_sigma_stated=0.03,
         gyro_white=factor * CONSUMER_ARW,
         accel_white=factor * CONSUMER_VRW,
         gyro_bias=math.radians(100.0) / 3600,
@@ -100,6 +103,32 @@ def test_preset_that_fits_is_kept_and_few_epochs_warn(tmp_path):
     # calibrate = false: nothing runs
     d, c = calibrate_noise(prep, False)
     assert not c["ran"] and "nis_before_per_dof" not in c
+
+
+def test_velocity_noise_beyond_its_sigmas_is_calibrated(tmp_path):
+    """GNSS velocity noise 2x the sigmas of the file: the gate (position and velocity together) rejects
+    10 % of the GNSS epochs of the preset; the check sees the velocity NIS (3.6 per dof) and the
+    calibration fits the velocity sigma factor, after which both NIS are in the band and the gate keeps
+    (nearly) every epoch. Before the velocity sigma factor existed (check and fit on position only) the
+    calibration ran (position NIS per dof 1.41) but ended with 1.38 and a warning, velocity NIS per dof
+    3.5, and its run gated 9.6 % of the GNSS epochs."""
+    from jaxnav.experiments import load_ins_config
+    from jaxnav.experiments.ins_run import calibrate_noise, prepare, run_filter
+
+    _, cfg = _car(tmp_path, 1.0, vel_factor=2.0)
+    prep = prepare(load_ins_config(cfg), progress=None)
+    n_used = int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1)))
+    d, c = calibrate_noise(prep)
+    lo, hi = c["nis_band_per_dof"]
+    assert c["ran"] and "vel_sigma_scale" in c["params"] and "velocity NIS per dof" in c["reason"]
+    assert c["nis_vel_before_per_dof"] > 2.0 * hi and c["n_nis_vel_epochs"] == c["n_nis_epochs"]
+    assert c["share_above_gate_before"] > 0.05
+    assert lo <= c["nis_vel_after_per_dof"] <= hi and lo <= c["nis_after_per_dof"] <= hi
+    assert c["share_above_gate_after"] <= c["nis_gate_share_max"] and "warning" not in c
+    assert 1.5 < c["after_si"]["vel_sigma_scale"] < 3.0 and c["display_units"]["vel_sigma_scale"] == "1"
+    # the gated run: the preset rejects many GNSS epochs, the calibrated noise (nearly) none
+    assert int(run_filter(prep).n_gated) / n_used > 0.05
+    assert int(run_filter(prep, d).n_gated) / n_used < 0.05
 
 
 class _Called(BaseException):
