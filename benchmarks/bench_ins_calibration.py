@@ -116,7 +116,12 @@ def study(platforms, factors, seeds):
                     c["wall_time_s"] = time.perf_counter() - t0
                     cal.append(c)
                     acc["after"].append(acc["before"][-1] if not c["ran"] else score(prep, truth, d))
-                print(platform, factor, seed, {k: c.get(k) for k in ("ran", "nis_before_per_dof", "nis_after_per_dof")})
+                print(
+                    platform,
+                    factor,
+                    seed,
+                    {k: c.get(k) for k in ("ran", "reason", "nis_after_per_dof", "nis_vel_after_per_dof")},
+                )
             for when in ("before", "after"):
                 runs = acc[when]
                 n = min(r[0].size for r in runs)
@@ -139,6 +144,9 @@ def study(platforms, factors, seeds):
                         "nis": np.mean([c["nis_before_per_dof"] for c in cal])
                         if when == "before"
                         else np.mean([c.get("nis_after_per_dof", c["nis_before_per_dof"]) for c in cal]),
+                        "nis_vel": np.mean([c["nis_vel_before_per_dof"] for c in cal])
+                        if when == "before"
+                        else np.mean([c.get("nis_vel_after_per_dof", c["nis_vel_before_per_dof"]) for c in cal]),
                         "nees_all": float(np.nanmean(nees)),
                         "nees_out": float(np.nanmean(nees[:, inside])),
                         "anees_band": (lo / seeds, hi / seeds),
@@ -155,13 +163,13 @@ def study(platforms, factors, seeds):
 
 def table(rows, seeds):
     out = [
-        f"| recording | true noise / preset | run | calibrated (of {seeds}) | GNSS NIS per dof | NEES all (outages) "
+        f"| recording | true noise / preset | run | calibrated (of {seeds}) | GNSS NIS per dof pos / vel | NEES all (outages) "
         "| epochs with seed-mean NEES in its 95 % band | 3-sigma coverage all (outages) | gated share | check + calibration, s |",
         "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         out.append(
-            f"| {r['platform']} | {r['factor']:g}x | {r['when']} | {r['calibrated']} | {r['nis']:.2f} | "
+            f"| {r['platform']} | {r['factor']:g}x | {r['when']} | {r['calibrated']} | {r['nis']:.2f} / {r['nis_vel']:.2f} | "
             f"{r['nees_all']:.2f} ({r['nees_out']:.2f}) | {100 * r['share_epochs_in_band']:.0f} % | "
             f"{100 * r['cov_all']:.1f} % ({100 * r['cov_out']:.1f} %) | {100 * r['gated']:.1f} % | "
             + (f"{r['cal_s']:.0f} |" if r["when"] == "after" else "- |")
