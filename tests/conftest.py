@@ -25,17 +25,41 @@ def _pin_xdist_worker():
 _pin_xdist_worker()
 
 
+#: XLA flags for quick compiles: (flag, value). The second selects XLA's older CPU emitters for
+#: fusions, which compile the suite's programs 2-4x faster (measured on the S0 filter program: 11.5
+#: -> 3.3 s) and run them ~1.5x slower; XLA refuses unknown flags, so it is probed first.
+FAST_FLAGS = (("--xla_backend_optimization_level", "0"), ("--xla_cpu_use_fusion_emitters", "false"))
+
+
+def _xla_accepts(flags: str) -> bool:
+    """Whether this jaxlib starts with these XLA_FLAGS (it aborts on a flag it does not know)."""
+    import subprocess
+
+    env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu")
+    code = "import jax; jax.devices()"
+    try:
+        return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, timeout=120).returncode == 0
+    except (OSError, subprocess.SubprocessError):
+        return False
+
+
 def _fast_compiles():
-    """Compile the tests' programs with XLA's LLVM backend at -O0, before jax starts.
+    """Compile the tests' programs quickly (:data:`FAST_FLAGS`), before jax starts.
 
     The suite checks numbers, not speed, and is compile-bound: -O0 cut cold module times by
     10-15 % (measured: test_filters_fast 67 -> 57 s, test_demo + test_sim 98 -> 88 s) with the
     same results (no fast-math at either level). Benchmarks run with XLA's defaults. A flag set
-    by the caller wins; notebook kernels and subprocesses inherit the environment.
+    by the caller wins; xdist workers, notebook kernels and subprocesses inherit the environment
+    (so the probe runs once, in the first process).
     """
     flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_backend_optimization_level" not in flags:
-        os.environ["XLA_FLAGS"] = (flags + " --xla_backend_optimization_level=0").strip()
+    for name, value in FAST_FLAGS:
+        if name.lstrip("-") in flags:
+            continue
+        trial = f"{flags} {name}={value}".strip()
+        if name == FAST_FLAGS[0][0] or _xla_accepts(trial):
+            flags = trial
+    os.environ["XLA_FLAGS"] = flags
 
 
 _fast_compiles()

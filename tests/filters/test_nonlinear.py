@@ -270,15 +270,17 @@ def test_inputs_and_time_varying_noise():
         np.broadcast_to(Q, (60, N, N)),
         np.broadcast_to(R, (60, M, M)),
     )
-    for run, smooth in (
-        (jf.extended_kalman_filter, jf.extended_rts_smoother),
-        (jf.unscented_kalman_filter, jf.unscented_rts_smoother),
+    # two programs, equal up to rounding; the UKF's sigma-point moments at alpha = 1e-3 amplify rounding
+    # (XLA's CPU emitters alone move its means by ~1e-9 relative), the EKF's do not
+    for run, smooth, rtol in (
+        (jf.extended_kalman_filter, jf.extended_rts_smoother, 0.0),
+        (jf.unscented_kalman_filter, jf.unscented_rts_smoother, 1e-8),
     ):
         res = run(model, X0, P0, zs, inputs={"dt": dts})
         ref = run(MODEL, X0, P0, zs)
-        np.testing.assert_allclose(res.means, ref.means, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.means, ref.means, rtol=rtol, atol=1e-9)
         np.testing.assert_allclose(
-            smooth(model, res, inputs={"dt": dts}).means, smooth(MODEL, ref).means, rtol=0, atol=1e-9
+            smooth(model, res, inputs={"dt": dts}).means, smooth(MODEL, ref).means, rtol=rtol, atol=1e-9
         )
 
 
