@@ -176,7 +176,7 @@ def test_quaternion_algebra(rand):
     np.testing.assert_allclose(out["q1q1c"], np.broadcast_to([1.0, 0, 0, 0], q1.shape), rtol=0, atol=1e-15)
     np.testing.assert_allclose(out["norm"], q1, rtol=0, atol=1e-15)
     # the sign of q does not change the rotation
-    np.testing.assert_allclose(out["q2dneg"], out["q2d1"], rtol=0, atol=0)
+    np.testing.assert_allclose(out["q2dneg"], out["q2d1"], rtol=0, atol=1e-15)
     np.testing.assert_allclose(out["q2rvneg"], out["q2rv"], rtol=0, atol=1e-15)
     # skew(a) b = a x b
     np.testing.assert_allclose(

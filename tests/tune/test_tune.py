@@ -197,7 +197,8 @@ def test_chunked_sweep_memory_is_bounded():
     assert c_small.peak_bytes > 0
     assert c_big.peak_bytes == c_small.peak_bytes
     assert u_big.peak_bytes > 8 * c_big.peak_bytes
-    np.testing.assert_array_equal(c_big.values["nll"], u_big.values["nll"])
+    # the same runs batched differently: equal to rounding (XLA may fuse a batch of 8 and of 32 differently)
+    np.testing.assert_allclose(c_big.values["nll"], u_big.values["nll"], rtol=1e-14, atol=0)
 
 
 _SHARDED = textwrap.dedent("""
