@@ -723,16 +723,22 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
     platform = run.get("platform", str, "handheld", choices=("car", "handheld", "foot", "rover"))
     run.done()
     imu = _imu(path, d["imu"], variables)
+    gnss = _gnss(path, d["gnss"], variables)
+    tune = _tune(path, d.get("tune", {}))
+    if "vel_sigma_scale" in tune.params and not gnss.use_velocity:
+        raise ConfigError(
+            f"{path}: tune.params: vel_sigma_scale needs gnss.use_velocity = true (it scales the GNSS velocity sigmas)"
+        )
     return InsConfig(
         path=path,
         name=name,
         imu=imu,
-        gnss=_gnss(path, d["gnss"], variables),
+        gnss=gnss,
         noise=_noise(path, d.get("noise", {"grade": "consumer"})),
         alignment=_alignment(path, d.get("alignment", {})),
         constraints=_constraints(path, d.get("constraints", {}), platform),
         evaluate=_evaluate(path, d["evaluate"], variables) if "evaluate" in d else None,
-        tune=_tune(path, d.get("tune", {})),
+        tune=tune,
         raw=d,
         odometer=_odometer(path, d["odometer"], imu, variables) if "odometer" in d else None,
         heading=_heading(path, d["heading"], variables) if "heading" in d else None,

@@ -58,6 +58,11 @@ BAD = [
     (BASE + "[tune]\nparams = ['arw', 'b']\n", "tune.params must be a non-empty list"),
     (BASE + "[tune]\ncalibrate = 'yes'\n", "tune.calibrate must be 'auto', true or false"),
     (BASE + "[tune]\ncalibrate_steps = 0\n", "tune.calibrate_steps"),
+    (
+        BASE.replace('file = "sol.pos"', 'file = "sol.pos"\nuse_velocity = false')
+        + "[tune]\nparams = ['vel_sigma_scale']\n",
+        "tune.params: vel_sigma_scale needs gnss.use_velocity = true",
+    ),
     (BASE + "[constraints]\nzupt = true\n", "constraints.zupt must be 'auto' or false"),
     (BASE + "[alignment]\nheading = 'north'\n", "alignment.heading must be"),
     (BASE.replace('file = "imu.csv"', 'file = "${JAXNAV_NOT_SET_HERE}/imu.csv"'), "JAXNAV_NOT_SET_HERE"),
