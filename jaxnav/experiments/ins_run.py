@@ -1104,6 +1104,19 @@ def nis_check(prep: Prepared, d: RunNoise | None = None) -> dict:
     }
 
 
+def _nis_report(check: dict, when: str) -> dict:
+    """The NIS figures of a :func:`nis_check` as calibration-report keys tagged ``when`` ("before", "after")."""
+    return {
+        f"nis_{when}_per_dof": check["nis_per_dof"],
+        f"nis_median_{when}_per_dof": check["nis_median_per_dof"],
+        f"nis_vel_{when}_per_dof": check["nis_vel_per_dof"],
+        f"nis_vel_median_{when}_per_dof": check["nis_vel_median_per_dof"],
+        f"share_above_gate_{when}": check["share_above_gate"],
+        f"share_pos_above_gate_{when}": check["share_pos_above_gate"],
+        f"share_vel_above_gate_{when}": check["share_vel_above_gate"],
+    }
+
+
 def calibration_params(cfg: InsConfig) -> tuple:
     """The densities the default calibration fits: ARW, VRW and the GNSS position sigma factor, the GNSS
     velocity sigma factor where the run uses GNSS velocity (``gnss.use_velocity``), and the gyro bias
@@ -1200,15 +1213,9 @@ def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
     before = nis_check(prep)
     n = before["n_epochs"]
     rep.update(
-        nis_before_per_dof=before["nis_per_dof"],
-        nis_median_before_per_dof=before["nis_median_per_dof"],
+        _nis_report(before, "before"),
         n_nis_epochs=n,
-        nis_vel_before_per_dof=before["nis_vel_per_dof"],
-        nis_vel_median_before_per_dof=before["nis_vel_median_per_dof"],
         n_nis_vel_epochs=before["n_vel_epochs"],
-        share_above_gate_before=before["share_above_gate"],
-        share_pos_above_gate_before=before["share_pos_above_gate"],
-        share_vel_above_gate_before=before["share_vel_above_gate"],
         min_epochs=MIN_CALIBRATION_EPOCHS,
     )
     where = "GNSS position epochs the filter sees" + (
@@ -1252,13 +1259,7 @@ def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
         display_units={k: DISPLAY_UNITS[k] for k in names},
         loglik_before=tr.loglik_before,
         loglik_after=tr.loglik_after,
-        nis_after_per_dof=after["nis_per_dof"],
-        nis_median_after_per_dof=after["nis_median_per_dof"],
-        nis_vel_after_per_dof=after["nis_vel_per_dof"],
-        nis_vel_median_after_per_dof=after["nis_vel_median_per_dof"],
-        share_above_gate_after=after["share_above_gate"],
-        share_pos_above_gate_after=after["share_pos_above_gate"],
-        share_vel_above_gate_after=after["share_vel_above_gate"],
+        **_nis_report(after, "after"),
         fitted_on=where,
         n_epochs=tr.n_epochs,
         n_evals=tr.n_evals,
