@@ -393,7 +393,8 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
       written, paths relative to ``out``).
     """
     from jaxnav._status import INFO_FLAGS, describe
-    from jaxnav.experiments.ins_run import GATED_SHARE_WARN, calibrate_noise, prepare, run_ins, tune_noise
+    from jaxnav.experiments.ins_run import calibrate_noise, prepare, run_ins, tune_noise
+    from jaxnav.ins import GATED_SHARE_WARN
     from jaxnav.io import provenance, write_json
 
     out = pathlib.Path(out)
@@ -489,10 +490,10 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
         )
         rep = tune_noise(prep, cfg.tune.params, max_evals=cfg.tune.steps, mode=cfg.tune.mode, loss_kind=cfg.tune.loss)
         tuned_prep = prep._replace(
-            lever_rfu=rep.lever_rfu,
-            meas=prep.meas._replace(lever=np.broadcast_to(rep.lever_rfu, np.shape(prep.meas.lever)).copy()),
+            lever_rfu=rep.lever,
+            meas=prep.meas._replace(lever=np.broadcast_to(rep.lever, np.shape(prep.meas.lever)).copy()),
         )
-        run_t = run_ins(tuned_prep, rep.densities)
+        run_t = run_ins(tuned_prep, rep.noise)
         results["tune"] = {
             "params": list(cfg.tune.params),
             "loss": cfg.tune.loss,
@@ -504,7 +505,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
             "wall_time_s": rep.wall_time_s,
             "fitted_on": rep.fitted_on,
             "n_epochs": rep.n_epochs,
-            "noise_after": _densities_dict(rep.densities),
+            "noise_after": _densities_dict(rep.noise),
             "evaluation_before": results["evaluation"],
             "evaluation_after": _evaluation(run_t.scores),
             "n_gated_gnss_epochs_after": int(run_t.result.n_gated) if run_t.result.n_gated is not None else 0,

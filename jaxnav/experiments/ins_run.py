@@ -31,11 +31,13 @@ from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (
     ImuNoise,
     LCGate,
+    LCNoise,
     LCParams,
     LCSave,
     OutageScores,
     SensorBiases,
     attitude_sigmas,
+    check_tunable,
     clock_drift,
     coarse_alignment,
     error_model_for,
@@ -56,6 +58,7 @@ from jaxnav.ins import (
     offset_search_epochs,
     outage_windows,
     position_cov_enu,
+    scale_gnss_sigmas,
     score_outages,
     sensor_to_body,
     smooth,
@@ -65,6 +68,7 @@ from jaxnav.ins import (
     zaru,
     zupt,
 )
+from jaxnav.ins import calibration_params as ins_calibration_params
 from jaxnav.ins import gnss_measurements as ins_gnss_measurements
 from jaxnav.ins import heading as heading_aid
 from jaxnav.ins.attitude import quat_to_dcm
@@ -80,6 +84,8 @@ from jaxnav.io import (
     read_pos,
     read_rtklib_imu,
 )
+from jaxnav.tune import NoiseFit, calibrate_lc_noise, fit_lc_noise
+from jaxnav.units import DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR
 
 
 def read_inputs(cfg: InsConfig):
@@ -217,24 +223,6 @@ def gnss_measurements(
     return meas, keep, withheld
 
 
-class RunNoise(NamedTuple):
-    """The noise of a run: the IMU's and the initial sigmas (SI; array leaves, so ``--tune`` differentiates them).
-
-    Attributes:
-      imu: :class:`jaxnav.ins.ImuNoise`; which of its densities enter the filter depends on
-        ``noise.states`` (:meth:`jaxnav.ins.ErrorModel.Qc`).
-      init_att: (2,) rad (roll/pitch, heading).  init_vel: m/s.  init_pos: m.
-      pos_sigma_scale: factor on the GNSS position sigmas.  vel_sigma_scale: factor on the GNSS velocity sigmas.
-    """
-
-    imu: ImuNoise
-    init_att: Any
-    init_vel: Any
-    init_pos: Any
-    pos_sigma_scale: Any = 1.0
-    vel_sigma_scale: Any = 1.0
-
-
 #: ``[noise]`` keys (SI) -> :class:`jaxnav.ins.ImuNoise` fields
 NOISE_KEYS = {
     "arw": "gyro_arw",
@@ -252,8 +240,8 @@ NOISE_KEYS = {
 }
 
 
-def run_noise(cfg: InsConfig) -> RunNoise:
-    """The run's :class:`RunNoise` from ``[noise]``: values given there, else the grade's :func:`jaxnav.ins.noise_preset`
+def run_noise(cfg: InsConfig) -> LCNoise:
+    """The run's :class:`LCNoise` from ``[noise]``: values given there, else the grade's :func:`jaxnav.ins.noise_preset`
     (without a grade: zeros, a 300 s gyro and a 3600 s accelerometer correlation time). The accelerometer's
     correlation time defaults to the gyro's when only that is given."""
     n = cfg.noise
@@ -261,7 +249,7 @@ def run_noise(cfg: InsConfig) -> RunNoise:
     given = {f: getattr(n, k) for k, f in NOISE_KEYS.items() if getattr(n, k, None) is not None}
     if n.bias_correlation_time is not None:
         given.setdefault("accel_bias_tau", n.bias_correlation_time)
-    return RunNoise(
+    return LCNoise(
         imu=imu._replace(**given),
         init_att=np.asarray(n.init_attitude, float),
         init_vel=n.init_velocity,
@@ -277,8 +265,8 @@ def run_error_model(cfg: InsConfig):
     return model.with_odometer_scale() if o is not None and o.estimate_scale else model
 
 
-def filter_params(noise: RunNoise, pos0, model, *, odo_scale_sigma=0.0) -> LCParams:
-    """:func:`jaxnav.ins.lc_params` of ``model`` from :class:`RunNoise` at ``pos0`` (3,) rad, rad, m; the roll/pitch
+def filter_params(noise: LCNoise, pos0, model, *, odo_scale_sigma=0.0) -> LCParams:
+    """:func:`jaxnav.ins.lc_params` of ``model`` from :class:`LCNoise` at ``pos0`` (3,) rad, rad, m; the roll/pitch
     sigma serves phi_E and phi_N, the heading sigma phi_U; ``odo_scale_sigma``: initial 1-sigma of the odometer
     scale-factor state (models with it), dimensionless."""
     att = jnp.asarray(noise.init_att)
@@ -315,7 +303,7 @@ class Prepared(NamedTuple):
     meas: Any
     keep: Any
     withheld: Any
-    densities: RunNoise
+    densities: LCNoise
     standstill: Any = None  # (N,) bool per IMU sample, or None (no detection)
     aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC, odometer)
     standstill_info: dict = {}  # detector report (detect_stops), with its series under "_series"
@@ -549,7 +537,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
 _SAVE = ("nav", "biases", "covs", "pred_covs", "Phi", "corrections", "innovations", "innov_covs", "nis", "valid")
 
 
-def run_filter(prep: Prepared, d: RunNoise | None = None, *, meas=None, save=_SAVE):
+def run_filter(prep: Prepared, d: LCNoise | None = None, *, meas=None, save=_SAVE):
     """The loosely coupled filter on a prepared recording; returns :class:`jaxnav.ins.LCResult`."""
     d = prep.densities if d is None else d
     o = prep.cfg.odometer
@@ -557,10 +545,7 @@ def run_filter(prep: Prepared, d: RunNoise | None = None, *, meas=None, save=_SA
     params = filter_params(
         d, prep.alignment.nav0.pos, model, odo_scale_sigma=o.init_scale_sigma if model.idx.s_odo is not None else 0.0
     )
-    m = prep.meas if meas is None else meas
-    # R -> D R D, D = diag(pos_sigma_scale x 3, vel_sigma_scale x 3): the sigmas scaled, correlations kept
-    s = jnp.concatenate([jnp.broadcast_to(d.pos_sigma_scale, (3,)), jnp.broadcast_to(d.vel_sigma_scale, (3,))])
-    m = m._replace(R=jnp.asarray(m.R) * (s[:, None] * s[None, :]))
+    m = scale_gnss_sigmas(prep.meas if meas is None else meas, d.pos_sigma_scale, d.vel_sigma_scale)
     g = prep.cfg.gnss
     gate = None if g.gate_probability is None else LCGate(g.gate_probability, g.gate_max_run)
     z3 = np.zeros(3)
@@ -614,11 +599,11 @@ class InsRun(NamedTuple):
     fixed: Any
     scores: OutageScores | None
     runtime_s: float
-    densities: RunNoise
+    densities: LCNoise
     gnss_epochs: Any = None
 
 
-def run_ins(prep: Prepared, d: RunNoise | None = None) -> InsRun:
+def run_ins(prep: Prepared, d: LCNoise | None = None) -> InsRun:
     """Forward filter + RTS smoother on a prepared recording, scored on its outages if it has any."""
     d = prep.densities if d is None else d
     t0 = time.perf_counter()
@@ -810,36 +795,6 @@ def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress
     return best, info
 
 
-#: ``[tune] params`` name -> (ImuNoise or RunNoise field, or "lever_arm"; bijector)
-_TUNE_MAP = {
-    "arw": ("gyro_arw", "log"),
-    "vrw": ("accel_vrw", "log"),
-    "gyro_bias_instability": ("gyro_bias_instability", "log"),
-    "pos_sigma_scale": ("pos_sigma_scale", "log"),
-    "vel_sigma_scale": ("vel_sigma_scale", "log"),
-    "lever_arm": ("lever_arm", "real"),
-}
-
-
-class TuneReport(NamedTuple):
-    """``--tune`` result: parameters before/after (SI), innovation log-likelihood before/after, evaluations, time.
-
-    ``fitted_on``: which GNSS epochs the loss used; ``n_epochs``: how many (with ``[evaluate]`` never
-    the withheld ones).
-    """
-
-    before: dict
-    after: dict
-    loglik_before: float
-    loglik_after: float
-    n_evals: int
-    wall_time_s: float
-    densities: RunNoise
-    lever_rfu: Any
-    fitted_on: str = ""
-    n_epochs: int = 0
-
-
 def run_training_windows(prep: Prepared) -> np.ndarray:
     """(K, 2) GNSS outages for ``--tune`` with ``loss = "outages"``: :func:`jaxnav.ins.training_windows`
     between the ``[evaluate]`` windows, or without them the default protocol's windows
@@ -853,35 +808,24 @@ def run_training_windows(prep: Prepared) -> np.ndarray:
 
 def tune_noise(
     prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse", loss_kind: str = "innovations"
-) -> TuneReport:
-    """Maximum-likelihood tuning of noise densities (and the lever arm) by gradient through the whole filter.
+) -> NoiseFit:
+    """``--tune``: :func:`jaxnav.tune.fit_lc_noise` of ``names`` on the GNSS epochs the filter sees.
 
     ``loss_kind``:
 
     * "innovations": the negative GNSS innovation log-likelihood of the forward filter over the
       whole run (every GNSS epoch the filter sees; the ``[evaluate]`` outages stay withheld) — the
       classic ML criterion; at a GNSS rate of several Hz it weighs predictions over fractions of a second.
-    * "outages": the negative predictive log-likelihood of the GNSS fixes withheld on
+    * "outages": :func:`jaxnav.ins.horizontal_fix_nll` of the GNSS fixes withheld on
       :func:`run_training_windows` (disjoint from the evaluation windows): horizontal antenna position
       predicted by the forward filter against each withheld fixed-quality fix, with the filter's
       predicted position variance plus the fix's own — the criterion for bridging outages.
 
-    Minimised by L-BFGS (:func:`jaxnav.tune.minimize_lbfgs`) with reverse- or forward-mode
-    gradients through the complete filter; densities are tuned on a log scale.
-
     Args:
-      prep: :class:`Prepared` (its evaluation outages stay withheld).  names: parameters
-        from ``_TUNE_MAP``.  max_evals: loss evaluations at most.  mode: "reverse" or "forward".
+      prep: :class:`Prepared` (its evaluation outages stay withheld).  names: parameters of
+        :data:`jaxnav.ins.calibration.TUNABLE`.  max_evals: loss evaluations at most.  mode: "reverse" or "forward".
     """
-    from jaxnav.tune import Space, minimize_lbfgs
-
-    unknown = [n for n in names if n not in _TUNE_MAP]
-    if unknown:
-        raise ValueError(f"cannot tune {unknown}; tunable: {sorted(_TUNE_MAP)}")
-    if "gyro_bias_instability" in names and prep.cfg.noise.states not in (18, 21):
-        raise ValueError("gyro_bias_instability is a parameter of the 18- and 21-state models (noise.states)")
-    if "vel_sigma_scale" in names and not prep.cfg.gnss.use_velocity:
-        raise ValueError("vel_sigma_scale scales the GNSS velocity sigmas: it needs gnss.use_velocity = true")
+    check_tunable(names, n_states=prep.cfg.noise.states, use_velocity=prep.cfg.gnss.use_velocity)
     if loss_kind not in ("innovations", "outages"):
         raise ValueError(f"loss must be 'innovations' or 'outages', got {loss_kind!r}")
     # only the epochs the filter may see: the [evaluate] outages stay withheld, scored once after tuning
@@ -898,41 +842,14 @@ def tune_noise(
                 f"windows {tw.tolist()}; use loss = 'innovations'"
             )
         base_mask = base_mask & ~inside[:, None]
-    all_gnss = prep.meas._replace(mask=base_mask)
-    n_fit = int(scored.sum()) if scored is not None else int(base_mask[:, :3].any(-1).sum())
-    fitted_on = (
-        "GNSS epochs the filter sees"
-        + (", outside the [evaluate] outages" if prep.withheld.any() else "")
-        + (": fixes withheld on the training windows" if scored is not None else ": their innovations")
-    )
-    d0 = prep.densities
-    lever0 = jnp.asarray(prep.lever_rfu, float)
-    p0 = {}
-    for n in names:
-        field, _ = _TUNE_MAP[n]
-        p0[n] = (
-            lever0
-            if field == "lever_arm"
-            else jnp.asarray(getattr(d0.imu if field in ImuNoise._fields else d0, field), float)
-        )
-    space = Space({n: _TUNE_MAP[n][1] for n in names})
+    seen = prep.meas._replace(mask=base_mask)
     pos0 = jnp.asarray(np.asarray(prep.alignment.nav0.pos, float))
     ref = jnp.asarray(np.asarray(prep.meas.pos, float))
     R_h = jnp.asarray(np.asarray(prep.meas.R, float)[:, :2, :2])
     idx = run_error_model(prep.cfg).idx
 
-    def unpack(p):
-        fields = {_TUNE_MAP[n][0]: p[n] for n in names if _TUNE_MAP[n][0] != "lever_arm"}
-        d = d0._replace(
-            imu=d0.imu._replace(**{f: v for f, v in fields.items() if f in ImuNoise._fields}),
-            **{f: v for f, v in fields.items() if f not in ImuNoise._fields},
-        )
-        lev = p.get("lever_arm", lever0)
-        return d, lev
-
-    def loss(p):
-        d, lev = unpack(p)
-        m = all_gnss._replace(lever=jnp.broadcast_to(lev, all_gnss.lever.shape))
+    def loss(d, lev):
+        m = seen._replace(lever=jnp.broadcast_to(lev, seen.lever.shape))
         if loss_kind == "innovations":
             return -run_filter(prep, d, meas=m, save=("nav",)).loglik
         res = run_filter(prep, d, meas=m, save=("nav", "covs"))
@@ -951,328 +868,71 @@ def tune_noise(
         )
         return jnp.sum(jnp.where(jnp.asarray(scored), nll, 0.0))
 
-    t0 = time.perf_counter()
-    res = minimize_lbfgs(loss, p0, space, max_evals=max_evals, mode=mode)
-    ll0 = -float(np.asarray(res.losses)[0])  # the first evaluation is at the start values
-    d1, lev1 = unpack(res.params)
-    ll1 = -float(res.loss)
-    si = {n: np.asarray(v).tolist() for n, v in p0.items()}
-    so = {n: np.asarray(v).tolist() for n, v in res.params.items()}
-    return TuneReport(
-        before=si,
-        after=so,
-        loglik_before=ll0,
-        loglik_after=ll1,
-        n_evals=int(res.n_evals),
-        wall_time_s=time.perf_counter() - t0,
-        densities=d1,
-        lever_rfu=np.asarray(lev1),
-        fitted_on=fitted_on,
-        n_epochs=n_fit,
+    return fit_lc_noise(
+        loss,
+        prep.densities,
+        names,
+        lever=jnp.asarray(prep.lever_rfu, float),
+        max_evals=max_evals,
+        mode=mode,
+        fitted_on="GNSS epochs the filter sees"
+        + (", outside the [evaluate] outages" if prep.withheld.any() else "")
+        + (": fixes withheld on the training windows" if scored is not None else ": their innovations"),
+        n_epochs=int(scored.sum()) if scored is not None else int(base_mask[:, :3].any(-1).sum()),
     )
-
-
-#: band of the mean GNSS position (and velocity) NIS per degree of freedom inside which the noise counts as consistent
-#: (a factor 1.25 either way in innovation variance; docs/guide/ins.md "Noise self-calibration")
-NIS_BAND = (0.8, 1.25)
-#: largest share of GNSS epochs whose NIS exceeds the gate's chi-square quantile for consistent noise
-NIS_GATE_SHARE_MAX = 0.01
-#: fewest GNSS position epochs the filter must see for a noise calibration
-MIN_CALIBRATION_EPOCHS = 50
-#: gated share of the GNSS epochs above which a run warns
-GATED_SHARE_WARN = 0.05
-
-
-def _block_nis(nu, S, use):
-    """nu' S^-1 nu over the components ``use`` (K, m) bool of (K, m) innovations with (K, m, m) covariances;
-    the others are left out (their rows and columns replaced by the identity, their innovations by 0)."""
-    u = use[..., :, None] & use[..., None, :]
-    eye = np.broadcast_to(np.eye(S.shape[-1]), S.shape)
-    Sm = np.where(u, S, eye)
-    L = np.linalg.cholesky(Sm)
-    w = np.linalg.solve(L, np.where(use, nu, 0.0)[..., None])[..., 0]
-    return np.sum(w * w, -1)
-
-
-def gnss_nis(res, mask) -> dict:
-    """NIS of the GNSS innovations per GNSS epoch: position, velocity and the whole epoch (the gate's statistic).
-
-    Args:
-      res: :class:`jaxnav.ins.LCResult` saved with "innovations", "innov_covs" (rows 0-2 of each epoch's
-        stacked measurement are the GNSS position components, m, rows 3-5 the velocity, m/s).
-      mask: (M, 6) bool GNSS mask (PVMeasurements).
-    Returns:
-      dict of (M,) arrays: ``pos`` (3 dof; NaN unless the three position components were used), ``vel``
-      (3 dof; NaN unless the three velocity components were used), ``epoch`` (nu' S^-1 nu over every GNSS
-      component used at the epoch, as :class:`jaxnav.ins.LCGate` computes it; NaN where none) and ``dof``
-      (its number of components, 0 where none).
-    """
-    ep = res.epochs
-    row = np.asarray(ep.gnss_row)
-    g = np.nonzero(row >= 0)[0]
-    nu = np.asarray(ep.innovations, float)[g, :6]
-    S = np.asarray(ep.innov_covs, float)[g, :6, :6]
-    M = np.asarray(mask).shape[0]
-    used = np.asarray(mask, bool)[row[g], :6] & np.isfinite(nu)
-    out = {k: np.full(M, np.nan) for k in ("pos", "vel", "epoch")}
-    out["dof"] = np.zeros(M, int)
-    for key, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6))):
-        ok = used[:, sl].all(-1)
-        if ok.any():
-            out[key][row[g][ok]] = _block_nis(nu[ok][:, sl], S[ok][:, sl, sl], used[ok][:, sl])
-    k = used.sum(-1)
-    ok = k > 0
-    if ok.any():
-        out["epoch"][row[g][ok]] = _block_nis(nu[ok], S[ok], used[ok])
-        out["dof"][row[g][ok]] = k[ok]
-    return out
-
-
-def position_nis(res, mask) -> np.ndarray:
-    """NIS of the GNSS position innovations per GNSS epoch: nu' S^-1 nu with the 3x3 position block.
-
-    Args:
-      res: :class:`jaxnav.ins.LCResult` saved with "innovations", "innov_covs" (rows 0-2 of each epoch's
-        stacked measurement are the GNSS position components, m).  mask: (M, 6) bool GNSS mask (PVMeasurements).
-    Returns:
-      (M,) NIS (3 degrees of freedom), NaN at the epochs whose three position components were not all used.
-    """
-    return gnss_nis(res, mask)["pos"]
-
-
-def nis_check(prep: Prepared, d: RunNoise | None = None) -> dict:
-    """Mean GNSS NIS per degree of freedom (position, velocity) of the filter WITHOUT the chi-square gate,
-    and the share of epochs the gate would reject.
-
-    Only the GNSS epochs the filter sees (the ``[evaluate]`` outages stay withheld). Expected 1 for a
-    consistent filter; consistent here: the mean position NIS per dof inside :data:`NIS_BAND`, the mean
-    velocity NIS per dof too (where the run uses GNSS velocity), and at most :data:`NIS_GATE_SHARE_MAX`
-    of the epochs beyond the gate's quantile — the whole epoch's NIS (every GNSS component used) against
-    the chi-square quantile for its number of components, as the gate judges it, and the position and
-    velocity NIS each against the 3-dof quantile (docs/guide/ins.md,
-    "Noise self-calibration": thousands of time-correlated epochs make the chi-square band of the mean
-    far too narrow to use, and GNSS noise dominating the innovations makes a wide band blind).
-
-    Returns:
-      dict: ``nis_per_dof`` (mean position NIS / 3), ``nis_median_per_dof`` (median position NIS / 2.366,
-      the chi-square(3) median; robust to outliers), ``n_epochs`` (epochs with a position NIS),
-      ``nis_vel_per_dof``, ``nis_vel_median_per_dof``, ``n_vel_epochs`` (the same for the velocity; NaN
-      and 0 without GNSS velocity), ``share_above_gate`` (epoch NIS above the chi-square quantile of
-      ``gnss.gate_probability``, or 0.9999 without a gate, for its number of components; over the epochs
-      with any GNSS component), ``share_pos_above_gate`` / ``share_vel_above_gate`` (the position /
-      velocity NIS above the chi-square(3) quantile; 0 without GNSS velocity), ``consistent`` (bool:
-      both means in the band, all three shares at most :data:`NIS_GATE_SHARE_MAX`), ``loglik``.
-    """
-    from jaxnav.ins.integration import chi2_quantile
-
-    g = prep.cfg.gnss
-    # an open gate (probability 1: nothing rejected) where the run has a gate: the final run's compiled program
-    ungated = prep._replace(
-        cfg=prep.cfg._replace(gnss=g._replace(gate_probability=None if g.gate_probability is None else 1.0))
-    )
-    res = run_filter(ungated, d)
-    nis = gnss_nis(res, prep.meas.mask)
-    p, v, e, k = nis["pos"], nis["vel"], nis["epoch"], nis["dof"]
-    ok, okv, oke = np.isfinite(p), np.isfinite(v), np.isfinite(e)
-    n, nv = int(ok.sum()), int(okv.sum())
-    prob = g.gate_probability if g.gate_probability is not None else 0.9999
-    thr = np.array([np.inf] + [chi2_quantile(prob, j) for j in range(1, 7)])
-    mean = float(np.mean(p[ok]) / 3.0) if n else float("nan")
-    mean_v = float(np.mean(v[okv]) / 3.0) if nv else float("nan")
-    share = float(np.mean(e[oke] > thr[k[oke]])) if oke.any() else float("nan")
-    # each 3-dof block against its own quantile too: a block's outliers can hide in the 6-dof epoch NIS
-    share_p = float(np.mean(p[ok] > thr[3])) if n else float("nan")
-    share_v = float(np.mean(v[okv] > thr[3])) if nv else 0.0
-    lo, hi = NIS_BAND
-    return {
-        "nis_per_dof": mean,
-        "nis_median_per_dof": float(np.median(p[ok]) / 2.366) if n else float("nan"),
-        "n_epochs": n,
-        "nis_vel_per_dof": mean_v,
-        "nis_vel_median_per_dof": float(np.median(v[okv]) / 2.366) if nv else float("nan"),
-        "n_vel_epochs": nv,
-        "share_above_gate": share,
-        "share_pos_above_gate": share_p,
-        "share_vel_above_gate": share_v,
-        "consistent": bool(
-            n
-            and lo <= mean <= hi
-            and (nv == 0 or lo <= mean_v <= hi)
-            and max(share, share_p, share_v) <= NIS_GATE_SHARE_MAX
-        ),
-        "loglik": float(res.loglik),
-    }
-
-
-def _nis_report(check: dict, when: str) -> dict:
-    """The NIS figures of a :func:`nis_check` as calibration-report keys tagged ``when`` ("before", "after")."""
-    return {
-        f"nis_{when}_per_dof": check["nis_per_dof"],
-        f"nis_median_{when}_per_dof": check["nis_median_per_dof"],
-        f"nis_vel_{when}_per_dof": check["nis_vel_per_dof"],
-        f"nis_vel_median_{when}_per_dof": check["nis_vel_median_per_dof"],
-        f"share_above_gate_{when}": check["share_above_gate"],
-        f"share_pos_above_gate_{when}": check["share_pos_above_gate"],
-        f"share_vel_above_gate_{when}": check["share_vel_above_gate"],
-    }
 
 
 def calibration_params(cfg: InsConfig) -> tuple:
-    """The densities the default calibration fits: ARW, VRW and the GNSS position sigma factor, the GNSS
-    velocity sigma factor where the run uses GNSS velocity (``gnss.use_velocity``), and the gyro bias
-    instability where the model has a state for it (``noise.states`` 18 or 21)."""
-    vel = ("vel_sigma_scale",) if cfg.gnss.use_velocity else ()
-    extra = ("gyro_bias_instability",) if cfg.noise.states in (18, 21) else ()
-    return ("arw", "vrw", "pos_sigma_scale", *vel, *extra)
+    """:func:`jaxnav.ins.calibration_params` of the run's error model and GNSS velocity use."""
+    return ins_calibration_params(cfg.noise.states, cfg.gnss.use_velocity)
 
 
-def _display(name: str, v) -> float:
-    """A tuned parameter in the unit of its config key (deg/sqrt(h), m/s/sqrt(h), deg/h, 1)."""
-    from jaxnav.units import DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR
-
-    scale = {
-        "arw": 1.0 / DEG_PER_SQRT_HOUR,
-        "vrw": math.sqrt(HOUR),
-        "gyro_bias_instability": 1.0 / DEG_PER_HOUR,
-        "pos_sigma_scale": 1.0,
-        "vel_sigma_scale": 1.0,
-    }[name]
-    return float(v) * scale
-
-
-#: unit of each calibrated parameter in :func:`calibrate_noise`'s report (the config key's unit)
+#: config-key unit of each calibrated parameter, and the factor from SI to it (for ``results.json``)
 DISPLAY_UNITS = {
-    "arw": "deg/sqrt(h)",
-    "vrw": "m/s/sqrt(h)",
-    "gyro_bias_instability": "deg/h",
-    "pos_sigma_scale": "1",
-    "vel_sigma_scale": "1",
+    "arw": ("deg/sqrt(h)", 1.0 / DEG_PER_SQRT_HOUR),
+    "vrw": ("m/s/sqrt(h)", math.sqrt(HOUR)),
+    "gyro_bias_instability": ("deg/h", 1.0 / DEG_PER_HOUR),
+    "pos_sigma_scale": ("1", 1.0),
+    "vel_sigma_scale": ("1", 1.0),
 }
 
 
-def _nis_words(chk: dict) -> tuple:
-    """(what the check measured, what fails) of a :func:`nis_check` result, as short phrases."""
-    lo, hi = NIS_BAND
-    said, bad = [], []
-    for what, key in (("position", "nis_per_dof"), ("velocity", "nis_vel_per_dof")):
-        x = chk[key]
-        if what == "velocity" and not chk["n_vel_epochs"]:
-            continue
-        inside = lo <= x <= hi
-        said.append(f"GNSS {what} NIS per dof {x:.2f} {'inside' if inside else 'outside'} {lo:g}-{hi:g}")
-        if not inside:
-            bad.append(f"the GNSS {what} NIS per dof is {x:.2f}, outside {lo:g}-{hi:g}")
-    for what, key in (("", "share_above_gate"), (" by the position NIS", "share_pos_above_gate")) + (
-        ((" by the velocity NIS", "share_vel_above_gate"),) if chk["n_vel_epochs"] else ()
-    ):
-        sh = chk[key]
-        if sh > NIS_GATE_SHARE_MAX:
-            said.append(f"{100 * sh:.1f} % of the epochs beyond the gate{what}")
-            bad.append(
-                f"{100 * sh:.1f} % of the GNSS epochs are beyond the gate{what} (at most "
-                f"{100 * NIS_GATE_SHARE_MAX:g} % for consistent noise)"
-            )
-    return ", ".join(said), bad
-
-
 def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
-    """Self-calibration of the noise densities: NIS check of the configured noise, ML fit where it fails.
-
-    1. The filter runs with the configured noise WITHOUT the chi-square gate; the mean NIS per degree of
-       freedom of its GNSS position and velocity innovations (:func:`nis_check`, the epochs the filter
-       sees) is compared with :data:`NIS_BAND`, the share of epochs beyond the gate's quantile with
-       :data:`NIS_GATE_SHARE_MAX`.
-    2. ``mode`` "auto": inside the band the configured noise is kept (one extra forward run). Outside it
-       (or ``mode`` True), :func:`tune_noise` with the innovations loss fits :func:`calibration_params`
-       (L-BFGS, forward-mode gradients, ``[tune] calibrate_steps`` evaluations) on the same epochs, ungated: the ``[evaluate]``
-       outages stay withheld. False: nothing runs.
-    3. Fewer than :data:`MIN_CALIBRATION_EPOCHS` GNSS position epochs: the configured noise is kept and
-       the measured NIS reported with a warning.
+    """The run's noise self-calibration: :func:`jaxnav.tune.calibrate_lc_noise` of :func:`calibration_params`
+    on the GNSS epochs the filter sees (the ``[evaluate]`` outages stay withheld), ``[tune] calibrate_steps``
+    evaluations.
 
     Args:
       prep: :class:`Prepared`.  mode: "auto" | True | False (default ``[tune] calibrate``).
       progress: callable for one line of text (stages and warnings), or None.
     Returns:
-      (:class:`RunNoise` to run with, report dict for ``results.json`` ``calibration``: mode, ran, reason,
-      NIS per dof before (and after), parameters before/after in SI and display units, the epochs fitted
-      on and their number, evaluations, wall time, warning).
+      (:class:`jaxnav.ins.LCNoise` to run with, the report for ``results.json`` ``calibration``, with the
+      parameters also in their config units: ``before_display``, ``after_display``, ``display_units``).
     """
-    say = progress or (lambda *_: None)
     cfg = prep.cfg
-    mode = cfg.tune.calibrate if mode is None else mode
-    t0 = time.perf_counter()
-    rep: dict = {
-        "mode": mode,
-        "ran": False,
-        "nis_band_per_dof": list(NIS_BAND),
-        "nis_gate_share_max": NIS_GATE_SHARE_MAX,
-    }
-    if mode is False:
-        rep["reason"] = "calibrate = false: the configured noise is used as given"
-        return prep.densities, rep
-    before = nis_check(prep)
-    n = before["n_epochs"]
-    rep.update(
-        _nis_report(before, "before"),
-        n_nis_epochs=n,
-        n_nis_vel_epochs=before["n_vel_epochs"],
-        min_epochs=MIN_CALIBRATION_EPOCHS,
+    g = cfg.gnss
+
+    def run(d, gate_probability, save):
+        p = prep._replace(cfg=cfg._replace(gnss=g._replace(gate_probability=gate_probability)))
+        return run_filter(p, d) if save is None else run_filter(p, d, save=save)
+
+    noise, rep = calibrate_lc_noise(
+        run,
+        prep.densities,
+        np.asarray(prep.meas.mask),
+        calibration_params(cfg),
+        mode=cfg.tune.calibrate if mode is None else mode,
+        max_evals=cfg.tune.calibrate_steps,
+        gate_probability=g.gate_probability,
+        fitted_on="GNSS position epochs the filter sees"
+        + (", outside the [evaluate] outages" if np.asarray(prep.withheld).any() else ""),
+        progress=progress,
     )
-    where = "GNSS position epochs the filter sees" + (
-        ", outside the [evaluate] outages" if np.asarray(prep.withheld).any() else ""
-    )
-    if n < MIN_CALIBRATION_EPOCHS:
-        rep["reason"] = (
-            f"too few GNSS epochs to calibrate ({n} < {MIN_CALIBRATION_EPOCHS}): the configured noise is kept"
-        )
-        rep["warning"] = (
-            f"only {n} GNSS position epochs, too few to check or calibrate the noise: GNSS position NIS per dof "
-            f"{before['nis_per_dof']:.2f} (consistent: {NIS_BAND[0]:g}-{NIS_BAND[1]:g}); the configured noise is "
-            "used, its uncertainties unchecked"
-        )
-        say(f"warning: {rep['warning']}")
-        rep["wall_time_s"] = time.perf_counter() - t0
-        return prep.densities, rep
-    why = _nis_words(before)[0]
-    if mode == "auto" and before["consistent"]:
-        rep["reason"] = f"{why}: the configured noise is consistent and kept"
-        rep["wall_time_s"] = time.perf_counter() - t0
-        return prep.densities, rep
-    names = calibration_params(cfg)
-    rep["reason"] = f"calibrate = true; {why}" if mode is True else why
-    say(
-        f"calibrating {', '.join(names)} ({rep['reason']}): innovation likelihood on {n} {where}, ungated, "
-        f"L-BFGS {cfg.tune.calibrate_steps} evaluations"
-    )
-    ungated = prep._replace(cfg=cfg._replace(gnss=cfg.gnss._replace(gate_probability=None)))
-    # forward mode: 3-4 parameters cost 3-4 tangents, cheaper than reverse mode's tape (about 2x per evaluation)
-    tr = tune_noise(ungated, names, max_evals=cfg.tune.calibrate_steps, mode="forward", loss_kind="innovations")
-    after = nis_check(prep, tr.densities)
-    rep.update(
-        ran=True,
-        params=list(names),
-        loss="innovations (GNSS innovation log-likelihood of the forward filter, no gate)",
-        before_si={k: float(v) for k, v in tr.before.items()},
-        after_si={k: float(v) for k, v in tr.after.items()},
-        before_display={k: _display(k, v) for k, v in tr.before.items()},
-        after_display={k: _display(k, v) for k, v in tr.after.items()},
-        display_units={k: DISPLAY_UNITS[k] for k in names},
-        loglik_before=tr.loglik_before,
-        loglik_after=tr.loglik_after,
-        **_nis_report(after, "after"),
-        fitted_on=where,
-        n_epochs=tr.n_epochs,
-        n_evals=tr.n_evals,
-    )
-    if not after["consistent"]:
-        bits = _nis_words(after)[1]
-        rep["warning"] = (
-            f"after calibration {' and '.join(bits)}: the uncertainties may still be wrong (errors the "
-            "error model has no state for?)"
-        )
-        say(f"warning: {rep['warning']}")
-    rep["wall_time_s"] = time.perf_counter() - t0
-    return tr.densities, rep
+    if rep["ran"]:
+        for when in ("before", "after"):
+            rep[f"{when}_display"] = {k: float(v) * DISPLAY_UNITS[k][1] for k, v in rep[f"{when}_si"].items()}
+        rep["display_units"] = {k: DISPLAY_UNITS[k][0] for k in rep["params"]}
+    return noise, rep
 
 
 def _mask_without_outages(prep: Prepared):

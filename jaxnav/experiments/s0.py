@@ -297,15 +297,17 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
     chunk = exp["monte_carlo"]["chunk"]
     states = inflated_states(exp)
 
+    idx = ins.error_model_for(exp["filter"]["n_states"]).idx
+
     def summary(res):
         """Per-run RMS (9,) and the per-epoch errors and 1-sigma bands used by the figures."""
         pe, ve = S.errors(res)
         ae = S.attitude_errors(res)
-        cov = res.epochs.covs
-        sig_p = jnp.sqrt(
-            jnp.stack([cov[:, 7, 7] * (S.RN * jnp.cos(S.lat)) ** 2, cov[:, 6, 6] * S.RM**2, cov[:, 8, 8]], -1)
-        )
-        sig_v = jnp.sqrt(jnp.stack([cov[:, 3, 3], cov[:, 4, 4], cov[:, 5, 5]], -1))
+        var = jnp.diagonal(res.epochs.covs, axis1=-2, axis2=-1)
+        dlat, dlon, dh = (var[:, idx.dpos][:, i] for i in range(3))
+        # east, north, up with the radii S.errors uses for the position errors
+        sig_p = jnp.sqrt(jnp.stack([dlon * (S.RN * jnp.cos(S.lat)) ** 2, dlat * S.RM**2, dh], -1))
+        sig_v = jnp.sqrt(var[:, idx.dv])
         return dict(
             rms=_rms9(pe, ve, ae), pos_err=pe, vel_err=ve, sig_pos=sig_p, sig_vel=sig_v, factors=res.epochs.factors
         )

@@ -4,7 +4,7 @@ Navigation frame ENU; body frame right-forward-up; quaternions scalar first; see
 :mod:`jaxnav.ins.attitude` for the Euler-angle convention.
 """
 
-from jaxnav.ins import attitude, earth, error_model, integration, measurements
+from jaxnav.ins import attitude, calibration, earth, error_model, integration, measurements
 from jaxnav.ins.alignment import HEADING_METHODS, Alignment, coarse_alignment
 from jaxnav.ins.allan import (  # Allan variance and noise identification from a static recording
     STATIC_LIMITS,
@@ -18,6 +18,19 @@ from jaxnav.ins.allan import (  # Allan variance and noise identification from a
     imu_noise_from_allan,
     static_check,
     uniform_rates,
+)
+from jaxnav.ins.calibration import (  # the run's noise and its consistency with the GNSS innovations
+    GATED_SHARE_WARN,
+    MIN_CALIBRATION_EPOCHS,
+    NIS_BAND,
+    NIS_GATE_SHARE_MAX,
+    LCNoise,
+    calibration_params,
+    check_tunable,
+    gnss_consistency,
+    gnss_nis,
+    position_nis,
+    scale_gnss_sigmas,
 )
 from jaxnav.ins.earth import EarthParams, earth_params, gravity_minus_coriolis, normal_gravity, position_rate
 from jaxnav.ins.error_model import (
@@ -276,4 +289,16 @@ __all__ += [
     "gnss_checked_standstill",
     "interpolate_on_samples",
     "nearest_samples",
+    "GATED_SHARE_WARN",
+    "MIN_CALIBRATION_EPOCHS",
+    "NIS_BAND",
+    "NIS_GATE_SHARE_MAX",
+    "LCNoise",
+    "calibration",
+    "calibration_params",
+    "check_tunable",
+    "gnss_consistency",
+    "gnss_nis",
+    "position_nis",
+    "scale_gnss_sigmas",
 ]

@@ -81,7 +81,8 @@ def test_overconfident_preset_is_calibrated_to_consistency(tmp_path):
 
 def test_preset_that_fits_is_kept_and_few_epochs_warn(tmp_path):
     from jaxnav.experiments import load_ins_config
-    from jaxnav.experiments.ins_run import MIN_CALIBRATION_EPOCHS, calibrate_noise, prepare
+    from jaxnav.experiments.ins_run import calibrate_noise, prepare
+    from jaxnav.ins import MIN_CALIBRATION_EPOCHS
 
     _, cfg = _car(tmp_path, 1.0)
     prep = prepare(load_ins_config(cfg), progress=None)
