@@ -31,7 +31,7 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
 from jaxnav.experiments.filter_family import format_filter_family, run_filter_family
 from jaxnav.experiments.ins_config import InsConfig, load_ins_config
 from jaxnav.experiments.ins_output import format_ins, process
-from jaxnav.experiments.ins_run import InsRun, gnss_measurements, prepare, run_ins, tune_noise
+from jaxnav.experiments.ins_run import InsRun, prepare, run_ins, tune_noise
 from jaxnav.experiments.s0 import (
     EXPERIMENT,
     FILTERS,
@@ -145,7 +145,6 @@ __all__ += [
     "InsConfig",
     "InsRun",
     "format_ins",
-    "gnss_measurements",
     "load_ins_config",
     "prepare",
     "process",

@@ -36,6 +36,7 @@ from jaxnav.ins import (
     LCSave,
     OutageScores,
     SensorBiases,
+    antenna_enu,
     attitude_sigmas,
     check_tunable,
     clock_drift,
@@ -43,6 +44,7 @@ from jaxnav.ins import (
     error_model_for,
     estimate_time_offset,
     gnss_checked_standstill,
+    gnss_solution_measurements,
     gnss_speed_test,
     horizontal_fix_nll,
     horizontal_sigma,
@@ -69,7 +71,6 @@ from jaxnav.ins import (
     zupt,
 )
 from jaxnav.ins import calibration_params as ins_calibration_params
-from jaxnav.ins import gnss_measurements as ins_gnss_measurements
 from jaxnav.ins import heading as heading_aid
 from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
@@ -166,61 +167,6 @@ def heading_on_imu(cfg: InsConfig, t_imu):
     if d["sigma"] is not None:
         sg[j[ok]] = d["sigma"][ok]
     return hd, sg
-
-
-def gnss_measurements(
-    pos_sol,
-    t_imu,
-    outages=(),
-    *,
-    lever_rfu=(0.0, 0.0, 0.0),
-    pos_sigma_floor: float = 0.02,
-    vel_sigma_floor: float = 0.05,
-    use_velocity: bool = True,
-    qualities=(1, 2),
-):
-    """The solution's epochs inside the IMU span as :func:`jaxnav.ins.gnss_measurements`, masked inside the outages.
-
-    Epochs inside an outage keep an all-False mask, so the filter reports its free-inertial
-    prediction there (and the smoother its estimate). Covariances: the solution's ENU position
-    and velocity covariances with the standard deviations floored at ``pos_sigma_floor`` (m) and
-    ``vel_sigma_floor`` (m/s); a missing velocity covariance counts as 1 (m/s)^2.
-
-    Args:
-      pos_sol: :class:`jaxnav.io.PosSolution`.  t_imu: (N,) IMU times, s.  outages: (K, 2) windows, s.
-      lever_rfu: (3,) antenna minus IMU in jaxnav's right-forward-up body frame, m.
-      qualities: solution qualities (``.pos`` Q: 1 fix, 2 float, ...) used.
-    Returns:
-      (:class:`jaxnav.ins.PVMeasurements`, index (M,) of the kept solution epochs, withheld (M,) bool).
-    """
-    t_imu = np.asarray(t_imu, float)
-    gt = np.asarray(pos_sol.t, float)
-    # an epoch needs an IMU sample ending at or before it (one inside the first sample's interval has none)
-    keep = np.nonzero((gt >= t_imu[0] - 1e-9) & (gt <= t_imu[-1]))[0]
-    if keep.size < 2:
-        raise ValueError(
-            f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
-            f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s"
-        )
-    t = gt[keep]
-    pos = np.stack([np.asarray(pos_sol.lat)[keep], np.asarray(pos_sol.lon)[keep], np.asarray(pos_sol.h)[keep]], -1)
-    withheld = np.zeros(keep.size, bool)
-    for a, b in np.asarray(outages, float).reshape(-1, 2):
-        withheld |= (t >= a) & (t < b)
-    use = np.isin(np.asarray(pos_sol.q)[keep], np.asarray(qualities)) & ~withheld
-    meas = ins_gnss_measurements(
-        t,
-        pos,
-        np.asarray(pos_sol.v_enu, float)[keep],
-        np.asarray(pos_sol.cov_enu)[keep],
-        np.asarray(pos_sol.vcov_enu, float)[keep],
-        use=use,
-        use_vel=use if use_velocity else np.zeros_like(use),
-        lever=lever_rfu,
-        pos_sigma_floor=pos_sigma_floor,
-        vel_sigma_floor=vel_sigma_floor,
-    )
-    return meas, keep, withheld
 
 
 #: ``[noise]`` keys (SI) -> :class:`jaxnav.ins.ImuNoise` fields
@@ -477,7 +423,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
             t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
         )
     )
-    meas, keep, withheld = gnss_measurements(
+    meas, keep, withheld = gnss_solution_measurements(
         pos,
         t,
         outages,
@@ -566,15 +512,6 @@ def run_filter(prep: Prepared, d: LCNoise | None = None, *, meas=None, save=_SAV
     )
 
 
-def antenna_enu(nav, t_nav, t, lever, pos0):
-    """(M, 3) antenna ENU (m, around ``pos0`` (3,)) of per-epoch nav states extrapolated to times ``t`` (M,)."""
-    pos = np.asarray(nav.pos)
-    enu = np.asarray(curvilinear_to_enu(pos0, pos - pos0))
-    C = np.asarray(quat_to_dcm(np.asarray(nav.q_bn)))
-    v = np.asarray(nav.v_n)
-    return enu + (np.asarray(t) - np.asarray(t_nav))[:, None] * v + np.einsum("mij,mj->mi", C, lever)
-
-
 class InsRun(NamedTuple):
     """One processed recording.
 
@@ -620,8 +557,8 @@ def run_ins(prep: Prepared, d: LCNoise | None = None) -> InsRun:
     sm_P_g = np.asarray(sm_P)[g]
     pos0 = np.array([float(x) for x in prep.alignment.nav0.pos])
     lev = np.asarray(meas.lever)
-    enu_f = antenna_enu(ep.nav, ep.t_nav, meas.t, lev, pos0)
-    enu_s = antenna_enu(sm_nav_g, ep.t_nav, meas.t, lev, pos0)
+    enu_f = np.asarray(antenna_enu(ep.nav, ep.t_nav, meas.t, lev, pos0))
+    enu_s = np.asarray(antenna_enu(sm_nav_g, ep.t_nav, meas.t, lev, pos0))
     enu_ref = np.asarray(curvilinear_to_enu(pos0, np.asarray(meas.pos) - pos0))
     fixed = np.asarray(prep.pos.q)[prep.keep] == 1
     nonfinite = int(sum(np.count_nonzero(~np.isfinite(np.asarray(a))) for a in (*ep.nav, *sm_nav)))
@@ -940,7 +877,7 @@ def _mask_without_outages(prep: Prepared):
     ok = np.asarray(prep.meas.mask).copy()
     w = np.asarray(prep.withheld)
     if w.any():
-        full = gnss_measurements(
+        full = gnss_solution_measurements(
             prep.pos,
             prep.t,
             (),

@@ -36,13 +36,14 @@ import numpy as np
 
 from jaxnav.experiments.figures import plot_walk
 from jaxnav.experiments.ins_config import load_ins_config
-from jaxnav.experiments.ins_run import filter_params, gnss_measurements, prepare, run_ins
+from jaxnav.experiments.ins_run import filter_params, prepare, run_ins
 from jaxnav.ins import (
     ERROR_MODEL_15,
     LCSave,
     OutageScores,
     SensorBiases,
     coarse_alignment,
+    gnss_solution_measurements,
     gyro_course_rate_correlation,
     loosely_coupled,
     mounting_from_groves_deg,
@@ -226,7 +227,7 @@ def frame_check(
         n = t <= t0 + until_s
         t, dth, dv, dt = t[n], dth[n], dv[n], dt[n]
         al = coarse_alignment(t, dv / dt[:, None], dth / dt[:, None], data.pos)
-        meas, _, _ = gnss_measurements(data.pos, t, lever_rfu=WALK_LEVER_RFU)
+        meas, _, _ = gnss_solution_measurements(data.pos, t, lever_rfu=WALK_LEVER_RFU)
         z3 = np.zeros(3)
         res = loosely_coupled(
             al.nav0,

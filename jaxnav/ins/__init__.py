@@ -80,13 +80,14 @@ from jaxnav.ins.integration import (
     SensorBiases,
     chi2_quantile,
     gnss_measurements,
+    gnss_solution_measurements,
     lc_params,
     loosely_coupled,
     predict_gnss_pv,
     segment_imu,
     smooth,
 )
-from jaxnav.ins.likelihood import horizontal_fix_nll
+from jaxnav.ins.likelihood import antenna_enu, horizontal_fix_nll
 from jaxnav.ins.measurements import (
     Aid,
     MeasContext,
@@ -184,6 +185,7 @@ __all__ = [
     "SensorBiases",
     "integration",
     "gnss_measurements",
+    "gnss_solution_measurements",
     "lc_params",
     "loosely_coupled",
     "predict_gnss_pv",
@@ -280,6 +282,7 @@ __all__ += [
     "score_outages",
     "training_windows",
     "horizontal_fix_nll",
+    "antenna_enu",
     "LikelihoodOffset",
     "clock_drift",
     "likelihood_time_offset",

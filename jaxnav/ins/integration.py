@@ -197,6 +197,62 @@ def gnss_measurements(
     )
 
 
+def gnss_solution_measurements(
+    pos_sol,
+    t_imu,
+    outages=(),
+    *,
+    lever_rfu=(0.0, 0.0, 0.0),
+    pos_sigma_floor: float = 0.02,
+    vel_sigma_floor: float = 0.05,
+    use_velocity: bool = True,
+    qualities=(1, 2),
+):
+    """A GNSS solution's epochs inside the IMU span as :func:`gnss_measurements`, masked inside the outages.
+
+    Epochs inside an outage keep an all-False mask, so the filter reports its free-inertial
+    prediction there (and the smoother its estimate). Covariances: the solution's ENU position
+    and velocity covariances with the standard deviations floored at ``pos_sigma_floor`` (m) and
+    ``vel_sigma_floor`` (m/s); a missing velocity covariance counts as 1 (m/s)^2.
+
+    Args:
+      pos_sol: a solution record with fields t (s), lat, lon (rad), h (m), q (quality), v_enu (m/s),
+        cov_enu, vcov_enu (m^2, (m/s)^2), e.g. :class:`jaxnav.io.PosSolution`.  t_imu: (N,) IMU times, s.  outages: (K, 2) windows, s.
+      lever_rfu: (3,) antenna minus IMU in jaxnav's right-forward-up body frame, m.
+      qualities: solution qualities (``.pos`` Q: 1 fix, 2 float, ...) used.
+    Returns:
+      (:class:`jaxnav.ins.PVMeasurements`, index (M,) of the kept solution epochs, withheld (M,) bool).
+    """
+    t_imu = np.asarray(t_imu, float)
+    gt = np.asarray(pos_sol.t, float)
+    # an epoch needs an IMU sample ending at or before it (one inside the first sample's interval has none)
+    keep = np.nonzero((gt >= t_imu[0] - 1e-9) & (gt <= t_imu[-1]))[0]
+    if keep.size < 2:
+        raise ValueError(
+            f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
+            f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s"
+        )
+    t = gt[keep]
+    pos = np.stack([np.asarray(pos_sol.lat)[keep], np.asarray(pos_sol.lon)[keep], np.asarray(pos_sol.h)[keep]], -1)
+    withheld = np.zeros(keep.size, bool)
+    for a, b in np.asarray(outages, float).reshape(-1, 2):
+        withheld |= (t >= a) & (t < b)
+    use = np.isin(np.asarray(pos_sol.q)[keep], np.asarray(qualities)) & ~withheld
+    meas = gnss_measurements(
+        t,
+        pos,
+        np.asarray(pos_sol.v_enu, float)[keep],
+        np.asarray(pos_sol.cov_enu)[keep],
+        np.asarray(pos_sol.vcov_enu, float)[keep],
+        use=use,
+        use_vel=use if use_velocity else np.zeros_like(use),
+        lever=lever_rfu,
+        pos_sigma_floor=pos_sigma_floor,
+        vel_sigma_floor=vel_sigma_floor,
+    )
+    return meas, keep, withheld
+
+
 def lc_params(model: ErrorModel, noise: ImuNoise, pos0, *, att, vel, pos_enu, odo_scale=0.0, R_scale=1.0) -> LCParams:
     """:class:`LCParams` of an error model from the IMU's noise and the initial navigation sigmas.
 

@@ -21,6 +21,24 @@ from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins.attitude import quat_to_dcm
 
 
+def antenna_enu(nav, t_nav, t, lever_b, pos0):
+    """(M, 3) antenna position in local ENU, m, of per-epoch navigation states extrapolated to times ``t``.
+
+    ENU(nav.pos) + (t - t_nav) v_n + C_bn lever_b: the IMU position in the ENU frame at ``pos0``, moved on
+    with the epoch's velocity to ``t`` and out to the antenna. Differentiable.
+
+    Args:
+      nav: :class:`jaxnav.ins.NavState` with (M, ...) leaves (pos [lat rad, lon rad, h m], v_n ENU m/s, q_bn).
+      t_nav: (M,) times of ``nav``, s.  t: (M,) target times, s.  lever_b: (3,) or (M, 3) antenna minus
+      IMU in the body frame, m.  pos0: (3,) origin of the ENU frame [lat rad, lon rad, h m].
+    """
+    M = jnp.shape(t_nav)[0]
+    C = quat_to_dcm(nav.q_bn)
+    dt = jnp.asarray(t) - t_nav
+    lev = jnp.broadcast_to(jnp.asarray(lever_b, C.dtype), (M, 3))
+    return curvilinear_to_enu(pos0, nav.pos - pos0) + dt[:, None] * nav.v_n + jnp.einsum("mij,mj->mi", C, lev)
+
+
 def horizontal_fix_nll(nav, covs, t_nav, t_fix, pos_fix, R_h, lever_b, pos0, idx):
     """(M,) negative log predictive density of M horizontal GNSS fixes given the filter's predictions.
 
@@ -42,9 +60,7 @@ def horizontal_fix_nll(nav, covs, t_nav, t_fix, pos_fix, R_h, lever_b, pos0, idx
         if (shp is not None and jnp.shape(a) != shp) or (shp is None and jnp.shape(a)[0] != M):
             raise ValueError(f"horizontal_fix_nll: {name} has shape {jnp.shape(a)}, expected {shp or (M, 'n', 'n')}")
     ilat, ilon = idx.dpos.start, idx.dpos.start + 1
-    C = quat_to_dcm(nav.q_bn)
-    dt = jnp.asarray(t_fix) - t_nav
-    ant = curvilinear_to_enu(pos0, nav.pos - pos0) + dt[:, None] * nav.v_n + jnp.einsum("mij,j->mi", C, lever_b)
+    ant = antenna_enu(nav, t_nav, t_fix, lever_b, pos0)
     e = ant[:, :2] - curvilinear_to_enu(pos0, pos_fix - pos0)[:, :2]
     sc = jnp.abs(curvilinear_to_enu(nav.pos, jnp.ones(3)))  # metres per (rad, rad, m)
     var = jnp.stack([covs[:, ilon, ilon] * sc[:, 0] ** 2, covs[:, ilat, ilat] * sc[:, 1] ** 2], -1)
