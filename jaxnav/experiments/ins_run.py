@@ -85,7 +85,7 @@ from jaxnav.io import (
     read_pos,
     read_rtklib_imu,
 )
-from jaxnav.tune import NoiseFit, calibrate_lc_noise, fit_lc_noise
+from jaxnav.tune import LCNoiseFit, calibrate_lc_noise, fit_lc_noise
 from jaxnav.units import DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR
 
 
@@ -745,7 +745,7 @@ def run_training_windows(prep: Prepared) -> np.ndarray:
 
 def tune_noise(
     prep: Prepared, names, *, max_evals: int = 25, mode: str = "reverse", loss_kind: str = "innovations"
-) -> NoiseFit:
+) -> LCNoiseFit:
     """``--tune``: :func:`jaxnav.tune.fit_lc_noise` of ``names`` on the GNSS epochs the filter sees.
 
     ``loss_kind``:

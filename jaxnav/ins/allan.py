@@ -12,7 +12,7 @@ the fully overlapping estimator (IEEE Std 952 / allantools ``oadev`` with ``data
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -211,21 +211,21 @@ class AllanFit(NamedTuple):
       dt: sample interval, s.  n: samples.
     """
 
-    taus: Any
-    ms: Any
-    avar: Any
-    avar_sigma: Any
-    fitted: Any
-    white: Any
-    bias_instability: Any
-    rate_rw: Any
-    white_sigma: Any
-    bias_instability_sigma: Any
-    rate_rw_sigma: Any
-    resolved: Any
-    upper: Any
-    tau_floor: Any
-    chi2: Any
+    taus: np.ndarray
+    ms: np.ndarray
+    avar: np.ndarray
+    avar_sigma: np.ndarray
+    fitted: np.ndarray
+    white: np.ndarray
+    bias_instability: np.ndarray
+    rate_rw: np.ndarray
+    white_sigma: np.ndarray
+    bias_instability_sigma: np.ndarray
+    rate_rw_sigma: np.ndarray
+    resolved: np.ndarray
+    upper: np.ndarray
+    tau_floor: np.ndarray
+    chi2: np.ndarray
     dt: float
     n: int
 

@@ -10,10 +10,11 @@ Navigation*, 2001, section 5.4). The maximum-likelihood fit that repairs an inco
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxnav.ins.integration import chi2_quantile
 from jaxnav.ins.noise import ImuNoise
@@ -44,11 +45,11 @@ class LCNoise(NamedTuple):
     """
 
     imu: ImuNoise
-    init_att: Any
-    init_vel: Any
-    init_pos: Any
-    pos_sigma_scale: Any = 1.0
-    vel_sigma_scale: Any = 1.0
+    init_att: ArrayLike
+    init_vel: ArrayLike
+    init_pos: ArrayLike
+    pos_sigma_scale: ArrayLike = 1.0
+    vel_sigma_scale: ArrayLike = 1.0
 
 
 #: tunable parameter name -> (:class:`LCNoise` or :class:`ImuNoise` field, or "lever_arm"; bijector of

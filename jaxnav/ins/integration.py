@@ -44,6 +44,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxnav import _status
 from jaxnav._numerics import masked_measurement, safe_cholesky, whiten
@@ -108,12 +109,12 @@ class PVMeasurements(NamedTuple):
       lever: (M, 3) antenna lever arm in the body frame, m (zeros for pseudo-measurements at the IMU).
     """
 
-    t: Any
-    pos: Any
-    vel: Any
-    R: Any
-    mask: Any
-    lever: Any
+    t: ArrayLike
+    pos: ArrayLike
+    vel: ArrayLike
+    R: ArrayLike
+    mask: ArrayLike
+    lever: ArrayLike
 
 
 class LCParams(NamedTuple):
@@ -130,10 +131,10 @@ class LCParams(NamedTuple):
       R_scale: scalar multiplying every measurement covariance (assumed-noise mismatch studies).
     """
 
-    P0: Any
-    Qc: Any
-    tau_markov: Any = 300.0
-    R_scale: Any = 1.0
+    P0: ArrayLike
+    Qc: ArrayLike
+    tau_markov: ArrayLike = 300.0
+    R_scale: ArrayLike = 1.0
 
 
 def _floor_sigmas(c, floor):
@@ -297,12 +298,12 @@ class SensorBiases(NamedTuple):
         for models without the state (:meth:`jaxnav.ins.ErrorModel.with_odometer_scale`).
     """
 
-    gyro: Any
-    markov: Any
-    accel: Any
-    gyro_scale: Any = None
-    accel_scale: Any = None
-    odo_scale: Any = None
+    gyro: jax.Array
+    markov: jax.Array
+    accel: jax.Array
+    gyro_scale: jax.Array | None = None
+    accel_scale: jax.Array | None = None
+    odo_scale: jax.Array | None = None
 
 
 class LCEpochs(NamedTuple):
@@ -321,23 +322,23 @@ class LCEpochs(NamedTuple):
         pseudo-measurements only); always filled.
     """
 
-    t: Any = None
-    t_nav: Any = None
-    nav: Any = None
-    biases: Any = None
-    covs: Any = None
-    pred_covs: Any = None
-    Phi: Any = None
-    corrections: Any = None
-    innovations: Any = None
-    innov_covs: Any = None
-    nis: Any = None
-    factors: Any = None
+    t: jax.Array | None = None
+    t_nav: jax.Array | None = None
+    nav: NavState | None = None
+    biases: SensorBiases | None = None
+    covs: jax.Array | None = None
+    pred_covs: jax.Array | None = None
+    Phi: jax.Array | None = None
+    corrections: jax.Array | None = None
+    innovations: jax.Array | None = None
+    innov_covs: jax.Array | None = None
+    nis: jax.Array | None = None
+    factors: jax.Array | None = None
     noise: Any = None
-    valid: Any = None
-    gated: Any = None
-    gnss_nis: Any = None
-    gnss_row: Any = None
+    valid: jax.Array | None = None
+    gated: jax.Array | None = None
+    gnss_nis: jax.Array | None = None
+    gnss_row: jax.Array | None = None
 
 
 class LCResult(NamedTuple):
@@ -352,22 +353,22 @@ class LCResult(NamedTuple):
     """
 
     epochs: LCEpochs
-    final_nav: Any
-    final_biases: Any
-    loglik: Any
-    n_nonfinite: Any
-    n_skipped: Any
-    status: Any
-    imu_nav: Any = None
-    n_gated: Any = None
+    final_nav: NavState
+    final_biases: SensorBiases
+    loglik: jax.Array
+    n_nonfinite: jax.Array
+    n_skipped: jax.Array
+    status: jax.Array
+    imu_nav: NavState | None = None
+    n_gated: jax.Array | None = None
 
 
 class Segments(NamedTuple):
     """Host-computed map of IMU samples to measurement epochs (static shapes for the nested scan)."""
 
-    idx: Any  # (M, K) int IMU sample indices per epoch interval (padded)
-    use: Any  # (M, K) bool, real samples
-    t_last: Any  # (M,) end time of the last IMU sample before each epoch
+    idx: np.ndarray  # (M, K) int IMU sample indices per epoch interval (padded)
+    use: np.ndarray  # (M, K) bool, real samples
+    t_last: np.ndarray  # (M,) end time of the last IMU sample before each epoch
     K: int
 
 
@@ -512,9 +513,9 @@ class _Carry(NamedTuple):
     mech: MechState
     biases: SensorBiases
     kf: FilterState
-    G_prev: Any = None  # two-speed mechanization: the last block's gravity minus Coriolis (else None)
-    n_gated: Any = None  # int32 count of gated GNSS epochs
-    gate_run: Any = None  # int32 consecutive gated GNSS epochs (re-acquisition after gate_max_run)
+    G_prev: jax.Array | None = None  # two-speed mechanization: the last block's gravity minus Coriolis (else None)
+    n_gated: jax.Array | None = None  # int32 count of gated GNSS epochs
+    gate_run: jax.Array | None = None  # int32 consecutive gated GNSS epochs (re-acquisition after gate_max_run)
 
 
 class _Sums(NamedTuple):
@@ -524,12 +525,12 @@ class _Sums(NamedTuple):
     the average of F up to O(dt_epoch^2) in the slowly varying terms.
     """
 
-    pos: Any  # (3,) sum pos dt
-    v: Any  # (3,) sum v_n dt, m
-    f: Any  # (3,) sum C_bn dv = integral of f_n dt, m/s
-    C: Any  # (3, 3) sum C_bn dt, s
-    Cw: Any = None  # (3, 3) sum C_bn diag(dtheta) = integral of C_bn diag(w_ib_b) dt (scale-factor models)
-    Cf: Any = None  # (3, 3) sum C_bn diag(dv) = integral of C_bn diag(f_b) dt (scale-factor models)
+    pos: jax.Array  # (3,) sum pos dt
+    v: jax.Array  # (3,) sum v_n dt, m
+    f: jax.Array  # (3,) sum C_bn dv = integral of f_n dt, m/s
+    C: jax.Array  # (3, 3) sum C_bn dt, s
+    Cw: jax.Array | None = None  # (3, 3) sum C_bn diag(dtheta) = integral of C_bn diag(w_ib_b) dt (scale-factor models)
+    Cf: jax.Array | None = None  # (3, 3) sum C_bn diag(dv) = integral of C_bn diag(f_b) dt (scale-factor models)
 
 
 class _Propagated(NamedTuple):
@@ -538,9 +539,9 @@ class _Propagated(NamedTuple):
     mech: MechState
     biases: SensorBiases  # the Markov drift decayed over the interval
     sums: _Sums
-    T: Any  # time covered by the interval's samples, s
-    w_last: Any  # (3,) angular rate of the last sample, rad/s (lever-arm velocity)
-    G: Any  # two-speed: the last block's gravity minus Coriolis (else None)
+    T: jax.Array  # time covered by the interval's samples, s
+    w_last: jax.Array  # (3,) angular rate of the last sample, rad/s (lever-arm velocity)
+    G: jax.Array  # two-speed: the last block's gravity minus Coriolis (else None)
 
 
 def _where_tree(c, a, b):
@@ -775,8 +776,8 @@ class _AidEpochs(NamedTuple):
     still (M', K) bool rows of the mean-rate aid or None."""
 
     data: Any
-    active: Any
-    still: Any
+    active: jax.Array
+    still: jax.Array | None
 
 
 class _CoreInputs(NamedTuple):
@@ -785,11 +786,11 @@ class _CoreInputs(NamedTuple):
     nav0: NavState
     biases0: SensorBiases
     rows: tuple  # (dtheta (M, K, 3), dv (M, K, 3), dt (M, K), use (M, K) bool): raw IMU samples per interval
-    t_last: Any  # (M,) end time of the last IMU sample before each epoch
+    t_last: jax.Array  # (M,) end time of the last IMU sample before each epoch
     meas: PVMeasurements
     aid_epochs: _AidEpochs | None
     aid_params: tuple
-    gate_thresholds: Any  # (7,) chi-square quantiles by dof, or None without gating
+    gate_thresholds: jax.Array | None  # (7,) chi-square quantiles by dof, or None without gating
 
 
 class _CoreOptions(NamedTuple):

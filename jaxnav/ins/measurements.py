@@ -49,8 +49,10 @@ import dataclasses
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxnav.geodesy import WGS84, curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins.attitude import quat_to_dcm, skew
@@ -72,21 +74,21 @@ class MeasContext(NamedTuple):
       biases: the sensor-error corrections applied so far (:class:`jaxnav.ins.SensorBiases`), or None.
     """
 
-    nav: Any
-    w_ib_b: Any
-    w_mean_b: Any
-    T_mean: Any
-    dtx: Any
-    biases: Any = None
+    nav: NavState
+    w_ib_b: jax.Array
+    w_mean_b: jax.Array
+    T_mean: jax.Array
+    dtx: jax.Array
+    biases: jax.Array | None = None
 
 
 class MeasRows(NamedTuple):
     """Rows of a measurement update: z (m,), H (m, n), R (m, m), mask (m,) bool."""
 
-    z: Any
-    H: Any
-    R: Any
-    mask: Any
+    z: jax.Array
+    H: jax.Array
+    R: jax.Array
+    mask: jax.Array
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -167,11 +169,11 @@ def predict_gnss_pv(nav: NavState, w_ib_b, lever_b, n_states: int, ellipsoid=WGS
 class GnssData(NamedTuple):
     """One epoch of :class:`jaxnav.ins.PVMeasurements` (pos (3,), vel (3,), R (6, 6), mask (6,), lever (3,))."""
 
-    pos: Any
-    vel: Any
-    R: Any
-    mask: Any
-    lever: Any
+    pos: ArrayLike
+    vel: ArrayLike
+    R: ArrayLike
+    mask: ArrayLike
+    lever: ArrayLike
 
 
 def _gnss_pv(ctx: MeasContext, data: GnssData, params, idx, n, ellipsoid=WGS84) -> MeasRows:
@@ -197,7 +199,7 @@ GNSS_PV = MeasurementModel("gnss_pv", 6, _gnss_pv)
 class ZuptParams(NamedTuple):
     """sigma: scalar or (3,) std of the zero-velocity pseudo-measurement (ENU), m/s."""
 
-    sigma: Any
+    sigma: ArrayLike
 
 
 def _zupt(ctx, data, params: ZuptParams, idx, n, ellipsoid=WGS84) -> MeasRows:
@@ -215,7 +217,7 @@ class ZaruParams(NamedTuple):
     """density: scalar or (3,) white-noise density of the angular rate at standstill (ARW plus
     vibration), rad/sqrt(s); the mean over T seconds has variance density^2 / T."""
 
-    density: Any
+    density: ArrayLike
 
 
 def _zaru(ctx, data, params: ZaruParams, idx, n, ellipsoid=WGS84) -> MeasRows:
@@ -250,9 +252,9 @@ class VehicleParams(NamedTuple):
       lever_b: (3,) the constrained point (rear axle, wheel) minus the IMU, body frame, m.
     """
 
-    sigma: Any
-    C_vb: Any
-    lever_b: Any
+    sigma: ArrayLike
+    C_vb: ArrayLike
+    lever_b: ArrayLike
 
 
 def _vehicle_velocity(ctx: MeasContext, p: VehicleParams, ellipsoid):
@@ -304,8 +306,8 @@ class HeadingParams(NamedTuple):
     """sigma: heading std, rad.  axis_b: (3,) body vector whose heading is measured (forward (0, 1, 0),
     or a dual-antenna baseline)."""
 
-    sigma: Any
-    axis_b: Any
+    sigma: ArrayLike
+    axis_b: ArrayLike
 
 
 def _heading(ctx, data, params: HeadingParams, idx, n, ellipsoid=WGS84) -> MeasRows:

@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxnav import _status
 from jaxnav.geodesy import WGS84, Ellipsoid, check_float64
@@ -40,33 +41,33 @@ class NavState(NamedTuple):
       pos: (3,) [latitude rad, longitude rad, ellipsoidal height m].
     """
 
-    q_bn: Any
-    v_n: Any
-    pos: Any
+    q_bn: jax.Array
+    v_n: jax.Array
+    pos: jax.Array
 
 
 class MechState(NamedTuple):
     """Scan carry: the navigation state plus what the two-sample algorithms remember."""
 
     nav: NavState
-    dtheta_prev: Any  # (3,) previous angular increment, rad
-    dv_prev: Any  # (3,) previous velocity increment, m/s
-    a_prev: Any  # (3,) previous mean nav acceleration, m/s^2 (mid-interval extrapolation)
-    status: Any  # int32 flags
+    dtheta_prev: jax.Array  # (3,) previous angular increment, rad
+    dv_prev: jax.Array  # (3,) previous velocity increment, m/s
+    a_prev: jax.Array  # (3,) previous mean nav acceleration, m/s^2 (mid-interval extrapolation)
+    status: jax.Array  # int32 flags
 
 
 class ImuSample(NamedTuple):
     """One IMU sample: increments over the interval ending at the sample time."""
 
-    dtheta: Any  # (3,) angular increment in b, rad
-    dv: Any  # (3,) velocity increment (integrated specific force) in b, m/s
-    dt: Any  # scalar interval, s
+    dtheta: jax.Array  # (3,) angular increment in b, rad
+    dv: jax.Array  # (3,) velocity increment (integrated specific force) in b, m/s
+    dt: jax.Array  # scalar interval, s
 
 
 class MechParams(NamedTuple):
     """Array parameters of the step (static choices are arguments of :func:`mech_step`)."""
 
-    earth_rate_sign: Any = 1.0  # -1 for reverse navigation (S3 class 3)
+    earth_rate_sign: ArrayLike = 1.0  # -1 for reverse navigation (S3 class 3)
 
 
 def _coning_sculling(dth, dv, dth_prev, dv_prev, coning: bool):
@@ -95,9 +96,9 @@ class _Block(NamedTuple):
     T: block duration, s.
     """
 
-    dq: Any
-    S: Any
-    T: Any
+    dq: jax.Array
+    S: jax.Array
+    T: jax.Array
 
 
 def _rot_sum(w, Y0, Y1, Y2):
@@ -112,10 +113,10 @@ def _rot_sum(w, Y0, Y1, Y2):
 class _NavFrame(NamedTuple):
     """Navigation-frame quantities of one update, frozen at the block's mid-time."""
 
-    w_in: Any  # (3,) w_ie + w_en, rad/s
-    G: Any  # (3,) g - (2 w_ie + w_en) x v_mid, m/s^2
-    pos_mid: Any  # (3,) extrapolated mid-block position (where the radii are taken)
-    v_mid: Any  # (3,) the velocity at which w_en and Coriolis are taken, m/s
+    w_in: jax.Array  # (3,) w_ie + w_en, rad/s
+    G: jax.Array  # (3,) g - (2 w_ie + w_en) x v_mid, m/s^2
+    pos_mid: jax.Array  # (3,) extrapolated mid-block position (where the radii are taken)
+    v_mid: jax.Array  # (3,) the velocity at which w_en and Coriolis are taken, m/s
 
 
 def _nav_update(nav: NavState, a_prev, blk: _Block, earth_rate_sign, ellipsoid, hold_height, G_prev=None):
@@ -300,8 +301,8 @@ class _TwoSpeed(NamedTuple):
     """Carry of the navigation-frame recursion of the two-speed mechanization."""
 
     nav: NavState
-    a_prev: Any  # (3,) mean nav acceleration of the last block, m/s^2
-    G: Any  # (3,) the last block's g - (2 w_ie + w_en) x v, m/s^2 (predicts the next block's mean velocity)
+    a_prev: jax.Array  # (3,) mean nav acceleration of the last block, m/s^2
+    G: jax.Array  # (3,) the last block's g - (2 w_ie + w_en) x v, m/s^2 (predicts the next block's mean velocity)
 
 
 def _two_speed_start(nav: NavState, a_prev, earth_rate_sign, ellipsoid) -> _TwoSpeed:
@@ -364,7 +365,7 @@ class MechResult(NamedTuple):
 
     nav: NavState
     final: MechState
-    status: Any
+    status: jax.Array
 
 
 def _concrete(*xs):

@@ -43,7 +43,9 @@ than the run).
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
+
+from jax.typing import ArrayLike
 
 from jaxnav import units
 
@@ -68,20 +70,20 @@ class ImuNoise(NamedTuple):
     :func:`jaxnav.ins.lc_params`) and the ``jaxnav ins`` configs all take this record.
     """
 
-    gyro_arw: Any
-    accel_vrw: Any
-    gyro_bias_instability: Any = 0.0
-    gyro_bias_tau: Any = 3600.0
-    accel_bias_instability: Any = 0.0
-    accel_bias_tau: Any = 3600.0
-    gyro_bias_rw: Any = 0.0
-    accel_bias_rw: Any = 0.0
-    gyro_bias_initial: Any = 0.0
-    accel_bias_initial: Any = 0.0
-    gyro_sf: Any = 0.0
-    accel_sf: Any = 0.0
-    gyro_sf_rw: Any = 0.0
-    accel_sf_rw: Any = 0.0
+    gyro_arw: ArrayLike
+    accel_vrw: ArrayLike
+    gyro_bias_instability: ArrayLike = 0.0
+    gyro_bias_tau: ArrayLike = 3600.0
+    accel_bias_instability: ArrayLike = 0.0
+    accel_bias_tau: ArrayLike = 3600.0
+    gyro_bias_rw: ArrayLike = 0.0
+    accel_bias_rw: ArrayLike = 0.0
+    gyro_bias_initial: ArrayLike = 0.0
+    accel_bias_initial: ArrayLike = 0.0
+    gyro_sf: ArrayLike = 0.0
+    accel_sf: ArrayLike = 0.0
+    gyro_sf_rw: ArrayLike = 0.0
+    accel_sf_rw: ArrayLike = 0.0
 
 
 #: preset names, best last

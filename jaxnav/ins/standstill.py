@@ -21,11 +21,12 @@ centred on the sample, clamped at the ends.
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 #: standard gravity, m/s^2 (the default magnitude; pass the local normal gravity for better)
 G0 = 9.80665
@@ -43,10 +44,10 @@ class StandstillParams(NamedTuple):
         measured |f| at rest, or the local normal gravity); NaN: its estimate over each window.
     """
 
-    sigma_a: Any = 0.05
-    sigma_w: Any = 0.01
-    threshold: Any = 30.0
-    g: Any = G0
+    sigma_a: ArrayLike = 0.05
+    sigma_w: ArrayLike = 0.01
+    threshold: ArrayLike = 30.0
+    g: ArrayLike = G0
 
 
 def _shift_sum(x, before: int, after: int):
@@ -351,14 +352,14 @@ class CheckedStandstill(NamedTuple):
         GNSS-static labels where GNSS brackets the sample (``covered``).
     """
 
-    detected: Any
-    stat: Any
-    raw: Any
-    moving: Any
-    static: Any
-    covered: Any
-    vetoed: Any
-    unconfirmed: Any
+    detected: np.ndarray
+    stat: np.ndarray
+    raw: np.ndarray
+    moving: np.ndarray
+    static: np.ndarray
+    covered: np.ndarray
+    vetoed: np.ndarray
+    unconfirmed: np.ndarray
     threshold: float
     threshold_source: str
     quiet_samples: int

@@ -13,7 +13,7 @@ import datetime as _dt
 import math
 import pathlib
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -57,15 +57,15 @@ class NavSolution(NamedTuple):
       quality: (M,) int, the GNSS quality used (``.pos`` Q: 1 fix, 2 float, ...; 0 inertial only).
     """
 
-    t: Any
-    pos: Any
-    v_enu: Any
-    rpy: Any
-    sig_pos_enu: Any
-    sig_vel: Any
-    sig_att: Any
-    gnss_used: Any
-    quality: Any
+    t: np.ndarray
+    pos: np.ndarray
+    v_enu: np.ndarray
+    rpy: np.ndarray
+    sig_pos_enu: np.ndarray
+    sig_vel: np.ndarray
+    sig_att: np.ndarray
+    gnss_used: np.ndarray
+    quality: np.ndarray
 
 
 class Track(NamedTuple):
@@ -78,7 +78,7 @@ class Track(NamedTuple):
     """
 
     name: str
-    pos: Any
+    pos: np.ndarray
     properties: dict | None = None
     color: str | None = None
     width: float | None = None

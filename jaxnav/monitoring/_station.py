@@ -332,11 +332,11 @@ class StationFit(NamedTuple):
     offset: jax.Array
     t_ref: float
     annual_amplitude: jax.Array
-    annual_amplitude_sigma: Any
-    annual_phase: Any
+    annual_amplitude_sigma: np.ndarray
+    annual_phase: np.ndarray
     semiannual_amplitude: jax.Array
-    semiannual_amplitude_sigma: Any
-    semiannual_phase: Any
+    semiannual_amplitude_sigma: np.ndarray
+    semiannual_phase: np.ndarray
     steps: jax.Array
     step_sizes: jax.Array
     step_sigmas: jax.Array

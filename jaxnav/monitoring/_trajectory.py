@@ -27,11 +27,12 @@ is a pure function of arrays: ``jax.vmap`` fits many stations (or components) at
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxnav import filters as jf
 from jaxnav.monitoring._noise import GGM_ONE_MINUS_PHI, gauss_markov_sum, gauss_markov_table
@@ -189,10 +190,10 @@ class NoiseFit(NamedTuple):
     theta_sigma: jax.Array
     beta: jax.Array
     beta_cov: jax.Array
-    loglik: Any
-    loglik_reml: Any
-    grad_norm: Any
-    iterations: Any
+    loglik: jax.Array
+    loglik_reml: jax.Array
+    grad_norm: jax.Array
+    iterations: jax.Array
     residuals: jax.Array
 
 
@@ -406,7 +407,7 @@ class NoiseSpec(NamedTuple):
     r: jax.Array
     W: jax.Array
     d_grid: jax.Array
-    kappa: Any
+    kappa: ArrayLike
     max_rel_error: float
 
 

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import erfc
+from jax.typing import ArrayLike
 
 #: consistency factor of the median absolute deviation for a normal distribution
 MAD_TO_SIGMA = 1.4826
@@ -55,7 +56,7 @@ class OutlierResult(NamedTuple):
       n_rejected: int, number of replaced values.
     """
 
-    clean: Any
+    clean: jax.Array
     flags: jax.Array
     scale: jax.Array
     n_rejected: jax.Array
@@ -175,16 +176,16 @@ class SeriesStats(NamedTuple):
       runs_z: standardised runs count; runs_p: two-sided normal p-value.
     """
 
-    n: Any
-    mean: Any
-    var: Any
-    skew: Any
-    kurt: Any
-    jb: Any
-    jb_p: Any
-    runs: Any
-    runs_z: Any
-    runs_p: Any
+    n: jax.Array
+    mean: jax.Array
+    var: jax.Array
+    skew: jax.Array
+    kurt: jax.Array
+    jb: jax.Array
+    jb_p: jax.Array
+    runs: jax.Array
+    runs_z: jax.Array
+    runs_p: jax.Array
 
 
 def _stats1(x):
@@ -247,11 +248,11 @@ class PreprocessParams(NamedTuple):
       cutoff_hz: zero-phase low-pass cut-off, Hz (inf: no low-pass).
     """
 
-    k_gyro: Any = 6.0
-    k_accel: Any = 6.0
-    floor_gyro: Any = 1e-4
-    floor_accel: Any = 1e-3
-    cutoff_hz: Any = 20.0
+    k_gyro: ArrayLike = 6.0
+    k_accel: ArrayLike = 6.0
+    floor_gyro: ArrayLike = 1e-4
+    floor_accel: ArrayLike = 1e-3
+    cutoff_hz: ArrayLike = 20.0
 
 
 class PreprocessResult(NamedTuple):

@@ -12,11 +12,12 @@ between stops; class 3 = a target stop whose previous stop is a known-coordinate
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxnav.ins.standstill import StandstillParams, shoe_statistic
 
@@ -165,10 +166,10 @@ class DetectorParams(NamedTuple):
         does not count as motion).
     """
 
-    sigma_a: Any = 0.02
-    sigma_g: Any = 2e-3
-    threshold: Any = 3.0
-    gravity: Any = float("nan")
+    sigma_a: ArrayLike = 0.02
+    sigma_g: ArrayLike = 2e-3
+    threshold: ArrayLike = 3.0
+    gravity: ArrayLike = float("nan")
 
 
 def stance_statistic(f_b, w_b, params: DetectorParams = DetectorParams(), *, window: int = 50):
@@ -217,9 +218,9 @@ def static_spans(static, t, *, min_duration: float = 2.0, min_gap: float = 0.5):
 class DetectionResult(NamedTuple):
     """Output of :func:`detect_stops`: statistic (N,), static mask (N,), spans (K, 2) s."""
 
-    statistic: Any
-    static: Any
-    spans: Any
+    statistic: np.ndarray
+    static: np.ndarray
+    spans: np.ndarray
 
 
 def detect_stops(
@@ -263,8 +264,8 @@ class MatchScore(NamedTuple):
     n_matched: int
     sample_precision: float
     sample_recall: float
-    start_error: Any
-    end_error: Any
+    start_error: np.ndarray
+    end_error: np.ndarray
 
 
 def match_stops(detected, true, *, min_overlap: float = 0.5, t=None, static=None) -> MatchScore:

@@ -34,11 +34,12 @@ numerical work (:func:`process_survey`) is one jit-able, vmappable function of t
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins.error_model import IDX18
@@ -74,8 +75,8 @@ class CadastralParams(NamedTuple):
     P0: jax.Array
     Qc: jax.Array
     tau_markov: jax.Array
-    zupt_sigma: Any = 0.005
-    pre: Any = PreprocessParams()
+    zupt_sigma: ArrayLike = 0.005
+    pre: PreprocessParams = PreprocessParams()
 
 
 class SurveyPlan(NamedTuple):
@@ -118,7 +119,7 @@ class SurveyPlan(NamedTuple):
     dep_epoch: jax.Array
     has_next: jax.Array
     stop_epochs: jax.Array
-    stop_epoch_w: Any
+    stop_epoch_w: np.ndarray
     fwd_epoch_reset: jax.Array
     bwd_epoch_reset: jax.Array
 
@@ -394,17 +395,17 @@ class SurveyOutput(NamedTuple):
       route: dict of (N, 3) positions (``forward``, ``smoothed``, ``backward``) or None.
     """
 
-    targets: Any
+    targets: jax.Array
     sigma_forward: jax.Array
     sigma_backward: jax.Array
     weight_forward: jax.Array
     backward: jax.Array
-    biases: Any
-    nav_smoothed: Any
-    nav_filtered: Any
-    n_rejected: Any
+    biases: jax.Array
+    nav_smoothed: NavState
+    nav_filtered: NavState
+    n_rejected: jax.Array
     status: jax.Array
-    route: Any = None
+    route: jax.Array | None = None
 
 
 def process_survey(

@@ -80,8 +80,8 @@ class InitialValues(NamedTuple):
     x0: jax.Array
     P0: jax.Array
     D_omega: jax.Array
-    dt: Any
-    n: Any
+    dt: jax.Array
+    n: jax.Array
 
 
 class RtkResult(NamedTuple):
@@ -119,7 +119,7 @@ class RtkResult(NamedTuple):
     epochs: jax.Array
     raw_epochs: jax.Array
     gk: jax.Array
-    init: Any
+    init: InitialValues
     n_skipped: jax.Array
     n_nonfinite: jax.Array
     status: jax.Array
@@ -445,10 +445,10 @@ class LevellingComparison(NamedTuple):
     """
 
     diff: jax.Array
-    max_abs: Any
-    mean: Any
-    std: Any
-    rms: Any
+    max_abs: float
+    mean: float
+    std: float
+    rms: float
     thresholds: jax.Array
     count_within: jax.Array
     share_within: jax.Array

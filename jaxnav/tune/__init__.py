@@ -29,7 +29,7 @@ function of array leaves:
 from jaxnav.tune._bijectors import Bijector, Space, bijector, interval, log, positive, real, unit
 from jaxnav.tune._distributed import batch_mesh, initialize, is_writer, monte_carlo_mean
 from jaxnav.tune._lbfgs import minimize_lbfgs
-from jaxnav.tune._lc_noise import NoiseFit, calibrate_lc_noise, fit_lc_noise
+from jaxnav.tune._lc_noise import LCNoiseFit, calibrate_lc_noise, fit_lc_noise
 from jaxnav.tune._losses import innovation_nll, nees, nees_consistency, nis_consistency, rms
 from jaxnav.tune._montecarlo import Sharded, map_chunked, map_sharded, run_chunked
 from jaxnav.tune._optimize import TuneResult, forward_gradient, minimize, value_and_grad
@@ -38,7 +38,7 @@ from jaxnav.tune._sweep import SweepResult, grid, sweep, table
 
 __all__ = [
     "Bijector",
-    "NoiseFit",
+    "LCNoiseFit",
     "Sharded",
     "Space",
     "SweepResult",

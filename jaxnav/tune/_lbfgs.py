@@ -27,26 +27,26 @@ from jaxnav.tune._optimize import TuneResult, value_and_grad
 class _LS(NamedTuple):
     """Line-search state along u = u_acc + alpha d."""
 
-    alpha: Any  # the trial step of the next evaluation
-    lo: Any  # bracket end with the lowest Armijo-satisfying value: (step, value, slope)
-    f_lo: Any
-    g_lo: Any
-    hi: Any
-    f_hi: Any
-    g_hi: Any
-    bracketed: Any
+    alpha: jax.Array  # the trial step of the next evaluation
+    lo: jax.Array  # bracket end with the lowest Armijo-satisfying value: (step, value, slope)
+    f_lo: jax.Array
+    g_lo: jax.Array
+    hi: jax.Array
+    f_hi: jax.Array
+    g_hi: jax.Array
+    bracketed: jax.Array
 
 
 class _State(NamedTuple):
     u: Any  # flat accepted point
-    f: Any  # its loss (inf before the first evaluation)
+    f: jax.Array  # its loss (inf before the first evaluation)
     g: Any  # its gradient
     d: Any  # search direction
-    slope: Any  # g . d at the accepted point
+    slope: jax.Array  # g . d at the accepted point
     ls: _LS
     lbfgs: Any
-    steps: Any  # accepted steps so far
-    done: Any
+    steps: jax.Array  # accepted steps so far
+    done: jax.Array
 
 
 def _cubic_min(a, fa, ga, b, fb, gb):

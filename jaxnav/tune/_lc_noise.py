@@ -29,7 +29,7 @@ from jaxnav.tune._bijectors import Space
 from jaxnav.tune._lbfgs import minimize_lbfgs
 
 
-class NoiseFit(NamedTuple):
+class LCNoiseFit(NamedTuple):
     """Result of :func:`fit_lc_noise`.
 
     Attributes:
@@ -63,7 +63,7 @@ def fit_lc_noise(
     mode: str = "reverse",
     fitted_on: str = "",
     n_epochs: int = 0,
-) -> NoiseFit:
+) -> LCNoiseFit:
     """Fit the :data:`jaxnav.ins.calibration.TUNABLE` parameters ``names`` of ``noise`` by minimising ``loss``.
 
     L-BFGS (:func:`jaxnav.tune.minimize_lbfgs`) with gradients through the complete filter; densities and
@@ -87,7 +87,7 @@ def fit_lc_noise(
     t0 = time.perf_counter()
     res = minimize_lbfgs(lambda p: loss(*with_noise_values(noise, p, lever)), p0, space, max_evals=max_evals, mode=mode)
     fitted, lev = with_noise_values(noise, res.params, lever)
-    return NoiseFit(
+    return LCNoiseFit(
         before={n: np.asarray(v).tolist() for n, v in p0.items()},
         after={n: np.asarray(v).tolist() for n, v in res.params.items()},
         loglik_before=-float(np.asarray(res.losses)[0]),  # the first evaluation is at the start values
