@@ -521,8 +521,9 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
         shifted = shifted_outages(cfg, imu, pos, run, cal, truth, calibrate=mode, tune=tune, progress=progress)
         results["evaluation"]["shifted_outages"] = shifted["results"]
         results["tuning"]["shifted_outages"] = (
-            f"each of the {cfg.evaluate.shifts} shifts is its own run: time offset, standstill check, noise "
-            "calibration and --tune are fitted again on the GNSS epochs that shift sees, never on its withheld ones"
+            f"each of the {cfg.evaluate.shifts} shifts is its own run: what is fitted (time offset, standstill "
+            "check, noise calibration, --tune) is fitted again per shift on the GNSS epochs that shift sees, never "
+            "on its withheld ones"
         )
     files = write_outputs(run, out)
     files += write_figures(run, out)
