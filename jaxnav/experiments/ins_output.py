@@ -600,12 +600,20 @@ def shifted_outages(cfg, imu, pos, run0, cal0, truth, *, calibrate, tune: bool, 
     ev = cfg.evaluate
     say = progress or (lambda *_: None)
     t_start = time.perf_counter()
+    fitted = [
+        name
+        for name, on in (
+            ("time offset", cfg.imu.time_offset_s == "estimate"),
+            ("standstill check", cfg.constraints.zupt == "auto"),
+            ("noise check and calibration", calibrate is not False),
+            ("--tune", tune),
+        )
+        if on
+    ]
+    refit = f"{', '.join(fitted)} fitted on the epochs it sees" if fitted else "nothing fitted"
     runs = [(run0, cal0)]
     for k in range(1, ev.shifts):
-        say(
-            f"shift {k} of {ev.shifts - 1}: GNSS withheld on the outages {k * ev.shift_s:g} s later; time offset, "
-            f"standstill check, noise calibration{' and --tune' if tune else ''} fitted on the epochs it sees"
-        )
+        say(f"shift {k} of {ev.shifts - 1}: GNSS withheld on the outages {k * ev.shift_s:g} s later; {refit}")
         fr = fit_and_run(
             shifted_config(cfg, k),
             imu=imu,
@@ -651,6 +659,7 @@ def shifted_outages(cfg, imu, pos, run0, cal0, truth, *, calibrate, tune: bool, 
         per_shift.append(
             {
                 "shift": k,
+                "refitted": fitted,
                 "delay_s": k * ev.shift_s,
                 "first_s": ev.first_s + k * ev.shift_s,
                 "n_windows": W,
@@ -664,6 +673,8 @@ def shifted_outages(cfg, imu, pos, run0, cal0, truth, *, calibrate, tune: bool, 
                 "runtime_s": run.runtime_s,
             }
         )
+        if cal.get("warning"):
+            per_shift[-1]["calibration_warning"] = cal["warning"]
     three = truth is not None
     pooled = {w: pooled_outage_drifts(mx[w]["h"], mx[w]["3d"] if three else None) for w in mx}
     res = {
