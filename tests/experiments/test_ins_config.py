@@ -155,3 +155,16 @@ def test_evaluate_shifts_default_and_keys(tmp_path):
     assert ev.shifts == 4 and ev.shift_s == pytest.approx((15.0 + 45.0) / 4)
     ev = load_ins_config(_write(tmp_path, BASE + "[evaluate]\nshifts = 3\nshift_s = 10\n", "t.toml")).evaluate
     assert ev.shifts == 3 and ev.shift_s == 10.0
+
+
+def test_a_shift_without_an_outage_window_is_refused_naming_the_keys(tmp_path):
+    """Checked on the IMU span before any fit: a shifted schedule the end margin leaves empty is an error."""
+    from jaxnav.experiments.ins_output import check_shifts
+
+    ev = "[evaluate]\nfirst_s = 40.0\noutage_s = 15.0\ngap_s = 45.0\nend_margin_s = 30.0\nshifts = 4\n"
+    p = _write(tmp_path, BASE + ev)
+    cfg = load_ins_config(p)
+    check_shifts(cfg, np.array([0.0, 200.0]))  # every shift has a window
+    with pytest.raises(ConfigError) as exc:
+        check_shifts(cfg, np.array([0.0, 100.0]))  # windows must end by 70 s: shift 2 (70-85 s) has none
+    assert f"{p}: evaluate.shifts = 4 with shift_s = 15 s: shift 2 " in str(exc.value)
