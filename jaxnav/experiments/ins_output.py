@@ -591,8 +591,9 @@ def shifted_outages(cfg, imu, pos, run0, cal0, truth, *, calibrate, tune: bool, 
     :class:`jaxnav.ins.OutageScores`); pooled over all shifts by :func:`jaxnav.ins.pooled_outage_drifts`.
 
     Returns:
-      dict: ``results`` (the ``evaluation.shifted_outages`` block of results.json) and the per-outage
-      arrays for :func:`plot_shifted`.
+      dict: ``results`` (the ``evaluation.shifted_outages`` block of results.json, per-outage rows included)
+      and ``three_d`` (bool: scored against a reference trajectory, so with 3-D drifts), as
+      :func:`plot_shifted` takes it.
     """
     from jaxnav.experiments.ins_run import fit_and_run, shifted_config, truth_errors
     from jaxnav.ins import outage_drift_maxima, pooled_outage_drifts
