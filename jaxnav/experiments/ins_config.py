@@ -94,6 +94,8 @@ RANGES = {
     "evaluate.first_s": (0.0, 1e6),
     "evaluate.gap_s": (0.1, 1e5),
     "evaluate.end_margin_s": (0.0, 1e5),
+    "evaluate.shifts": (1, 100),
+    "evaluate.shift_s": (0.1, 1e5),
     "tune.calibrate_steps": (1.0, 1e4),
 }
 
@@ -235,7 +237,10 @@ class EvaluateSection(NamedTuple):
     ``gap_s`` between them, the last ending at least ``end_margin_s`` before the end (all s);
     ``outages`` False: none (a truth-only evaluation). ``truth``: a reference trajectory file (or
     None) in ``truth_format`` ("kf-gins": ``truth.nav``; "csv": with ``truth_columns``,
-    ``truth_units``, ``truth_delimiter`` as :func:`jaxnav.io.read_csv_truth` takes them)."""
+    ``truth_units``, ``truth_delimiter`` as :func:`jaxnav.io.read_csv_truth` takes them).
+    ``shifts``: the protocol repeated with the outage schedule shifted by ``k shift_s``, k = 0 ..
+    shifts - 1, each shift its own run (:func:`jaxnav.ins.shifted_outage_windows`); ``shift_s``
+    (s) defaults to ``(outage_s + gap_s) / shifts``."""
 
     outage_s: float
     first_s: float
@@ -247,6 +252,8 @@ class EvaluateSection(NamedTuple):
     truth_columns: dict | None = None
     truth_units: dict | None = None
     truth_delimiter: str | None = ","
+    shifts: int = 1
+    shift_s: float | None = None
 
 
 class TuneSection(NamedTuple):
@@ -646,17 +653,38 @@ def _evaluate(path, d, variables=None) -> EvaluateSection:
         )
     if not isinstance(delim, str) or not (delim == "whitespace" or len(delim) == 1):
         r.fail("truth_delimiter", f"must be one character or 'whitespace', got {delim!r}")
+    outage_s = r.get("outage_s", float, 15.0, lo=0.0, lo_open=True)
+    gap_s = r.get("gap_s", float, 45.0, lo=0.0, lo_open=True)
+    outages = r.get("outages", bool, True)
+    lo, hi = RANGES["evaluate.shifts"]
+    shifts = r.get("shifts", int, 1, lo=lo, hi=hi)
+    period = outage_s + gap_s
+    shift_s = r.get("shift_s", float, period / shifts, lo=0.0, lo_open=True)
+    if "shift_s" in d and shifts == 1:
+        r.fail("shift_s", "is only used with shifts > 1 (the number of shifted outage schedules)")
+    if shifts > 1 and not outages:
+        r.fail("shifts", "> 1 shifts the outage schedule, but outages = false withholds no GNSS")
+    if shifts > 1 and (shifts - 1) * shift_s >= period - 1e-9:
+        r.fail(
+            "shift_s",
+            f"= {shift_s:g} s: the last of the {shifts} shifts would start {(shifts - 1) * shift_s:g} s late, a whole "
+            f"outage period (outage_s + gap_s = {period:g} s) or more, repeating an earlier shift's windows: "
+            f"give shift_s < {period / (shifts - 1):g} s, or leave it out ({period / shifts:g} s: the shifts tile "
+            "one period)",
+        )
     e = EvaluateSection(
-        outage_s=r.get("outage_s", float, 15.0, lo=0.0, lo_open=True),
+        outage_s=outage_s,
         first_s=r.get("first_s", float, 40.0, lo=0.0),
-        gap_s=r.get("gap_s", float, 45.0, lo=0.0, lo_open=True),
+        gap_s=gap_s,
         end_margin_s=r.get("end_margin_s", float, 30.0, lo=0.0),
-        outages=r.get("outages", bool, True),
+        outages=outages,
         truth=truth,
         truth_format=fmt,
         truth_columns=cols,
         truth_units=units,
         truth_delimiter=None if delim == "whitespace" else delim,
+        shifts=shifts,
+        shift_s=shift_s,
     )
     if not e.outages and truth is None:
         r.fail("outages", "= false leaves nothing to evaluate: give truth = FILE, or drop [evaluate]")

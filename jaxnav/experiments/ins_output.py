@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import pathlib
+import time
 
 import jax
 import numpy as np
@@ -393,17 +394,19 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
       written, paths relative to ``out``).
     """
     from jaxnav._status import INFO_FLAGS, describe
-    from jaxnav.experiments.ins_run import calibrate_noise, prepare, run_ins, tune_noise
+    from jaxnav.experiments.ins_run import calibrate_noise, prepare, run_ins, tune_noise, tuned_run
     from jaxnav.ins import GATED_SHARE_WARN
     from jaxnav.io import provenance, write_json
 
     out = pathlib.Path(out)
     say = progress or (lambda *_: None)
     say(f"reading {cfg.imu.file.name} and {cfg.gnss.file.name}")
-    from jaxnav.experiments.ins_run import read_truth
+    from jaxnav.experiments.ins_run import read_inputs, read_truth
 
     truth = read_truth(cfg)  # before the filter: a bad reference file fails fast
-    prep = prepare(cfg, progress=progress)
+    imu, pos = read_inputs(cfg)
+    prep = prepare(cfg, imu=imu, pos=pos, progress=progress)
+    check_shifts(cfg, prep.t)  # before any fit: a shift without an outage window fails fast
     mode = cfg.tune.calibrate if calibrate is None else calibrate
     if mode is not False:
         say(
@@ -489,11 +492,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
             f"tuning {', '.join(cfg.tune.params)} by the {cfg.tune.loss} likelihood (L-BFGS, {cfg.tune.steps} evaluations)"
         )
         rep = tune_noise(prep, cfg.tune.params, max_evals=cfg.tune.steps, mode=cfg.tune.mode, loss_kind=cfg.tune.loss)
-        tuned_prep = prep._replace(
-            lever_rfu=rep.lever,
-            meas=prep.meas._replace(lever=np.broadcast_to(rep.lever, np.shape(prep.meas.lever)).copy()),
-        )
-        run_t = run_ins(tuned_prep, rep.noise)
+        run_t = tuned_run(prep, rep)
         results["tune"] = {
             "params": list(cfg.tune.params),
             "loss": cfg.tune.loss,
@@ -518,8 +517,19 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
     if truth is not None:
         say(f"scoring against the reference trajectory {cfg.evaluate.truth.name}")
         errs, results["evaluation"] = _truth_evaluation(run, truth, results.get("evaluation"), tuned=tune)
+    shifted = None
+    if cfg.evaluate is not None and cfg.evaluate.shifts > 1:
+        shifted = shifted_outages(cfg, imu, pos, run, cal, truth, calibrate=mode, tune=tune, progress=progress)
+        results["evaluation"]["shifted_outages"] = shifted["results"]
+        results["tuning"]["shifted_outages"] = (
+            f"each of the {cfg.evaluate.shifts} shifts is its own run: what is fitted (time offset, standstill "
+            "check, noise calibration, --tune) is fitted again per shift on the GNSS epochs that shift sees, never "
+            "on its withheld ones"
+        )
     files = write_outputs(run, out)
     files += write_figures(run, out)
+    if shifted is not None:
+        files.append(str(plot_shifted(shifted, out / "shifted_outages.png", name=cfg.name)))
     if errs is not None:
         from jaxnav.plot import plot_truth_errors
 
@@ -538,6 +548,179 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
     results["files"] = sorted(pathlib.Path(f).relative_to(out).as_posix() for f in files) + ["results.json"]
     write_json(out / "results.json", results)
     return results
+
+
+def check_shifts(cfg, t) -> None:
+    """Every shifted outage schedule of ``[evaluate] shifts`` has a window in the IMU span ``t`` (N,) s,
+    else :class:`jaxnav.experiments.ins_config.ConfigError` naming the keys."""
+    from jaxnav.experiments.ins_config import ConfigError
+    from jaxnav.ins import shifted_outage_windows
+
+    ev = cfg.evaluate
+    if ev is None or ev.shifts <= 1:
+        return
+    t0, t1 = float(t[0]), float(t[-1])
+    wins = shifted_outage_windows(
+        t0,
+        t1,
+        shifts=ev.shifts,
+        shift_s=ev.shift_s,
+        first_s=ev.first_s,
+        outage_s=ev.outage_s,
+        gap_s=ev.gap_s,
+        end_margin_s=ev.end_margin_s,
+    )
+    for k, w in enumerate(wins):
+        if not len(w):
+            raise ConfigError(
+                f"{cfg.path}: evaluate.shifts = {ev.shifts} with shift_s = {ev.shift_s:g} s: shift {k} (first outage "
+                f"{ev.first_s + k * ev.shift_s:g} s after the start, {ev.outage_s:g} s long, end_margin_s = "
+                f"{ev.end_margin_s:g} s) has no outage window in the {t1 - t0:.1f} s IMU span: give fewer shifts, a "
+                "smaller shift_s or end_margin_s"
+            )
+
+
+def shifted_outages(cfg, imu, pos, run0, cal0, truth, *, calibrate, tune: bool, progress=None) -> dict:
+    """The ``[evaluate] shifts`` protocol: the outage schedule shifted by ``k shift_s`` (k = 1 .. shifts - 1),
+    each shift its own run with every fit redone on the GNSS epochs it sees
+    (:func:`jaxnav.experiments.ins_run.fit_and_run` of :func:`jaxnav.experiments.ins_run.shifted_config`);
+    shift 0 is the main run ``run0`` (calibration report ``cal0``).
+
+    Scores per outage of every shift: the largest drift of the forward and smoothed solutions, against
+    the reference trajectory ``truth`` (3-D and horizontal, :func:`jaxnav.ins.outage_drift_maxima`) or,
+    without one, against the withheld fixed GNSS epochs (horizontal, the runs'
+    :class:`jaxnav.ins.OutageScores`); pooled over all shifts by :func:`jaxnav.ins.pooled_outage_drifts`.
+
+    Returns:
+      dict: ``results`` (the ``evaluation.shifted_outages`` block of results.json, per-outage rows included)
+      and ``three_d`` (bool: scored against a reference trajectory, so with 3-D drifts), as
+      :func:`plot_shifted` takes it.
+    """
+    from jaxnav.experiments.ins_run import fit_and_run, shifted_config, truth_errors
+    from jaxnav.ins import outage_drift_maxima, pooled_outage_drifts
+
+    ev = cfg.evaluate
+    say = progress or (lambda *_: None)
+    t_start = time.perf_counter()
+    fitted = [
+        name
+        for name, on in (
+            ("time offset", cfg.imu.time_offset_s == "estimate"),
+            ("standstill check", cfg.constraints.zupt == "auto"),
+            ("noise check and calibration", calibrate is not False),
+            ("--tune", tune),
+        )
+        if on
+    ]
+    refit = f"{', '.join(fitted)} fitted on the epochs it sees" if fitted else "nothing fitted"
+    runs = [(run0, cal0)]
+    for k in range(1, ev.shifts):
+        say(f"shift {k} of {ev.shifts - 1}: GNSS withheld on the outages {k * ev.shift_s:g} s later; {refit}")
+        fr = fit_and_run(
+            shifted_config(cfg, k),
+            imu=imu,
+            pos=pos,
+            calibrate=calibrate,
+            tune=tune,
+            progress=lambda m, k=k: say(f"shift {k}: {m}"),
+        )
+        runs.append((fr.run, fr.calibration))
+    per_shift, per_outage = [], []
+    mx = {w: {"h": [], "3d": []} for w in ("forward", "smoothed")}
+    for k, (run, cal) in enumerate(runs):
+        prep = run.prep
+        W = int(prep.outages.shape[0])
+        if truth is not None:
+            got = {w: outage_drift_maxima(truth_errors(run, truth, w), W) for w in ("forward", "smoothed")}
+            for w, (m3, mh, _) in got.items():
+                mx[w]["3d"].append(m3)
+                mx[w]["h"].append(mh)
+            n_scored = got["forward"][2]
+        else:
+            sc = run.scores
+            mx["forward"]["h"].append(np.asarray(sc.fwd_max, float))
+            mx["smoothed"]["h"].append(np.asarray(sc.sm_max, float))
+            n_scored = np.asarray(sc.n_ref, int)
+        for j, (a, b) in enumerate(prep.outages):
+            row = {
+                "shift": k,
+                "window": j + 1,
+                "gpst_start_s": float(a),
+                "gpst_end_s": float(b),
+                "start_since_imu_start_s": float(a - prep.t[0]),
+                "n_scored_epochs": int(n_scored[j]),
+                "forward_max_h_m": float(mx["forward"]["h"][k][j]),
+                "smoothed_max_h_m": float(mx["smoothed"]["h"][k][j]),
+            }
+            if truth is not None:
+                row["forward_max_3d_m"] = float(mx["forward"]["3d"][k][j])
+                row["smoothed_max_3d_m"] = float(mx["smoothed"]["3d"][k][j])
+            if not n_scored[j]:
+                row["null_reason"] = "no scored epoch in the window" + ("" if truth is not None else " (no fixed GNSS)")
+            per_outage.append(row)
+        per_shift.append(
+            {
+                "shift": k,
+                "refitted": fitted,
+                "delay_s": k * ev.shift_s,
+                "first_s": ev.first_s + k * ev.shift_s,
+                "n_windows": W,
+                "n_scored_windows": int(np.count_nonzero(n_scored)),
+                "n_withheld_gnss_epochs": int(np.count_nonzero(prep.withheld)),
+                "time_offset_s": prep.time_offset,
+                "time_offset_source": prep.time_offset_info.get("source", "config"),
+                "noise_calibrated": bool(cal.get("ran")),
+                "noise": _densities_dict(run.densities),
+                "gnss_epochs_fitted_on": int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1))),
+                "runtime_s": run.runtime_s,
+            }
+        )
+        if cal.get("warning"):
+            per_shift[-1]["calibration_warning"] = cal["warning"]
+    three = truth is not None
+    pooled = {w: pooled_outage_drifts(mx[w]["h"], mx[w]["3d"] if three else None) for w in mx}
+    res = {
+        "shifts": ev.shifts,
+        "shift_s": ev.shift_s,
+        "period_s": ev.outage_s + ev.gap_s,
+        "reference": (
+            f"the reference trajectory {ev.truth.name} (IMU point; 3-D and horizontal drift)"
+            if three
+            else "the withheld fixed-quality GNSS positions (antenna; horizontal drift)"
+        ),
+        "solution": "after --tune (refitted per shift)" if tune else "as configured (calibrated per shift)",
+        "fitted": "per shift, on the GNSS epochs that shift's filter sees (its own outages withheld)",
+        "n_outages": pooled["forward"]["n_outages"],
+        "n_windows": sum(s["n_windows"] for s in per_shift),
+        "forward": pooled["forward"],
+        "smoothed": pooled["smoothed"],
+        "per_shift": per_shift,
+        "per_outage": per_outage,
+        "wall_time_s": time.perf_counter() - t_start,
+    }
+    return {"results": res, "three_d": three}
+
+
+def plot_shifted(shifted: dict, path, *, name: str):
+    """``shifted_outages.png``: :func:`jaxnav.plot.plot_shifted_outages` of a :func:`shifted_outages` result."""
+    from jaxnav.plot import plot_shifted_outages
+
+    r = shifted["results"]
+    tag = "3d" if shifted["three_d"] else "h"
+    rows = r["per_outage"]
+    word = "3-D" if tag == "3d" else "horizontal"
+    return plot_shifted_outages(
+        [o["start_since_imu_start_s"] for o in rows],
+        [o["shift"] for o in rows],
+        [o[f"forward_max_{tag}_m"] for o in rows],
+        [o[f"smoothed_max_{tag}_m"] for o in rows],
+        path,
+        title=f"{name}: largest {word} drift per simulated GNSS outage against "
+        f"{'the reference trajectory' if tag == '3d' else 'the withheld fixed GNSS'}\n{r['shifts']} outage schedules "
+        f"shifted by {r['shift_s']:g} s, each its own run",
+        what=f"largest {word} drift",
+        pooled=(r["forward"][f"rms_of_max_{tag}_drift_m"], r["smoothed"][f"rms_of_max_{tag}_drift_m"]),
+    )
 
 
 def _tuning(prep, results: dict) -> dict:
@@ -661,6 +844,18 @@ def format_ins(results: dict) -> str:
                     f"{p['rms_of_max_3d_drift_m']:.3f} m over {p['n_scored_windows']}"
                 )
             lines.append(line)
+    so = (r.get("evaluation") or {}).get("shifted_outages")
+    if so:
+        tag = "3d" if "rms_of_max_3d_drift_m" in so["forward"] else "h"
+        f, s = so["forward"], so["smoothed"]
+        lines.append(
+            f"  shifted outages: {so['shifts']} schedules {so['shift_s']:g} s apart, {so['n_outages']} outages scored "
+            f"against {'the reference' if tag == '3d' else 'withheld fixed GNSS'}; largest "
+            f"{'3-D' if tag == '3d' else 'horizontal'} drift per outage: forward RMS "
+            f"{f[f'rms_of_max_{tag}_drift_m']:.2f} m (mean {f[f'mean_of_max_{tag}_drift_m']:.2f}, max "
+            f"{f[f'max_of_max_{tag}_drift_m']:.2f} m), smoothed RMS {s[f'rms_of_max_{tag}_drift_m']:.2f} m (mean "
+            f"{s[f'mean_of_max_{tag}_drift_m']:.2f}, max {s[f'max_of_max_{tag}_drift_m']:.2f} m)"
+        )
     if "tune" in r:
         t = r["tune"]
         lines.append(

@@ -595,6 +595,61 @@ def run_ins(prep: Prepared, d: LCNoise | None = None) -> InsRun:
     )
 
 
+def tuned_run(prep: Prepared, rep) -> InsRun:
+    """:func:`run_ins` with the noise and lever arm of a ``--tune`` :class:`jaxnav.tune.LCNoiseFit`."""
+    tuned_prep = prep._replace(
+        lever_rfu=rep.lever,
+        meas=prep.meas._replace(lever=np.broadcast_to(rep.lever, np.shape(prep.meas.lever)).copy()),
+    )
+    return run_ins(tuned_prep, rep.noise)
+
+
+def shifted_config(cfg: InsConfig, k: int) -> InsConfig:
+    """The config of shift ``k`` of the ``[evaluate] shifts`` protocol: the outage schedule starting
+    ``k shift_s`` later (``first_s + k shift_s``; :func:`jaxnav.ins.shifted_outage_windows`), as a single
+    schedule (``shifts = 1``), so that :func:`prepare` withholds GNSS on shift k's windows and every fit
+    (time offset, standstill check, noise calibration, ``--tune``) leaves them out."""
+    ev = cfg.evaluate
+    return cfg._replace(evaluate=ev._replace(first_s=ev.first_s + k * ev.shift_s, shifts=1))
+
+
+class FittedRun(NamedTuple):
+    """One withheld-GNSS run with everything fitted on the GNSS epochs it sees (:func:`fit_and_run`).
+
+    Attributes:
+      prep: :class:`Prepared` (its time offset and standstill detection fitted without the withheld epochs).
+      calibration: :func:`calibrate_noise`'s report.  run: the final :class:`InsRun` (after ``--tune`` if tuned).
+      tune: the ``--tune`` :class:`jaxnav.tune.LCNoiseFit`, or None.
+    """
+
+    prep: Prepared
+    calibration: dict
+    run: InsRun
+    tune: Any = None
+
+
+def fit_and_run(cfg: InsConfig, *, imu, pos, calibrate=None, tune: bool = False, progress=None) -> FittedRun:
+    """The whole fitted pipeline of one outage schedule: :func:`prepare` (time offset and standstill
+    detection on the GNSS epochs outside the config's outages), :func:`calibrate_noise`, :func:`run_ins`,
+    and with ``tune`` :func:`tune_noise` and its rerun; nothing fitted sees the withheld epochs.
+
+    Args:
+      cfg: the config (e.g. :func:`shifted_config`).  imu, pos: the recording as read (:func:`read_inputs`;
+        the IMU times before the time offset).  calibrate: "auto" | True | False (None: ``[tune] calibrate``).
+      progress: callable for one line of text, or None.
+    """
+    prep = prepare(cfg, imu=imu, pos=pos, progress=progress)
+    dens, cal = calibrate_noise(prep, calibrate, progress=progress)
+    prep = prep._replace(densities=dens)
+    run = run_ins(prep)
+    rep = None
+    if tune:
+        t = cfg.tune
+        rep = tune_noise(prep, t.params, max_evals=t.steps, mode=t.mode, loss_kind=t.loss)
+        run = tuned_run(prep, rep)
+    return FittedRun(prep=prep, calibration=cal, run=run, tune=rep)
+
+
 def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
     """The GNSS solution restricted to the epochs every trial offset in [-span, span] s can use, and counts
     (:func:`jaxnav.ins.offset_search_epochs`; with ``[evaluate]`` its outages are left out).

@@ -247,14 +247,7 @@ def error_statistics(e: TrajectoryErrors, n_windows: int | None = None) -> dict:
     ``n_scored_windows``.
     """
     W = int(n_windows if n_windows is not None else (e.window.max() + 1 if e.window.size else 0))
-    d3 = np.linalg.norm(e.pos_enu, axis=1)
-    dh = np.hypot(e.pos_enu[:, 0], e.pos_enu[:, 1])
-    m3 = np.full(W, np.nan)
-    mh = np.full(W, np.nan)
-    for k in range(W):
-        s = e.window == k
-        if s.any():
-            m3[k], mh[k] = float(np.max(d3[s])), float(np.max(dh[s]))
+    m3, mh, _ = outage_drift_maxima(e, W)
     scored = np.isfinite(m3)
     return {
         "n_epochs": int(e.t.size),
@@ -272,6 +265,29 @@ def error_statistics(e: TrajectoryErrors, n_windows: int | None = None) -> dict:
             "rms_of_max_h_drift_m": _rms(mh[scored]) if scored.any() else float("nan"),
         },
     }
+
+
+def outage_drift_maxima(e: TrajectoryErrors, n_windows: int) -> tuple:
+    """Per outage window the largest 3-D and horizontal position error (the drift since GNSS was lost).
+
+    Args:
+      e: :class:`TrajectoryErrors` whose ``window`` labels the epochs inside the outages (0 .. W-1).
+      n_windows: W, the number of windows (a window without a scored epoch gets NaN).
+    Returns:
+      (max_3d (W,) m, max_h (W,) m, n_epochs (W,) int: the epochs scored in each window).
+    """
+    W = int(n_windows)
+    d3 = np.linalg.norm(e.pos_enu, axis=1)
+    dh = np.hypot(e.pos_enu[:, 0], e.pos_enu[:, 1])
+    m3 = np.full(W, np.nan)
+    mh = np.full(W, np.nan)
+    n = np.zeros(W, int)
+    for k in range(W):
+        s = e.window == k
+        n[k] = int(np.count_nonzero(s))
+        if n[k]:
+            m3[k], mh[k] = float(np.max(d3[s])), float(np.max(dh[s]))
+    return m3, mh, n
 
 
 # ----------------------------------------------------------------------------- GNSS outage protocol
@@ -295,6 +311,91 @@ def outage_windows(
         out.append((a, a + outage_s))
         a += outage_s + gap_s
     return np.array(out, float).reshape(-1, 2)
+
+
+def shifted_outage_windows(
+    t_start: float,
+    t_end: float,
+    *,
+    shifts: int = 1,
+    shift_s: float | None = None,
+    first_s: float = 40.0,
+    outage_s: float = 15.0,
+    gap_s: float = 45.0,
+    end_margin_s: float = 30.0,
+) -> list:
+    """The outage protocol repeated with shifted starts: one :func:`outage_windows` schedule per shift.
+
+    Schedule k (k = 0 .. ``shifts`` - 1) is :func:`outage_windows` with its first window starting
+    ``first_s + k shift_s`` after ``t_start``, so schedule 0 is the unshifted protocol and, with the
+    default ``shift_s = (outage_s + gap_s) / shifts``, the schedules' starts tile one outage period:
+    every part of the trajectory after ``first_s`` (up to the end margin) is bridged by some shift
+    when ``shift_s <= outage_s``. Each schedule is meant for its own run (GNSS withheld on its
+    windows only); a schedule can have one window fewer than another where the end margin cuts it.
+
+    Args:
+      t_start, t_end: the span, s.  shifts: number of schedules (>= 1).  shift_s: step between
+        consecutive schedules' starts, s (> 0; default ``(outage_s + gap_s) / shifts``).
+      first_s, outage_s, gap_s, end_margin_s: as :func:`outage_windows`, s.
+    Returns:
+      list of ``shifts`` (K_k, 2) arrays of windows [a, b), s.
+    Raises:
+      ValueError: ``shifts`` < 1 or ``shift_s`` <= 0.
+    """
+    if int(shifts) != shifts or shifts < 1:
+        raise ValueError(f"shifts must be an integer >= 1, got {shifts!r}")
+    step = (outage_s + gap_s) / shifts if shift_s is None else float(shift_s)
+    if not step > 0.0:
+        raise ValueError(f"shift_s must be > 0, got {shift_s!r}")
+    return [
+        outage_windows(
+            t_start, t_end, first_s=first_s + k * step, outage_s=outage_s, gap_s=gap_s, end_margin_s=end_margin_s
+        )
+        for k in range(int(shifts))
+    ]
+
+
+def pool_drifts(maxima) -> dict:
+    """Statistics of per-outage maximum drifts pooled over several outage schedules (shifted starts).
+
+    Args:
+      maxima: a sequence (one entry per schedule) of (K_k,) per-outage maximum drifts, m; NaN marks
+        an outage without a scored epoch (left out of the statistics and counted).
+    Returns:
+      dict: ``n_outages`` (outages with a drift), ``n_unscored`` (NaN ones), ``rms_m``, ``mean_m``,
+      ``max_m`` of the drifts (NaN when there is none).
+    """
+    x = np.concatenate([np.asarray(m, float).reshape(-1) for m in maxima]) if len(maxima) else np.zeros(0)
+    ok = np.isfinite(x)
+    v = x[ok]
+    return {
+        "n_outages": int(v.size),
+        "n_unscored": int(np.count_nonzero(~ok)),
+        "rms_m": _rms(v),
+        "mean_m": float(np.mean(v)) if v.size else float("nan"),
+        "max_m": float(np.max(v)) if v.size else float("nan"),
+    }
+
+
+def pooled_outage_drifts(max_h, max_3d=None) -> dict:
+    """The shifted-outage statistics of one solution: :func:`pool_drifts` of its horizontal (and 3-D)
+    per-outage maximum drifts over all schedules.
+
+    Args:
+      max_h: sequence of (K_k,) horizontal per-outage maxima, m (NaN: not scored), one per schedule
+        (e.g. ``OutageScores.fwd_max`` of each shifted run, or :func:`outage_drift_maxima`'s ``max_h``).
+      max_3d: the same of the 3-D maxima (against a reference trajectory), or None.
+    Returns:
+      dict: ``n_outages``, ``n_unscored_outages``, ``rms_of_max_h_drift_m``, ``mean_of_max_h_drift_m``,
+      ``max_of_max_h_drift_m``, and with ``max_3d`` the same ``..._3d_...`` keys.
+    """
+    h = pool_drifts(max_h)
+    out = {"n_outages": h["n_outages"], "n_unscored_outages": h["n_unscored"]}
+    for tag, p in (("h", h),) + ((("3d", pool_drifts(max_3d)),) if max_3d is not None else ()):
+        out[f"rms_of_max_{tag}_drift_m"] = p["rms_m"]
+        out[f"mean_of_max_{tag}_drift_m"] = p["mean_m"]
+        out[f"max_of_max_{tag}_drift_m"] = p["max_m"]
+    return out
 
 
 def training_windows(windows, t_end: float, outage_s: float) -> np.ndarray:

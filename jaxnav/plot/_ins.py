@@ -262,3 +262,48 @@ def plot_truth_errors(err_fwd, err_sm, windows, path, *, title: str) -> pathlib.
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
+
+
+def plot_shifted_outages(
+    start, shift, drift_fwd, drift_sm, path, *, title: str, what: str, pooled=None
+) -> pathlib.Path:
+    """Largest drift per simulated outage against the outage's start, one marker per shifted schedule.
+
+    Outages without a scored epoch (NaN drift) are marked at zero in grey.
+
+    Args:
+      start: (K,) start of each outage since the start of the run, s.  shift: (K,) int, the schedule
+        (shift) of each outage.  drift_fwd, drift_sm: (K,) the forward and smoothed solutions' largest
+        drift in each outage, m (NaN: not scored).  path: file written.  title: figure title.
+      what: the drift plotted, for the y labels (e.g. "largest horizontal drift").
+      pooled: optional (RMS forward, RMS smoothed) over all outages, m, drawn as dashed lines.
+    """
+    path = pathlib.Path(path)
+    start, shift = np.asarray(start, float), np.asarray(shift, int)
+    markers = "osD^vP*Xph<>"
+    fig, ax = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    for i, (a, d, name) in enumerate(
+        ((ax[0], np.asarray(drift_fwd, float), "forward filter"), (ax[1], np.asarray(drift_sm, float), "RTS smoothed"))
+    ):
+        ok = np.isfinite(d)
+        for k in np.unique(shift):
+            s = (shift == k) & ok
+            a.plot(start[s], d[s], markers[k % len(markers)], ms=7, color=f"C{k % 10}", label=f"shift {k}")
+        if (~ok).any():
+            a.plot(
+                start[~ok], np.zeros(int((~ok).sum())), "x", ms=7, color="0.5", label="not scored (no reference epoch)"
+            )
+        rms = None if pooled is None else pooled[i]
+        if rms is not None and np.isfinite(rms):
+            a.axhline(rms, ls="--", color="0.3", lw=1, label="RMS over all scored outages")
+        a.set_title(f"{name}" + (f": RMS {rms:.3g} m over {int(ok.sum())} outages" if rms is not None else ""))
+        a.set_ylabel(f"{what}, m")
+        top = float(np.max(d[ok])) if ok.any() else 1.0
+        a.set_ylim(-0.04 * top, 1.12 * top)
+        a.grid(alpha=0.3)
+    ax[1].set_xlabel("outage start since the start of the run, s")
+    fig.suptitle(title)
+    legend_below(fig, ax[0], ncol=4, height=0.08)
+    save_figure(fig, path, dpi=110)
+    plt.close(fig)
+    return path

@@ -77,6 +77,8 @@ def test_overconfident_preset_is_calibrated_to_consistency(tmp_path):
     assert 1.0 <= f["all"]["nees_pos_mean"] <= 6.0 and 1.0 <= f["outages"]["nees_pos_mean"] <= 9.0
     assert r["gnss"]["gated_share"] < 0.05 and "gate_warning" not in c
     assert r["tuning"]["fitted"]["noise calibration"]["n_epochs"] == c["n_epochs"]
+    # one outage schedule (the default [evaluate] shifts = 1): no shifted-outage block, no figure
+    assert "shifted_outages" not in r["evaluation"] and "shifted_outages.png" not in r["files"]
 
 
 def test_preset_that_fits_is_kept_and_few_epochs_warn(tmp_path):

@@ -42,6 +42,13 @@ BAD = [
     (BASE.replace('file = "imu.csv"', "file = 3"), "imu.file must be a string"),
     (BASE + "[evaluate]\noutage_s = -1\n", "evaluate.outage_s = -1.0 must be > 0"),
     (BASE + "[evaluate]\noutage_s = true\n", "evaluate.outage_s must be a number"),
+    (BASE + "[evaluate]\nshifts = 0\n", "evaluate.shifts = 0 must be >= 1"),
+    (BASE + "[evaluate]\nshifts = 2.5\n", "evaluate.shifts must be an integer"),
+    (BASE + "[evaluate]\nshifts = 101\n", "evaluate.shifts = 101 must be <= 100"),
+    (BASE + "[evaluate]\nshifts = 2\nshift_s = 0.01\n", "evaluate.shift_s = 0.01 is outside the plausible range"),
+    (BASE + "[evaluate]\nshift_s = 5.0\n", "evaluate.shift_s is only used with shifts > 1"),
+    (BASE + "[evaluate]\nshifts = 3\nshift_s = 30.0\n", "evaluate.shift_s = 30 s: the last of the 3 shifts"),
+    (BASE + "[evaluate]\nshifts = 2\noutages = false\ntruth = 't.nav'\n", "evaluate.shifts > 1 shifts the"),
     (BASE.replace('format = "rtklib-csv"', 'format = "kf-gins"\ntag = "x.tag"'), "imu.tag is only used with"),
     (
         BASE.replace('format = "rtklib-csv"', "mounting_rpy_deg = [0, 0, 0]\nmounting_groves_rpy_deg = [1, 2, 3]"),
@@ -138,3 +145,26 @@ def test_calibrate_default_and_keys(tmp_path):
     t = load_ins_config(_write(tmp_path, BASE + "[tune]\ncalibrate = false\ncalibrate_steps = 5\n", "f.toml")).tune
     assert t.calibrate is False and t.calibrate_steps == 5
     assert load_ins_config(_write(tmp_path, BASE + "[tune]\ncalibrate = true\n", "t.toml")).tune.calibrate is True
+
+
+def test_evaluate_shifts_default_and_keys(tmp_path):
+    """``[evaluate] shifts`` is 1 unless given; its step defaults to one outage period over the shifts."""
+    ev = load_ins_config(_write(tmp_path, BASE + "[evaluate]\noutage_s = 15.0\ngap_s = 45.0\n")).evaluate
+    assert ev.shifts == 1
+    ev = load_ins_config(_write(tmp_path, BASE + "[evaluate]\nshifts = 4\n", "s.toml")).evaluate
+    assert ev.shifts == 4 and ev.shift_s == pytest.approx((15.0 + 45.0) / 4)
+    ev = load_ins_config(_write(tmp_path, BASE + "[evaluate]\nshifts = 3\nshift_s = 10\n", "t.toml")).evaluate
+    assert ev.shifts == 3 and ev.shift_s == 10.0
+
+
+def test_a_shift_without_an_outage_window_is_refused_naming_the_keys(tmp_path):
+    """Checked on the IMU span before any fit: a shifted schedule the end margin leaves empty is an error."""
+    from jaxnav.experiments.ins_output import check_shifts
+
+    ev = "[evaluate]\nfirst_s = 40.0\noutage_s = 15.0\ngap_s = 45.0\nend_margin_s = 30.0\nshifts = 4\n"
+    p = _write(tmp_path, BASE + ev)
+    cfg = load_ins_config(p)
+    check_shifts(cfg, np.array([0.0, 200.0]))  # every shift has a window
+    with pytest.raises(ConfigError) as exc:
+        check_shifts(cfg, np.array([0.0, 100.0]))  # windows must end by 70 s: shift 2 (70-85 s) has none
+    assert f"{p}: evaluate.shifts = 4 with shift_s = 15 s: shift 2 " in str(exc.value)

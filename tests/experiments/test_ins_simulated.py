@@ -27,7 +27,7 @@ def done(tmp_path_factory):
         rec,
         folder / "data",
         states=21,
-        evaluate_extra='truth = "truth.nav"\ntruth_format = "kf-gins"',
+        evaluate_extra='truth = "truth.nav"\ntruth_format = "kf-gins"\nshifts = 2',
         extra='[constraints]\nzupt = "auto"\nzaru = true\nnhc = true\ndetector_threshold = 30.0\n'
         "detector_sigma_a_m_s2 = 0.01\ndetector_sigma_w_deg_s = 0.05\ndetector_min_s = 1.0\n",
     )
@@ -151,3 +151,38 @@ def test_scored_against_the_true_trajectory(done):
     # consistency: errors explained by the sigmas
     assert 0.3 < f["all"]["nees_pos_mean"] < 10.0 and f["all"]["share_pos_within_3_sigma"] > 0.9
     assert (out / "truth_errors.png").is_file() and "truth_errors.png" in r["files"]
+
+
+def test_shifted_outages(done):
+    """``[evaluate] shifts = 2``: the outage schedule repeated 30 s later (half the 60 s period) as a run of
+    its own (time offset and standstill refitted on the epochs it sees), scored against the truth; shift 0
+    is the unshifted protocol, its drifts those of ``evaluation.truth``."""
+    _, out, r = done
+    so = r["evaluation"]["shifted_outages"]
+    assert so["shifts"] == 2 and so["shift_s"] == 30.0 and so["period_s"] == 60.0
+    assert "shifted_outages.png" in r["files"] and (out / "shifted_outages.png").stat().st_size > 10_000
+    rows = so["per_outage"]
+    s0 = [o for o in rows if o["shift"] == 0]
+    s1 = [o for o in rows if o["shift"] == 1]
+    tr = r["evaluation"]["truth"]
+    # shift 0 reproduces the unshifted protocol: same windows, same per-outage drifts
+    assert [o["gpst_start_s"] for o in s0] == [w["gpst_start_s"] for w in r["evaluation"]["windows"]]
+    for w in ("forward", "smoothed"):
+        p = tr[w]["outage_protocol"]
+        assert [o[f"{w}_max_3d_m"] for o in s0] == p["max_3d_drift_m"]
+        assert [o[f"{w}_max_h_m"] for o in s0] == p["max_h_drift_m"]
+    # shift 1 starts 30 s later; its own run withholds its own windows and fits its own time offset
+    assert [o["start_since_imu_start_s"] - 30.0 for o in s1] == pytest.approx(
+        [o["start_since_imu_start_s"] for o in s0][: len(s1)]
+    )
+    sh = so["per_shift"]
+    assert sh[0]["time_offset_s"] == r["time_offset_s"] and sh[1]["time_offset_source"] == "estimate"
+    assert sh[1]["time_offset_s"] == pytest.approx(0.15, abs=0.01)  # the tags are 0.15 s late
+    assert so["n_outages"] == len(rows) == sh[0]["n_windows"] + sh[1]["n_windows"] >= 4
+    # pooled over both shifts: RMS / mean / max of the per-outage maxima
+    for w in ("forward", "smoothed"):
+        d3 = np.array([o[f"{w}_max_3d_m"] for o in rows])
+        assert so[w]["rms_of_max_3d_drift_m"] == pytest.approx(math.sqrt(np.mean(d3**2)))
+        assert so[w]["max_of_max_3d_drift_m"] == pytest.approx(d3.max())
+        assert so[w]["mean_of_max_h_drift_m"] == pytest.approx(np.mean([o[f"{w}_max_h_m"] for o in rows]))
+    assert so["smoothed"]["rms_of_max_3d_drift_m"] < so["forward"]["rms_of_max_3d_drift_m"] < 5.0

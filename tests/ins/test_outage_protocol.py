@@ -58,3 +58,72 @@ def test_likelihood_search_and_drift_on_a_known_quadratic():
     sel = ins.offset_search_epochs(np.arange(0.0, 10.0), np.linspace(1.0, 8.0, 100), 0.5, [[4.0, 5.0]])
     assert sel["use"].tolist() == [False, False, True, True, False, False, True, True, False, False]
     assert (sel["n_used"], sel["n_withheld"]) == (4, 2)
+
+
+def test_shifted_outage_windows_tile_one_period():
+    kw = dict(first_s=40.0, outage_s=15.0, gap_s=45.0, end_margin_s=30.0)
+    ws = ins.shifted_outage_windows(100.0, 500.0, shifts=4, **kw)
+    assert len(ws) == 4
+    np.testing.assert_array_equal(ws[0], ins.outage_windows(100.0, 500.0, **kw))  # shift 0: the protocol itself
+    for k, w in enumerate(ws):
+        assert w.shape[1] == 2 and len(w) >= 1
+        np.testing.assert_allclose(w[:, 1] - w[:, 0], 15.0)
+        np.testing.assert_allclose(w[0, 0], 100.0 + 40.0 + 15.0 * k)  # default step: one 60 s period / 4
+        assert w[0, 0] >= 140.0 and w[-1, 1] <= 500.0 - 30.0  # inside the span, the end margin kept
+    # the default step equals outage_s here, so the shifts' windows tile [140 s, last end) without a hole
+    starts = np.sort(np.concatenate([w[:, 0] for w in ws]))
+    np.testing.assert_allclose(np.diff(starts), 15.0)
+    t = np.arange(140.0, starts[-1] + 15.0, 0.25)
+    inside = np.array([ins.in_windows(t, w) for w in ws])
+    assert inside.any(0).all() and (inside.sum(0) == 1).all()  # each instant bridged by exactly one shift
+    # an explicit step; one shift is the unshifted protocol
+    w2 = ins.shifted_outage_windows(100.0, 500.0, shifts=2, shift_s=10.0, **kw)
+    np.testing.assert_allclose(w2[1], w2[0][: len(w2[1])] + 10.0)
+    np.testing.assert_array_equal(ins.shifted_outage_windows(100.0, 500.0, **kw)[0], ws[0])
+    for bad in (dict(shifts=0), dict(shifts=2, shift_s=0.0), dict(shifts=1.5)):
+        with pytest.raises(ValueError):
+            ins.shifted_outage_windows(100.0, 500.0, **bad, **kw)
+
+
+def test_pooled_drifts_equal_a_direct_computation():
+    """Per-outage maxima of shifted schedules pooled by the library equal numpy from the per-epoch errors."""
+    rng = np.random.default_rng(3)
+    t_ref = np.arange(0.0, 300.0, 0.1)
+    ref = np.stack([np.full(t_ref.size, 0.7), np.full(t_ref.size, 0.2), np.full(t_ref.size, 100.0)], -1)
+    t_sol = np.arange(0.05, 299.0, 0.5)
+    e_true = np.cumsum(rng.normal(0.0, 0.05, (t_sol.size, 3)), 0)  # a random-walk drift, m
+    from jaxnav.geodesy import enu_to_curvilinear
+
+    pos = ref[: t_sol.size] + np.asarray(enu_to_curvilinear(ref[: t_sol.size], e_true))
+    kw = dict(first_s=30.0, outage_s=20.0, gap_s=40.0, end_margin_s=10.0)
+    sched = ins.shifted_outage_windows(t_sol[0], t_sol[-1], shifts=3, **kw)
+    sched[2] = np.vstack([sched[2], [[299.5, 299.9]]])  # a window with no epoch: NaN, counted as unscored
+    got_h, got_3d, direct_h, direct_3d = [], [], [], []
+    for w in sched:
+        e = ins.trajectory_errors(t_sol, pos, None, None, t_ref, ref, windows=w)
+        m3, mh, n = ins.outage_drift_maxima(e, len(w))
+        p = ins.error_statistics(e, n_windows=len(w))["outage_protocol"]
+        np.testing.assert_array_equal(p["max_3d_drift_m"], m3)
+        np.testing.assert_array_equal(p["max_h_drift_m"], mh)
+        got_h.append(mh)
+        got_3d.append(m3)
+        for j, (a, b) in enumerate(w):  # independent: the per-epoch errors inside [a, b)
+            s = (e.t >= a) & (e.t < b)
+            assert n[j] == s.sum()
+            if s.any():
+                direct_3d.append(np.max(np.sqrt(np.sum(e.pos_enu[s] ** 2, 1))))
+                direct_h.append(np.max(np.sqrt(e.pos_enu[s, 0] ** 2 + e.pos_enu[s, 1] ** 2)))
+    st = ins.pooled_outage_drifts(got_h, got_3d)
+    dh, d3 = np.array(direct_h), np.array(direct_3d)
+    assert st["n_outages"] == d3.size == sum(len(w) for w in sched) - 1 and st["n_unscored_outages"] == 1
+    assert st["rms_of_max_3d_drift_m"] == pytest.approx(np.sqrt(np.mean(d3**2)), rel=1e-12)
+    assert st["mean_of_max_3d_drift_m"] == pytest.approx(np.mean(d3), rel=1e-12)
+    assert st["max_of_max_3d_drift_m"] == pytest.approx(np.max(d3), rel=1e-12)
+    assert st["rms_of_max_h_drift_m"] == pytest.approx(np.sqrt(np.mean(dh**2)), rel=1e-12)
+    assert st["mean_of_max_h_drift_m"] == pytest.approx(np.mean(dh), rel=1e-12)
+    assert st["max_of_max_h_drift_m"] == pytest.approx(np.max(dh), rel=1e-12)
+    assert d3.max() > 0.1 and np.all(dh <= d3)
+    # horizontal only (the withheld-fix scores): no 3-D keys; nothing scored: NaN, not an error
+    assert "rms_of_max_3d_drift_m" not in ins.pooled_outage_drifts(got_h)
+    empty = ins.pool_drifts([np.array([np.nan])])
+    assert empty["n_outages"] == 0 and empty["n_unscored"] == 1 and np.isnan(empty["rms_m"])
