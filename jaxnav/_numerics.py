@@ -121,6 +121,15 @@ def cho_solve(L, B):
     return solve_triangular(L, y, lower=True, trans=1)
 
 
+def solve_lower_t(L, B):
+    """Solve L^T X = B given the lower factor L (one triangular solve); B is (m,) or (m, k)."""
+    if L.shape[-1] <= SMALL:
+        Bm, vec = _as_matrix(B)
+        X = _solve_upper_t_unrolled(L, Bm)
+        return X[..., 0] if vec else X
+    return solve_triangular(L, B, lower=True, trans=1)
+
+
 def whiten(L, v):
     """L^{-1} v, so that |L^{-1} v|^2 = v^T (L L^T)^{-1} v."""
     if L.shape[-1] <= SMALL:

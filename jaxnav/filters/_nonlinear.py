@@ -24,13 +24,21 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import cho_solve, safe_cholesky, symmetrize
+from jaxnav._numerics import (
+    cho_solve,
+    gaussian_loglik,
+    masked_measurement,
+    safe_cholesky,
+    solve_lower_t,
+    symmetrize,
+    whiten,
+)
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import pytree_dataclass, static_field
 from jaxnav.filters._rts import rts_smoother
 from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoothed_means
-from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, scan_setup, step_with_gain, update
+from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, UpdateResult, scan_setup, step_with_gain, update
 
 
 @pytree_dataclass
@@ -115,17 +123,75 @@ def sigma_points(x, P, c):
     Returns:
       (points (2n+1, n), L (n, n)).
     """
+    return _points(x, P, jnp.sqrt(c))
+
+
+def _points(x, P, sc):
+    """:func:`sigma_points` given sqrt(c) (the same scale as :func:`_moments`' M)."""
     L, _ = safe_cholesky(P)
-    U = jnp.sqrt(c) * L.T  # row i: the i-th column of sqrt(c) L
+    U = sc * L.T  # row i: the i-th column of sqrt(c) L
     return jnp.concatenate([x[None], x[None] + U, x[None] - U], axis=0), L
 
 
-def _moments(points, fx, Wm, Wc):
-    """Weighted mean of fx (N, d), its covariance and the cross-covariance with the points (N, n)."""
-    mean = _mul(fx.T, Wm)
-    D = fx - mean
-    X = points - points[0]
-    return mean, _mul((D * Wc[:, None]).T, D), _mul((X * Wc[:, None]).T, D)
+def _moments(fx, weights):
+    """Moments of the values fx (2n+1, d) of a function at :func:`sigma_points` (centre, +, - points).
+
+    With the Van der Merwe weights (centre Wm_0, Wc_0; all others w = 1/(2c); the Wm sum to 1), about
+    the centre value f_0: mean = f_0 + mu with mu = w sum_i (f_i - f_0), and
+    cov = Wc_0 mu mu^T + w sum_i (f_i - f_0 - mu)(f_i - f_0 - mu)^T. Equal to the textbook
+    sum_i W_i f_i and sum_i Wc_i (f_i - mean)(f_i - mean)^T, without its cancellation: at alpha = 1e-3
+    the weights are ~1e6 and sum_i W_i f_i rounds at ~1e-16 |W| |f| (4e-8 m on a 364 m range), an
+    error the textbook covariance cancels only if every use of the mean rounds alike, which XLA's
+    fusions do not guarantee (one recomputing it with FMA, another not, moved S by 5e-4 at alpha = 1e-3);
+    here the weighted sums run over differences of size sqrt(c) |J L|.
+    The cross-covariance with the points, sum_i W_i (X_i - x)(f_i - mean)^T, is L M with
+    M = w sqrt(c) (f_+ - f_-)^T (n, d) (the +/- points are x +/- sqrt(c) L_i; the mean cancels); it is
+    returned as M, so that P^{-1} L M = L^{-T} M is one triangular solve and H P H^T, (I - K H) L
+    are products of M (:func:`_update_factored`). Only the distinct weights enter (a per-point
+    weight vector is sliced into one scalar kernel per point on CPU).
+
+    Returns:
+      (mean (d,), cov (d, d), M (n, d)).
+    """
+    wc0, w, sc = weights
+    n = (fx.shape[0] - 1) // 2
+    f0, fp, fm = fx[0], fx[1 : n + 1], fx[n + 1 :]
+    dp, dm = fp - f0, fm - f0
+    mu = w * sum(dp[i] + dm[i] for i in range(n))
+    ep, em = dp - mu, dm - mu
+    cov = wc0 * (mu[:, None] * mu[None, :]) + w * (_mul(ep.T, ep) + _mul(em.T, em))
+    return f0 + mu, cov, (w * sc) * (fp - fm)
+
+
+def _update_factored(x_pred, P_pred, L, M, v, R, valid, joseph):
+    """:func:`~jaxnav.filters._step.update` of the sigma-point regression H = M^T L^{-1}, P_pred = L L^T,
+    without forming H: P H^T = L M, H P H^T = M^T M, and the Joseph congruence
+    (I - K H) P (I - K H)^T = A A^T with A = (I - K H) L = L - K M^T, plus K R K^T (symmetric
+    positive semi-definite by construction, as the Joseph form). ``v`` (m,) is the innovation
+    z - z_hat; invalid components are removed as in ``update`` (zero columns of M, identity R)."""
+    Mt, Rm = masked_measurement(M.T, R, valid)  # Mt (m, n): H_m L
+    v = jnp.where(valid, v, 0.0)
+    PHt = _mul(L, Mt.T)
+    S = symmetrize(_mul(Mt, Mt.T) + Rm)
+    Ls, ok = safe_cholesky(S)
+    K = cho_solve(Ls, PHt.T).T
+    x = x_pred + _mul(K, v)
+    if joseph:
+        A = L - _mul(K, Mt)
+        P = symmetrize(_mul(A, A.T) + _mul(_mul(K, Rm), K.T))
+    else:
+        P = symmetrize(P_pred - _mul(K, PHt.T))
+    w = whiten(Ls, v)
+    return UpdateResult(
+        x=jnp.where(ok, x, x_pred),
+        P=jnp.where(ok, P, P_pred),
+        v=v,
+        S=S,
+        K=jnp.where(ok, K, 0.0),
+        nis=jnp.sum(w * w),
+        loglik=gaussian_loglik(w, Ls, jnp.sum(valid)),
+        ok=ok,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -159,27 +225,26 @@ class _Taylor(NamedTuple):
 class _SigmaPoints(NamedTuple):
     model: Any
     t: Any
-    weights: Any  # (Wm, Wc, c)
+    weights: Any  # (Wc_0, w, sqrt(c)): _weights
 
     def predict(self, x, P):
-        Wm, Wc, c = self.weights
-        pts, L = sigma_points(x, P, c)
+        pts, L = _points(x, P, self.weights[2])
         fx = jax.vmap(lambda p: self.model.f(p, self.t))(pts)
-        mean, FPF, Pxf = _moments(pts, fx, Wm, Wc)
-        return cho_solve(L, Pxf).T, mean, FPF  # F = P_xf^T P^{-1}, only for the plug-ins
+        mean, FPF, M = _moments(fx, self.weights)
+        return solve_lower_t(L, M).T, mean, FPF  # F = P_xf^T P^{-1} = M^T L^{-1}, only for the plug-ins
 
     def measure(self, x, P):
-        Wm, Wc, c = self.weights
-        pts, L = sigma_points(x, P, c)
+        pts, L = _points(x, P, self.weights[2])
         hx = jax.vmap(lambda p: self.model.h(p, self.t))(pts)
-        z_hat, Pzz, Pxz = _moments(pts, hx, Wm, Wc)
-        H = cho_solve(L, Pxz).T
-        return H, z_hat, symmetrize(Pzz - _mul(H, Pxz))
+        z_hat, Pzz, M = _moments(hx, self.weights)
+        H = solve_lower_t(L, M).T  # P_xz^T P^{-1} = M^T L^T L^{-T} L^{-1}: the plug-ins' H (dead code without them)
+        # the regression residual P_zz - H P_xz, with H P_xz = M^T M
+        return H, z_hat, symmetrize(Pzz - _mul(M.T, M)), L, M
 
     def update(self, x_pred, P_pred, z, R, valid, joseph, first, redo):
-        H, z_hat, Om = self.measure(x_pred, P_pred) if redo else first
-        z_lin = jnp.where(valid, z - z_hat + _mul(H, x_pred), 0.0)
-        up = _update(x_pred, P_pred, z_lin, H, R + Om, valid, joseph)
+        H, z_hat, Om, L, M = self.measure(x_pred, P_pred) if redo else first
+        up = _update_factored(x_pred, P_pred, L, M, z - z_hat, R + Om, valid, joseph)
+        z_lin = jnp.where(valid, z - z_hat + _mul(H, x_pred), 0.0)  # the affine model's z - b (plug-ins only)
         return up, jnp.where(valid[:, None], H, 0.0), z_lin
 
 
@@ -249,10 +314,16 @@ def _ekf(model, x0, P0, zs, *, iterations, **kw):
     return _run(model, x0, P0, zs, lambda t, dt: _Taylor(model, t, iterations), **kw)
 
 
+def _weights(n, alpha, beta, kappa, dtype):
+    """The weights :func:`_moments` uses, (Wc_0, w, sqrt(c)), of :func:`merwe_weights` (Wm_0 = 1 - 2 n w)."""
+    Wm, Wc, c = merwe_weights(n, alpha, beta, kappa, dtype)
+    return Wc[0], Wm[1], jnp.sqrt(jnp.asarray(c, dtype))
+
+
 @partial(jax.jit, static_argnames=_STATIC)
 def _spkf(model, x0, P0, zs, alpha, beta, kappa, **kw):
     n = jnp.shape(x0)[0]
-    return _run(model, x0, P0, zs, lambda t, dt: _SigmaPoints(model, t, merwe_weights(n, alpha, beta, kappa, dt)), **kw)
+    return _run(model, x0, P0, zs, lambda t, dt: _SigmaPoints(model, t, _weights(n, alpha, beta, kappa, dt)), **kw)
 
 
 _COMMON_DOC = """
@@ -446,12 +517,12 @@ def _urts(model, filtered, alpha, beta, kappa, *, inputs, unroll, save):
             )
     T, n = filtered.means.shape
     dt = filtered.means.dtype
-    Wm, Wc, c = merwe_weights(n, alpha, beta, kappa, dt)
+    weights = _weights(n, alpha, beta, kappa, dt)
     t_next = jax.tree_util.tree_map(lambda a: a[1:], _epochs(inputs, T))
 
     def cross(x, P, t):
-        pts, _ = sigma_points(x, P, c)
-        return _moments(pts, jax.vmap(lambda p: model.f(p, t))(pts), Wm, Wc)[2]
+        pts, L = _points(x, P, weights[2])
+        return _mul(L, _moments(jax.vmap(lambda p: model.f(p, t))(pts), weights)[2])
 
     Pxf = jax.vmap(cross)(filtered.means[:-1], filtered.covs[:-1], t_next)
     L, ok = safe_cholesky(filtered.pred_covs[1:])
