@@ -26,19 +26,17 @@ import jax.numpy as jnp
 from jaxnav import _status
 from jaxnav._numerics import (
     cho_solve,
-    gaussian_loglik,
     masked_measurement,
     safe_cholesky,
     solve_lower_t,
     symmetrize,
-    whiten,
 )
 from jaxnav.filters._kalman import KalmanResult
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import pytree_dataclass, static_field
 from jaxnav.filters._rts import rts_smoother
 from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoothed_means
-from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, UpdateResult, scan_setup, step_with_gain, update
+from jaxnav.filters._step import ALL_OUTPUTS, StepInfo, scan_setup, step_with_gain, update, update_result
 
 
 @pytree_dataclass
@@ -181,17 +179,7 @@ def _update_factored(x_pred, P_pred, L, M, v, R, valid, joseph):
         P = symmetrize(_mul(A, A.T) + _mul(_mul(K, Rm), K.T))
     else:
         P = symmetrize(P_pred - _mul(K, PHt.T))
-    w = whiten(Ls, v)
-    return UpdateResult(
-        x=jnp.where(ok, x, x_pred),
-        P=jnp.where(ok, P, P_pred),
-        v=v,
-        S=S,
-        K=jnp.where(ok, K, 0.0),
-        nis=jnp.sum(w * w),
-        loglik=gaussian_loglik(w, Ls, jnp.sum(valid)),
-        ok=ok,
-    )
+    return update_result(x_pred, P_pred, x, P, v, S, K, Ls, valid, ok)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -209,8 +209,14 @@ def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True, matmul=mm):
         P = symmetrize(matmul(matmul(IKH, P_pred), IKH.T) + matmul(matmul(K, Rm), K.T))
     else:
         P = symmetrize(P_pred - matmul(K, PHt.T))
+    return update_result(x_pred, P_pred, x, P, v, S, K, L, valid, ok)
+
+
+def update_result(x_pred, P_pred, x, P, v, S, K, L, valid, ok) -> UpdateResult:
+    """:class:`UpdateResult` of an update: the posterior (x, P) where the Cholesky factor L of S succeeded
+    (``ok``), else the prior with a zero gain; NIS and Gaussian log-likelihood of the innovation v (m,)
+    whitened by L over the ``valid`` components."""
     w = whiten(L, v)
-    loglik = gaussian_loglik(w, L, jnp.sum(valid))
     return UpdateResult(
         x=jnp.where(ok, x, x_pred),
         P=jnp.where(ok, P, P_pred),
@@ -218,7 +224,7 @@ def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True, matmul=mm):
         S=S,
         K=jnp.where(ok, K, 0.0),
         nis=jnp.sum(w * w),
-        loglik=loglik,
+        loglik=gaussian_loglik(w, L, jnp.sum(valid)),
         ok=ok,
     )
 
