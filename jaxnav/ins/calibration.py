@@ -86,16 +86,23 @@ def with_noise_values(noise: LCNoise, values: dict, lever=None):
     return noise, values.get("lever_arm", lever)
 
 
-def check_tunable(names, *, n_states: int, use_velocity: bool = True) -> None:
-    """Raise ``ValueError`` naming the parameters of ``names`` a run with ``n_states`` error states (and GNSS
-    velocity updates or not) cannot tune."""
+def check_names(names) -> None:
+    """Raise ``ValueError`` naming the parameters of ``names`` that are not :data:`TUNABLE`."""
     unknown = [n for n in names if n not in TUNABLE]
     if unknown:
         raise ValueError(f"cannot tune {unknown}; tunable: {sorted(TUNABLE)}")
+
+
+def check_tunable(names, *, n_states: int, use_velocity: bool = True) -> None:
+    """Raise ``ValueError`` naming the parameters of ``names`` a run with ``n_states`` error states (and GNSS
+    velocity updates or not) cannot tune."""
+    check_names(names)
     if "gyro_bias_instability" in names and n_states not in (18, 21):
-        raise ValueError("gyro_bias_instability is a parameter of the 18- and 21-state models (noise.states)")
+        raise ValueError(
+            f"gyro_bias_instability is a parameter of the 18- and 21-state error models, not of {n_states} states"
+        )
     if "vel_sigma_scale" in names and not use_velocity:
-        raise ValueError("vel_sigma_scale scales the GNSS velocity sigmas: it needs gnss.use_velocity = true")
+        raise ValueError("vel_sigma_scale scales the GNSS velocity sigmas: it needs GNSS velocity updates")
 
 
 def calibration_params(n_states: int, use_velocity: bool) -> tuple:

@@ -231,7 +231,7 @@ def gnss_solution_measurements(
     if keep.size < 2:
         raise ValueError(
             f"only {keep.size} GNSS epoch(s) fall inside the IMU span [{t_imu[0]:.3f}, {t_imu[-1]:.3f}] s "
-            f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and imu.time_offset_s"
+            f"(GNSS [{gt[0]:.3f}, {gt[-1]:.3f}] s): check the time systems and the IMU time offset"
         )
     t = gt[keep]
     pos = np.stack([np.asarray(pos_sol.lat)[keep], np.asarray(pos_sol.lon)[keep], np.asarray(pos_sol.h)[keep]], -1)
@@ -298,12 +298,12 @@ class SensorBiases(NamedTuple):
         for models without the state (:meth:`jaxnav.ins.ErrorModel.with_odometer_scale`).
     """
 
-    gyro: jax.Array
-    markov: jax.Array
-    accel: jax.Array
-    gyro_scale: jax.Array | None = None
-    accel_scale: jax.Array | None = None
-    odo_scale: jax.Array | None = None
+    gyro: ArrayLike
+    markov: ArrayLike
+    accel: ArrayLike
+    gyro_scale: ArrayLike | None = None
+    accel_scale: ArrayLike | None = None
+    odo_scale: ArrayLike | None = None
 
 
 class LCEpochs(NamedTuple):
@@ -541,7 +541,7 @@ class _Propagated(NamedTuple):
     sums: _Sums
     T: jax.Array  # time covered by the interval's samples, s
     w_last: jax.Array  # (3,) angular rate of the last sample, rad/s (lever-arm velocity)
-    G: jax.Array  # two-speed: the last block's gravity minus Coriolis (else None)
+    G: jax.Array | None  # two-speed: the last block's gravity minus Coriolis (else None)
 
 
 def _where_tree(c, a, b):

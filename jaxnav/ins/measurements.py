@@ -79,7 +79,7 @@ class MeasContext(NamedTuple):
     w_mean_b: jax.Array
     T_mean: jax.Array
     dtx: jax.Array
-    biases: jax.Array | None = None
+    biases: Any = None  # SensorBiases (jaxnav.ins.integration imports this module) or None
 
 
 class MeasRows(NamedTuple):

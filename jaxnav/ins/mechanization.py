@@ -41,9 +41,9 @@ class NavState(NamedTuple):
       pos: (3,) [latitude rad, longitude rad, ellipsoidal height m].
     """
 
-    q_bn: jax.Array
-    v_n: jax.Array
-    pos: jax.Array
+    q_bn: ArrayLike
+    v_n: ArrayLike
+    pos: ArrayLike
 
 
 class MechState(NamedTuple):

@@ -331,10 +331,10 @@ class StationFit(NamedTuple):
     velocity_sigma_white: jax.Array
     offset: jax.Array
     t_ref: float
-    annual_amplitude: jax.Array
+    annual_amplitude: np.ndarray
     annual_amplitude_sigma: np.ndarray
     annual_phase: np.ndarray
-    semiannual_amplitude: jax.Array
+    semiannual_amplitude: np.ndarray
     semiannual_amplitude_sigma: np.ndarray
     semiannual_phase: np.ndarray
     steps: jax.Array

@@ -32,7 +32,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.typing import ArrayLike
 
 from jaxnav import filters as jf
 from jaxnav.monitoring._noise import GGM_ONE_MINUS_PHI, gauss_markov_sum, gauss_markov_table
@@ -407,7 +406,7 @@ class NoiseSpec(NamedTuple):
     r: jax.Array
     W: jax.Array
     d_grid: jax.Array
-    kappa: ArrayLike
+    kappa: float | None
     max_rel_error: float
 
 

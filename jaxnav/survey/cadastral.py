@@ -43,7 +43,7 @@ from jax.typing import ArrayLike
 
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins.error_model import IDX18
-from jaxnav.ins.integration import LCParams, LCSave, PVMeasurements, loosely_coupled, smooth
+from jaxnav.ins.integration import LCParams, LCSave, PVMeasurements, SensorBiases, loosely_coupled, smooth
 from jaxnav.ins.mechanization import ImuSample, MechParams, MechState, NavState, mech_step
 from jaxnav.survey._preprocess import PreprocessParams, preprocess_imu
 from jaxnav.survey._stops import (
@@ -395,17 +395,17 @@ class SurveyOutput(NamedTuple):
       route: dict of (N, 3) positions (``forward``, ``smoothed``, ``backward``) or None.
     """
 
-    targets: jax.Array
+    targets: dict
     sigma_forward: jax.Array
     sigma_backward: jax.Array
     weight_forward: jax.Array
     backward: jax.Array
-    biases: jax.Array
+    biases: SensorBiases
     nav_smoothed: NavState
     nav_filtered: NavState
     n_rejected: jax.Array
     status: jax.Array
-    route: jax.Array | None = None
+    route: dict | None = None
 
 
 def process_survey(

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from jaxnav.ins.calibration import (
     NIS_GATE_SHARE_MAX,
     TUNABLE,
     LCNoise,
+    check_names,
     consistency_report,
     consistency_words,
     gnss_consistency,
@@ -48,7 +49,7 @@ class LCNoiseFit(NamedTuple):
     n_evals: int
     wall_time_s: float
     noise: LCNoise
-    lever: Any
+    lever: np.ndarray | None
     fitted_on: str = ""
     n_epochs: int = 0
 
@@ -77,9 +78,7 @@ def fit_lc_noise(
       max_evals: loss evaluations at most (static).  mode: "reverse" or "forward" gradients.
       fitted_on, n_epochs: the data the loss uses, recorded in the result.
     """
-    unknown = [n for n in names if n not in TUNABLE]
-    if unknown:
-        raise ValueError(f"cannot tune {unknown}; tunable: {sorted(TUNABLE)}")
+    check_names(names)
     if "lever_arm" in names and lever is None:
         raise ValueError("fitting 'lever_arm' needs lever= (3,) m to start from")
     p0 = noise_values(noise, names, lever)
@@ -140,6 +139,8 @@ def calibrate_lc_noise(
       after), parameters before/after (SI), the epochs fitted on and their number, evaluations, wall
       time, warning).
     """
+    if not (mode is True or mode is False or mode == "auto"):
+        raise ValueError(f"calibrate_lc_noise: mode must be 'auto', True or False, got {mode!r}")
     say = progress or (lambda *_: None)
     t0 = time.perf_counter()
     rep: dict = {

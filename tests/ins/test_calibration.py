@@ -122,8 +122,10 @@ def test_noise_values_round_trip_and_bad_names():
         ins.check_tunable(["bogus"], n_states=15)
     with pytest.raises(ValueError, match="18- and 21-state"):
         ins.check_tunable(["gyro_bias_instability"], n_states=15)
-    with pytest.raises(ValueError, match="use_velocity"):
+    with pytest.raises(ValueError, match="needs GNSS velocity updates"):
         ins.check_tunable(["vel_sigma_scale"], n_states=15, use_velocity=False)
+    with pytest.raises(ValueError, match="mode must be 'auto', True or False, got 'on'"):
+        tune.calibrate_lc_noise(lambda *a: None, d, np.ones((3, 6), bool), ["arw"], mode="on")
     with pytest.raises(ValueError, match="needs lever="):
         tune.fit_lc_noise(lambda d, lev: 0.0, d, ["lever_arm"])
     assert ins.calibration_params(21, True) == (
