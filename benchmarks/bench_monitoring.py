@@ -19,7 +19,7 @@ A script, not a test. It runs in the environment with the bench extra (hector-ts
    power law started at the first day, 10 % days missing, rate 3 mm/yr): share of 95 % rate
    intervals covering the truth, spread of the standardised errors, beside white-noise sigmas.
 3. **Batch.** 1000 simulated stations x 3 components (3000 series) of 10 years in one call
-   (``fit_series_batch``, vmap in chunks of 250 series for memory), wall time with compilation,
+   (``fit_series_batch``, vmap in chunks of 250 series for memory, one host thread per core), wall time with compilation,
    peak resident memory of the process.
 4. **Network** (``--part network``): ``jaxnav monitor`` with its defaults on the five real series
    (``run_monitor_velocities``, the function behind the command: white + flicker + random walk,

@@ -226,3 +226,27 @@ def test_step_detection_finds_a_planted_step_and_nothing_in_pure_noise():
             assert found is not None and abs(found[0] - t[600]) <= 7 * DAY, found
         else:
             assert found is None, found
+
+
+def test_chunked_threaded_batch_equals_one_vmap():
+    """fit_series_batch with chunk (the last chunk padded) in two host threads gives the fits of one vmap."""
+    B, n = 5, 300
+    keys = jax.random.split(jax.random.PRNGKey(3), B)
+    sim = jax.vmap(
+        lambda k: mon.simulate_powerlaw_series(
+            k, n, rate=3.0 * MM_PER_YEAR, sigma_white=2 * MM, amplitude=6 * MM / YEAR**0.25, gap_fraction=0.1
+        )
+    )
+    y, t = sim(keys)
+    y = np.asarray(y)
+    valid = np.isfinite(y)
+    D = mon.design_matrix(np.asarray(t[0]))
+    spec = mon.noise_spec(n)
+    args = (np.nan_to_num(y), valid, D.A, spec, np.full(B, 4 * MM))
+    one = mon.fit_series_batch(*args, random_walk=False, iterations=15)
+    chunked = mon.fit_series_batch(*args, random_walk=False, iterations=15, chunk=2, workers=2)
+    assert chunked.theta.shape == one.theta.shape == (B, 4)
+    np.testing.assert_allclose(chunked.theta, one.theta, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(chunked.beta, one.beta, rtol=1e-9, atol=1e-15)
+    with pytest.raises(ValueError, match="chunk must be a positive"):
+        mon.fit_series_batch(*args, random_walk=False, chunk=0)
