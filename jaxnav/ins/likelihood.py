@@ -29,8 +29,9 @@ def antenna_enu(nav, t_nav, t, lever_b, pos0):
 
     Args:
       nav: :class:`jaxnav.ins.NavState` with (M, ...) leaves (pos [lat rad, lon rad, h m], v_n ENU m/s, q_bn).
-      t_nav: (M,) times of ``nav``, s.  t: (M,) target times, s.  lever_b: (3,) or (M, 3) antenna minus
-      IMU in the body frame, m.  pos0: (3,) origin of the ENU frame [lat rad, lon rad, h m].
+      t_nav: (M,) times of ``nav``, s.  t: (M,) target times, s.
+      lever_b: (3,) or (M, 3) antenna minus IMU in the body frame, m.
+      pos0: (3,) origin of the ENU frame [lat rad, lon rad, h m].
     """
     M = jnp.shape(t_nav)[0]
     C = quat_to_dcm(nav.q_bn)
