@@ -394,8 +394,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
       written, paths relative to ``out``).
     """
     from jaxnav._status import INFO_FLAGS, describe
-    from jaxnav.experiments.ins_run import calibrate_noise, prepare, run_ins, tune_noise, tuned_run
-    from jaxnav.ins import GATED_SHARE_WARN
+    from jaxnav.experiments.ins_run import fit_and_run, prepare
     from jaxnav.io import provenance, write_json
 
     out = pathlib.Path(out)
@@ -408,27 +407,10 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
     prep = prepare(cfg, imu=imu, pos=pos, progress=progress)
     check_shifts(cfg, prep.t)  # before any fit: a shift without an outage window fails fast
     mode = cfg.tune.calibrate if calibrate is None else calibrate
-    if mode is not False:
-        say(
-            f"checking the noise: GNSS position and velocity NIS of the configured noise without the gate "
-            f"(calibrate = {mode})"
-        )
-    dens, cal = calibrate_noise(prep, mode, progress=progress)
-    prep = prep._replace(densities=dens)
-    say(
-        f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
-        f"running the filter and the smoother"
-    )
-    run = run_ins(prep)
+    fr = fit_and_run(cfg, imu=imu, pos=pos, prep=prep, calibrate=mode, tune=tune, progress=progress)
+    prep, cal, run = fr.prep, fr.calibration, fr.untuned
     n_used = int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1)))
     n_gated = int(run.result.n_gated) if run.result.n_gated is not None else 0
-    gated_share = n_gated / n_used if n_used else 0.0
-    if gated_share > GATED_SHARE_WARN:
-        cal["gate_warning"] = (
-            f"the chi-square gate rejected {n_gated} of {n_used} GNSS epochs ({100 * gated_share:.1f} %, above "
-            f"{100 * GATED_SHARE_WARN:.0f} %): the noise does not explain the GNSS data"
-        )
-        say(f"warning: {cal['gate_warning']}")
     prov = provenance(config_file=cfg.path, config=cfg.raw)
     if command:
         prov["command"] = command
@@ -464,7 +446,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
             "n_epochs_used": n_used,
             "n_withheld": int(np.count_nonzero(prep.withheld)),
             "n_gated": n_gated,
-            "gated_share": gated_share,
+            "gated_share": fr.gated_share,
         },
         "calibration": cal,
         "constraints": _constraints(prep, run),
@@ -488,11 +470,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
         "evaluation": _evaluation(run.scores),
     }
     if tune:
-        say(
-            f"tuning {', '.join(cfg.tune.params)} by the {cfg.tune.loss} likelihood (L-BFGS, {cfg.tune.steps} evaluations)"
-        )
-        rep = tune_noise(prep, cfg.tune.params, max_evals=cfg.tune.steps, mode=cfg.tune.mode, loss_kind=cfg.tune.loss)
-        run_t = tuned_run(prep, rep)
+        rep, run_t = fr.tune, fr.run
         results["tune"] = {
             "params": list(cfg.tune.params),
             "loss": cfg.tune.loss,

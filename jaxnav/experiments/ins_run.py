@@ -29,6 +29,7 @@ import numpy as np
 from jaxnav.experiments.ins_config import ConfigError, InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (
+    GATED_SHARE_WARN,
     ImuNoise,
     LCGate,
     LCNoise,
@@ -617,37 +618,65 @@ class FittedRun(NamedTuple):
     """One withheld-GNSS run with everything fitted on the GNSS epochs it sees (:func:`fit_and_run`).
 
     Attributes:
-      prep: :class:`Prepared` (its time offset and standstill detection fitted without the withheld epochs).
-      calibration: :func:`calibrate_noise`'s report.  run: the final :class:`InsRun` (after ``--tune`` if tuned).
-      tune: the ``--tune`` :class:`jaxnav.tune.LCNoiseFit`, or None.
+      prep: :class:`Prepared` (its time offset and standstill detection fitted without the withheld
+        epochs; its noise the calibrated one).  calibration: :func:`calibrate_noise`'s report (with
+        ``gate_warning`` where the gate rejected more than :data:`jaxnav.ins.GATED_SHARE_WARN` of the
+        GNSS epochs).  run: the final :class:`InsRun` (after ``--tune`` if tuned).
+      tune: the ``--tune`` :class:`jaxnav.tune.LCNoiseFit`, or None.  untuned: the run before ``--tune``
+        (``run`` itself without it).  gated_share: GNSS epochs gated / used by ``untuned``.
     """
 
     prep: Prepared
     calibration: dict
     run: InsRun
     tune: Any = None
+    untuned: InsRun | None = None
+    gated_share: float = 0.0
 
 
-def fit_and_run(cfg: InsConfig, *, imu, pos, calibrate=None, tune: bool = False, progress=None) -> FittedRun:
+def fit_and_run(cfg: InsConfig, *, imu, pos, prep=None, calibrate=None, tune: bool = False, progress=None) -> FittedRun:
     """The whole fitted pipeline of one outage schedule: :func:`prepare` (time offset and standstill
-    detection on the GNSS epochs outside the config's outages), :func:`calibrate_noise`, :func:`run_ins`,
-    and with ``tune`` :func:`tune_noise` and its rerun; nothing fitted sees the withheld epochs.
+    detection on the GNSS epochs outside the config's outages), :func:`calibrate_noise`, :func:`run_ins`
+    (and the gated-share check), and with ``tune`` :func:`tune_noise` and its rerun; nothing fitted sees
+    the withheld epochs.
 
     Args:
       cfg: the config (e.g. :func:`shifted_config`).  imu, pos: the recording as read (:func:`read_inputs`;
-        the IMU times before the time offset).  calibrate: "auto" | True | False (None: ``[tune] calibrate``).
+        the IMU times before the time offset).  prep: its :class:`Prepared` if already made (None: made here).
+      calibrate: "auto" | True | False (None: ``[tune] calibrate``).  tune: run ``--tune``.
       progress: callable for one line of text, or None.
     """
-    prep = prepare(cfg, imu=imu, pos=pos, progress=progress)
-    dens, cal = calibrate_noise(prep, calibrate, progress=progress)
+    say = progress or (lambda *_: None)
+    prep = prepare(cfg, imu=imu, pos=pos, progress=progress) if prep is None else prep
+    mode = cfg.tune.calibrate if calibrate is None else calibrate
+    if mode is not False:
+        say(
+            f"checking the noise: GNSS position and velocity NIS of the configured noise without the gate "
+            f"(calibrate = {mode})"
+        )
+    dens, cal = calibrate_noise(prep, mode, progress=progress)
     prep = prep._replace(densities=dens)
-    run = run_ins(prep)
+    say(
+        f"IMU {prep.t.size} samples over {prep.t[-1] - prep.t[0]:.1f} s, GNSS {prep.meas.t.size} epochs; "
+        f"running the filter and the smoother"
+    )
+    run = untuned = run_ins(prep)
+    n_used = int(np.count_nonzero(np.asarray(prep.meas.mask)[:, :3].any(-1)))
+    n_gated = int(run.result.n_gated) if run.result.n_gated is not None else 0
+    gated_share = n_gated / n_used if n_used else 0.0
+    if gated_share > GATED_SHARE_WARN:
+        cal["gate_warning"] = (
+            f"the chi-square gate rejected {n_gated} of {n_used} GNSS epochs ({100 * gated_share:.1f} %, above "
+            f"{100 * GATED_SHARE_WARN:.0f} %): the noise does not explain the GNSS data"
+        )
+        say(f"warning: {cal['gate_warning']}")
     rep = None
     if tune:
         t = cfg.tune
+        say(f"tuning {', '.join(t.params)} by the {t.loss} likelihood (L-BFGS, {t.steps} evaluations)")
         rep = tune_noise(prep, t.params, max_evals=t.steps, mode=t.mode, loss_kind=t.loss)
         run = tuned_run(prep, rep)
-    return FittedRun(prep=prep, calibration=cal, run=run, tune=rep)
+    return FittedRun(prep=prep, calibration=cal, run=run, tune=rep, untuned=untuned, gated_share=gated_share)
 
 
 def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
