@@ -269,10 +269,10 @@ def fit_series_batch(
     ``chunk`` (an int) runs the vmap over chunks of that many series (the last one padded, so one
     program serves all): the reverse pass keeps about 150 numbers per series and day, 4 MB per
     10-year series, so a few thousand series at once need chunks on a small machine. The chunks run
-    in ``workers`` host threads at once (default: one per CPU core, at most one per chunk): a
-    vmapped fit keeps one core busy, and JAX runs compiled programs from several threads in parallel
-    (two chunks on two cores take half the time of one after the other; the memory is that of
-    ``workers`` chunks). ``progress``: a progress line per finished chunk (:class:`jaxnav._progress.Progress`).
+    in ``workers`` host threads at once (default: one per CPU core, at most :data:`MAX_DEFAULT_WORKERS`
+    and one per chunk): a vmapped fit keeps one core busy, and JAX runs compiled programs from several
+    threads in parallel (two chunks on two cores take half the time of one after the other). The
+    memory is that of ``workers`` chunks, hence the cap on the default; pass ``workers`` for more. ``progress``: a progress line per finished chunk (:class:`jaxnav._progress.Progress`).
 
     Args:
       y: (B, T) m (any value where not valid).  valid: (B, T) bool.  A: (T, k) shared design.
@@ -312,6 +312,11 @@ def fit_series_batch(
     return _threaded_chunks(jax.jit(jax.vmap(one)), args, int(chunk), workers, progress)
 
 
+#: most host threads :func:`fit_series_batch` starts by default (each holds a chunk's reverse pass in
+#: memory: about 1 GB for 250 ten-year series)
+MAX_DEFAULT_WORKERS = 4
+
+
 def _threaded_chunks(fn, args, chunk: int, workers, progress: bool):
     """``fn`` (vmapped over the leading axis of every array in ``args``) over chunks of ``chunk`` rows, the
     last padded with copies of its first row (one compiled size), in ``workers`` threads; concatenated."""
@@ -324,7 +329,7 @@ def _threaded_chunks(fn, args, chunk: int, workers, progress: bool):
         raise ValueError(f"chunk must be a positive number of series, got {chunk}")
     B = int(args[0].shape[0])
     starts = list(range(0, B, chunk))
-    workers = min(int(workers or os.cpu_count() or 1), len(starts))
+    workers = min(int(workers or min(os.cpu_count() or 1, MAX_DEFAULT_WORKERS)), len(starts))
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
 
