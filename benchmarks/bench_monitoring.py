@@ -21,7 +21,14 @@ A script, not a test. It runs in the environment with the bench extra (hector-ts
 3. **Batch.** 1000 simulated stations x 3 components (3000 series) of 10 years in one call
    (``fit_series_batch``, vmap in chunks of 250 series for memory, one host thread per core), wall time with compilation,
    peak resident memory of the process.
-4. **Network** (``--part network``): ``jaxnav monitor`` with its defaults on the five real series
+4. **Stations** (``--part stations``): the command's own path, :func:`jaxnav.monitoring.fit_stations`
+   with ``jaxnav monitor``'s defaults (outlier screening, white + flicker + random walk, REML, up
+   to 5 steps detected per station, a misfit scan after the last fit) on ``--stations`` simulated
+   ten-year stations with 0-4 steps each in the up component (the step study's simulator,
+   ``bench_step_detection.station``), then MIDAS beside each fit (:func:`jaxnav.monitoring.midas_check`);
+   wall time with compilation, peak memory, steps found; Hector's ``findoffsets`` (three
+   components) on ``--hector-sample`` of the same stations for the time per station.
+5. **Network** (``--part network``): ``jaxnav monitor`` with its defaults on the five real series
    (``run_monitor_velocities``, the function behind the command: white + flicker + random walk,
    REML, up to 5 steps detected per station by the BIC criterion), writing ``monitor.json``,
    ``velocities.csv`` and ``velocity_map.png`` into ``--out``: the steps found (date, size and
@@ -52,7 +59,7 @@ from reference.hector_run import run_hector  # noqa: E402
 
 from jaxnav import io  # noqa: E402
 from jaxnav import monitoring as mon  # noqa: E402
-from jaxnav.units import MM, MM_PER_YEAR, YEAR  # noqa: E402
+from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
 
 DATA = ROOT.parent / "shared/data/gnss_daily_timeseries"
 FILES = ["LHAS.tenv3", "bjfsCleanUnf.neu", "MRHK_GOM20_neu_cm.col", "UH01_GOM20_neu_cm.col", "UHCR_GOM20_neu_cm.col"]
@@ -222,6 +229,56 @@ def part_batch(stations=1000, n=3653, chunk=250, hector_sample=0):
     )
 
 
+def part_stations(stations=1000, hector_sample=0, match_days=30):
+    from bench_step_detection import as_series, match, run_findoffsets, station
+
+    from jaxnav.cli.monitor import DETECT_DEFAULT
+
+    t0 = time.perf_counter()
+    sims = [station(i) for i in range(stations)]
+    ser = [as_series(t, y, f"S{i:04d}") for i, (t, y, _, _) in enumerate(sims)]
+    sim_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    fits = mon.fit_stations(ser, detect=DETECT_DEFAULT, progress=True)
+    wall = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    midas = [mon.midas_check(f) for f in fits]
+    midas_s = time.perf_counter() - t0
+    n_true = n_hit = n_false = 0
+    for (t, _, days, _), f in zip(sims, fits):
+        found = np.round((np.asarray(f.steps) - t[0]) / DAY).astype(int)
+        hit, false = match(days, found, match_days)
+        n_true += len(days)
+        n_hit += len(hit)
+        n_false += false
+    hector = []
+    for i in range(hector_sample):  # findoffsets on the station's three components, one process each
+        t, y, _, _ = sims[i]
+        w = 0.0
+        for c in range(3):
+            v = np.isfinite(y[:, c])
+            w += run_findoffsets(t[v], y[v, c])[1]
+        hector.append(w)
+        print(
+            f"Hector findoffsets station {i + 1}/{hector_sample}: {w:.1f} s (load {os.getloadavg()[0]:.1f})", flush=True
+        )
+    return dict(
+        stations=stations,
+        detect=DETECT_DEFAULT,
+        simulate_s=sim_s,
+        wall_s=wall,
+        per_station_s=wall / stations,
+        midas_s=midas_s,
+        steps_true=n_true,
+        steps_found=n_hit,
+        false_steps=n_false,
+        midas_warnings=sum(len(m[1]) for m in midas),
+        hector_station_s=hector,
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        load=os.getloadavg(),
+    )
+
+
 def part_network(out, from_json=None):
     """jaxnav monitor (defaults) on the five real series; the monitor.json it wrote."""
     if from_json:
@@ -345,7 +402,7 @@ def report(res):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--part", choices=["real", "kappa", "mc", "batch", "network", "all"], default="all")
+    ap.add_argument("--part", choices=["real", "kappa", "mc", "batch", "stations", "network", "all"], default="all")
     ap.add_argument("--out", default="bench_monitor_network", help="output folder of the network part")
     ap.add_argument("--from-json", help="network part: format this monitor.json instead of running")
     ap.add_argument("--json")
@@ -364,6 +421,12 @@ def main():
         print(report({"mc": res["mc"]}), flush=True)
     if a.part in ("batch", "all"):
         res["batch"] = part_batch(stations=a.stations, n=a.days, chunk=a.chunk, hector_sample=a.hector_sample)
+    if a.part == "stations":
+        res["stations"] = part_stations(stations=a.stations, hector_sample=a.hector_sample)
+        print(json.dumps(res["stations"], indent=1))
+        if a.json:
+            Path(a.json).write_text(json.dumps(res, indent=1))
+        return
     if a.part == "network":
         res["network"] = part_network(Path(a.out), a.from_json)
         print(network_report(res["network"]))

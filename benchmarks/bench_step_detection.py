@@ -132,32 +132,41 @@ def _done(path):
     return {json.loads(line)["station"] for line in path.read_text().splitlines() if line.strip()}
 
 
-def part_jaxnav(out, start, stop, detect=8):
+def part_jaxnav(out, start, stop, detect=8, block=100):
+    """jaxnav's detection on stations start..stop, ``block`` stations per :func:`jaxnav.monitoring.fit_stations`
+    call (batched fits); ``wall_s`` of a station is its block's wall time over the block's size."""
     path = out / "jaxnav.jsonl"
     done = _done(path)
     todo = [i for i in range(start, stop) if i not in done]
     t_all = time.perf_counter()
-    for k, i in enumerate(todo):
-        t, y, days, sizes = station(i)
+    for b0 in range(0, len(todo), block):
+        ids = todo[b0 : b0 + block]
+        sims = [station(i) for i in ids]
         t0 = time.perf_counter()
-        fit = mon.fit_station(as_series(t, y, f"S{i:03d}"), detect=detect, random_walk=False)
-        wall = time.perf_counter() - t0
-        found = np.round((np.asarray(fit.steps) - t[0]) / DAY).astype(int).tolist()
-        rec = dict(
-            station=i,
-            true_days=days.tolist(),
-            true_sizes=sizes.tolist(),
-            found_days=found,
-            found_up_mm=(fit.step_sizes[2] / MM).tolist(),
-            gains=np.asarray(fit.step_gains).tolist(),
-            wall_s=wall,
-            load=os.getloadavg()[0],
+        fits = mon.fit_stations(
+            [as_series(t, y, f"S{i:03d}") for i, (t, y, _, _) in zip(ids, sims)],
+            detect=detect,
+            random_walk=False,
+            progress=True,
         )
+        wall = (time.perf_counter() - t0) / len(ids)
         with path.open("a") as f:
-            f.write(json.dumps(rec) + "\n")
+            for i, (t, _y, days, sizes), fit in zip(ids, sims, fits):
+                found = np.round((np.asarray(fit.steps) - t[0]) / DAY).astype(int).tolist()
+                rec = dict(
+                    station=i,
+                    true_days=days.tolist(),
+                    true_sizes=sizes.tolist(),
+                    found_days=found,
+                    found_up_mm=(fit.step_sizes[2] / MM).tolist(),
+                    gains=np.asarray(fit.step_gains).tolist(),
+                    wall_s=wall,
+                    load=os.getloadavg()[0],
+                )
+                f.write(json.dumps(rec) + "\n")
         el = time.perf_counter() - t_all
         print(
-            f"jaxnav {k + 1}/{len(todo)} station {i}: {len(days)} true, found {len(found)} in {wall:.1f} s "
+            f"jaxnav stations {ids[0]}-{ids[-1]} ({b0 + len(ids)}/{len(todo)}): {wall:.1f} s per station "
             f"(elapsed {el:.0f} s, load {os.getloadavg()[0]:.1f})",
             flush=True,
         )

@@ -1,7 +1,8 @@
 """Station velocities with coloured noise on daily files (``jaxnav monitor FILES``).
 
 :func:`run_monitor_velocities` reads each file, screens outliers, fits the trajectory model with
-white + power-law (+ random-walk) noise by maximum likelihood (:func:`jaxnav.monitoring.fit_station`),
+white + power-law (+ random-walk) noise by maximum likelihood (:func:`jaxnav.monitoring.fit_stations`,
+all stations' fits batched),
 writes ``monitor.json`` (labelled east/north/up values, mm and mm/yr) and one figure per station.
 With ``s1=True`` the S1 adaptive-filter analysis of the same files
 (:func:`jaxnav.experiments.run_monitor_files`) runs as well, into ``OUT/s1``, and its per-station
@@ -18,7 +19,7 @@ import numpy as np
 
 from jaxnav import io
 from jaxnav.io import explicit_step
-from jaxnav.monitoring import COMPONENTS, fit_station
+from jaxnav.monitoring import COMPONENTS, fit_stations
 from jaxnav.units import DAY
 
 UNITS = {
@@ -146,19 +147,10 @@ def run_monitor_velocities(
             f"warning: known step of {u['station']} at {u['date']} ({u['kind']}, {u['given_by']}): no such "
             "station among the files; not used"
         )
-    for k, (f, s) in enumerate(zip(files, series)):
-        _log.info(
-            "station %d/%d %s: %d days, fitting trajectory model and %s noise (%s)",
-            k + 1,
-            len(files),
-            s.station,
-            int(np.size(s.t)),
-            "white + power-law" + (" + random-walk" if random_walk else ""),
-            "REML" if reml else "ML",
-        )
-        t_st = time.perf_counter()
-        from jaxnav.monitoring._station import _day_index
+    from jaxnav.monitoring._station import _day_index
 
+    uses, outsides = [], []
+    for s in series:
         first, last = float(s.t[0]), float(s.t[0]) + float(_day_index(s)[-1]) * DAY  # the daily grid's ends
         use, outside = [], []
         for k in io.merge_known_steps(by_station.get(s.station, [])):
@@ -171,25 +163,36 @@ def run_monitor_velocities(
                 )
             else:
                 outside.append(k)
-        fit = fit_station(
-            s,
-            steps=[k.epoch for k in use],
-            detect=detect,
-            kappa=kappa,
-            random_walk=random_walk,
-            reml=reml,
-            screen=screen,
-            sigma_factor=sigma_factor,
-            residual_k=residual_k,
-            periods_days=periods_days,
-            warn_steps=True,
-            poly_degree=poly_degree,
-            postseismic=[(k.epoch, form, tau) for k in use for form, tau in k.postseismic],
-        )
+        uses.append(use)
+        outsides.append(outside)
+    _log.info(
+        "fitting %d station(s): trajectory model and %s noise (%s), batched",
+        len(series),
+        "white + power-law" + (" + random-walk" if random_walk else ""),
+        "REML" if reml else "ML",
+    )
+    fits = fit_stations(
+        series,
+        steps=[[k.epoch for k in use] for use in uses],
+        postseismic=[[(k.epoch, form, tau) for k in use for form, tau in k.postseismic] for use in uses],
+        progress=True,
+        detect=detect,
+        kappa=kappa,
+        random_walk=random_walk,
+        reml=reml,
+        screen=screen,
+        sigma_factor=sigma_factor,
+        residual_k=residual_k,
+        periods_days=periods_days,
+        warn_steps=True,
+        poly_degree=poly_degree,
+    )
+    for f, s, fit, use, outside in zip(files, series, fits, uses, outsides):
+        span = f"{iso_date(fit.grid.t[0])} .. {iso_date(fit.grid.t[fit.grid.n_days - 1])}"
         for k in outside:
             fit.warnings.append(
-                f"known step at {iso_date(k.epoch)} ({k.kind}, {k.origin}) is outside the series "
-                f"({iso_date(first)} .. {iso_date(last)}): not in the model"
+                f"known step at {iso_date(k.epoch)} ({k.kind}, {k.origin}) is outside the series ({span}): "
+                "not in the model"
             )
         fig = out / f"{s.station}_fit.png"
         plot_station_fit(fit, fig)
@@ -202,7 +205,6 @@ def run_monitor_velocities(
         rec["latitude_deg"] = float(np.degrees(np.median(llh[ok, 0]))) if ok.any() else None
         rec["longitude_deg"] = float(np.degrees(np.median(llh[ok, 1]))) if ok.any() else None
         rec["first_day"], rec["last_day"] = iso_date(fit.grid.t[0]), iso_date(fit.grid.t[fit.grid.n_days - 1])
-        _log.debug("station %s fitted in %.1f s", s.station, time.perf_counter() - t_st)
         result["stations"][s.station] = rec
         for comp in COMPONENTS:
             n = rec["noise"][comp]

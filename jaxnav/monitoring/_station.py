@@ -317,7 +317,7 @@ def fit_series_batch(
 MAX_DEFAULT_WORKERS = 4
 
 
-def _threaded_chunks(fn, args, chunk: int, workers, progress: bool):
+def _threaded_chunks(fn, args, chunk: int, workers, progress: bool, *, label="station fits", unit="series"):
     """``fn`` (vmapped over the leading axis of every array in ``args``) over chunks of ``chunk`` rows, the
     last padded with copies of its first row (one compiled size), in ``workers`` threads; concatenated."""
     import os
@@ -340,7 +340,7 @@ def _threaded_chunks(fn, args, chunk: int, workers, progress: bool):
             part = [jnp.concatenate([p, jnp.broadcast_to(p[:1], (chunk - n, *p.shape[1:]))]) for p in part]
         return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], jax.block_until_ready(fn(*part)))
 
-    with Progress(B, "station fits", unit="series", enabled=progress) as bar, ThreadPoolExecutor(workers) as ex:
+    with Progress(B, label, unit=unit, enabled=progress) as bar, ThreadPoolExecutor(workers) as ex:
         futures = [ex.submit(run, s) for s in starts]
         outs = []
         for s, f in zip(starts, futures):
@@ -549,6 +549,100 @@ def step_penalty(grid: DailyGrid) -> float:
     return 4.0 * float(np.log(max(n, 2)))
 
 
+def _step_statistic(theta, y, valid, A, cand, r, W, d_grid, *, estimate_kappa, random_walk):
+    """Twice the log-likelihood gain of a step at each candidate epoch, summed over the components.
+
+    Per component the data and the design ``A`` are whitened by the component's noise
+    (:func:`jaxnav.monitoring._trajectory._whitened`); with X~ = Q R and e~ the whitened residual
+    (orthogonal to Q), the gain of the whitened step column s~ is (s~^T e~)^2 / (|s~|^2 - |Q^T s~|^2),
+    whose sums :func:`jaxnav.monitoring._trajectory.step_scan_sums` accumulates in a second pass.
+    Candidates the design already spans (a known step's epoch) get 0.
+
+    Args:
+      theta: (3, 4) noise parameters.  y: (3, T) m (0 where not valid).  valid: (3, T) bool.
+      A: (T, k) design.  cand: (M,) int candidate epochs (grid indices).
+    Returns:
+      (M,) statistic.
+    """
+    from jaxnav.monitoring._trajectory import _whitened, step_scan_sums
+
+    def one(th, yy, vv):
+        yt, Xt, _ = _whitened(th, yy, vv, A, r, W, d_grid, estimate_kappa, random_walk)
+        Q, _ = jnp.linalg.qr(Xt)
+        e = yt - Q @ (Q.T @ yt)
+        num, full, QtS = step_scan_sums(th, vv, cand, e, Q, r, W, d_grid, estimate_kappa, random_walk)
+        den = full - jnp.sum(QtS * QtS, axis=0)
+        ok = den > 1e-9 * jnp.maximum(full, 1e-300)
+        return jnp.where(ok, num * num / jnp.where(ok, den, 1.0), 0.0)
+
+    return jnp.sum(jax.vmap(one)(theta, y, valid), axis=0)
+
+
+class ScanRequest(NamedTuple):
+    """One station's step scan as the station driver asks for it (host side, numpy).
+
+    Attributes:
+      theta: (3, 4) fitted noise parameters.  y: (3, T) m (0 where not valid).  valid: (3, T) bool.
+      A: (T, k) design.  cand: (M,) int candidate epochs.  spec: :class:`NoiseSpec`.
+      random_walk: as in the fit.
+    """
+
+    theta: np.ndarray
+    y: np.ndarray
+    valid: np.ndarray
+    A: np.ndarray
+    cand: np.ndarray
+    spec: Any
+    random_walk: bool
+
+
+@partial(jax.jit, static_argnames=("estimate_kappa", "random_walk", "batched"))
+def _scan_compiled(theta, y, valid, A, cand, r, W, d_grid, *, estimate_kappa, random_walk, batched):
+    """:func:`_step_statistic` compiled, for one station or (``batched``) over a leading station axis."""
+    fn = partial(_step_statistic, estimate_kappa=estimate_kappa, random_walk=random_walk)
+    return (
+        jax.vmap(fn)(theta, y, valid, A, cand, r, W, d_grid) if batched else fn(theta, y, valid, A, cand, r, W, d_grid)
+    )
+
+
+def _scan_request(req: ScanRequest):
+    """The statistic (M,) of one scan request."""
+    sp = req.spec
+    return np.asarray(
+        _scan_compiled(
+            *(jnp.asarray(a) for a in (req.theta, req.y, req.valid, req.A, req.cand, sp.r, sp.W, sp.d_grid)),
+            estimate_kappa=sp.kappa is None,
+            random_walk=req.random_walk,
+            batched=False,
+        )
+    )
+
+
+def _detect_steps_program(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_days: int = 7, threshold=None):
+    """:func:`detect_steps` as a generator: yields a :class:`ScanRequest` per scan, is sent its statistic."""
+    n = grid.n_days
+    cand = np.arange(30, n - 30, spacing_days)
+    if cand.size == 0:
+        return None
+    base = dict(
+        theta=np.asarray(fit.theta),
+        y=np.where(grid.valid, grid.y, 0.0).T,
+        valid=np.asarray(grid.valid).T,
+        A=np.asarray(A),
+        spec=spec,
+        random_walk=random_walk,
+    )
+    stat = yield ScanRequest(cand=cand, **base)
+    j = int(np.argmax(stat))
+    if spacing_days > 1:  # refine to the day around the best candidate
+        cand = np.arange(max(30, cand[j] - spacing_days + 1), min(n - 30, cand[j] + spacing_days))
+        stat = yield ScanRequest(cand=cand, **base)
+        j = int(np.argmax(stat))
+    if stat[j] < (step_penalty(grid) if threshold is None else threshold):
+        return None
+    return float(grid.t[cand[j]]), float(stat[j])
+
+
 def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_days: int = 7, threshold=None):
     """Best single step epoch under the fitted noise (likelihood-ratio scan), or None.
 
@@ -566,53 +660,11 @@ def detect_steps(grid: DailyGrid, A, fit, spec, *, random_walk: bool, spacing_da
     Returns:
       (epoch s since J2000, statistic) or None.
     """
-    from jaxnav.monitoring._trajectory import _whitened
-
-    n = grid.n_days
-    cand = np.arange(30, n - 30, spacing_days)
-    if cand.size == 0:
-        return None
-    T = len(grid.t)
-    est = spec.kappa is None
-    per_comp = []
-    for c in range(3):
-        args = (
-            jnp.asarray(fit.theta[c]),
-            jnp.asarray(np.where(grid.valid[:, c], grid.y[:, c], 0.0)),
-            jnp.asarray(grid.valid[:, c]),
+    return _run_program(
+        _detect_steps_program(
+            grid, A, fit, spec, random_walk=random_walk, spacing_days=spacing_days, threshold=threshold
         )
-        per_comp.append(args)
-
-    def scan(cand):
-        S = (np.arange(T)[:, None] >= cand[None, :]).astype(float)  # (T, M)
-        stat = np.zeros(cand.size)
-        for th, yy, v in per_comp:
-            allA = jnp.asarray(np.concatenate([A, S], axis=1))
-            yt, At, _ = _whitened(
-                th, yy, v, allA, jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid), est, random_walk
-            )
-            yt, At = np.asarray(yt), np.asarray(At)
-            X, Sw = At[:, : A.shape[1]], At[:, A.shape[1] :]
-            Q, _ = np.linalg.qr(X)
-            e = yt - Q @ (Q.T @ yt)
-            Sp = Sw - Q @ (Q.T @ Sw)
-            num = (Sp.T @ e) ** 2
-            den = np.sum(Sp * Sp, axis=0)
-            # a candidate the design already holds (a known step's epoch) adds nothing
-            stat += np.where(
-                den > 1e-9 * np.maximum(np.sum(Sw * Sw, axis=0), 1e-300), num / np.maximum(den, 1e-300), 0.0
-            )
-        return stat
-
-    stat = scan(cand)
-    j = int(np.argmax(stat))
-    if spacing_days > 1:  # refine to the day around the best candidate
-        fine = np.arange(max(30, cand[j] - spacing_days + 1), min(n - 30, cand[j] + spacing_days))
-        cand, stat = fine, scan(fine)
-        j = int(np.argmax(stat))
-    if stat[j] < (step_penalty(grid) if threshold is None else threshold):
-        return None
-    return float(grid.t[cand[j]]), float(stat[j])
+    )
 
 
 def period_amplitudes(fit: StationFit) -> dict:
@@ -662,6 +714,226 @@ def residual_trend(grid: DailyGrid, A, beta):
     return out
 
 
+class FitRequest(NamedTuple):
+    """One station's noise fit as the station driver asks for it (host side, numpy).
+
+    Attributes:
+      y: (3, T) m (any value where not valid).  valid: (3, T) bool.  A: (T, k) design.
+      spec: :class:`NoiseSpec`.  scale: (3,) m, data scales (start and box).
+      random_walk, reml, iterations: as in :func:`fit_component`.
+    """
+
+    y: np.ndarray
+    valid: np.ndarray
+    A: np.ndarray
+    spec: Any
+    scale: np.ndarray
+    random_walk: bool
+    reml: bool
+    iterations: int
+
+
+def _fit_request(req: FitRequest):
+    """The fit of one request: :func:`fit_series_batch` over its three components (numpy leaves)."""
+    fit = fit_series_batch(
+        req.y,
+        req.valid,
+        req.A,
+        req.spec,
+        req.scale,
+        random_walk=req.random_walk,
+        reml=req.reml,
+        iterations=req.iterations,
+    )
+    return jax.tree_util.tree_map(np.asarray, fit)
+
+
+def _run_request(req):
+    """The answer to one request of a station program: a fit or a scan statistic."""
+    return _fit_request(req) if isinstance(req, FitRequest) else _scan_request(req)
+
+
+def _run_program(program):
+    """Drive one station program (:func:`_fit_station_program`, :func:`_detect_steps_program`) to its end."""
+    try:
+        req = next(program)
+        while True:
+            req = program.send(_run_request(req))
+    except StopIteration as stop:
+        return stop.value
+
+
+@partial(jax.jit, static_argnames=("estimate_kappa", "random_walk", "reml", "iterations"))
+def _fit_stations_vmapped(y, valid, A, r, W, d_grid, theta0, lo, hi, *, estimate_kappa, random_walk, reml, iterations):
+    """:func:`fit_component` over stations (leading axis: y, valid, theta0, lo, hi (S, 3, ...); A, r, W,
+    d_grid (S, ...)) and, inside, over each station's three components (sharing its design and noise)."""
+
+    def station(yy, vv, AA, rr, WW, dd, t0, l, h):
+        comp = partial(
+            fit_component, estimate_kappa=estimate_kappa, random_walk=random_walk, reml=reml, iterations=iterations
+        )
+        return jax.vmap(comp, in_axes=(0, 0, None, None, None, None, 0, 0, 0))(yy, vv, AA, rr, WW, dd, t0, l, h)
+
+    return jax.vmap(station)(y, valid, A, r, W, d_grid, theta0, lo, hi)
+
+
+def _request_key(req):
+    """Requests with equal keys share one compiled batched call (array shapes and static choices)."""
+    sp = req.spec
+    shapes = (np.shape(sp.r), np.shape(sp.W), sp.kappa is None, req.random_walk)
+    if isinstance(req, ScanRequest):
+        return (req.y.shape, req.A.shape, req.cand.shape) + shapes
+    return (req.y.shape, req.A.shape, req.reml, req.iterations) + shapes
+
+
+#: series per compiled chunk of :func:`fit_stations` for ten-year daily series (about 1 GB of reverse
+#: pass per chunk); shorter series get proportionally more stations per chunk
+CHUNK_SERIES_DAYS = 250 * 3653
+
+
+def _fit_requests(reqs, *, chunk, workers, progress, label):
+    """Fits of requests that share a :func:`_request_key`, in chunked ``vmap`` calls; a list of numpy
+    :class:`NoiseFit` (leading axis the three components), one per request."""
+    r0 = reqs[0]
+    th0, lo, hi = zip(*(start_and_box(q.scale, kappa=q.spec.kappa, random_walk=q.random_walk) for q in reqs))
+    args = (
+        jnp.asarray(np.stack([np.where(q.valid, q.y, 0.0) for q in reqs])),
+        jnp.asarray(np.stack([q.valid for q in reqs])),
+        jnp.asarray(np.stack([q.A for q in reqs])),
+        jnp.asarray(np.stack([q.spec.r for q in reqs])),
+        jnp.asarray(np.stack([q.spec.W for q in reqs])),
+        jnp.asarray(np.stack([q.spec.d_grid for q in reqs]).astype(float)),
+        jnp.asarray(np.stack(th0)),
+        jnp.asarray(np.stack(lo)),
+        jnp.asarray(np.stack(hi)),
+    )
+    n = len(reqs)
+    per_chunk = int(chunk) if chunk else max(1, CHUNK_SERIES_DAYS // (3 * r0.y.shape[1]))
+    per_chunk = min(per_chunk, 1 << (n - 1).bit_length())  # a small batch: padded to a power of two, not to a chunk
+    fn = partial(
+        _fit_stations_vmapped,
+        estimate_kappa=r0.spec.kappa is None,
+        random_walk=r0.random_walk,
+        reml=r0.reml,
+        iterations=r0.iterations,
+    )
+    fits = _threaded_chunks(fn, args, per_chunk, workers, progress, label=label, unit="station")
+    fits = jax.tree_util.tree_map(np.asarray, fits)
+    return [jax.tree_util.tree_map(lambda x, i=i: x[i], fits) for i in range(n)]
+
+
+def _scan_requests(reqs, *, chunk, progress, label):
+    """Statistics of scan requests that share a :func:`_request_key`, in chunked ``vmap`` calls (one
+    host thread: the scans run one after the other); a list of (M,) arrays, one per request."""
+    r0 = reqs[0]
+    sp = [q.spec for q in reqs]
+    args = (
+        jnp.asarray(np.stack([q.theta for q in reqs])),
+        jnp.asarray(np.stack([q.y for q in reqs])),
+        jnp.asarray(np.stack([q.valid for q in reqs])),
+        jnp.asarray(np.stack([q.A for q in reqs])),
+        jnp.asarray(np.stack([q.cand for q in reqs])),
+        jnp.asarray(np.stack([p.r for p in sp])),
+        jnp.asarray(np.stack([p.W for p in sp])),
+        jnp.asarray(np.stack([p.d_grid for p in sp]).astype(float)),
+    )
+    n = len(reqs)
+    per_chunk = int(chunk) if chunk else max(1, CHUNK_SERIES_DAYS // (3 * r0.y.shape[1]))
+    per_chunk = min(per_chunk, 1 << (n - 1).bit_length())
+    fn = partial(_scan_compiled, estimate_kappa=r0.spec.kappa is None, random_walk=r0.random_walk, batched=True)
+    stats = np.asarray(_threaded_chunks(fn, args, per_chunk, 1, progress, label=label, unit="station"))
+    return list(stats)
+
+
+def fit_stations(series, *, steps=None, postseismic=None, chunk=None, workers=None, progress: bool = False, **options):
+    """:func:`fit_station` of many stations, their noise fits and step scans batched: the same
+    results, one compiled ``vmap`` per step of the stations' programs instead of one station after the other.
+
+    Every station runs :func:`fit_station`'s program (screening, design, noise fit, step scans,
+    refit after a detected step); each time, the driver collects what all unfinished stations ask
+    for, a noise fit (:class:`FitRequest`) or a step scan (:class:`ScanRequest`, coarse or fine),
+    runs the requests of equal shapes (grid length, design size, candidates, noise terms) in chunked
+    ``vmap`` calls (fits in ``workers`` host threads, scans in one), and sends each station its
+    answer. A station that gains a step asks for a refit; the others finish. A network with 0-4
+    steps per station needs 3 steps (fit, coarse scan, fine scan) per step found plus 3, each
+    cheaper than the last as stations finish.
+
+    Args:
+      series: sequence of :class:`jaxnav.io.DailySeries`.
+      steps: None, or one sequence of known step epochs (s since J2000) per station.
+      postseismic: None, or one sequence of post-seismic terms per station (as in :func:`fit_station`).
+      chunk: stations per compiled call (default: about 250 ten-year series' worth, ~1 GB per thread).
+      workers: host threads (default: the CPU count, at most :data:`MAX_DEFAULT_WORKERS`).
+      progress: progress lines per batched call (:class:`jaxnav._progress.Progress`).
+      options: the further keyword options of :func:`fit_station`, the same for every station.
+    Returns:
+      list of :class:`StationFit`, in the order of ``series``; equal to :func:`fit_station` of each
+      station up to rounding (the batch runs the same program in another vmap nesting).
+    Raises:
+      ValueError: as :func:`fit_station` (the station named), or ``steps``/``postseismic`` of another
+        length than ``series``.
+    """
+    import logging
+    import time
+
+    series = list(series)
+    n = len(series)
+    per = {}
+    for name, val in (("steps", steps), ("postseismic", postseismic)):
+        per[name] = [()] * n if val is None else list(val)
+        if len(per[name]) != n:
+            raise ValueError(f"{name}: {len(per[name])} entries for {n} stations (one per station, or None)")
+    programs = [
+        _fit_station_program(s, steps=st, postseismic=ps, **options)
+        for s, st, ps in zip(series, per["steps"], per["postseismic"])
+    ]
+    log = logging.getLogger(__name__)
+    done = [None] * n
+    pending = {}
+
+    def advance(i, answer=None, first=False):
+        try:
+            pending[i] = next(programs[i]) if first else programs[i].send(answer)
+        except StopIteration as stop:
+            done[i] = stop.value
+            pending.pop(i, None)
+
+    for i in range(n):  # screening and the first design
+        advance(i, first=True)
+    rounds = 0
+    while pending:
+        rounds += 1
+        t0 = time.perf_counter()
+        groups = {}
+        for i, req in pending.items():
+            groups.setdefault((type(req).__name__, _request_key(req)), []).append(i)
+        answers = {}
+        n_fit = n_scan = 0
+        for (kind, _), idx in groups.items():
+            reqs = [pending[i] for i in idx]
+            if kind == "FitRequest":
+                n_fit += len(idx)
+                got = _fit_requests(
+                    reqs, chunk=chunk, workers=workers, progress=progress, label=f"station fits, step {rounds}"
+                )
+            else:
+                n_scan += len(idx)
+                got = _scan_requests(reqs, chunk=chunk, progress=progress, label=f"step scans, step {rounds}")
+            answers.update(zip(idx, got))
+        for i in list(pending):
+            advance(i, answers[i])
+        log.info(
+            "step %d: %d station fit(s) and %d step scan(s) in %.1f s (%d compiled shape(s)); %d station(s) continue",
+            rounds,
+            n_fit,
+            n_scan,
+            time.perf_counter() - t0,
+            len(groups),
+            len(pending),
+        )
+    return done
+
+
 def fit_station(
     series,
     *,
@@ -707,6 +979,29 @@ def fit_station(
       ValueError: a series shorter than 60 days or with fewer valid days than model terms + 10, a
         step or post-seismic epoch outside the series.
     """
+    return _run_program(_fit_station_program(**locals()))
+
+
+def _fit_station_program(
+    series,
+    *,
+    steps=(),
+    detect: int = 0,
+    kappa=-1.0,
+    random_walk: bool = True,
+    reml: bool = True,
+    screen: bool = True,
+    sigma_factor: float = 5.0,
+    residual_k: float = 5.0,
+    per_decade: float = 1.5,
+    iterations: int = 40,
+    periods_days=(),
+    warn_steps=None,
+    poly_degree: int = 1,
+    postseismic=(),
+):
+    """:func:`fit_station` as a generator: yields a :class:`FitRequest` per noise fit, is sent the fit
+    (:class:`NoiseFit`, numpy, leading axis the three components), returns the :class:`StationFit`."""
     steps = [float(s) for s in np.atleast_1d(np.asarray(steps, float))]
     post = []
     for item in postseismic:
@@ -788,10 +1083,7 @@ def fit_station(
             k = grid.valid[:, c]
             b = np.linalg.lstsq(A[k], grid.y[k, c], rcond=None)[0]
             scale.append(max(float(robust_scale(grid.y[k, c] - A[k] @ b)), 1e-6))
-        fit = fit_series_batch(
-            grid.y.T, grid.valid.T, A, spec, np.array(scale), random_walk=random_walk, reml=reml, iterations=iterations
-        )
-        fit = jax.tree_util.tree_map(np.asarray, fit)
+        fit = yield FitRequest(grid.y.T, grid.valid.T, A, spec, np.array(scale), random_walk, reml, iterations)
         if estimate_tau and tau_passes < 3:  # profile each estimated tau under the noise just fitted
             tau_passes += 1
             moved = False
@@ -809,7 +1101,7 @@ def fit_station(
         limit = detect <= sum(s == "detected" for s in sources)
         if limit and not (detect > 0 if warn_steps is None else warn_steps):
             break
-        found = detect_steps(grid, A, fit, spec, random_walk=random_walk)
+        found = yield from _detect_steps_program(grid, A, fit, spec, random_walk=random_walk)
         if found is None:
             break
         if limit:

@@ -227,17 +227,13 @@ def noise_state_space(theta, r, W, d_grid, *, estimate_kappa: bool = False, rand
     return jf.LinearGaussian(F=jnp.diag(f), H=jnp.ones((1, n)), Q=jnp.diag(q), R=sw[None, None] ** 2), jnp.diag(p0)
 
 
-def _whitened(theta, y, valid, A, r, W, d_grid, estimate_kappa, random_walk):
-    """Kalman-filter whitening of [y, A] by the noise model: (y~ (T,), A~ (T, k), sum ln S).
+def _whitening_step(f, q, sw):
+    """One epoch of the whitening filter (:func:`_whitened`): ((X, P), (z, ok)) -> ((X, P), (w, ln S)).
 
-    The classic Kalman filter (S0 eqs. (4)-(9)) written for this model: a scalar measurement
-    with H = 1^T and a diagonal transition, so that the gain is K = P_pred 1 / S and one
-    covariance recursion serves the data and every design column (their means are the columns of
-    an (n, 1 + k) matrix). Equal to :func:`jaxnav.filters.kalman_filter` on
-    :func:`noise_state_space` (tests/monitoring/test_trajectory.py) at about 1/20 of its cost.
+    X (n, c) holds the filtered states of c columns (data or design) that share the covariance P
+    (n, n); z (c,) their values at the epoch, ok whether the epoch is valid; w (c,) the whitened
+    values (0 where not valid).
     """
-    f, q, p0, sw = _noise_arrays(theta, r, W, d_grid, estimate_kappa, random_walk)
-    Z = jnp.concatenate([jnp.where(valid, y, 0.0)[:, None], jnp.where(valid[:, None], A, 0.0)], axis=1)
     Qd = jnp.diag(q)
     ff = f[:, None] * f[None, :]
 
@@ -255,6 +251,53 @@ def _whitened(theta, y, valid, A, r, W, d_grid, estimate_kappa, random_walk):
         Pn = jnp.where(ok, 0.5 * (Pn + Pn.T), Pp)
         return (Xn, Pn), (jnp.where(ok, v / jnp.sqrt(S), 0.0), jnp.where(ok, jnp.log(S), 0.0))
 
+    return step
+
+
+def step_scan_sums(theta, valid, cand, e, Q, r, W, d_grid, estimate_kappa, random_walk):
+    """Sums over epochs of the whitened step columns, for the step statistic of :func:`jaxnav.monitoring.detect_steps`.
+
+    The step column of candidate j (1 from epoch cand_j on) is whitened on the fly, epoch by epoch,
+    with the same filter as :func:`_whitened` (one covariance recursion for all M columns), and only
+    its products with the whitened residual e~ and the orthonormal basis Q of the whitened design
+    are kept: memory O(M k) instead of the (T, M) whitened columns.
+
+    Args:
+      theta: (4,) noise parameters.  valid: (T,) bool.  cand: (M,) int epoch indices.
+      e: (T,) whitened residual (orthogonal to Q).  Q: (T, k) orthonormal basis of the whitened design.
+    Returns:
+      (s~^T e~ (M,), |s~|^2 (M,), Q^T s~ (k, M)).
+    """
+    f, q, p0, sw = _noise_arrays(theta, r, W, d_grid, estimate_kappa, random_walk)
+    step = _whitening_step(f, q, sw)
+    M, k = cand.shape[0], Q.shape[1]
+
+    def body(carry, inp):
+        state, num, full, QtS = carry
+        t, ok, et, Qt = inp
+        z = jnp.where(ok, (t >= cand).astype(e.dtype), 0.0)
+        state, (w, _) = step(state, (z, ok))
+        return (state, num + w * et, full + w * w, QtS + Qt[:, None] * w[None, :]), None
+
+    T = valid.shape[0]
+    zero = jnp.zeros(M, e.dtype)
+    init = ((jnp.zeros((f.shape[0], M), e.dtype), jnp.diag(p0)), zero, zero, jnp.zeros((k, M), e.dtype))
+    (_, num, full, QtS), _ = jax.lax.scan(body, init, (jnp.arange(T), valid, e, Q), unroll=UNROLL)
+    return num, full, QtS
+
+
+def _whitened(theta, y, valid, A, r, W, d_grid, estimate_kappa, random_walk):
+    """Kalman-filter whitening of [y, A] by the noise model: (y~ (T,), A~ (T, k), sum ln S).
+
+    The classic Kalman filter (S0 eqs. (4)-(9)) written for this model: a scalar measurement
+    with H = 1^T and a diagonal transition, so that the gain is K = P_pred 1 / S and one
+    covariance recursion serves the data and every design column (their means are the columns of
+    an (n, 1 + k) matrix). Equal to :func:`jaxnav.filters.kalman_filter` on
+    :func:`noise_state_space` (tests/monitoring/test_trajectory.py) at about 1/20 of its cost.
+    """
+    f, q, p0, sw = _noise_arrays(theta, r, W, d_grid, estimate_kappa, random_walk)
+    Z = jnp.concatenate([jnp.where(valid, y, 0.0)[:, None], jnp.where(valid[:, None], A, 0.0)], axis=1)
+    step = _whitening_step(f, q, sw)
     X0 = jnp.zeros((f.shape[0], Z.shape[1]), Z.dtype)
     _, (V, lS) = jax.lax.scan(step, (X0, jnp.diag(p0)), (Z, valid), unroll=UNROLL)
     return V[:, 0], V[:, 1:], jnp.sum(lS)

@@ -250,3 +250,93 @@ def test_chunked_threaded_batch_equals_one_vmap():
     np.testing.assert_allclose(chunked.beta, one.beta, rtol=1e-9, atol=1e-15)
     with pytest.raises(ValueError, match="chunk must be a positive"):
         mon.fit_series_batch(*args, random_walk=False, chunk=0)
+
+
+def _station_series(seed, n, step_day=None, step_mm=0.0):
+    keys = jax.random.split(jax.random.PRNGKey(seed), 3)
+    y = np.stack(
+        [
+            np.asarray(
+                mon.simulate_powerlaw_series(
+                    k, n, rate=2 * MM_PER_YEAR, sigma_white=2 * MM, amplitude=4 * MM / YEAR**0.25, gap_fraction=0.05
+                )[0]
+            )
+            for k in keys
+        ],
+        axis=1,
+    )
+    if step_day is not None:
+        y[step_day:] += step_mm * MM
+    t = np.arange(n) * DAY + 10 * YEAR
+    return io.DailySeries(
+        station=f"S{seed}",
+        path="simulated",
+        fmt="tenv3",
+        t=t,
+        year=2000.0 + t / YEAR,
+        enu=y,
+        cov=np.tile(np.eye(3) * (2 * MM) ** 2, (n, 1, 1)),
+        origin=np.zeros(3),
+        llh=np.full((n, 3), np.nan),
+        n_masked=int(np.isnan(y).sum()),
+    )
+
+
+def test_fit_stations_equals_fit_station_of_each_station():
+    """fit_stations (the fits of all stations batched per round, stations advanced in threads) gives
+    fit_station's results station by station: two grid lengths (two compiled shapes), a known step,
+    a detected one (a second round for that station only), a station with nothing to add."""
+    ser = [
+        _station_series(1, 700, step_day=350, step_mm=15.0),  # detected
+        _station_series(2, 700),
+        _station_series(3, 450, step_day=200, step_mm=10.0),  # given
+    ]
+    given = [[], [], [float(ser[2].t[200])]]
+    opts = dict(detect=2, random_walk=False, iterations=20)
+    one = [mon.fit_station(s, steps=st, **opts) for s, st in zip(ser, given)]
+    many = mon.fit_stations(ser, steps=given, chunk=2, workers=2, **opts)
+    assert [len(f.steps) for f in many] == [len(f.steps) for f in one] == [1, 0, 1]
+    assert many[0].step_sources == ("detected",) and many[2].step_sources == ("given",)
+    for a, b in zip(one, many):
+        assert a.station == b.station and a.warnings == b.warnings
+        np.testing.assert_allclose(b.steps, a.steps, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(b.velocity, a.velocity, rtol=0, atol=1e-6 * np.max(a.velocity_sigma))
+        np.testing.assert_allclose(b.velocity_sigma, a.velocity_sigma, rtol=1e-6)
+        np.testing.assert_allclose(b.step_sizes, a.step_sizes, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="steps: 1 entries for 3 stations"):
+        mon.fit_stations(ser, steps=[[]], **opts)
+
+
+def test_step_statistic_equals_the_projection_of_whitened_step_columns():
+    """The scan's statistic from on-the-fly sums (s~^T e~, |s~|^2, Q^T s~) equals the textbook one:
+    whiten [design, step columns] with the fitted noise, project out the design by QR in NumPy,
+    (s~_p^T e~)^2 / |s~_p|^2 per candidate, summed over components; a known step's epoch scores 0."""
+    from jaxnav.monitoring._station import _step_statistic
+
+    n = 400
+    ser = _station_series(5, n, step_day=150, step_mm=6.0)
+    y = np.where(np.isfinite(ser.enu), ser.enu, 0.0).T
+    valid = np.isfinite(ser.enu).T
+    t = np.asarray(ser.t)
+    A = mon.design_matrix(t, steps=[t[300]], t_ref=t[n // 2]).A  # a known step at day 300
+    spec = mon.noise_spec(n)
+    theta = np.array([[np.log(2 * MM), np.log(4 * MM * DAY**0.25 / YEAR**0.25), np.log(1e-4 * MM), -1.0]] * 3)
+    theta[1, 0] += 0.3
+    cand = np.array([30, 100, 149, 150, 151, 250, 300, 369])
+    got = np.asarray(
+        _step_statistic(theta, y, valid, A, cand, spec.r, spec.W, spec.d_grid, estimate_kappa=False, random_walk=True)
+    )
+    S = (np.arange(n)[:, None] >= cand[None, :]).astype(float)
+    want = np.zeros(cand.size)
+    for c in range(3):
+        yt, At, _ = _whitened(
+            theta[c], y[c], valid[c], np.concatenate([A, S], 1), spec.r, spec.W, spec.d_grid, False, True
+        )
+        yt, At = np.asarray(yt), np.asarray(At)
+        Q, _ = np.linalg.qr(At[:, : A.shape[1]])
+        e = yt - Q @ (Q.T @ yt)
+        Sp = At[:, A.shape[1] :] - Q @ (Q.T @ At[:, A.shape[1] :])
+        den = np.sum(Sp * Sp, axis=0)
+        want += np.where(den > 1e-9 * np.sum(At[:, A.shape[1] :] ** 2, axis=0), (Sp.T @ e) ** 2 / den, 0.0)
+    assert want[3] > 30 and want[6] == 0.0  # the planted step stands out; the known one adds nothing
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
