@@ -12,9 +12,10 @@ from functools import cache, partial
 from typing import Any, NamedTuple
 
 import jax
+import jax.numpy as jnp
 
 from jaxnav.filters._model import LinearGaussian
-from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, filter_step, scan_setup
+from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, filter_step, prepare_inputs, scan_setup
 
 
 def kalman_filter(
@@ -128,6 +129,12 @@ def filter_call_of(means, covs, pred_means, pred_covs):
     return call if all(r() is a for r, a in zip(refs, (means, covs, pred_means, pred_covs))) else None
 
 
+#: (prepared primals, tangents) -> (loglik, its tangent) of the classic filter by one backward
+#: smoothing pass; set by :mod:`jaxnav.filters._loglik` when the package is imported (it builds on
+#: this module's filter, so this module cannot import it)
+LOGLIK_JVP = None
+
+
 @cache
 def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
     """:func:`_kalman_filter` for one static configuration, with a ``vmap`` rule and exact derivatives.
@@ -177,7 +184,21 @@ def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
     def run(*args):
         return batched(*args)
 
-    run.defjvp(lambda primals, tangents: jax.jvp(plain, primals, tangents))
+    @run.defjvp
+    def run_jvp(primals, tangents):
+        out, t_out = jax.jvp(plain, primals, tangents)
+        model, x0, P0, zs, inflation, estimator, mask = primals
+        if inflation is None and estimator is None and check_finite and not allow_float32:
+            # The classic filter's log-likelihood tangent from one filter and one backward pass
+            # behind a vmap rule (:func:`jaxnav.filters._loglik.loglik_jvp`): under vmap(grad) a
+            # clean batch keeps one covariance recursion, and the per-sequence tangents of the
+            # other outputs are dropped by jit when only the log-likelihood is differentiated.
+            prepared = prepare_inputs(model, x0, P0, zs, mask, (), allow_float32)[:5]
+            _, t_ll = LOGLIK_JVP(prepared, tangents[:4])
+            t_out = t_out._replace(loglik=jnp.asarray(t_ll, out.loglik.dtype))
+            out = batched(*primals)
+        return out, t_out
+
     return run
 
 

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav._numerics import cho_solve, cholesky, masked_measurement, mm
+from jaxnav.filters import _kalman
 from jaxnav.filters._kalman import kalman_filter
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._step import prepare_inputs
@@ -71,11 +72,32 @@ def _loglik(model, x0, P0, zs, mask):
 
 @_loglik.defjvp
 def _loglik_jvp(primals, tangents):
-    dmodel, dx0, dP0, dzs, _ = tangents
+    return loglik_jvp(primals, tangents[:4])
+
+
+def loglik_jvp(primals, tangents):
+    """(log-likelihood, its tangent) from the gradients of :func:`loglik_and_gradients` (module docstring).
+
+    Args:
+      primals: (model, x0, P0, zs, mask) as prepared by ``prepare_inputs``.
+      tangents: (dmodel, dx0, dP0, dzs), shaped like the primals (symbolic zeros allowed).
+    The gradients are a primal computation behind a ``vmap`` rule (one covariance recursion for a
+    batch with a shared model, P0 and finite pattern); the tangent is linear in them, so reverse
+    mode transposes only the final sum.
+    """
+    dmodel, dx0, dP0, dzs = tangents
     value, grads = _gradients(*primals)
     pairs = [(grads.x0, dx0), (grads.P0, dP0), (grads.zs, dzs)]
-    pairs += [(g, t) for g, t in zip(grads.model, dmodel) if g is not None]
-    return value, sum(jnp.sum(g * t) for g, t in pairs)
+    pairs += [(g, t) for g, t in zip(grads.model, dmodel) if g is not None and t is not None]
+    return value, sum(jnp.sum(g * jnp.asarray(t, g.dtype)) for g, t in pairs if not _is_zero(t))
+
+
+def _is_zero(t):
+    """A tangent that carries nothing (float0: the primal is an integer or bool array)."""
+    return getattr(t, "dtype", None) == jax.dtypes.float0
+
+
+_kalman.LOGLIK_JVP = loglik_jvp  # the classic filter's loglik tangent (see :func:`jaxnav.filters._kalman._batch_aware`)
 
 
 @jax.custom_batching.custom_vmap
