@@ -862,8 +862,10 @@ def fit_stations(series, *, steps=None, postseismic=None, chunk=None, workers=No
       series: sequence of :class:`jaxnav.io.DailySeries`.
       steps: None, or one sequence of known step epochs (s since J2000) per station.
       postseismic: None, or one sequence of post-seismic terms per station (as in :func:`fit_station`).
-      chunk: stations per compiled call (default: about 250 ten-year series' worth, ~1 GB per thread).
-      workers: host threads (default: the CPU count, at most :data:`MAX_DEFAULT_WORKERS`).
+      chunk: stations per compiled call (default: about 250 ten-year series' worth).
+      workers: host threads for the fits (default: the CPU count, at most :data:`MAX_DEFAULT_WORKERS`).
+        Memory grows faster than the thread count: 100 ten-year stations with the random walk peak at
+        2.1 GB with one thread and 5.7 GB with two (1.23x faster; benchmarks/RESULTS.md).
       progress: progress lines per batched call (:class:`jaxnav._progress.Progress`).
       options: the further keyword options of :func:`fit_station`, the same for every station.
     Returns:
