@@ -10,6 +10,7 @@ components); :func:`fit_series_batch` runs it over a batch of series in one ``vm
 from __future__ import annotations
 
 import datetime as _dt
+import inspect
 import math
 from functools import partial
 from typing import Any, NamedTuple
@@ -885,10 +886,11 @@ def fit_stations(series, *, steps=None, postseismic=None, chunk=None, workers=No
         per[name] = [()] * n if val is None else list(val)
         if len(per[name]) != n:
             raise ValueError(f"{name}: {len(per[name])} entries for {n} stations (one per station, or None)")
-    programs = [
-        _fit_station_program(s, steps=st, postseismic=ps, **options)
-        for s, st, ps in zip(series, per["steps"], per["postseismic"])
-    ]
+    programs = []
+    for s, st, ps in zip(series, per["steps"], per["postseismic"]):
+        bound = inspect.signature(fit_station).bind(s, steps=st, postseismic=ps, **options)  # TypeError: unknown option
+        bound.apply_defaults()
+        programs.append(_fit_station_program(bound.arguments))
     log = logging.getLogger(__name__)
     done = [None] * n
     pending = {}
@@ -981,29 +983,38 @@ def fit_station(
       ValueError: a series shorter than 60 days or with fewer valid days than model terms + 10, a
         step or post-seismic epoch outside the series.
     """
-    return _run_program(_fit_station_program(**locals()))
+    return _run_program(_fit_station_program(locals()))
 
 
-def _fit_station_program(
-    series,
-    *,
-    steps=(),
-    detect: int = 0,
-    kappa=-1.0,
-    random_walk: bool = True,
-    reml: bool = True,
-    screen: bool = True,
-    sigma_factor: float = 5.0,
-    residual_k: float = 5.0,
-    per_decade: float = 1.5,
-    iterations: int = 40,
-    periods_days=(),
-    warn_steps=None,
-    poly_degree: int = 1,
-    postseismic=(),
-):
-    """:func:`fit_station` as a generator: yields a :class:`FitRequest` per noise fit, is sent the fit
-    (:class:`NoiseFit`, numpy, leading axis the three components), returns the :class:`StationFit`."""
+#: :func:`fit_station`'s parameter names, in order
+_FIT_STATION_ARGS = tuple(inspect.signature(fit_station).parameters)
+
+
+def _fit_station_program(args: dict):
+    """:func:`fit_station` as a generator: yields a :class:`FitRequest` per noise fit and a
+    :class:`ScanRequest` per step scan, is sent the answer (a :class:`NoiseFit` with numpy leaves and
+    a leading axis of three components, or the scan statistic), returns the :class:`StationFit`.
+
+    Args:
+      args: :func:`fit_station`'s arguments by name, every one given (``inspect.BoundArguments.arguments``).
+    """
+    (
+        series,
+        steps,
+        detect,
+        kappa,
+        random_walk,
+        reml,
+        screen,
+        sigma_factor,
+        residual_k,
+        per_decade,
+        iterations,
+        periods_days,
+        warn_steps,
+        poly_degree,
+        postseismic,
+    ) = (args[name] for name in _FIT_STATION_ARGS)
     steps = [float(s) for s in np.atleast_1d(np.asarray(steps, float))]
     post = []
     for item in postseismic:

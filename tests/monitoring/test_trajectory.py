@@ -201,18 +201,7 @@ def test_step_detection_finds_a_planted_step_and_nothing_in_pure_noise():
     from types import SimpleNamespace
 
     n = 1024
-    keys = jax.random.split(jax.random.PRNGKey(7), 3)
-    y = np.stack(
-        [
-            np.asarray(
-                mon.simulate_powerlaw_series(
-                    k, n, rate=2 * MM_PER_YEAR, sigma_white=2 * MM, amplitude=4 * MM / YEAR**0.25, gap_fraction=0.05
-                )[0]
-            )
-            for k in keys
-        ],
-        axis=1,
-    )
+    y = _station_series(7, n).enu
     t = np.arange(n) * DAY + 10 * YEAR
     spec = mon.noise_spec(n)
     A = mon.design_matrix(t).A
@@ -305,6 +294,8 @@ def test_fit_stations_equals_fit_station_of_each_station():
         np.testing.assert_allclose(b.step_sizes, a.step_sizes, rtol=0, atol=1e-9)
     with pytest.raises(ValueError, match="steps: 1 entries for 3 stations"):
         mon.fit_stations(ser, steps=[[]], **opts)
+    with pytest.raises(TypeError, match="detekt"):
+        mon.fit_stations(ser, detekt=2)
 
 
 def test_step_statistic_equals_the_projection_of_whitened_step_columns():
