@@ -28,6 +28,11 @@ A script, not a test. It runs in the environment with the bench extra (hector-ts
    ``bench_step_detection.station``), then MIDAS beside each fit (:func:`jaxnav.monitoring.midas_check`);
    wall time with compilation, peak memory, steps found; Hector's ``findoffsets`` (three
    components) on ``--hector-sample`` of the same stations for the time per station.
+   ``--part refits``: the same stations (``--stations``, 100 suggested) fitted twice, each in its own
+   process: with the library's warm-started refits after a detected step, and with cold refits (40
+   iterations from the default start, the behaviour before the warm start, switched on in the
+   child process by replacing :func:`jaxnav.monitoring._station.refit_iterations` and the start);
+   wall times, steps found, and the differences of rates, rate sigmas and ln L_R.
 5. **Network** (``--part network``): ``jaxnav monitor`` with its defaults on the five real series
    (``run_monitor_velocities``, the function behind the command: white + flicker + random walk,
    REML, up to 5 steps detected per station by the BIC criterion), writing ``monitor.json``,
@@ -279,6 +284,75 @@ def part_stations(stations=1000, hector_sample=0, match_days=30):
     )
 
 
+def _refits_child(stations, mode, path):
+    """One side of ``--part refits`` (in its own process): fit_stations with warm or cold refits."""
+    from bench_step_detection import as_series, match, station
+
+    from jaxnav.cli.monitor import DETECT_DEFAULT
+    from jaxnav.monitoring import _station
+
+    if mode == "cold":
+        start = _station._start
+        _station.refit_iterations = lambda iterations: iterations
+        _station._start = lambda scale, spec, random_walk, theta0=None: start(scale, spec, random_walk, None)
+        _station._hinv_start = lambda hinv0, shape: np.full(tuple(shape) + (4, 4), np.nan)
+    sims = [station(i) for i in range(stations)]
+    ser = [as_series(t, y, f"S{i:04d}") for i, (t, y, _, _) in enumerate(sims)]
+    t0 = time.perf_counter()
+    fits = mon.fit_stations(ser, detect=DETECT_DEFAULT)
+    wall = time.perf_counter() - t0
+    hit = false = 0
+    for (t, _, days, _), f in zip(sims, fits):
+        h, nf = match(days, np.round((np.asarray(f.steps) - t[0]) / DAY).astype(int), 30)
+        hit, false = hit + len(h), false + nf
+    out = dict(
+        mode=mode,
+        wall_s=wall,
+        steps_found=hit,
+        false_steps=false,
+        n_steps=[len(f.steps) for f in fits],
+        rate=[f.velocity.tolist() for f in fits],
+        rate_sigma=[f.velocity_sigma.tolist() for f in fits],
+        loglik_reml=[np.asarray(f.noise.loglik_reml).tolist() for f in fits],
+    )
+    Path(path).write_text(json.dumps(out))
+
+
+def part_refits(stations=100):
+    """Warm against cold refits on the same stations, each side in a fresh process (no shared compile cache)."""
+    import subprocess
+    import tempfile
+
+    res = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for mode in ("cold", "warm"):
+            path = Path(tmp) / f"{mode}.json"
+            cmd = [sys.executable, __file__, "--part", "refits-child", "--refit-mode", mode]
+            subprocess.run(cmd + ["--stations", str(stations), "--json", str(path)], check=True)
+            res[mode] = json.loads(path.read_text())
+    c, w = res["cold"], res["warm"]
+    same = np.array(c["n_steps"]) == np.array(w["n_steps"])
+    sel = same & (np.array(c["n_steps"]) > 0)
+    sc = np.array(c["rate_sigma"])[sel]
+    d = np.abs(np.array(w["rate"])[sel] - np.array(c["rate"])[sel]) / sc
+    ratio = np.array(w["rate_sigma"])[sel] / sc
+    dll = np.array(w["loglik_reml"])[sel] - np.array(c["loglik_reml"])[sel]
+    return dict(
+        stations=stations,
+        cold_s=c["wall_s"],
+        warm_s=w["wall_s"],
+        steps_found=(c["steps_found"], w["steps_found"]),
+        false_steps=(c["false_steps"], w["false_steps"]),
+        stations_same_steps=int(same.sum()),
+        components_compared=int(d.size),
+        rate_diff_over_sigma_max=float(d.max()) if d.size else 0.0,
+        rate_diff_over_sigma_median=float(np.median(d)) if d.size else 0.0,
+        sigma_ratio_range=(float(ratio.min()), float(ratio.max())) if d.size else (1.0, 1.0),
+        sigma_within_1pct=int(np.sum(np.abs(ratio - 1) < 0.01)),
+        loglik_reml_diff_range=(float(dll.min()), float(dll.max())) if d.size else (0.0, 0.0),
+    )
+
+
 def part_network(out, from_json=None):
     """jaxnav monitor (defaults) on the five real series; the monitor.json it wrote."""
     if from_json:
@@ -402,7 +476,9 @@ def report(res):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--part", choices=["real", "kappa", "mc", "batch", "stations", "network", "all"], default="all")
+    parts = ["real", "kappa", "mc", "batch", "stations", "refits", "refits-child", "network", "all"]
+    ap.add_argument("--part", choices=parts, default="all")
+    ap.add_argument("--refit-mode", choices=["cold", "warm"], help="refits-child: the side to run")
     ap.add_argument("--out", default="bench_monitor_network", help="output folder of the network part")
     ap.add_argument("--from-json", help="network part: format this monitor.json instead of running")
     ap.add_argument("--json")
@@ -422,8 +498,20 @@ def main():
     if a.part in ("batch", "all"):
         res["batch"] = part_batch(stations=a.stations, n=a.days, chunk=a.chunk, hector_sample=a.hector_sample)
     if a.part == "stations":
+        import logging
+
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")  # fit_stations' step lines
         res["stations"] = part_stations(stations=a.stations, hector_sample=a.hector_sample)
         print(json.dumps(res["stations"], indent=1))
+        if a.json:
+            Path(a.json).write_text(json.dumps(res, indent=1))
+        return
+    if a.part == "refits-child":
+        _refits_child(a.stations, a.refit_mode, a.json)
+        return
+    if a.part == "refits":
+        res["refits"] = part_refits(stations=a.stations)
+        print(json.dumps(res["refits"], indent=1))
         if a.json:
             Path(a.json).write_text(json.dumps(res, indent=1))
         return

@@ -178,6 +178,8 @@ class NoiseFit(NamedTuple):
       grad_norm: largest |d ln L_R / d theta| over the free parameters not at a bound.
       iterations: accepted BFGS steps.
       residuals: (T,) y - A beta (NaN where masked), m.
+      hinv: (4, 4) the BFGS inverse-Hessian approximation of -ln L_R at the end (identity rows
+        and columns for fixed parameters): with ``theta``, a warm start of a refit.
     """
 
     theta: jax.Array
@@ -194,6 +196,7 @@ class NoiseFit(NamedTuple):
     grad_norm: jax.Array
     iterations: jax.Array
     residuals: jax.Array
+    hinv: jax.Array
 
 
 def _noise_arrays(theta, r, W, d_grid, estimate_kappa: bool, random_walk: bool):
@@ -344,6 +347,7 @@ def fit_component(
     random_walk=True,
     reml=True,
     iterations: int = 40,
+    hinv0=None,
 ) -> NoiseFit:
     """Maximum-likelihood noise parameters and GLS trajectory of one component (vmappable).
 
@@ -358,6 +362,8 @@ def fit_component(
         :func:`component_loglik`).  theta0, lo, hi: (4,) start and box (a parameter with lo == hi
         is fixed).
       estimate_kappa, random_walk, reml: static model choices.  iterations: BFGS steps (static).
+      hinv0: None, or (4, 4) the starting inverse Hessian (a previous fit's ``hinv``, with
+        ``theta0`` its ``theta``: a warm start); ignored where not finite or not positive definite.
     Returns:
       :class:`NoiseFit`.
     """
@@ -404,6 +410,11 @@ def fit_component(
     u0 = theta0[idx]
     f0, g0 = vg(u0, theta0)
     H0 = jnp.eye(p) / jnp.maximum(jnp.max(jnp.abs(g0)), 1.0)  # first step at most 1 in ln sigma
+    if hinv0 is not None:
+        Hw = jnp.asarray(hinv0)[idx[:, None], idx[None, :]]
+        Hw = 0.5 * (Hw + Hw.T)
+        pd = jnp.all(jnp.isfinite(Hw)) & jnp.all(jnp.linalg.eigvalsh(jnp.where(jnp.isfinite(Hw), Hw, 0.0)) > 0)
+        H0 = jnp.where(pd, Hw, H0)
     (u, f, g, Hinv, _, n_acc), _ = jax.lax.scan(
         step, (u0, f0, g0, H0, jnp.asarray(1.0), jnp.zeros((), jnp.int32)), None, length=iterations
     )
@@ -435,6 +446,7 @@ def fit_component(
         grad_norm=jnp.max(jnp.where(inner, jnp.abs(gfull), 0.0)),
         iterations=n_acc,
         residuals=res,
+        hinv=Hfull,
     )
 
 

@@ -271,6 +271,40 @@ def _station_series(seed, n, step_day=None, step_mm=0.0):
     )
 
 
+def test_warm_started_refit_reaches_the_cold_fit_in_half_the_iterations():
+    """A refit after a step is added, started from the fit without it (theta and the BFGS inverse
+    Hessian, as fit_station's refits are), reaches the cold 40-iteration fit within
+    refit_iterations(40) = 20 steps: ln L_R, rates and rate sigmas equal; white + flicker + random walk."""
+    from jaxnav.monitoring._station import refit_iterations
+    from jaxnav.monitoring._trajectory import robust_scale
+
+    n, day = 900, 500
+    ser = _station_series(11, n, step_day=day, step_mm=12.0)
+    grid = mon.daily_grid(ser, np.isfinite(ser.enu))
+    spec = mon.noise_spec(grid.n_days)
+    A0 = mon.design_matrix(grid.t).A
+    A1 = mon.design_matrix(grid.t, steps=[float(grid.t[day])]).A
+
+    def scale(A):
+        out = []
+        for c in range(3):
+            k = grid.valid[:, c]
+            b = np.linalg.lstsq(A[k], grid.y[k, c], rcond=None)[0]
+            out.append(float(robust_scale(grid.y[k, c] - A[k] @ b)))
+        return np.array(out)
+
+    y, v = grid.y.T, grid.valid.T
+    before = mon.fit_series_batch(y, v, A0, spec, scale(A0))
+    cold = mon.fit_series_batch(y, v, A1, spec, scale(A1))
+    k = refit_iterations(40)
+    warm = mon.fit_series_batch(y, v, A1, spec, scale(A1), iterations=k, theta0=before.theta, hinv0=before.hinv)
+    assert k == 20 and np.all(np.asarray(cold.grad_norm) < 1e-2)
+    np.testing.assert_allclose(warm.loglik_reml, cold.loglik_reml, rtol=0, atol=1e-3)
+    rate_sigma = np.sqrt(np.asarray(cold.beta_cov)[:, 1, 1])
+    np.testing.assert_allclose(warm.beta[:, 1], cold.beta[:, 1], rtol=0, atol=0.01 * rate_sigma.min())
+    np.testing.assert_allclose(np.sqrt(np.asarray(warm.beta_cov)[:, 1, 1]), rate_sigma, rtol=0.01)
+
+
 def test_fit_stations_equals_fit_station_of_each_station():
     """fit_stations (the fits of all stations batched per round, stations advanced in threads) gives
     fit_station's results station by station: two grid lengths (two compiled shapes), a known step,
@@ -286,6 +320,7 @@ def test_fit_stations_equals_fit_station_of_each_station():
     many = mon.fit_stations(ser, steps=given, chunk=2, workers=2, **opts)
     assert [len(f.steps) for f in many] == [len(f.steps) for f in one] == [1, 0, 1]
     assert many[0].step_sources == ("detected",) and many[2].step_sources == ("given",)
+    assert np.all(many[0].noise.iterations <= 10)  # the refit after the detected step: warm, 20 // 2 steps
     for a, b in zip(one, many):
         assert a.station == b.station and a.warnings == b.warnings
         np.testing.assert_allclose(b.steps, a.steps, rtol=0, atol=1e-6)
