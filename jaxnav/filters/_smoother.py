@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from functools import cache, partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -19,12 +19,13 @@ class SmootherResult(NamedTuple):
       means: (T, n) smoothed means.  covs: (T, n, n) smoothed covariances.
       gains: (T, n, n) smoother gains C_t (zero at the last epoch).
       status: int32 flags (SMOOTHER_FAILED if a predicted covariance was not PD).
+      A field left out of ``save`` is None.
     """
 
-    means: Any
-    covs: Any
-    gains: Any
-    status: Any
+    means: jax.Array | None
+    covs: jax.Array | None
+    gains: jax.Array | None
+    status: jax.Array
 
 
 SMOOTHER_OUTPUTS = ("means", "covs", "gains")
@@ -126,10 +127,10 @@ def vmap_sharing(fn, in_axes, args, fields):
 class _Moments(NamedTuple):
     """The four filter outputs the smoother reads."""
 
-    means: Any
-    covs: Any
-    pred_means: Any
-    pred_covs: Any
+    means: jax.Array
+    covs: jax.Array
+    pred_means: jax.Array
+    pred_covs: jax.Array
 
 
 @partial(jax.jit, static_argnames=("unroll", "save"))

@@ -25,7 +25,7 @@ theta_PROJ = -theta and s_PROJ = 1 + m.
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -55,8 +55,8 @@ class Similarity2D(NamedTuple):
     """
 
     t: jax.Array
-    theta: Any
-    m: Any
+    theta: jax.Array
+    m: jax.Array
 
 
 class HelmertFit(NamedTuple):
@@ -73,9 +73,9 @@ class HelmertFit(NamedTuple):
       rms: (d,) RMS of the residuals per axis, m.
     """
 
-    params: Any
+    params: Helmert7 | Similarity2D
     residuals: jax.Array
-    sigma0: Any
+    sigma0: jax.Array
     cov: jax.Array
     std: jax.Array
     dof: int

@@ -9,7 +9,7 @@ good enough, else from the GNSS course once moving, or a given heading / attitud
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -41,9 +41,9 @@ class Alignment(NamedTuple):
       n_static: number of IMU samples in the static window.
     """
 
-    nav0: Any
-    gyro_bias: Any
-    att0: Any
+    nav0: NavState
+    gyro_bias: np.ndarray
+    att0: np.ndarray
     t_static: float
     t_heading: float
     course: float

@@ -6,8 +6,9 @@ rate and transport rate, all in the local-level east-north-up navigation frame.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 
 from jaxnav.geodesy import WGS84, Ellipsoid, meridian_radius, prime_vertical_radius
@@ -22,12 +23,12 @@ class EarthParams(NamedTuple):
       w_in_n: (3,) w_ie_n + w_en_n.  g_n: (3,) normal gravity vector in n, m/s^2.
     """
 
-    R_M: Any
-    R_N: Any
-    w_ie_n: Any
-    w_en_n: Any
-    w_in_n: Any
-    g_n: Any
+    R_M: jax.Array
+    R_N: jax.Array
+    w_ie_n: jax.Array
+    w_en_n: jax.Array
+    w_in_n: jax.Array
+    g_n: jax.Array
 
 
 def normal_gravity(lat, h, ellipsoid: Ellipsoid = WGS84):

@@ -17,7 +17,7 @@ errors inside +-3 sigma (expected 99.73 % per component for a consistent Gaussia
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -43,15 +43,15 @@ class TrajectoryErrors(NamedTuple):
       at: "solution" or "reference": whose epochs were scored.
     """
 
-    t: Any
-    pos_enu: Any
-    vel_enu: Any
-    att: Any
-    sig_pos_enu: Any
-    sig_vel: Any
-    sig_att: Any
-    nees_pos: Any
-    window: Any
+    t: np.ndarray
+    pos_enu: np.ndarray
+    vel_enu: np.ndarray
+    att: np.ndarray
+    sig_pos_enu: np.ndarray
+    sig_vel: np.ndarray
+    sig_att: np.ndarray
+    nees_pos: np.ndarray
+    window: np.ndarray
     n_dropped: int
     at: str
 
@@ -446,26 +446,26 @@ class OutageScores(NamedTuple):
       figure: path of a figure of the scores, or None.  n_nonfinite_nav: NaN count in the navigation outputs.
     """
 
-    windows: Any
-    n_ref: Any
-    fwd_max: Any
-    sm_max: Any
-    fwd_rms: Any
-    sm_rms: Any
+    windows: np.ndarray
+    n_ref: np.ndarray
+    fwd_max: np.ndarray
+    sm_max: np.ndarray
+    fwd_rms: np.ndarray
+    sm_rms: np.ndarray
     fwd_rms_all: float
     sm_rms_all: float
     fwd_max_mean: float
     sm_max_mean: float
     fwd_rms_outside: float
-    t: Any
-    err_fwd: Any
-    err_sm: Any
-    withheld: Any
+    t: np.ndarray
+    err_fwd: np.ndarray
+    err_sm: np.ndarray
+    withheld: np.ndarray
     runtime_s: float
     figure: str | None
     n_nonfinite_nav: int
-    sig_fwd: Any = None
-    sig_sm: Any = None
+    sig_fwd: np.ndarray | None = None
+    sig_sm: np.ndarray | None = None
 
 
 def score_outages(

@@ -10,7 +10,7 @@ the same step backwards in time exactly as S3 class 3 prescribes.
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -217,9 +217,9 @@ def mech_step(
 class _Prefix(NamedTuple):
     """Per-sample prefixes inside each block, for states between navigation-frame updates."""
 
-    B: Any  # 4 x (nb, M) components: body rotation from the block start to the end of sample j
-    S: Any  # 4 x 3 x (nb, M): the moments of :class:`_Block` over samples 1..j
-    tau: Any  # (nb, M) time from the block start to the end of sample j
+    B: jax.Array  # 4 x (nb, M) components: body rotation from the block start to the end of sample j
+    S: jax.Array  # 4 x 3 x (nb, M): the moments of :class:`_Block` over samples 1..j
+    tau: jax.Array  # (nb, M) time from the block start to the end of sample j
 
 
 def _prefix_products(r):

@@ -54,8 +54,8 @@ class TimeOffset(NamedTuple):
     n_epochs: int
     turn_rate_rms: float
     at_bound: bool
-    lags_s: Any
-    corr_curve: Any
+    lags_s: np.ndarray
+    corr_curve: np.ndarray
     source: str
 
 
@@ -285,8 +285,8 @@ class LikelihoodOffset(NamedTuple):
     offset_s: float
     sigma_s: float
     at_edge: bool
-    fine_s: Any
-    fine_loglik: Any
+    fine_s: np.ndarray
+    fine_loglik: np.ndarray
 
 
 def likelihood_time_offset(

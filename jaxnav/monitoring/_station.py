@@ -13,7 +13,7 @@ import datetime as _dt
 import inspect
 import math
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -24,6 +24,8 @@ from jaxnav.monitoring._trajectory import (
     AT_BOUND_TOL,
     COMPONENTS,
     POSTSEISMIC_FORMS,
+    NoiseFit,
+    NoiseSpec,
     component_loglik,
     design_matrix,
     fit_component,
@@ -417,7 +419,7 @@ class StationFit(NamedTuple):
     kappa: jax.Array
     powerlaw_amplitude: jax.Array
     random_walk: jax.Array
-    noise: Any
+    noise: NoiseFit
     model: str
     warnings: list
     screening: Screening
@@ -616,7 +618,7 @@ class ScanRequest(NamedTuple):
     valid: np.ndarray
     A: np.ndarray
     cand: np.ndarray
-    spec: Any
+    spec: NoiseSpec
     random_walk: bool
 
 
@@ -752,7 +754,7 @@ class FitRequest(NamedTuple):
     y: np.ndarray
     valid: np.ndarray
     A: np.ndarray
-    spec: Any
+    spec: NoiseSpec
     scale: np.ndarray
     random_walk: bool
     reml: bool

@@ -38,10 +38,10 @@ class _LS(NamedTuple):
 
 
 class _State(NamedTuple):
-    u: Any  # flat accepted point
+    u: jax.Array  # flat accepted point
     f: jax.Array  # its loss (inf before the first evaluation)
-    g: Any  # its gradient
-    d: Any  # search direction
+    g: jax.Array  # its gradient
+    d: jax.Array  # search direction
     slope: jax.Array  # g . d at the accepted point
     ls: _LS
     lbfgs: Any

@@ -28,12 +28,12 @@ class TuneResult(NamedTuple):
       compile_time_s: of which compilation.
     """
 
-    params: Any
+    params: dict
     loss: jax.Array
     losses: jax.Array
-    path: Any
+    path: dict
     grad_norm: jax.Array
-    n_evals: Any
+    n_evals: int
     wall_time_s: float = 0.0
     compile_time_s: float = 0.0
 
