@@ -16,7 +16,7 @@ observation beyond its 6 parameters), otherwise the plane (at least 3 points).
 from __future__ import annotations
 
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -42,9 +42,9 @@ class HeightAnomalyModel(NamedTuple):
 
     coef: jax.Array
     center: jax.Array
-    scale: Any
+    scale: jax.Array
     residuals: jax.Array | None = None
-    sigma0: Any = None
+    sigma0: jax.Array | None = None
     cov: jax.Array | None = None
     dof: int = 0
 

@@ -30,7 +30,7 @@ import csv
 import datetime as _dt
 import math
 import pathlib
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -72,8 +72,8 @@ class Levelling(NamedTuple):
     """Levelled normal heights. Attributes: path; point (P,) names; height (P,) m."""
 
     path: str
-    point: Any
-    height: Any
+    point: np.ndarray
+    height: np.ndarray
 
 
 class ControlPoints(NamedTuple):

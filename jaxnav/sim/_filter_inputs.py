@@ -12,7 +12,7 @@ from typing import Any, NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.ins import ImuNoise, gnss_measurements
+from jaxnav.ins import ImuNoise, NavState, gnss_measurements
 from jaxnav.ins.integration import PVMeasurements
 
 
@@ -39,7 +39,7 @@ class LCInputs(NamedTuple):
         ``gnss.pos_sigma`` m and ``gnss.vel_sigma`` m/s; outage epochs masked).
     """
 
-    nav0: Any
+    nav0: NavState
     t_imu: Any
     dtheta: Any
     dv: Any

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -39,6 +39,7 @@ from jaxnav.geodesy import (
     WGS84,
     Ellipsoid,
     HeightAnomalyModel,
+    HelmertFit,
     Similarity2D,
     gauss_kruger,
     height_anomaly,
@@ -498,8 +499,8 @@ class ConnectionModels(NamedTuple):
         control point has a normal height).
     """
 
-    transform: Any
-    anomaly: Any
+    transform: HelmertFit | None
+    anomaly: HeightAnomalyModel | None
 
 
 def connection_models(

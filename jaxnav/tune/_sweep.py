@@ -41,7 +41,7 @@ class SweepResult(NamedTuple):
       n_processes: processes the devices belong to (1 without :func:`jaxnav.tune.initialize`).
     """
 
-    grid: Any
+    grid: Mapping
     values: Any
     wall_time_s: float
     compile_time_s: float
