@@ -13,13 +13,12 @@ from jaxnav._numerics import cho_solve, mm, safe_cholesky, symmetrize
 
 
 class SmootherResult(NamedTuple):
-    """RTS output, aligned with the filter's outputs.
+    """RTS output, aligned with the filter's outputs; a field left out of ``save`` is None.
 
     Attributes:
       means: (T, n) smoothed means.  covs: (T, n, n) smoothed covariances.
       gains: (T, n, n) smoother gains C_t (zero at the last epoch).
       status: int32 flags (SMOOTHER_FAILED if a predicted covariance was not PD).
-      A field left out of ``save`` is None.
     """
 
     means: jax.Array | None
