@@ -16,6 +16,12 @@ the seeds in chunks; compile time is the sweep's AOT compilation, run time is th
 configurations in one run: the per-epoch Taylor series (default), the same with the two-speed
 mechanization between fixes (``loosely_coupled(..., nav_every=10)``), and the Van Loan matrix
 exponential.
+
+``--per-seed`` instead times the cost per seed of the vmapped filter (issue "Monte Carlo at full
+speed": the INS/GNSS filter over 64 seeds at most half of 64 single runs per seed): the classic
+filter alone (Taylor series), the 64 seeds in chunks of ``--chunk`` against ``--singles`` seeds one
+per compiled call, each side compiled once (compile time apart), simulation included on both
+sides; written to its own section of RESULTS.md.
 """
 
 from __future__ import annotations
@@ -51,8 +57,12 @@ from jaxnav.ins import LCDiscretization, LCPropagation, LCSave, error_model_for,
 BEGIN, END = "<!-- BEGIN bench_s0_study -->", "<!-- END bench_s0_study -->"
 
 
-def study(exp, seeds, chunk, discretization, nav_every=1):
-    """Time the three filters over ``seeds`` seeds; returns (per-filter mean position RMS, timings)."""
+PER_SEED_BEGIN, PER_SEED_END = "<!-- BEGIN bench_s0_per_seed -->", "<!-- END bench_s0_per_seed -->"
+
+
+def study(exp, seeds, chunk, discretization, nav_every=1, classic_only=False):
+    """Time the three filters (or the classic one) over ``seeds`` seeds; returns (mean position RMS per
+    filter, timings)."""
     S = S0Setup(exp)
     states = inflated_states(exp)
     keys = jax.random.split(jax.random.PRNGKey(2019), seeds)
@@ -90,25 +100,61 @@ def study(exp, seeds, chunk, discretization, nav_every=1):
         rule = jf.switch(p["rule"], [jf.attenuated(p["b"], states=states), rules(exp)["fading"]])
         return summary(run(k, rule))
 
-    sw = tune.sweep(
-        one,
-        {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])},
-        keys,
-        chunk=chunk,
-        progress=False,
-    )
-    rms = {"classic": sw.values["rms"][0], "attenuated": sw.values["rms"][1], "fading": sw.values["rms"][2]}
+    grid = {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])}
+    if classic_only:
+        grid = {k: v[:1] for k, v in grid.items()}
+    sw = tune.sweep(one, grid, keys, chunk=chunk, progress=False)
+    names = ("classic", "attenuated", "fading")[: len(grid["b"])]
+    rms = {n: sw.values["rms"][i] for i, n in enumerate(names)}
     t = dict(compile=sw.compile_time_s, run=sw.wall_time_s - sw.compile_time_s)
     return {k: float(np.mean(v)) for k, v in rms.items()}, t
+
+
+def per_seed(exp, seeds, chunk, singles, write):
+    """Run cost per seed: ``seeds`` seeds vmapped in chunks of ``chunk`` against ``singles`` seeds one by one."""
+    load0 = loadavg()
+    _, tb = study(exp, seeds, chunk, "taylor", classic_only=True)
+    _, t1 = study(exp, singles, 1, "taylor", classic_only=True)
+    b, one = tb["run"] / seeds, t1["run"] / singles
+    print(
+        f"vmapped: {b * 1e3:.0f} ms per seed ({seeds} seeds, chunks of {chunk}; compile {tb['compile']:.1f} s); "
+        f"single: {one * 1e3:.0f} ms per seed ({singles} runs; compile {t1['compile']:.1f} s); ratio {b / one:.2f}",
+        flush=True,
+    )
+    if not write:
+        return
+    when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    lines = [
+        "## Cost per seed of the vmapped INS/GNSS filter (`benchmarks/bench_s0_study.py --per-seed`)",
+        "",
+        f"{when}, {cpu_model()}, {jax.device_count()} device(s) `{jax.devices()[0].platform}`, jax "
+        f"{_version('jax')}, jaxnav {git_revision()}; load average {load0} at the start, {loadavg()} at the end.",
+        "",
+        "The S0 experiment's classic filter (18 states, Taylor series, 2000 s: 200 000 IMU samples, 2000 GPS "
+        "fixes; navigation, covariances and factors saved; the run's simulation included), one compiled "
+        "program per side.",
+        "",
+        "| how | seeds | compile | run | per seed | against single |",
+        "|---|---|---|---|---|---|",
+        f"| vmapped, chunks of {chunk} | {seeds} | {tb['compile']:.1f} s | {tb['run']:.1f} s | {b * 1e3:.0f} ms | "
+        f"{b / one:.2f}x |",
+        f"| single (chunk 1) | {singles} | {t1['compile']:.1f} s | {t1['run']:.1f} s | {one * 1e3:.0f} ms | 1 |",
+    ]
+    write_section(pathlib.Path(__file__).with_name("RESULTS.md"), "\n".join(lines), PER_SEED_BEGIN, PER_SEED_END)
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=int, default=64)
     p.add_argument("--chunk", type=int, default=16, help="runs per compiled call (default 16)")
+    p.add_argument("--per-seed", action="store_true", help="only the cost per seed, vmapped against single runs")
+    p.add_argument("--singles", type=int, default=8, help="--per-seed: single runs timed")
     p.add_argument("--no-write", action="store_true")
     a = p.parse_args(argv)
     exp = load_experiment()
+    if a.per_seed:
+        per_seed(exp, a.seeds, a.chunk, a.singles, not a.no_write)
+        return 0
     load0 = loadavg()
     t_all = time.perf_counter()
     rows = []
