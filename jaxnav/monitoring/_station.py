@@ -23,6 +23,7 @@ from jaxnav.monitoring._midas import midas_velocity
 from jaxnav.monitoring._trajectory import (
     AT_BOUND_TOL,
     COMPONENTS,
+    GAIN_LEFT_WARN,
     POSTSEISMIC_FORMS,
     NoiseFit,
     NoiseSpec,
@@ -1266,6 +1267,12 @@ def _fit_station_program(args: dict):
                 amplitude=beta[:, i],
                 amplitude_sigma=np.sqrt(cov[:, i, i]),
             )
+        )
+    left = np.asarray(fit.gain_left)
+    for c in np.flatnonzero(left > GAIN_LEFT_WARN):
+        warnings.append(
+            f"{COMPONENTS[c]}: noise fit not converged after {int(fit.iterations[c])} accepted BFGS steps "
+            f"(a further step would raise ln L_R by {left[c]:.2g}): rates and sigmas may be off; raise iterations"
         )
     r_rate = residual_trend(grid, A, beta)
     kap = fit.theta[:, 3]

@@ -305,6 +305,21 @@ def test_warm_started_refit_reaches_the_cold_fit_in_half_the_iterations():
     np.testing.assert_allclose(np.sqrt(np.asarray(warm.beta_cov)[:, 1, 1]), rate_sigma, rtol=0.01)
 
 
+def test_a_fit_stopped_short_of_its_optimum_says_so():
+    """Two BFGS steps leave the noise fit short of its optimum: the predicted rise of ln L_R
+    (NoiseFit.gain_left) exceeds GAIN_LEFT_WARN and the station's warnings name the components; the
+    default iterations leave nothing to gain and no such warning."""
+    from jaxnav.monitoring._trajectory import GAIN_LEFT_WARN
+
+    ser = _station_series(5, 500)
+    short = mon.fit_station(ser, random_walk=False, iterations=2)
+    assert np.any(short.noise.gain_left > GAIN_LEFT_WARN)
+    flagged = [w for w in short.warnings if "not converged" in w]
+    assert len(flagged) == int(np.sum(short.noise.gain_left > GAIN_LEFT_WARN)) and flagged
+    full = mon.fit_station(ser, random_walk=False)
+    assert np.all(full.noise.gain_left < 1e-4) and not any("not converged" in w for w in full.warnings)
+
+
 def test_fit_stations_equals_fit_station_of_each_station():
     """fit_stations (the fits of all stations batched per round, stations advanced in threads) gives
     fit_station's results station by station: two grid lengths (two compiled shapes), a known step,
