@@ -213,10 +213,25 @@ def _fused_mm(A, B):
     return jnp.sum(A[..., :, :, None] * B[..., None, :, :], axis=-2)
 
 
-#: batch size from which a vmapped small product runs as XLA's batched dot (see :func:`mm`); measured
-#: on the 6-state filter with a covariance per sequence: B = 16 fused 104 vs dot 114 ms, B = 64 fused
-#: 499 vs dot 339 ms, B = 256 about equal (1.69 vs 1.70 s) on the loaded 2-core machine
-DOT_FROM_BATCH = 32
+def _loop_sum(x, axis: int):
+    """Sum of ``x`` over ``axis``, as a reduction XLA:CPU compiles into its own fused loops.
+
+    XLA:CPU (jax 0.10) hands add-reductions with 4096 or more elements to YNNPACK, whose per-call
+    cost is several times the arithmetic of the (B, n, k, n) products of small matrices under
+    ``vmap``. Its matcher takes only a reducer that is exactly ``add(a, b)``; this one is
+    ``a - (-b)``, equal to ``a + b`` in IEEE arithmetic (negation is exact), so the product stays in
+    XLA's loop fusions. Not differentiable in reverse mode (a generic reduction): only for values
+    whose derivatives are defined elsewhere (:func:`_mm`'s rule).
+    """
+    zero = jnp.zeros((), x.dtype)
+    return jax.lax.reduce(x, zero, lambda a, b: a - (-b), (axis % x.ndim,))
+
+
+def _batched_mm(A, B):
+    """One sequence's A B as :func:`_fused_mm`, summed by :func:`_loop_sum`: the kernel ``vmap`` runs."""
+    if B.ndim == 1:
+        return _loop_sum(A * B, -1)
+    return _loop_sum(A[..., :, :, None] * B[..., None, :, :], -2)
 
 
 def mm(A, B):
@@ -226,12 +241,13 @@ def mm(A, B):
     (:func:`_fused_mm`), which XLA fuses with its neighbours; on CPU each ``dot`` of tiny matrices
     is a separate kernel costing ~0.5 us, several times the arithmetic (the 6-state filter,
     T = 3600, runs about twice as fast as with ``dot``; benchmarks/bench_filters.py case (a)).
-    Under ``jax.vmap`` over :data:`DOT_FROM_BATCH` or more sequences with their own matrices,
-    the elementwise form becomes a reduction over a non-minor axis of (B, n, n, n) arrays and
-    XLA's batched dot is faster, so the product has that batching rule
-    (``jax.custom_batching.custom_vmap``: the same product, another kernel; a static choice,
-    whatever the nesting of ``jit``, ``vmap`` and ``grad``). Derivatives (``custom_jvp``) are
-    dA B + A dB in the elementwise form. A 1-D ``B`` is a vector: ``mm(A, v) = A v``.
+    Under ``jax.vmap`` with their own matrices per sequence the product runs the same elementwise
+    form summed by :func:`_loop_sum` (``jax.custom_batching.custom_vmap``: the same product,
+    another reduction; whatever the nesting of ``jit``, ``vmap`` and ``grad``): a plain sum of
+    B x 216 or more products goes to YNNPACK on XLA:CPU, and a batched ``dot`` of tiny matrices
+    is slower still (6-state filter with a covariance per sequence, T = 3600: B = 32 153 -> 87 ms,
+    B = 256 1.11 -> 0.70 s; benchmarks/bench_filters.py case (d)). Derivatives (``custom_jvp``)
+    are dA B + A dB in the elementwise form. A 1-D ``B`` is a vector: ``mm(A, v) = A v``.
     """
     if A.shape[-1] > SMALL:
         return A @ B
@@ -264,8 +280,7 @@ def _mm_batchable(A, B):
 def _mm_batched(axis_size, in_batched, A, B):
     if not any(in_batched):  # nested transforms (jacfwd of vmap) may call the rule with nothing batched
         return _fused_mm(A, B), False
-    kernel = _fused_mm if axis_size < DOT_FROM_BATCH else jnp.matmul
-    return jax.vmap(kernel, in_axes=tuple(0 if b else None for b in in_batched))(A, B), True
+    return jax.vmap(_batched_mm, in_axes=tuple(0 if b else None for b in in_batched))(A, B), True
 
 
 def mT(A):
