@@ -40,9 +40,10 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import safe_cholesky, whiten
+from jaxnav._numerics import SMALL, safe_cholesky, whiten
+from jaxnav.filters._minor import classic_filter_minor
 from jaxnav.filters._model import LinearGaussian
-from jaxnav.filters._plugins import data_independent
+from jaxnav.filters._plugins import NoEstimator, NoInflation, data_independent
 from jaxnav.filters._smoother import SMOOTHER_OUTPUTS, SmootherResult, smoothed_covs, smoother_gains, vmap_sharing
 from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, scan_setup, step_with_gain
 
@@ -463,6 +464,56 @@ def _broadcast_like(tree, like):
 _SHARED_FIELDS = ("covs", "pred_covs", "innov_covs", "factors", "noise", "valid", "n_skipped", "P_final")
 
 
+def _minor_applies(in_batched, args, check_finite) -> bool:
+    """Whether a batch runs :func:`._minor.classic_filter_minor`: the classic filter (no plug-ins), a
+    shared model of at most :data:`jaxnav._numerics.SMALL` states and components, and a covariance
+    that may differ between the sequences (P0 or the mask per sequence, or data per sequence with
+    NaN/inf masking on)."""
+    model, x0, P0, zs, inflation, estimator, mask = args
+    classic = isinstance(inflation, (type(None), NoInflation)) and isinstance(estimator, (type(None), NoEstimator))
+    shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (0, 4, 5)]))
+    per_cov = in_batched[2] or in_batched[6] or (in_batched[3] and check_finite)
+    n, m = jnp.shape(x0)[-1], jnp.shape(zs)[-1]
+    return classic and shared and bool(per_cov) and max(n, m) <= SMALL
+
+
+def minor_args(args, in_batched, like):
+    """The arguments of :func:`._minor.classic_filter_minor` from a filter's vmapped ``args``: every
+    array with the leading batch axis, cast to the dtype of ``like`` (the plain vmapped result's shape)."""
+    model, x0, P0, zs, _, _, mask = args
+    B, n = like.x_final.shape
+    dtype = like.x_final.dtype
+    T, m = jnp.shape(zs)[-2:]
+
+    def batch(a, is_batched, shape):
+        a = jnp.asarray(a)
+        return jnp.broadcast_to(a if is_batched else a[None], (B,) + shape)
+
+    if mask is None:
+        masks = jnp.ones((B, T, m), bool)
+    else:
+        mk = jnp.asarray(mask, bool)
+        if mk.ndim == (2 if in_batched[6] else 1):
+            mk = mk[..., None]
+        masks = batch(mk, in_batched[6], (T, m))
+    return (
+        LinearGaussian(*[None if a is None else jnp.asarray(a, dtype) for a in model]),
+        batch(x0, in_batched[1], (n,)).astype(dtype),
+        batch(P0, in_batched[2], (n, n)).astype(dtype),
+        batch(zs, in_batched[3], (T, m)).astype(dtype),
+        masks,
+    )
+
+
+def _per_sequence_minor(args, in_batched, like, save, unroll, check_finite, joseph):
+    """The per-sequence filters of a ``vmap`` with the classic filter, batch-minor (:mod:`._minor`),
+    shaped like the plain vmapped result ``like``."""
+    out = classic_filter_minor(
+        *minor_args(args, in_batched, like), save=save, check_finite=check_finite, joseph=joseph, unroll=unroll
+    )
+    return _broadcast_like(out, like)
+
+
 def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, check_finite, joseph):
     """The ``vmap`` rule of :func:`~jaxnav.filters.kalman_filter`: one covariance recursion when the batch allows.
 
@@ -473,7 +524,9 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
     copies, as a loop returns them); else the plain per-sequence filters. Either way the result
     equals a loop of single runs. Other batches (P0 or the model per sequence, data-dependent
     rules, ``check_finite=False``) run the plain filters under ``vmap``, which leaves the
-    covariance outputs unbatched where they do not depend on the batch.
+    covariance outputs unbatched where they do not depend on the batch; those of the classic
+    filter with a covariance per sequence and a small shared model run batch-minor
+    (:func:`._minor.classic_filter_minor`).
 
     Args:
       plain: the per-sequence filter ``(model, x0, P0, zs, inflation, estimator, mask) -> KalmanResult``.
@@ -489,6 +542,9 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
         return jax.vmap(plain, in_axes=axes)(*args)
 
     like = jax.eval_shape(per_sequence)
+    minor = _minor_applies(in_batched, args, check_finite)
+    if minor:
+        per_sequence = partial(_per_sequence_minor, args, in_batched, like, save, unroll, check_finite, joseph)
     shared_args = [in_batched[i] for i in (0, 2, 4, 5, 6)]
     if (
         check_finite
@@ -520,5 +576,8 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
             used = used[:, None]
         clean = jnp.all(jnp.isfinite(zs) | ~jnp.asarray(used, bool))
         out = jax.lax.cond(clean, shared, per_sequence)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+    if minor:
+        out = per_sequence()
         return out, jax.tree_util.tree_map(lambda _: True, out)
     return vmap_sharing(plain, axes, args, _SHARED_FIELDS)

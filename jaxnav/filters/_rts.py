@@ -9,8 +9,15 @@ from functools import cache
 import jax
 import jax.numpy as jnp
 
-from jaxnav.filters._batch import _broadcast_like, _kalman_filter_batch, _rts_smoother_batch
+from jaxnav.filters._batch import (
+    _broadcast_like,
+    _kalman_filter_batch,
+    _minor_applies,
+    _rts_smoother_batch,
+    minor_args,
+)
 from jaxnav.filters._kalman import _kalman_filter, filter_call_of
+from jaxnav.filters._minor import classic_filter_rts_minor
 from jaxnav.filters._model import LinearGaussian
 from jaxnav.filters._plugins import data_independent
 from jaxnav.filters._smoother import (
@@ -110,7 +117,8 @@ def _batch_aware_filter_rts(unroll, save, fstatic):
             and not any(jax.tree_util.tree_leaves([in_batched[0]] + [fb[i] for i in (0, 2, 4, 5, 6)]))
             and jnp.ndim(zs) == 3
         )
-        if not shareable:
+        minor = _minor_applies(fb, fargs, check_finite) and not any(jax.tree_util.tree_leaves(in_batched[0]))
+        if not (shareable or minor):
             return _rts_rule(model, moments, (in_batched[0],) + tuple(in_batched[2:]), unroll, save)
         faxes = jax.tree_util.tree_map(lambda b: 0 if b else None, fb)
 
@@ -127,14 +135,24 @@ def _batch_aware_filter_rts(unroll, save, fstatic):
                 joseph=joseph,
             )
 
-        def per_sequence():
-            def one(*a):
-                f = filt(*a)
-                return _rts_smoother(
-                    model, _Moments(f.means, f.covs, f.pred_means, f.pred_covs), unroll=unroll, save=save
-                )
+        def smooth(f):
+            return _rts_smoother(model, _Moments(f.means, f.covs, f.pred_means, f.pred_covs), unroll=unroll, save=save)
 
-            return jax.vmap(one, in_axes=faxes)(*fargs)
+        def per_sequence():
+            return jax.vmap(lambda *a: smooth(filt(*a)), in_axes=faxes)(*fargs)
+
+        like = jax.eval_shape(per_sequence)
+
+        def per_sequence_minor():  # filter and smoother of every sequence, batch-minor, in one program
+            like_f = jax.eval_shape(lambda: jax.vmap(filt, in_axes=faxes)(*fargs))
+            out = classic_filter_rts_minor(
+                *minor_args(fargs, fb, like_f), save=save, check_finite=check_finite, joseph=joseph, unroll=funroll
+            )
+            return _broadcast_like(out, like)
+
+        if not shareable:
+            out = per_sequence_minor()
+            return out, jax.tree_util.tree_map(lambda _: True, out)
 
         def shared():
             res = _kalman_filter_batch(
@@ -153,12 +171,11 @@ def _batch_aware_filter_rts(unroll, save, fstatic):
             )
             return _broadcast_like(_rts_smoother_batch(model, res, save=save, unroll=unroll), like)
 
-        like = jax.eval_shape(per_sequence)
         used = True if mask is None else jnp.asarray(mask, bool)
         if jnp.ndim(used) == 1:
             used = used[:, None]
         clean = jnp.all(jnp.isfinite(zs) | ~jnp.asarray(used, bool))
-        out = jax.lax.cond(clean, shared, per_sequence)
+        out = jax.lax.cond(clean, shared, per_sequence_minor if minor else per_sequence)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     @jax.custom_jvp
