@@ -220,8 +220,9 @@ def _loop_sum(x, axis: int):
     cost is several times the arithmetic of the (B, n, k, n) products of small matrices under
     ``vmap``. Its matcher takes only a reducer that is exactly ``add(a, b)``; this one is
     ``a - (-b)``, equal to ``a + b`` in IEEE arithmetic (negation is exact), so the product stays in
-    XLA's loop fusions. Not differentiable in reverse mode (a generic reduction): only for values
-    whose derivatives are defined elsewhere (:func:`_mm`'s rule).
+    XLA's loop fusions. JAX differentiates the generic reduction in both modes (gradients equal
+    ``jnp.sum``'s), at more cost: used for values computed under ``vmap`` whose derivatives are
+    defined elsewhere (:func:`_mm`'s rule, the log-likelihood's gradient pass).
     """
     zero = jnp.zeros((), x.dtype)
     return jax.lax.reduce(x, zero, lambda a, b: a - (-b), (axis % x.ndim,))

@@ -27,7 +27,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxnav._numerics import cho_solve, cholesky, masked_measurement, mm
+from jaxnav._numerics import _loop_sum, cho_solve, cholesky, masked_measurement, mm
 from jaxnav.filters import _kalman
 from jaxnav.filters._kalman import kalman_filter
 from jaxnav.filters._model import LinearGaussian
@@ -167,10 +167,10 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     # rank-deficient G Q G^T) is fine.
     H, R = model.H, model.R
     Hm, Rm = masked_measurement(H, R, valid)
-    vm = jnp.where(valid, zs - jnp.sum(Hm * f.pred_means[:, None, :], axis=-1), 0.0)
+    vm = jnp.where(valid, zs - _loop_sum(Hm * f.pred_means[:, None, :], -1), 0.0)
     S = Hm @ f.pred_covs @ jnp.swapaxes(Hm, -1, -2) + Rm
     SiH = cho_solve(cholesky(S), Hm)  # S^-1 H (T, m, n), zero rows where invalid
-    u = jnp.sum(SiH * vm[:, :, None], axis=1)  # H^T S^-1 v (T, n)
+    u = _loop_sum(SiH * vm[:, :, None], 1)  # H^T S^-1 v (T, n)
     K = f.pred_covs @ jnp.swapaxes(SiH, -1, -2)
     eye_n = jnp.eye(n, dtype=dtype)
     F = model.F
@@ -190,14 +190,14 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
         return (b_t, Lam_t), (b_t, Lam_t)
 
     _, (b, Lam) = jax.lax.scan(back, (jnp.zeros(n, dtype), jnp.zeros((n, n), dtype)), (u, HtSiH, W), reverse=True)
-    sm_means = f.pred_means + jnp.sum(f.pred_covs * b[:, None, :], axis=-1)
+    sm_means = f.pred_means + _loop_sum(f.pred_covs * b[:, None, :], -1)
     sm_covs = f.pred_covs - f.pred_covs @ Lam @ f.pred_covs
     A_cov = -0.5 * Lam  # A_t = A_cov + b b^T / 2
     m_prev = jnp.concatenate([x0[None], f.means[:-1]], axis=0)
     P_prev = jnp.concatenate([P0[None], f.covs[:-1]], axis=0)
     Fi = at("F")
     bF = jnp.einsum(f"tj,{Fi}jk->tk", b, F)
-    bFP = jnp.sum(bF[:, :, None] * P_prev, axis=1)  # (b^T F P_t-1)_t
+    bFP = _loop_sum(bF[:, :, None] * P_prev, 1)  # (b^T F P_t-1)_t
     gF = fold("ti,tj->ij", b, m_prev + bFP, leaf="F") + 2.0 * fold(f"tij,{Fi}jk,tkl->il", A_cov, F, P_prev, leaf="F")
     F0 = F[0] if tv["F"] else F
     gx0 = F0.T @ b[0]
@@ -217,8 +217,8 @@ def loglik_and_gradients(model: LinearGaussian, x0, P0, zs, valid):
     # measurement sensitivities over the valid components (R^-1 of the valid block, zero elsewhere)
     both = valid[:, :, None] & valid[:, None, :]
     Ri = jnp.where(both, cho_solve(cholesky(Rm), jnp.broadcast_to(jnp.eye(m, dtype=dtype), (T, m, m))), 0.0)
-    e = jnp.where(valid, zs - jnp.sum(Hm * sm_means[:, None, :], axis=-1), 0.0)
-    Rie = jnp.sum(Ri * e[:, None, :], axis=-1)
+    e = jnp.where(valid, zs - _loop_sum(Hm * sm_means[:, None, :], -1), 0.0)
+    Rie = _loop_sum(Ri * e[:, None, :], -1)
     RiH = Ri @ Hm
     gR = 0.5 * (
         fold("ti,tj->ij", Rie, Rie, leaf="R")
