@@ -196,9 +196,11 @@ def _batch_aware(save, unroll, allow_float32, check_finite, joseph):
             # clean batch keeps one covariance recursion, and the per-sequence tangents of the
             # other outputs are dropped by jit when only the log-likelihood is differentiated.
             prepared = prepare_inputs(model, x0, P0, zs, mask, (), allow_float32)[:5]
-            _, t_ll = LOGLIK_JVP(prepared, tangents[:4])
+            # Its value (the same log-likelihood) replaces the filter's, so that when only the
+            # log-likelihood is used the filter below is dead code and runs once, not twice.
+            ll, t_ll = LOGLIK_JVP(prepared, tangents[:4])
             t_out = t_out._replace(loglik=jnp.asarray(t_ll, out.loglik.dtype))
-            out = batched(*primals)
+            out = batched(*primals)._replace(loglik=jnp.asarray(ll, out.loglik.dtype))
         return out, t_out
 
     return run
