@@ -126,3 +126,19 @@ def test_grad_with_p0_per_sequence_equals_loop(zs):
     got = jax.jit(jax.vmap(jax.grad(loss), in_axes=(None, 0, 0)))(theta, P0S, zs)
     want = jnp.stack([jax.grad(loss)(theta, P, zz) for P, zz in zip(P0S, zs)])
     np.testing.assert_allclose(got, want, rtol=1e-10)
+
+
+def test_nested_vmap_and_float32(zs):
+    """vmap over two axes (an outer vmap of the batch-minor rule) and the opt-in float32 path."""
+    m = MODELS["static"]()
+    f = lambda P, zz: jf.kalman_filter(m, X0, P, zz, save=("means", "covs"))  # noqa: E731
+    P2, z2 = jnp.stack([P0S, P0S[::-1]]), jnp.stack([zs, zs[::-1]])
+    got = jax.jit(jax.vmap(jax.vmap(f)))(P2, z2)
+    assert_tree_close(got, stack([stack([f(P, zz) for P, zz in zip(Pb, zb)]) for Pb, zb in zip(P2, z2)]))
+    m32 = jax.tree_util.tree_map(lambda a: jnp.asarray(a, jnp.float32), m)
+    g = lambda P, zz: jf.kalman_filter(m32, X0.astype(jnp.float32), P, zz, allow_float32=True)  # noqa: E731
+    P32, z32 = P0S.astype(jnp.float32), zs.astype(jnp.float32)
+    got = jax.jit(jax.vmap(g))(P32, z32)
+    want = stack([g(P, zz) for P, zz in zip(P32, z32)])
+    assert got.means.dtype == jnp.float32
+    assert_tree_close(got, want, tol=1e-5)
