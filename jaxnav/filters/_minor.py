@@ -48,10 +48,12 @@ def _mm(A, C):
 
 
 def _sym(P):
+    """(P + P^T) / 2 of (r, r, b) matrices."""
     return 0.5 * (P + _t(P))
 
 
 def _eye(n, dtype):
+    """The (n, n, 1) identity, shared by the batch."""
     return jnp.eye(n, dtype=dtype)[:, :, None]
 
 
