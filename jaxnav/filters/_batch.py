@@ -471,15 +471,21 @@ def _minor_applies(in_batched, args, check_finite) -> bool:
     NaN/inf masking on)."""
     model, x0, P0, zs, inflation, estimator, mask = args
     classic = isinstance(inflation, (type(None), NoInflation)) and isinstance(estimator, (type(None), NoEstimator))
-    shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (0, 4, 5)]))
-    per_cov = in_batched[2] or in_batched[6] or (in_batched[3] and check_finite)
+    shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (4, 5)]))
+    per_cov = in_batched[2] or in_batched[6] or (in_batched[3] and check_finite) or any(model_batched(in_batched[0]))
     n, m = jnp.shape(x0)[-1], jnp.shape(zs)[-1]
     return classic and shared and bool(per_cov) and max(n, m) <= SMALL
 
 
+def model_batched(flags) -> tuple:
+    """Which leaves (F, H, Q, R, G) of a :class:`LinearGaussian` are batched, from ``vmap``'s flags (None: no G)."""
+    return tuple(bool(getattr(flags, name)) for name in LinearGaussian._fields)
+
+
 def minor_args(args, in_batched, like):
-    """The arguments of :func:`._minor.classic_filter_minor` from a filter's vmapped ``args``: every
-    array with the leading batch axis, cast to the dtype of ``like`` (the plain vmapped result's shape)."""
+    """The arguments of :func:`._minor.classic_filter_minor` from a filter's vmapped ``args``: the
+    initial moments, data and masks with the leading batch axis, the model's leaves as given (those
+    batched with it: :func:`model_batched`), cast to the dtype of ``like`` (the plain vmapped result)."""
     model, x0, P0, zs, _, _, mask = args
     B, n = like.x_final.shape
     dtype = like.x_final.dtype
@@ -509,7 +515,12 @@ def _per_sequence_minor(args, in_batched, like, save, unroll, check_finite, jose
     """The per-sequence filters of a ``vmap`` with the classic filter, batch-minor (:mod:`._minor`),
     shaped like the plain vmapped result ``like``."""
     out = classic_filter_minor(
-        *minor_args(args, in_batched, like), save=save, check_finite=check_finite, joseph=joseph, unroll=unroll
+        *minor_args(args, in_batched, like),
+        save=save,
+        check_finite=check_finite,
+        joseph=joseph,
+        unroll=unroll,
+        batched=model_batched(in_batched[0]),
     )
     return _broadcast_like(out, like)
 

@@ -44,10 +44,11 @@ def kalman_filter(
     (``lax.cond``) picks: no unmasked NaN/inf in the whole batch -> one covariance recursion for
     all sequences (:func:`~jaxnav.filters.kalman_filter_batch`'s; saved covariances returned as
     B copies); else one filter per sequence (with masking on, each sequence's covariance depends
-    on its own NaN/inf elements). Batches with a covariance per sequence (P0, mask or NaN/inf per
-    sequence) of the classic filter with a shared model of at most 8 states run batch-minor
-    (:mod:`jaxnav.filters._minor`: the batch the minor axis of every array; the loop's results). Derivatives (``grad``, ``jvp``) are the plain filter's: exact,
-    one per sequence under ``vmap``. With ``check_finite=False`` and shared inputs, ``vmap``
+    on its own NaN/inf elements). Batches with a covariance per sequence (P0, mask, NaN/inf or
+    model leaves per sequence) of the classic filter with a model of at most 8 states run
+    batch-minor (:mod:`jaxnav.filters._minor`: the batch the minor axis of every array; the loop's
+    results). Derivatives (``grad``, ``jvp``) are the plain filter's: exact, one per sequence
+    under ``vmap``. With ``check_finite=False`` and shared inputs, ``vmap``
     shares the covariance recursion by itself. For batches with gaps common to all sequences,
     :func:`~jaxnav.filters.kalman_filter_batch` shares the recursion while masking NaN/inf.
 

@@ -12,8 +12,8 @@ The formulas, their order and the masking are those of :func:`~jaxnav.filters.fi
 the classic filter (no inflation, no noise estimation; S0 eqs. (4)-(9), Joseph update by default):
 the results equal ``jax.vmap(kalman_filter)`` to rounding (the sums run in another order). The
 ``vmap`` rule of :func:`~jaxnav.filters.kalman_filter` runs it for batches whose covariances differ
-(P0 per sequence, NaN/inf per sequence, a mask per sequence) when the model is shared and small
-(n <= :data:`jaxnav._numerics.SMALL`); derivatives stay the generic filter's.
+(P0, NaN/inf, a mask or model leaves per sequence) when the model is small (n <=
+:data:`jaxnav._numerics.SMALL`); derivatives stay the generic filter's.
 """
 
 from __future__ import annotations
@@ -107,10 +107,10 @@ def _step(carry, inp, *, Fs, Hs, GQGs, Rs, check_finite, joseph):
     """One epoch of the classic filter for the whole batch (the generic step's formulas, batch-minor)."""
     x, P, status, ll_sum, n_bad_sum, n_skip = carry
     z, mask, F, H, GQG, R = inp
-    F = Fs if F is None else F[:, :, None]
-    H = Hs if H is None else H[:, :, None]
-    GQG = GQGs if GQG is None else GQG[:, :, None]
-    R = Rs if R is None else R[:, :, None]
+    F = Fs if F is None else F
+    H = Hs if H is None else H
+    GQG = GQGs if GQG is None else GQG
+    R = Rs if R is None else R
     n, m = x.shape[0], z.shape[0]
     dt = P.dtype
 
@@ -179,19 +179,44 @@ def _step(carry, inp, *, Fs, Hs, GQGs, Rs, check_finite, joseph):
     return carry, outs
 
 
-def _filter_scan(model, x0s, P0s, zs, masks, save, check_finite, joseph, unroll):
-    """The batch-minor scan: (final carry, per-epoch outputs ``save`` as (T, ..., B) arrays)."""
+def _leaf_layout(a, batched):
+    """A model leaf as (static (r, c, b), scan input (T, r, c, b)), the other None; b is B for a leaf
+    given per sequence (leading axis B), else 1. Time-varying leaves (a T axis after any B) are scan
+    inputs."""
+    if a is None:
+        return None, None
+    a4 = jnp.asarray(a) if batched else jnp.asarray(a)[None]  # (b, [T,] r, c)
+    x = jnp.moveaxis(a4, 0, -1)
+    return (x, None) if a4.ndim == 3 else (None, x)
+
+
+def _gqg(G, Q, gb, qb):
+    """G Q G^T (or Q) with leading axes (b, t) of 1 or B and T, as (b, t, n, n)."""
+
+    def lead(a, batched):
+        a = a if batched else a[None]
+        return a[:, None] if a.ndim == 3 else a
+
+    Q4 = lead(jnp.asarray(Q), qb)
+    if G is None:
+        return Q4
+    G4 = lead(jnp.asarray(G), gb)
+    return G4 @ Q4 @ jnp.swapaxes(G4, -1, -2)
+
+
+def _filter_scan(model, batched, x0s, P0s, zs, masks, save, check_finite, joseph, unroll):
+    """The batch-minor scan: (final carry, per-epoch outputs ``save`` as (T, ..., B) arrays).
+
+    ``batched`` (static): which leaves of ``model`` carry a leading batch axis B (given per sequence).
+    """
     B = zs.shape[0]
     F, H, Q, R, G = model
-
-    def shared(a, r):  # a static leaf as (r..., 1), or None when time-varying (a scan input)
-        return None if a is None or jnp.ndim(a) == r + 1 else jnp.asarray(a)[..., None]
-
-    def gqg(Qt, Gt):
-        return Qt if Gt is None else Gt @ Qt @ jnp.swapaxes(Gt, -1, -2)
-
-    tvQ = jnp.ndim(Q) == 3 or (G is not None and jnp.ndim(G) == 3)
-    GQG = gqg(Q, G)
+    fb, hb, qb, rb, gb = batched
+    Fs, Ft = _leaf_layout(F, fb)
+    Hs, Ht = _leaf_layout(H, hb)
+    Rs, Rt = _leaf_layout(R, rb)
+    GQG = jnp.moveaxis(_gqg(G, Q, gb, qb), 0, -1)  # (t, n, n, b)
+    GQGs, GQGt = (GQG[0], None) if GQG.shape[0] == 1 else (None, GQG)
     carry = (
         jnp.moveaxis(x0s, 0, -1),
         jnp.moveaxis(P0s, 0, -1),
@@ -200,23 +225,8 @@ def _filter_scan(model, x0s, P0s, zs, masks, save, check_finite, joseph, unroll)
         jnp.zeros((B,), jnp.int32),
         jnp.zeros((B,), jnp.int32),
     )
-    inp = (
-        jnp.moveaxis(zs, 0, -1),
-        jnp.moveaxis(masks, 0, -1),
-        F if jnp.ndim(F) == 3 else None,
-        H if jnp.ndim(H) == 3 else None,
-        GQG if tvQ else None,
-        R if jnp.ndim(R) == 3 else None,
-    )
-    step = partial(
-        _step,
-        Fs=shared(F, 2),
-        Hs=shared(H, 2),
-        GQGs=None if tvQ else jnp.asarray(GQG)[..., None],
-        Rs=shared(R, 2),
-        check_finite=check_finite,
-        joseph=joseph,
-    )
+    inp = (jnp.moveaxis(zs, 0, -1), jnp.moveaxis(masks, 0, -1), Ft, Ht, GQGt, Rt)
+    step = partial(_step, Fs=Fs, Hs=Hs, GQGs=GQGs, Rs=Rs, check_finite=check_finite, joseph=joseph)
 
     def body(c, i):
         c, outs = step(c, i)
@@ -225,12 +235,13 @@ def _filter_scan(model, x0s, P0s, zs, masks, save, check_finite, joseph, unroll)
     return jax.lax.scan(body, carry, inp, unroll=unroll)
 
 
-@partial(jax.jit, static_argnames=("save", "check_finite", "joseph", "unroll"))
-def classic_filter_minor(model, x0s, P0s, zs, masks, *, save, check_finite, joseph, unroll=1):
+@partial(jax.jit, static_argnames=("save", "check_finite", "joseph", "unroll", "batched"))
+def classic_filter_minor(model, x0s, P0s, zs, masks, *, save, check_finite, joseph, unroll=1, batched=(False,) * 5):
     """The classic filter (S0 eqs. (4)-(9)) for B sequences with a covariance each, batch-minor.
 
     Args:
-      model: shared :class:`~jaxnav.filters.LinearGaussian` (static or (T, ...) leaves), cast.
+      model: :class:`~jaxnav.filters.LinearGaussian` (static or (T, ...) leaves), cast; the leaves
+        named in ``batched`` (static, five bools) with a leading batch axis B (per sequence).
       x0s: (B, n) initial means.  P0s: (B, n, n) initial covariances.
       zs: (B, T, m) measurements.  masks: (B, T, m) bool user masks.
       save, check_finite, joseph, unroll: as in :func:`~jaxnav.filters.kalman_filter` (static).
@@ -239,7 +250,7 @@ def classic_filter_minor(model, x0s, P0s, zs, masks, *, save, check_finite, jose
       is (): the classic filter estimates none).
     """
     (x, P, status, ll, n_bad, n_skip), outs = _filter_scan(
-        model, x0s, P0s, zs, masks, save, check_finite, joseph, unroll
+        model, batched, x0s, P0s, zs, masks, save, check_finite, joseph, unroll
     )
     per_epoch = {g: jnp.moveaxis(a, -1, 0) for g, a in outs.items()}  # (T, ..., B) -> (B, T, ...)
     return KalmanResult(
@@ -254,13 +265,14 @@ def classic_filter_minor(model, x0s, P0s, zs, masks, *, save, check_finite, jose
     )
 
 
-@partial(jax.jit, static_argnames=("save", "check_finite", "joseph", "unroll"))
-def classic_filter_rts_minor(model, x0s, P0s, zs, masks, *, save, check_finite, joseph, unroll=1):
+@partial(jax.jit, static_argnames=("save", "check_finite", "joseph", "unroll", "batched"))
+def classic_filter_rts_minor(model, x0s, P0s, zs, masks, *, save, check_finite, joseph, unroll=1, batched=(False,) * 5):
     """:func:`classic_filter_minor` then :func:`rts_minor` in one program: the filter's moments stay
     batch-minor between the two passes. Arguments as there; returns the smoother's result."""
     moments = ("means", "covs", "pred_means", "pred_covs")
-    _, outs = _filter_scan(model, x0s, P0s, zs, masks, moments, check_finite, joseph, unroll)
-    return rts_minor(model.F, *(outs[g] for g in moments), save=save)
+    _, outs = _filter_scan(model, batched, x0s, P0s, zs, masks, moments, check_finite, joseph, unroll)
+    Fs, Ft = _leaf_layout(model.F, batched[0])
+    return rts_minor(Fs if Ft is None else Ft, *(outs[g] for g in moments), save=save)
 
 
 def _cho_solve(L, Y):
@@ -290,20 +302,20 @@ def rts_minor(F, means, covs, pred_means, pred_covs, *, save):
     :func:`~jaxnav.filters.rts_smoother`, the gains formed inside the backward scan.
 
     Args:
-      F: (n, n) or (T, n, n) shared transitions.
+      F: (n, n, b) or (T, n, n, b) transitions, b = B (per sequence) or 1 (shared).
       means, pred_means: (T, n, B).  covs, pred_covs: (T, n, n, B) the filter's moments, batch-minor.
       save: static subset of ("means", "covs", "gains").
     Returns:
       :class:`~jaxnav.filters.SmootherResult` with a leading batch axis B on every field.
     """
     T, n = means.shape[:2]
-    tv = jnp.ndim(F) == 3
-    Fs = None if tv else jnp.asarray(F)[..., None]
+    tv = jnp.ndim(F) == 4
+    Fs = None if tv else F
 
     def body(carry, inp):
         x_next, P_next, failed = carry
         x, P, xp, Pp, Ft = inp
-        Fk = Fs if Ft is None else Ft[:, :, None]
+        Fk = Fs if Ft is None else Ft
         Lc = _cholesky(Pp)
         ok = jnp.all(jnp.isfinite(Lc), axis=(0, 1))
         Lc = jnp.where(ok, Lc, _eye(n, Pp.dtype))

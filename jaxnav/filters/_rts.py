@@ -15,6 +15,7 @@ from jaxnav.filters._batch import (
     _minor_applies,
     _rts_smoother_batch,
     minor_args,
+    model_batched,
 )
 from jaxnav.filters._kalman import _kalman_filter, filter_call_of
 from jaxnav.filters._minor import classic_filter_rts_minor
@@ -117,7 +118,7 @@ def _batch_aware_filter_rts(unroll, save, fstatic):
             and not any(jax.tree_util.tree_leaves([in_batched[0]] + [fb[i] for i in (0, 2, 4, 5, 6)]))
             and jnp.ndim(zs) == 3
         )
-        minor = _minor_applies(fb, fargs, check_finite) and not any(jax.tree_util.tree_leaves(in_batched[0]))
+        minor = _minor_applies(fb, fargs, check_finite)
         if not (shareable or minor):
             return _rts_rule(model, moments, (in_batched[0],) + tuple(in_batched[2:]), unroll, save)
         faxes = jax.tree_util.tree_map(lambda b: 0 if b else None, fb)
@@ -135,18 +136,24 @@ def _batch_aware_filter_rts(unroll, save, fstatic):
                 joseph=joseph,
             )
 
-        def smooth(f):
-            return _rts_smoother(model, _Moments(f.means, f.covs, f.pred_means, f.pred_covs), unroll=unroll, save=save)
+        def smooth(md, f):
+            return _rts_smoother(md, _Moments(f.means, f.covs, f.pred_means, f.pred_covs), unroll=unroll, save=save)
 
         def per_sequence():
-            return jax.vmap(lambda *a: smooth(filt(*a)), in_axes=faxes)(*fargs)
+            maxes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched[0])
+            return jax.vmap(lambda md, *a: smooth(md, filt(*a)), in_axes=(maxes, *faxes))(model, *fargs)
 
         like = jax.eval_shape(per_sequence)
 
         def per_sequence_minor():  # filter and smoother of every sequence, batch-minor, in one program
             like_f = jax.eval_shape(lambda: jax.vmap(filt, in_axes=faxes)(*fargs))
             out = classic_filter_rts_minor(
-                *minor_args(fargs, fb, like_f), save=save, check_finite=check_finite, joseph=joseph, unroll=funroll
+                *minor_args(fargs, fb, like_f),
+                save=save,
+                check_finite=check_finite,
+                joseph=joseph,
+                unroll=funroll,
+                batched=model_batched(fb[0]),
             )
             return _broadcast_like(out, like)
 

@@ -142,3 +142,21 @@ def test_nested_vmap_and_float32(zs):
     want = stack([g(P, zz) for P, zz in zip(P32, z32)])
     assert got.means.dtype == jnp.float32
     assert_tree_close(got, want, tol=1e-5)
+
+
+def test_model_per_sequence_equals_loop(zs):
+    """A parameter swept per sequence (the noise scales) batches the model: batch-minor too."""
+    scales = 0.5 + 0.5 * jnp.arange(B)
+
+    def model(k):
+        return jf.constant_velocity(1.0, sigma=0.05 * k, q=1e-4 / k)
+
+    def both(k, zz):
+        m = model(k)
+        f = jf.kalman_filter(m, X0, P0, zz)
+        return f, jf.rts_smoother(m, f)
+
+    got = jax.jit(jax.vmap(both))(scales, zs)
+    assert_tree_close(got, stack([both(k, zz) for k, zz in zip(scales, zs)]))
+    f = jax.jit(jax.vmap(lambda k, zz: jf.kalman_filter(model(k), X0, P0, zz, save=("means",)).means))
+    assert f"f64[6,6,{B}]" in f.lower(scales, zs).compile().as_text()
