@@ -466,9 +466,9 @@ _SHARED_FIELDS = ("covs", "pred_covs", "innov_covs", "factors", "noise", "valid"
 
 def _minor_applies(in_batched, args, check_finite) -> bool:
     """Whether a batch runs :func:`._minor.classic_filter_minor`: the classic filter (no plug-ins), a
-    shared model of at most :data:`jaxnav._numerics.SMALL` states and components, and a covariance
-    that may differ between the sequences (P0 or the mask per sequence, or data per sequence with
-    NaN/inf masking on)."""
+    model of at most :data:`jaxnav._numerics.SMALL` states and components, and a covariance that may
+    differ between the sequences (P0, the mask or model leaves per sequence, or data per sequence
+    with NaN/inf masking on)."""
     model, x0, P0, zs, inflation, estimator, mask = args
     classic = isinstance(inflation, (type(None), NoInflation)) and isinstance(estimator, (type(None), NoEstimator))
     shared = not any(jax.tree_util.tree_leaves([in_batched[i] for i in (4, 5)]))
@@ -511,11 +511,18 @@ def minor_args(args, in_batched, like):
     )
 
 
-def _per_sequence_minor(args, in_batched, like, save, unroll, check_finite, joseph):
-    """The per-sequence filters of a ``vmap`` with the classic filter, batch-minor (:mod:`._minor`),
-    shaped like the plain vmapped result ``like``."""
-    out = classic_filter_minor(
-        *minor_args(args, in_batched, like),
+def per_sequence_minor(kernel, args, in_batched, like_filter, like, *, save, unroll, check_finite, joseph):
+    """A ``vmap`` rule's per-sequence branch run batch-minor (:mod:`._minor`).
+
+    Args:
+      kernel: :func:`._minor.classic_filter_minor` or :func:`._minor.classic_filter_rts_minor`.
+      args, in_batched: the filter's vmapped arguments and their batch flags.
+      like_filter: the shape of the plain vmapped filter's result (batch size, dtype).
+      like: the shape of the plain vmapped result this branch stands for (what is returned).
+      save, unroll, check_finite, joseph: the kernel's static options.
+    """
+    out = kernel(
+        *minor_args(args, in_batched, like_filter),
         save=save,
         check_finite=check_finite,
         joseph=joseph,
@@ -536,7 +543,7 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
     equals a loop of single runs. Other batches (P0 or the model per sequence, data-dependent
     rules, ``check_finite=False``) run the plain filters under ``vmap``, which leaves the
     covariance outputs unbatched where they do not depend on the batch; those of the classic
-    filter with a covariance per sequence and a small shared model run batch-minor
+    filter with a covariance per sequence and a small model run batch-minor
     (:func:`._minor.classic_filter_minor`).
 
     Args:
@@ -555,7 +562,18 @@ def vmap_filter_rule(plain, in_batched, args, *, save, unroll, allow_float32, ch
     like = jax.eval_shape(per_sequence)
     minor = _minor_applies(in_batched, args, check_finite)
     if minor:
-        per_sequence = partial(_per_sequence_minor, args, in_batched, like, save, unroll, check_finite, joseph)
+        per_sequence = partial(
+            per_sequence_minor,
+            classic_filter_minor,
+            args,
+            in_batched,
+            like,
+            like,
+            save=save,
+            unroll=unroll,
+            check_finite=check_finite,
+            joseph=joseph,
+        )
     shared_args = [in_batched[i] for i in (0, 2, 4, 5, 6)]
     if (
         check_finite

@@ -14,8 +14,7 @@ from jaxnav.filters._batch import (
     _kalman_filter_batch,
     _minor_applies,
     _rts_smoother_batch,
-    minor_args,
-    model_batched,
+    per_sequence_minor,
 )
 from jaxnav.filters._kalman import _kalman_filter, filter_call_of
 from jaxnav.filters._minor import classic_filter_rts_minor
@@ -145,20 +144,22 @@ def _batch_aware_filter_rts(unroll, save, fstatic):
 
         like = jax.eval_shape(per_sequence)
 
-        def per_sequence_minor():  # filter and smoother of every sequence, batch-minor, in one program
+        def minor_branch():  # filter and smoother of every sequence, batch-minor, in one program
             like_f = jax.eval_shape(lambda: jax.vmap(filt, in_axes=faxes)(*fargs))
-            out = classic_filter_rts_minor(
-                *minor_args(fargs, fb, like_f),
+            return per_sequence_minor(
+                classic_filter_rts_minor,
+                fargs,
+                fb,
+                like_f,
+                like,
                 save=save,
+                unroll=funroll,
                 check_finite=check_finite,
                 joseph=joseph,
-                unroll=funroll,
-                batched=model_batched(fb[0]),
             )
-            return _broadcast_like(out, like)
 
         if not shareable:
-            out = per_sequence_minor()
+            out = minor_branch()
             return out, jax.tree_util.tree_map(lambda _: True, out)
 
         def shared():
@@ -182,7 +183,7 @@ def _batch_aware_filter_rts(unroll, save, fstatic):
         if jnp.ndim(used) == 1:
             used = used[:, None]
         clean = jnp.all(jnp.isfinite(zs) | ~jnp.asarray(used, bool))
-        out = jax.lax.cond(clean, shared, per_sequence_minor if minor else per_sequence)
+        out = jax.lax.cond(clean, shared, minor_branch if minor else per_sequence)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     @jax.custom_jvp
