@@ -165,8 +165,17 @@ def _kalman_filter_batch(model, x0, P0, zs, *, inflation, estimator, mask, save,
     user = xs.mask
     fin = jnp.isfinite(zs)
     common = user & jnp.all(fin, axis=0)
-    n_bad = jnp.sum(user & ~fin, axis=(1, 2)).astype(jnp.int32)
-    widened = jnp.any(user & fin & ~common, axis=(1, 2))
+
+    def per_sequence_counts():
+        n_bad = jnp.sum(user & ~fin, axis=(1, 2), dtype=jnp.int32)
+        return n_bad, jnp.any(user & fin & ~common, axis=(1, 2))
+
+    # the per-sequence counts read the whole batch again; a clean batch (the usual case) skips them
+    n_bad, widened = jax.lax.cond(
+        jnp.all(common == user),
+        lambda: (jnp.zeros((B,), jnp.int32), jnp.zeros((B,), bool)),
+        per_sequence_counts,
+    )
     xs = xs._replace(mask=common)
     seq_flags = (
         jnp.where(n_bad > 0, _status.NONFINITE_MEASUREMENT, 0) | jnp.where(widened, _status.BATCH_MASK_WIDENED, 0)
@@ -322,7 +331,7 @@ def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
             bufs0[g] = jnp.zeros((B, T), dtype)
 
     def apply(carry, t0, Lk, M):
-        s, bufs, ll, fin = carry
+        s, bufs, ll = carry
         # masked elements may hold NaN/inf: zero them (multiply-then-clean is a plain vector
         # operation here; a select on the mask costs ~10 us per block, measured)
         zb = jax.lax.dynamic_slice_in_dim(Z, t0 * m, Lk * m, axis=1)
@@ -342,10 +351,9 @@ def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
             g: jax.lax.dynamic_update_slice_in_dim(b, vals[g], t0 * (b.shape[1] // T), axis=1) for g, b in bufs.items()
         }
         state = cols["means"] if "means" in cols else cols["end"]
-        fin = fin & jnp.all(jnp.isfinite(state), axis=1)
-        return state[:, -n:], bufs, ll + jnp.sum(lls, axis=1), fin
+        return state[:, -n:], bufs, ll + jnp.sum(lls, axis=1)
 
-    carry = (jnp.asarray(x0s, dtype), bufs0, jnp.zeros((B,), dtype), jnp.ones((B,), bool))
+    carry = (jnp.asarray(x0s, dtype), bufs0, jnp.zeros((B,), dtype))
     per_epoch = (sh["F"], sh["Hm"], sh["K"], sh["Linv"], sh["valid"])
     if nb:
         blk = [a[: nb * Lb].reshape((nb, Lb) + a.shape[1:]) for a in per_epoch]
@@ -354,7 +362,10 @@ def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
     if tail:
         blk = [a[nb * Lb :][None] for a in per_epoch]
         carry = apply(carry, nb * Lb, tail, _block_maps(*blk, groups)[0])
-    x_final, bufs, ll, fin = carry
+    x_final, bufs, ll = carry
+    # a non-finite state stays non-finite through the blocks' products (NaN x 0 is NaN), so the
+    # final state tells whether any state of the run was non-finite
+    fin = jnp.all(jnp.isfinite(x_final), axis=-1)
     shape = {g: (B, T, width[g]) for g in ("means", "pred_means", "innovations")}
     out = {g: bufs[g].reshape(shape.get(g, (B, T))) for g in PER_SEQUENCE if g in save}
     return out, ll, x_final, fin
@@ -442,11 +453,13 @@ def _smoothed_means_blocks(C, A, xs, L):
         return jnp.concatenate(rows, axis=1)
 
     def apply(carry, t0, Lk, M):
-        s, out = carry
-        Y = jnp.concatenate([s, jax.lax.dynamic_slice_in_dim(X, t0 * n, Lk * n, axis=1)], axis=1) @ M
+        s, out = carry  # out holds the filtered means from t0 on back, the smoothed ones after
+        Y = jnp.concatenate([s, jax.lax.dynamic_slice_in_dim(out, t0 * n, Lk * n, axis=1)], axis=1) @ M
         return Y[:, :n], jax.lax.dynamic_update_slice_in_dim(out, Y, t0 * n, axis=1)
 
-    carry = (jnp.zeros((B, n), xs.dtype), jnp.zeros((B, T * n), xs.dtype))
+    # the smoothed means overwrite the filtered ones block by block: under jit, when the filtered
+    # means are not used elsewhere, XLA updates their buffer in place instead of writing a fresh one
+    carry = (jnp.zeros((B, n), xs.dtype), X)
     if tail:
         carry = apply(carry, nb * L, tail, maps(C[nb * L :][None], A[nb * L :][None])[0])
     if nb:
