@@ -231,8 +231,8 @@ def test_kalman_filter_batch_equals_per_sequence(problem, T_, block):
     assert [bool(int(s) & _status.NONFINITE_STATE) for s in got.status] == [False, False, False, True]
     assert int(got.status[3]) == int(refs[3].status) and [int(c) for c in got.n_nonfinite] == [1, 1, 1, 1]
     np.testing.assert_array_equal(np.isfinite(np.asarray(got.means[3])), np.isfinite(np.asarray(refs[3].means)))
-    # with only the means saved the blocks skip the whitened innovations; the log-likelihood then
-    # follows from the means (time-varying F here), equal to the per-sequence value
+    # with only the means saved the blocks write nothing else; the log-likelihood (from the blocks'
+    # whitened innovations, time-varying F here) still equals the per-sequence value
     lean = jf.kalman_filter_batch(mod, x0s[:3], P0, batch[:3], mask=mk, inflation=rule, block=block, save=("means",))
     np.testing.assert_allclose(np.asarray(lean.loglik), [float(r.loglik) for r in refs[:3]], rtol=1e-11)
     np.testing.assert_allclose(np.asarray(lean.means), np.asarray(got.means[:3]), rtol=1e-12, atol=1e-12)
@@ -241,6 +241,15 @@ def test_kalman_filter_batch_equals_per_sequence(problem, T_, block):
         ref = jf.rts_smoother(mod, refs[i])
         np.testing.assert_allclose(np.asarray(sm.means[i]), np.asarray(ref.means), rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(np.asarray(sm.covs), np.asarray(ref.covs), rtol=1e-10, atol=1e-12)
+    # in one jit returning both, the smoother (which overwrites the filtered means where it may)
+    # leaves the filtered means intact
+    both = jax.jit(
+        lambda z: (lambda r: (r.means, jf.rts_smoother_batch(mod, r).means))(
+            jf.kalman_filter_batch(mod, x0s[:3], P0, z, mask=mk, inflation=rule, block=block)
+        )
+    )(batch[:3])
+    np.testing.assert_allclose(np.asarray(both[0]), np.asarray(got.means[:3]), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(both[1]), np.asarray(sm.means[:3]), rtol=1e-12, atol=1e-12)
     if T_ == 13 and block == 8:  # gradients through the blocks equal the per-sequence gradients
 
         def nll(th, z):
