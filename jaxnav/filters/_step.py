@@ -165,7 +165,7 @@ def predict(x, P, F, GQG, factor=1.0, FPF=None):
     return mm(F, x), symmetrize(factor * FPF + GQG)
 
 
-def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True, matmul=mm):
+def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True):
     """Measurement update with Cholesky solves (S0 eqs. (5), (7), (9)), Joseph form by default.
 
     K = P H^T (H P H^T + R)^{-1}; x = x_pred + K v; P = (I - K H) P (I - K H)^T + K R K^T,
@@ -188,8 +188,6 @@ def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True, matmul=mm):
       x_pred: (n,) prior mean.  P_pred: (n, n) prior covariance.
       z: (m,) measurement (any value where invalid).  H: (m, n).  R: (m, m).
       valid: optional (m,) bool.  joseph: static, the covariance form (above).
-      matmul: static, the small matrix product (the nonlinear filters pass unrolled multiply-adds,
-        which XLA fuses under ``vmap``).
     Returns:
       :class:`UpdateResult`.
     """
@@ -198,17 +196,17 @@ def update(x_pred, P_pred, z, H, R, valid=None, joseph: bool = True, matmul=mm):
     if valid is None:
         valid = jnp.ones((m,), bool)
     Hm, Rm = masked_measurement(H, R, valid)
-    v = jnp.where(valid, z - matmul(Hm, x_pred), 0.0)
-    PHt = matmul(P_pred, Hm.T)
-    S = symmetrize(matmul(Hm, PHt) + Rm)
+    v = jnp.where(valid, z - mm(Hm, x_pred), 0.0)
+    PHt = mm(P_pred, Hm.T)
+    S = symmetrize(mm(Hm, PHt) + Rm)
     L, ok = safe_cholesky(S)
     K = cho_solve(L, PHt.T).T
-    x = x_pred + matmul(K, v)
+    x = x_pred + mm(K, v)
     if joseph:
-        IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - matmul(K, Hm)
-        P = symmetrize(matmul(matmul(IKH, P_pred), IKH.T) + matmul(matmul(K, Rm), K.T))
+        IKH = jnp.eye(P_pred.shape[-1], dtype=dt) - mm(K, Hm)
+        P = symmetrize(mm(mm(IKH, P_pred), IKH.T) + mm(mm(K, Rm), K.T))
     else:
-        P = symmetrize(P_pred - matmul(K, PHt.T))
+        P = symmetrize(P_pred - mm(K, PHt.T))
     return update_result(x_pred, P_pred, x, P, v, S, K, L, valid, ok)
 
 
