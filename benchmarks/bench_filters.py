@@ -392,7 +392,7 @@ def run_benchmarks(args, zs_batch, log):
             means=np.asarray(out.means),
             jax_impl=True,
             note=f"kalman_filter_batch over B={B}: one covariance recursion (NaN masking on), the means "
-            "in blocks of 8 epochs",
+            "in blocks of 4 epochs",
         )
     )
     jzG = jzB.at[:, T // 3 : T // 3 + 60, :].set(jnp.nan)
@@ -1428,11 +1428,11 @@ def main(argv=None):
         try:
             key = (
                 f"jaxnav kalman_filter_batch (c), B={len(zB)} (every loop, fusions x trips: the covariance pass "
-                "x T, the block maps x 8 (x 4 for the tail), the blocks x T/8)"
+                "x T, the block maps x 4 (and a tail's), the blocks x T/4)"
             )
             profile[key] = loop_body_profile(
                 lambda z: (lambda r: (r.means, r.loglik))(
-                    jf.kalman_filter_batch(model, x0, P0, z, save=("means",), block=8)
+                    jf.kalman_filter_batch(model, x0, P0, z, save=("means",), block=4)
                 ),
                 zB,
                 batch=len(zB),

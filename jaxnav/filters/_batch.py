@@ -50,10 +50,11 @@ from jaxnav.filters._step import ALL_OUTPUTS, KalmanResult, scan_setup, step_wit
 #: per-epoch outputs that differ between the sequences of a shared-recursion batch
 PER_SEQUENCE = ("means", "pred_means", "innovations", "nis", "logliks")
 
-#: epochs per block: the products' width grows with L and their count falls with it; 8 was the
-#: fastest of 4, 6, 8, 12, 16, 24 and 40 for the 6-state model at B = 256, T = 3600
-#: (benchmarks/bench_filters.py case (c))
-BLOCK = 8
+#: epochs per block: the products' width grows with L and their count falls with it. For the
+#: 6-state model at B = 256, T = 3600 (benchmarks/bench_filters.py case (c), every output) L = 3
+#: and 4 ran 36 ms, 5 45 ms, 8 52 ms (interleaved, best of 10; the floor of reading the data and
+#: writing the means 15-17 ms)
+BLOCK = 4
 
 #: smallest batch size x epochs for which the blocks are used by default. Below it the plain
 #: per-sequence mean recursion costs a few ms at most, and the blocks' extra program (maps, block

@@ -205,7 +205,7 @@ def _batch_problem(problem, T_):
     return mod, x0, P0, batch, mask[:T_].at[3, 0].set(False)
 
 
-@pytest.mark.parametrize("block", [8, None])
+@pytest.mark.parametrize("block", [4, 8, None])
 @pytest.mark.parametrize("T_", [13, 5])
 def test_kalman_filter_batch_equals_per_sequence(problem, T_, block):
     """kalman_filter_batch (one covariance recursion; the means in blocks of 8 epochs or by a scan) equals the
