@@ -27,8 +27,8 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxnav import ins, sim  # noqa: E402
-from jaxnav.ins import LCParams, PVMeasurements  # noqa: E402
+from jaxnav import ins, sim
+from jaxnav.ins import LCParams, PVMeasurements
 
 CAR_HEAD = """
 name = "car"
@@ -99,7 +99,7 @@ def _setup(duration):
         mask=np.broadcast_to(np.asarray(gn.valid)[:, None], (M, 6)),
         lever=np.zeros((M, 3)),
     )
-    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
+    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))
     nz = cfg.noise
     kw = dict(
         att=v3(cfg.initial_errors.attitude),

@@ -31,8 +31,8 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from _harness import cpu_model, git_revision, write_section  # noqa: E402
-from _harness import package_version as _version  # noqa: E402
+from _harness import cpu_model, git_revision, write_section
+from _harness import package_version as _version
 
 BEGIN, END = "<!-- BEGIN bench_distributed -->", "<!-- END bench_distributed -->"
 LAYOUTS = ((1, 1), (1, 2), (2, 1))  # (processes, devices per process)

@@ -43,8 +43,8 @@ jaxnav.enable_x64()
 # Honest compile times: never read compiled executables from a persistent cache.
 jax.config.update("jax_enable_compilation_cache", False)
 
-from jaxnav import filters as jf  # noqa: E402
-from jaxnav import tune as jtune  # noqa: E402
+from jaxnav import filters as jf
+from jaxnav import tune as jtune
 
 HERE = Path(__file__).resolve().parent
 BEGIN = "<!-- BEGIN bench_filters results (generated; rerun the script to refresh) -->"
@@ -1385,7 +1385,7 @@ def main(argv=None):
         results = None
 
     t_start = time.perf_counter()
-    log = lambda s: print(f"[{time.perf_counter() - t_start:6.1f} s] {s}", file=sys.stderr, flush=True)  # noqa: E731
+    log = lambda s: print(f"[{time.perf_counter() - t_start:6.1f} s] {s}", file=sys.stderr, flush=True)
     load0 = loadavg()
     info = machine_info()
     print(f"# bench_filters  {info['date']}")

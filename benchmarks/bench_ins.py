@@ -66,13 +66,13 @@ import jaxnav
 jaxnav.enable_x64()
 jax.config.update("jax_enable_compilation_cache", False)
 
-import jax.numpy as jnp  # noqa: E402
-import pandas as pd  # noqa: E402
-from pyins import sim, strapdown, transform  # noqa: E402
-from pyins._numba_integrate import integrate as pyins_kernel  # noqa: E402
+import jax.numpy as jnp
+import pandas as pd
+from pyins import sim, strapdown, transform
+from pyins._numba_integrate import integrate as pyins_kernel
 
-from jaxnav.ins import NavState, mechanize  # noqa: E402
-from jaxnav.ins import attitude as att  # noqa: E402
+from jaxnav.ins import NavState, mechanize
+from jaxnav.ins import attitude as att
 
 warnings.filterwarnings("ignore", message="The copy keyword is deprecated")  # pandas 3 vs pyins 1.0.1
 
@@ -347,7 +347,7 @@ def main(argv=None):
     batches = [int(b) for b in args.batches.split(",")]
     if args.N_batch % args.save_every:
         p.error("--save-every must divide --N-batch")
-    log = lambda m: print(m, flush=True)  # noqa: E731
+    log = lambda m: print(m, flush=True)
     wall0 = time.perf_counter()
     load0 = loadavg()
     info = machine_info()

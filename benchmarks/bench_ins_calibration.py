@@ -37,8 +37,8 @@ import numpy as np
 HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests" / "experiments"))
 
-from _harness import cpu_model, git_revision, loadavg, write_section  # noqa: E402
-from _recording import car_config, short_car_spec, walk_spec, write_car, write_truth_nav  # noqa: E402
+from _harness import cpu_model, git_revision, loadavg, write_section
+from _recording import car_config, short_car_spec, walk_spec, write_car, write_truth_nav
 
 BEGIN = "<!-- BEGIN bench_ins_calibration results -->"
 END = "<!-- END bench_ins_calibration results -->"

@@ -27,7 +27,7 @@ import datetime as _dt
 import statistics
 import time
 from pathlib import Path
-from types import SimpleNamespace  # noqa: E402
+from types import SimpleNamespace
 
 import jax
 import numpy as np
@@ -35,8 +35,8 @@ from _harness import cpu_model, git_revision, loadavg, write_section
 from _harness import package_version as _version
 from bench_insgnss import PyinsCase, enu_err, make_setup, pyins_pos_after_fix, rms, simulate_seeds, take
 
-from jaxnav.experiments import S0Setup, s0_measurements  # noqa: E402
-from jaxnav.ins import LCPropagation, LCSave, loosely_coupled, smooth  # noqa: E402
+from jaxnav.experiments import S0Setup, s0_measurements
+from jaxnav.ins import LCPropagation, LCSave, loosely_coupled, smooth
 
 HERE = Path(__file__).resolve().parent
 BEGIN = "<!-- BEGIN bench_ins_run results -->"

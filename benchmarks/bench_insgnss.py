@@ -70,15 +70,15 @@ import jaxnav
 jaxnav.enable_x64()
 jax.config.update("jax_enable_compilation_cache", False)
 
-import jax.numpy as jnp  # noqa: E402
-import pandas as pd  # noqa: E402
-from pyins import filters as pfilters  # noqa: E402
-from pyins import inertial_sensor, measurements, strapdown, transform  # noqa: E402
+import jax.numpy as jnp
+import pandas as pd
+from pyins import filters as pfilters
+from pyins import inertial_sensor, measurements, strapdown, transform
 
-from jaxnav import sim  # noqa: E402
-from jaxnav.experiments import S0Setup, load_experiment, s0_measurements  # noqa: E402
-from jaxnav.ins import LCPropagation, LCSave, error_model_for, loosely_coupled  # noqa: E402
-from jaxnav.ins import attitude as att  # noqa: E402
+from jaxnav import sim
+from jaxnav.experiments import S0Setup, load_experiment, s0_measurements
+from jaxnav.ins import LCPropagation, LCSave, error_model_for, loosely_coupled
+from jaxnav.ins import attitude as att
 
 warnings.filterwarnings("ignore", message="The copy keyword is deprecated")  # pandas 3 vs pyins 1.0.1
 warnings.filterwarnings("ignore", category=FutureWarning)
@@ -325,7 +325,7 @@ def main(argv=None):
         if "--results" not in (argv or sys.argv):
             args.no_write = True
     batches = [int(b) for b in args.batches.split(",")]
-    log = lambda m: print(m, flush=True)  # noqa: E731
+    log = lambda m: print(m, flush=True)
     wall0 = time.perf_counter()
     load0 = loadavg()
     info = machine_info()
@@ -536,7 +536,7 @@ def build_report(args, info, load0, load1, wall, N, M, rows1, rowsB, agree, sing
         "max |jaxnav - pyins| m | jaxnav vel RMS E / N / U m/s | pyins vel RMS E / N / U m/s |"
     )
     out.append("|---|---|---|---|---|---|---|")
-    f3 = lambda a, k=2: " / ".join(f"{x:.{k}f}" for x in a)  # noqa: E731
+    f3 = lambda a, k=2: " / ".join(f"{x:.{k}f}" for x in a)
     for i, a in enumerate(agree):
         out.append(
             f"| {i} | {f3(a['j'])} | {f3(a['p'])} | {f3(a['d'])} | {a['maxd']:.2f} | {f3(a['vj'], 3)} | "

@@ -59,12 +59,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from _harness import cpu_model, package_version  # noqa: E402
-from reference.hector_run import run_hector  # noqa: E402
+from _harness import cpu_model, package_version
+from reference.hector_run import run_hector
 
-from jaxnav import io  # noqa: E402
-from jaxnav import monitoring as mon  # noqa: E402
-from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
+from jaxnav import io
+from jaxnav import monitoring as mon
+from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR
 
 DATA = ROOT.parent / "shared/data/gnss_daily_timeseries"
 FILES = ["LHAS.tenv3", "bjfsCleanUnf.neu", "MRHK_GOM20_neu_cm.col", "UH01_GOM20_neu_cm.col", "UHCR_GOM20_neu_cm.col"]

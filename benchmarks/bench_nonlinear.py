@@ -30,7 +30,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-import jaxnav.filters as jf  # noqa: E402
+import jaxnav.filters as jf
 
 STATION = jnp.array([-200.0, -300.0])
 Q = jnp.diag(jnp.array([0.01, 0.01, 0.01, 1e-6, 1e-10]))

@@ -32,7 +32,7 @@ import jaxnav
 jaxnav.enable_x64()
 jax.config.update("jax_enable_compilation_cache", False)
 
-from jaxnav import filters as jf  # noqa: E402
+from jaxnav import filters as jf
 
 HERE = Path(__file__).resolve().parent
 BEGIN = "<!-- BEGIN bench_parallel results (generated; rerun the script to refresh) -->"
@@ -62,7 +62,7 @@ def main(argv=None):
     if args.quick:
         Ts, batches, args.repeats, args.tree_max_T = [300, 3000], [4, 16], 2, 300
     t_start = time.perf_counter()
-    log = lambda s: print(f"[{time.perf_counter() - t_start:6.1f} s] {s}", file=sys.stderr, flush=True)  # noqa: E731
+    log = lambda s: print(f"[{time.perf_counter() - t_start:6.1f} s] {s}", file=sys.stderr, flush=True)
 
     banner = device_banner()
     rate0 = matmul_rate()

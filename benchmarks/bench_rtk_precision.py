@@ -31,12 +31,12 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 DATA = ROOT.parent / "shared" / "data"
 
-import jax  # noqa: E402
+import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from jaxnav.io import read_pos  # noqa: E402
-from jaxnav.survey import motion_segments, pack_points, point_sigmas, process_points, windows_from_pos  # noqa: E402
+from jaxnav.io import read_pos
+from jaxnav.survey import motion_segments, pack_points, point_sigmas, process_points, windows_from_pos
 
 FILES = {
     "Nagoya rooftop (MatRTKLIB, real, 5 min 1 Hz)": (DATA / "rtk_pos_matrtklib/static/rover_rtk.pos", 138.0),

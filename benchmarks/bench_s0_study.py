@@ -34,25 +34,25 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import jax  # noqa: E402
-from _harness import cpu_model, git_revision, loadavg, write_section  # noqa: E402
-from _harness import package_version as _version  # noqa: E402
+import jax
+from _harness import cpu_model, git_revision, loadavg, write_section
+from _harness import package_version as _version
 
-import jaxnav  # noqa: E402
+import jaxnav
 
 jaxnav.enable_x64()
 jax.config.update("jax_enable_compilation_cache", False)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
-from jaxnav import filters as jf  # noqa: E402
+from jaxnav import filters as jf
 from jaxnav import (
-    sim,  # noqa: E402
-    tune,  # noqa: E402
+    sim,
+    tune,
 )
-from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules, s0_measurements  # noqa: E402
-from jaxnav.ins import LCDiscretization, LCPropagation, LCSave, error_model_for, loosely_coupled  # noqa: E402
+from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules, s0_measurements
+from jaxnav.ins import LCDiscretization, LCPropagation, LCSave, error_model_for, loosely_coupled
 
 BEGIN, END = "<!-- BEGIN bench_s0_study -->", "<!-- END bench_s0_study -->"
 

@@ -20,17 +20,17 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import jax  # noqa: E402
-from _harness import cpu_model, loadavg  # noqa: E402
+import jax
+from _harness import cpu_model, loadavg
 
-import jaxnav  # noqa: E402
+import jaxnav
 
 jaxnav.enable_x64()
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
-from jaxnav import sim, units  # noqa: E402
+from jaxnav import sim, units
 
 
 def main(argv=None) -> int:

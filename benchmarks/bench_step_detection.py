@@ -54,9 +54,9 @@ jax.config.update("jax_enable_x64", True)
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from jaxnav import io  # noqa: E402
-from jaxnav import monitoring as mon  # noqa: E402
-from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
+from jaxnav import io
+from jaxnav import monitoring as mon
+from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR
 
 N_DAYS = 3653
 WHITE = 2.0 * MM

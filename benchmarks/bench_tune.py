@@ -38,21 +38,21 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import jax  # noqa: E402
-from _harness import cpu_model, git_revision, loadavg, write_section  # noqa: E402
-from _harness import package_version as _version  # noqa: E402
+import jax
+from _harness import cpu_model, git_revision, loadavg, write_section
+from _harness import package_version as _version
 
-import jaxnav  # noqa: E402
+import jaxnav
 
 jaxnav.enable_x64()
 jax.config.update("jax_enable_compilation_cache", False)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import optax  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+import optax
 
-from jaxnav import tune  # noqa: E402
-from jaxnav.experiments import S0Setup, load_experiment, s0_metrics  # noqa: E402
+from jaxnav import tune
+from jaxnav.experiments import S0Setup, load_experiment, s0_metrics
 
 BEGIN, END = "<!-- BEGIN bench_tune -->", "<!-- END bench_tune -->"
 B_PAPER = 0.254

@@ -64,7 +64,7 @@ def main(argv=None):
         Qt, Rt = jnp.exp(theta[0]) * Qunit, jnp.exp(2 * theta[1]) * jnp.eye(N_OBS)
         return -lgssm_filter(make_lgssm_params(F @ x0, F @ P0 @ F.T + Qt, F, Qt, H, Rt), z).marginal_loglik
 
-    vg = lambda f: jax.jit(jax.vmap(jax.value_and_grad(f), in_axes=(None, 0)))  # noqa: E731
+    vg = lambda f: jax.jit(jax.vmap(jax.value_and_grad(f), in_axes=(None, 0)))
     cases = {
         "c": [
             (
@@ -125,7 +125,7 @@ def main(argv=None):
         ps = best.get((c, "plain lax.scan", "clean"))
         dx = best.get((c, "dynamax", "clean"))
         ref_row = n in ("plain lax.scan", "dynamax")
-        fmt = lambda ref: "—" if ref is None or ref_row else f"{ref / t:.2f}x"  # noqa: E731
+        fmt = lambda ref: "—" if ref is None or ref_row else f"{ref / t:.2f}x"
         out.append(f"| ({c}) | {n} | {lab} | {bf._fmt_t(t)} | {fmt(ps)} | {fmt(dx)} |")
     report = "\n".join(out)
     print(report)

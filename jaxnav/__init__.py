@@ -31,7 +31,7 @@ def x64_enabled() -> bool:
 
 
 from jaxnav import filters, units  # noqa: E402  (after enable_x64 is defined)
-from jaxnav._status import StatusError, raise_for_status  # noqa: E402
+from jaxnav._status import StatusError, raise_for_status  # noqa: E402  (likewise)
 
 __all__ = [
     "enable_x64",

@@ -64,9 +64,9 @@ def _fast_compiles():
 
 _fast_compiles()
 
-import jax  # noqa: E402
+import jax
 
-import jaxnav  # noqa: E402
+import jaxnav
 
 jaxnav.enable_x64()
 # The persistent compilation cache is opt-in (JAXNAV_JAX_CACHE=FOLDER, for repeated local runs): under
@@ -82,7 +82,7 @@ if os.environ.get("JAXNAV_JAX_CACHE"):
 SHARED = pathlib.Path(__file__).resolve().parents[2] / "shared"
 
 
-import pytest  # noqa: E402
+import pytest
 
 # `make test` runs `pytest -n 2 --dist loadscope --no-loadscope-reorder`: each module (and each
 # notebook's class in test_notebooks.py) goes to one worker whole, so module-scoped fixtures and

@@ -60,12 +60,12 @@ def _resolve(obj: griffe.Object, target: str) -> str | None:
     while scope is not None:
         try:
             member = scope.members.get(head) if hasattr(scope, "members") else None
-        except Exception:  # noqa: BLE001 - an alias that cannot be resolved: try the next scope
+        except Exception:  # an alias that cannot be resolved: try the next scope
             member = None
         if member is not None:
             try:
                 path = member.target_path if member.is_alias else member.path
-            except Exception:  # noqa: BLE001
+            except Exception:
                 path = member.path
             return f"{path}.{rest}" if rest else path
         scope = scope.parent
@@ -163,7 +163,7 @@ def _runtime_fields(attr: griffe.Attribute) -> set[str]:
 
         cls = getattr(importlib.import_module(attr.parent.path), attr.name)
         return set(getattr(cls, "_fields", ()))
-    except Exception:  # noqa: BLE001 - documentation only: without the fields nothing is split
+    except Exception:  # documentation only: without the fields nothing is split
         return set()
 
 

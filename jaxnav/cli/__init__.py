@@ -265,7 +265,7 @@ def main(argv=None) -> int:
             raise
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
-    except Exception as exc:  # noqa: BLE001 - the one place that turns a bug into a message
+    except Exception as exc:  # the one place that turns a bug into a message
         if debug:
             raise
         return _internal(prog, exc)

@@ -250,7 +250,7 @@ def start_processes(args) -> bool:
         tune.initialize(args.coordinator, args.num_processes, args.process_id, timeout_s=args.join_timeout)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    except Exception as exc:  # noqa: BLE001 - JAX's runtime errors (timeouts, unreachable coordinator)
+    except Exception as exc:  # JAX's runtime errors (timeouts, unreachable coordinator)
         where = args.coordinator or os.environ.get("JAX_COORDINATOR_ADDRESS") or "the cluster's coordinator"
         raise CommandError(
             f"cannot join the processes of this study at {where}: {type(exc).__name__}: "

@@ -268,7 +268,7 @@ def format_ct_drive(result) -> str:
     """Markdown tables (m) of a :func:`run_ct_drive` result: all variants; manoeuvres; gross errors."""
     meas, turns, runs = result["measured"], result["turns"], result["fixed_runs"]
     raw = result["raw"]
-    f2 = lambda v: f"{v[0]:.2f} / {v[1]:.2f}"  # noqa: E731
+    f2 = lambda v: f"{v[0]:.2f} / {v[1]:.2f}"
     lines = [
         "| filter | plug-in | filtered, all epochs | smoothed, all epochs | filtered, measured epochs | "
         "smoothed, measured epochs |",

@@ -127,7 +127,7 @@ def rules(exp: dict, b=None) -> dict:
 
 def s0_measurements(cfg, gnss, t) -> PVMeasurements:
     """The GPS position/velocity measurements of one S0 run (no lever arm; R diagonal from the scenario's sigmas)."""
-    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
+    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))
     return ins.gnss_measurements(
         t,
         gnss.pos,

@@ -98,7 +98,7 @@ def _period_run(key, num: dict, S: int, T: int, filters: dict):
     """One period: simulate, add gross errors, run every filter (pure; vmapped over keys)."""
     ko, kt, kw, ks, kg = jax.random.split(key, 5)
     cfg = subsidence_config(S)
-    u = lambda k, lo_hi: jax.random.uniform(k, (S,), minval=lo_hi[0], maxval=lo_hi[1])  # noqa: E731
+    u = lambda k, lo_hi: jax.random.uniform(k, (S,), minval=lo_hi[0], maxval=lo_hi[1])
     cfg = cfg._replace(onset=u(ko, num["onset"]) * T, rate=1.0 / u(kt, num["time_constant"]), w_max=u(kw, num["w_max"]))
     simu = simulate_subsidence(ks, cfg, T)
     sig = jnp.tile(num["sigma"], S)
@@ -192,7 +192,7 @@ def run_s1_simulation(
         return res
 
     res = map_chunked(call, P, chunk=min(int(chunk), P), desc="S1 periods", progress=progress, unit="period")
-    squeeze = lambda a: a[:, 0] if a.ndim >= 2 and a.shape[1] == 1 else a  # noqa: E731
+    squeeze = lambda a: a[:, 0] if a.ndim >= 2 and a.shape[1] == 1 else a
     out = {"stats": {}, "internal": {}, "forecast_rms": {}, "episode_rms": {}, "status": {}}
     for name, r in res.items():
         out["stats"][name] = jax.tree_util.tree_map(squeeze, r["stats"])
@@ -284,7 +284,7 @@ def format_s1_tables(tables: dict, *, compare=("standard", "adaptive")) -> str:
             f"{i + 1:<8}{t6[a]['plane'][i]:>16.2f}{t6[a]['height'][i]:>17.2f}{t6[b]['plane'][i]:>16.2f}"
             f"{t6[b]['height'][i]:>17.2f}{t6['improvement_plane'][i]:>13.1f}{t6['improvement_height'][i]:>14.1f}"
         )
-    mean = lambda x: float(np.mean(x))  # noqa: E731
+    mean = lambda x: float(np.mean(x))
     L.append(
         f"{'mean':<8}{mean(t6[a]['plane']):>16.2f}{mean(t6[a]['height']):>17.2f}{mean(t6[b]['plane']):>16.2f}"
         f"{mean(t6[b]['height']):>17.2f}{mean(t6['improvement_plane']):>13.1f}"

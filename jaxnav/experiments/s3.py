@@ -195,7 +195,7 @@ def preprocessing_check(scn, seed: int = 0, n: int = 60000, axis: int = 0):
         kf = ar_kalman(c, sel.fit.phi, sel.fit.sigma2, R)
         st_raw = series_stats(y)
         st = series_stats(c)
-        v = lambda a: float(jnp.var(a))  # noqa: E731  residual about the mean: the true signal is constant
+        v = lambda a: float(jnp.var(a))
         # decimated to 1 s means (low-pass + resampling): the correlated drift becomes visible to the
         # AR identification, and the filter estimates it (compared with the simulated drift)
         m = int(round(scn.imu_rate_hz))

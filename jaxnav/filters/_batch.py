@@ -301,7 +301,7 @@ def _block_maps(F, Hm, K, Linv, valid, groups):
         maps = dict(means=(xPhi, xPsi), pred_means=(pPhi, pPsi), innovations=(vPhi, vPsi), w=(Lj @ vPhi, Lj @ vPsi))
         return (xPhi, xPsi), tuple(maps[g] for g in groups if g != "end")
 
-    lead = lambda a: jnp.swapaxes(a, 0, 1)  # noqa: E731  (L, nb, ...) for the scan
+    lead = lambda a: jnp.swapaxes(a, 0, 1)  # (L, nb, ...) for the scan
     init = (jnp.broadcast_to(jnp.eye(n, dtype=F.dtype), (nb, n, n)), jnp.zeros((nb, n, L * m), F.dtype))
     (Phi, Psi), outs = jax.lax.scan(step, init, (lead(F), lead(Hm), lead(K), lead(Linv), lead(valid), sel))
     Ms, Mz = [], []
@@ -345,7 +345,7 @@ def _means_blocks(model, tv, allv, K, xs, x0s, zs, save, Lb):
             off += w
         wv = cols["w"].reshape(B, Lk, m)
         nis = jnp.sum(wv * wv, axis=-1)
-        sl = lambda a: jax.lax.dynamic_slice_in_dim(a, t0, Lk)  # noqa: E731
+        sl = lambda a: jax.lax.dynamic_slice_in_dim(a, t0, Lk)
         lls = sl(sh["okf"]) * (sl(sh["c_ll"]) - 0.5 * nis)
         vals = dict(cols, nis=sl(sh["obsf"]) * nis, logliks=lls)
         bufs = {
@@ -448,7 +448,7 @@ def _smoothed_means_blocks(C, A, xs, L):
             return (Phi, Psi), (Phi, Psi)
 
         init = (jnp.broadcast_to(jnp.eye(n, dtype=Cb.dtype), (k, n, n)), jnp.zeros((k, n, Lk * n), Cb.dtype))
-        lead = lambda a: jnp.swapaxes(a, 0, 1)  # noqa: E731
+        lead = lambda a: jnp.swapaxes(a, 0, 1)
         _, out = jax.lax.scan(step, init, (lead(Cb), lead(Ab), eye), reverse=True)
         rows = [jnp.transpose(a, (1, 3, 0, 2)).reshape(k, a.shape[-1], Lk * n) for a in out]
         return jnp.concatenate(rows, axis=1)

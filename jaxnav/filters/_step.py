@@ -426,7 +426,7 @@ def prepare_inputs(model, x0, P0, zs, mask, save, allow_float32):
     if not jnp.issubdtype(dtype, jnp.floating):
         dtype = jnp.result_type(float)
     check_float64(dtype, what="the Kalman filter's arrays", allow_float32=allow_float32)
-    cast = lambda a: None if a is None else jnp.asarray(a, dtype)  # noqa: E731
+    cast = lambda a: None if a is None else jnp.asarray(a, dtype)
     model = LinearGaussian(*[cast(a) for a in model])
     x0, P0, zs = cast(x0), cast(P0), cast(zs)
     if mask is None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from jaxnav._numerics import check_float64  # noqa: F401  (the package's one float64 guard, re-exported here)
+from jaxnav._numerics import check_float64  # the package's one float64 guard, re-exported here
 from jaxnav.geodesy._ellipsoid import WGS84, Ellipsoid
 
 _BOWRING_ITERATIONS = 4
@@ -90,7 +90,7 @@ def _rot_enu(lat0, lon0):
 def ecef_to_enu_vector(dx, dy, dz, lat0, lon0):
     """Rotate an ECEF vector (e.g. a velocity) into local east, north, up at (lat0, lon0) rad."""
     e, n, u = _rot_enu(_f(lat0), _f(lon0))
-    dot = lambda r: r[0] * dx + r[1] * dy + r[2] * dz  # noqa: E731
+    dot = lambda r: r[0] * dx + r[1] * dy + r[2] * dz
     return dot(e), dot(n), dot(u)
 
 

@@ -87,7 +87,6 @@ from jaxnav.ins.integration import (
     gnss_solution_measurements,
     lc_params,
     loosely_coupled,
-    predict_gnss_pv,
     segment_imu,
     smooth,
 )
@@ -100,6 +99,7 @@ from jaxnav.ins.measurements import (
     heading,
     nhc,
     odometer,
+    predict_gnss_pv,
     zaru,
     zupt,
 )

@@ -334,7 +334,7 @@ def allan_noise_fit(y, dt, *, tau_range=None, per_octave: int = 1, kind: str = "
         out_i = _fit_axis(taus[fitted], a[fitted], K[fitted])
         for k, v in out_i.items():
             out[k][i] = v
-    r = lambda k: out[k].reshape(batch + out[k].shape[1:])  # noqa: E731
+    r = lambda k: out[k].reshape(batch + out[k].shape[1:])
     th, sd = r("theta"), r("sd")
     return AllanFit(
         taus=taus,
@@ -476,7 +476,7 @@ def allan_fit_datasheet(fit: AllanFit, sensor: str) -> dict:
         heads = ("vrw", "bias_instability", "rate_rw")
         tails = ("_m_per_s_per_sqrt_h", "_mg", "_mg_per_sqrt_h")
         dev = ("adev", "_mg", units.mps2_to_mg)
-    lst = lambda a: [float(v) for v in np.asarray(a, float).reshape(-1)]  # noqa: E731
+    lst = lambda a: [float(v) for v in np.asarray(a, float).reshape(-1)]
     out = {}
     for j, (c, h, t, v, s) in enumerate(
         zip(

@@ -327,7 +327,7 @@ def _Qc21(noise: ImuNoise):
     (x3 each): the bias instability with its correlation time is a first-order Gauss-Markov process of
     that stationary sigma (:func:`markov_psd`); the bias random walk K adds its density (tau = inf: only K)."""
     dtype = jnp.result_type(noise.gyro_arw, noise.accel_vrw, float)
-    v = lambda x: _vec3(x, dtype)  # noqa: E731
+    v = lambda x: _vec3(x, dtype)
 
     def gm(sigma, tau):
         tau = v(tau)
@@ -568,7 +568,7 @@ class ErrorModel:
         """
         pos = jnp.asarray(pos)
         dtype = jnp.result_type(pos, float)
-        v = lambda x: _vec3(x, dtype)  # noqa: E731
+        v = lambda x: _vec3(x, dtype)
         lat, h = pos[0], pos[2]
         pe = v(pos_enu)
         dpos = jnp.stack(

@@ -108,7 +108,7 @@ def trajectory_errors(
     """
     t_sol, t_ref = np.asarray(t_sol, float), np.asarray(t_ref, float)
     N, M = t_sol.size, t_ref.size
-    nan = lambda n: np.full((n, 3), np.nan)  # noqa: E731
+    nan = lambda n: np.full((n, 3), np.nan)
     pos_sol, pos_ref = np.asarray(pos_sol, float), np.asarray(pos_ref, float)
     v_sol = nan(N) if v_sol is None else np.asarray(v_sol, float)
     v_ref = nan(M) if v_ref is None else np.asarray(v_ref, float)
@@ -484,7 +484,7 @@ def score_outages(
     outages = np.asarray(outages, float).reshape(-1, 2)
     e_f = np.where(fixed, err_f, np.nan)
     e_s = np.where(fixed, err_s, np.nan)
-    rms = lambda x: _rms(x, finite_only=False)  # noqa: E731
+    rms = lambda x: _rms(x, finite_only=False)
     K = outages.shape[0]
     n_ref = np.zeros(K, int)
     st = {k: np.full(K, np.nan) for k in ("fm", "sm", "fr", "sr")}
@@ -556,5 +556,5 @@ def attitude_sigmas(covs, heading, idx) -> np.ndarray:
     f = np.stack([np.sin(heading), np.cos(heading)], -1)  # forward in (east, north)
     r = np.stack([np.cos(heading), -np.sin(heading)], -1)  # right
     T = P[:, e : n + 1, e : n + 1]
-    var = lambda w: np.einsum("mi,mij,mj->m", w, T, w)  # noqa: E731
+    var = lambda w: np.einsum("mi,mij,mj->m", w, T, w)
     return np.sqrt(np.clip(np.stack([var(f), var(r), P[:, u, u]], -1), 0.0, None))

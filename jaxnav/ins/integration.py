@@ -63,7 +63,7 @@ from jaxnav.filters import (
 from jaxnav.geodesy import WGS84, Ellipsoid, check_float64
 from jaxnav.ins.attitude import quat_mul, quat_normalize, quat_rotate, quat_to_dcm, rv_to_quat
 from jaxnav.ins.error_model import ERROR_MODEL_18, ErrorModel, discretize_taylor, discretize_van_loan
-from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows, predict_gnss_pv  # noqa: F401
+from jaxnav.ins.measurements import GNSS_PV, Aid, GnssData, MeasContext, MeasRows
 from jaxnav.ins.mechanization import (
     ImuSample,
     MechParams,
@@ -638,7 +638,7 @@ def _propagate_blocks(
     scale = biases.gyro_scale is not None
     nb = -(-K // M)
     padn = nb * M - K
-    pad = lambda a: jnp.concatenate([a, jnp.zeros((padn,) + a.shape[1:], dtype)]) if padn else a  # noqa: E731
+    pad = lambda a: jnp.concatenate([a, jnp.zeros((padn,) + a.shape[1:], dtype)]) if padn else a
     blk, pre = _body_blocks(pad(dth), pad(dvc), pad(dtu), mech.dtheta_prev, mech.dv_prev, M, True, prefix=True)
     Bq = jnp.stack(pre.B, axis=-1)  # (nb, M, 4) body rotation to the end of each sample
     f_b = jnp.sum(quat_rotate(Bq, pad(dvc).reshape(nb, M, 3)), axis=1)  # (nb, 3)
@@ -686,7 +686,7 @@ def _discretise(model: ErrorModel, p: _Propagated, tau, Qc, ellipsoid, how: LCDi
     """
     Tsafe = jnp.maximum(p.T, 1e-300)
     s = p.sums
-    avg = lambda a: None if a is None else a / Tsafe  # noqa: E731
+    avg = lambda a: None if a is None else a / Tsafe
     F = model.F(avg(s.pos), avg(s.v), avg(s.f), avg(s.C), tau, ellipsoid=ellipsoid, Cw=avg(s.Cw), Cf=avg(s.Cf))
     G = model.G(quat_to_dcm(p.mech.nav.q_bn))
     if how.method == "van_loan":
@@ -1005,7 +1005,7 @@ def _merge_epochs(t_imu, meas: PVMeasurements, active):
     fill = np.where(fill < 0, 0, fill)
     src = np.where(row >= 0, row, fill)
     has = jnp.asarray(row >= 0)
-    take = lambda a: jnp.asarray(a)[src]  # noqa: E731
+    take = lambda a: jnp.asarray(a)[src]
     merged = PVMeasurements(
         t=t_all,
         pos=take(meas.pos),

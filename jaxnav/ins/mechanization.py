@@ -278,7 +278,7 @@ def _between(start: NavState, fr: _NavFrame, pre: _Prefix, dt, hold_height, elli
     Vectorised over blocks and samples, in components. start, fr: (nb, ...) from the scan;
     pre: :class:`_Prefix` with (nb, M) components; dt (nb, M). Returns a NavState of (nb, M, ...).
     """
-    col = lambda a: tuple(a[:, i, None] for i in range(a.shape[1]))  # noqa: E731  (nb, k) -> k x (nb, 1)
+    col = lambda a: tuple(a[:, i, None] for i in range(a.shape[1]))  # (nb, k) -> k x (nb, 1)
     q, v0, p0, w, G = col(start.q_bn), col(start.v_n), col(start.pos), col(fr.w_in), col(fr.G)
     Y = [quat_rotate_c(q, S) for S in pre.S[:3]]
     wY1, wY2 = cross_c(w, Y[1]), cross_c(w, cross_c(w, Y[2]))
@@ -293,7 +293,7 @@ def _between(start: NavState, fr: _NavFrame, pre: _Prefix, dt, hold_height, elli
     n = rv_to_quat_series_c(*(-tau * w[i] for i in range(3)))
     qj = quat_mul_c(n, quat_mul_c(q, pre.B))
     norm = jnp.sqrt(sum(a * a for a in qj))
-    stack = lambda xs: jnp.stack([jnp.broadcast_to(x, tau.shape) for x in xs], axis=-1)  # noqa: E731
+    stack = lambda xs: jnp.stack([jnp.broadcast_to(x, tau.shape) for x in xs], axis=-1)
     return NavState(q_bn=stack([a / norm for a in qj]), v_n=stack(v), pos=stack(pos))
 
 

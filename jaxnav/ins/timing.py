@@ -363,12 +363,12 @@ def clock_drift(
     T = float(tg[-1] - tg[0])
     if tg.size < 2 * MIN_SEARCH_EPOCHS or T <= 0:
         return {"note": "not estimated: too few GNSS epochs"}
-    ok = lambda o, c: abs(o) + 0.5 * abs(c) <= span + 1e-9  # noqa: E731
-    key = lambda o, c: (round(o, 6), round(c, 6))  # noqa: E731
-    ll = lambda x: loglik(*x)  # noqa: E731
+    ok = lambda o, c: abs(o) + 0.5 * abs(c) <= span + 1e-9
+    key = lambda o, c: (round(o, 6), round(c, 6))
+    ll = lambda x: loglik(*x)
     x = key(round(offset / step_o) * step_o, 0.0)
     stencil = ((0, 0), (-1, 0), (1, 0), (0, -1), (0, 1), (1, 1))  # the fewest points that fix a 2-D quadratic
-    nbrs = lambda x: [key(x[0] + i * step_o, x[1] + j * step_c) for i, j in stencil]  # noqa: E731
+    nbrs = lambda x: [key(x[0] + i * step_o, x[1] + j * step_c) for i, j in stencil]
     S = np.diag([step_o, step_c])
     for _ in range(12):
         pts = nbrs(x)

@@ -74,7 +74,7 @@ def _convert(obj, counts):
         return _convert(obj._asdict(), counts)
     try:
         a = np.asarray(obj)
-    except Exception:  # noqa: BLE001 - anything else is written as its text
+    except Exception:  # anything else is written as its text
         return str(obj)
     if a.dtype == object:
         return [_convert(v, counts) for v in a.tolist()] if a.ndim else str(obj)
@@ -101,7 +101,7 @@ def _size(v) -> int:
         return sum(_size(x) for x in v)
     try:
         return int(np.size(v))
-    except Exception:  # noqa: BLE001
+    except Exception:
         return 1
 
 

@@ -374,7 +374,7 @@ def read_control_points(path) -> ControlPoints:
 def write_control_points(path, point, lat, lon, H, x, y, h) -> pathlib.Path:
     """Write a control-point file (B, L in degrees from ``lat, lon`` in rad; NaN written empty)."""
     path = pathlib.Path(path)
-    fmt = lambda v, f: "" if not math.isfinite(v) else format(v, f)  # noqa: E731
+    fmt = lambda v, f: "" if not math.isfinite(v) else format(v, f)
     with path.open("w", encoding="utf-8", newline="") as fh:
         fh.write(
             "# control points (jaxnav S2 format): B L deg and H ellipsoidal height m (WGS-84); x north, y east "

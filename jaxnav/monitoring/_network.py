@@ -176,7 +176,7 @@ def forecast(
     save = ("means", "pred_means", "factors", "noise") + (("covs", "pred_covs") if uncertainty else ())
     plug = {k: v for k, v in dict(estimator=estimator, inflation=inflation, mask=mask).items() if v is not None}
     r = jf.kalman_filter(model, x0, P0, zs, save=save, **plug)  # same call as a plain run: shares its compilation
-    blk = lambda a: a.reshape(T, S, 2, 3)  # noqa: E731
+    blk = lambda a: a.reshape(T, S, 2, 3)
     mean, pred = blk(r.means), blk(r.pred_means)
     if uncertainty:
         psig = jnp.sqrt(blk(jnp.diagonal(r.pred_covs, axis1=-2, axis2=-1))[:, :, 0])

@@ -310,7 +310,7 @@ def fit_series_batch(
     th0, lo, hi = _start(scale, spec, random_walk, theta0)
     est = spec.kappa is None
     r, W, dg, Aj = jnp.asarray(spec.r), jnp.asarray(spec.W), jnp.asarray(spec.d_grid), jnp.asarray(A)
-    one = lambda yy, vv, t0, l, h, H: fit_component(  # noqa: E731
+    one = lambda yy, vv, t0, l, h, H: fit_component(
         yy,
         vv,
         Aj,

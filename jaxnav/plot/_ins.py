@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pathlib
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import legend_below, readable_ticks, symlog_ticks

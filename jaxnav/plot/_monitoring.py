@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pathlib
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import legend_outside, readable_ticks
-from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR  # noqa: E402
+from jaxnav.units import DAY, MM, MM_PER_YEAR, YEAR
 
 COLORS = {
     "standard": "tab:gray",

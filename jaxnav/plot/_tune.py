@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pathlib
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from jaxnav.plot._save import save_figure
 from jaxnav.plot._style import readable_ticks as _readable_ticks

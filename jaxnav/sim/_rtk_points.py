@@ -208,7 +208,7 @@ def simulate_rtk_points(key, cfg: RtkPointsConfig = RtkPointsConfig()) -> RtkPoi
     cxy = similarity2d(datum, gk_all[P:])
     ch = ch_true + cfg.levelling_sigma * draw["cl"]
 
-    nanT = lambda a: jnp.where(mask if a.ndim == 2 else mask[..., None], a, jnp.nan)  # noqa: E731
+    nanT = lambda a: jnp.where(mask if a.ndim == 2 else mask[..., None], a, jnp.nan)
     return RtkPointsSim(
         t=t,
         mask=mask,

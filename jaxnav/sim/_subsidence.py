@@ -74,7 +74,7 @@ def subsidence_config(
       :class:`SubsidenceConfig` (float arrays).
     """
     S = int(n_stations)
-    f = lambda a, shape: jnp.broadcast_to(jnp.asarray(a, float), shape)  # noqa: E731
+    f = lambda a, shape: jnp.broadcast_to(jnp.asarray(a, float), shape)
     return SubsidenceConfig(
         w_max=f(w_max, (S,)),
         rate=1.0 / f(time_constant, (S,)),

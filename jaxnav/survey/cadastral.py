@@ -181,7 +181,7 @@ def plan_survey(stops: StopList, t_imu, *, meas_rate_hz: float = 1.0, margin_s: 
     known = np.flatnonzero(stops.kind == KNOWN_COORDINATE)
     kef = np.array([np.flatnonzero(meas_stop == k)[-1] for k in known])
     keb = np.array([np.flatnonzero(meas_stop == k)[0] for k in known])
-    grid_idx = lambda tt: np.searchsorted(t_grid, tt - eps, side="left")  # noqa: E731
+    grid_idx = lambda tt: np.searchsorted(t_grid, tt - eps, side="left")
     fwd_reset = np.full(N, -1)
     bwd_reset = np.full(N, -1)
     for r, _k in enumerate(known):
@@ -493,7 +493,7 @@ def process_survey(
     # points (known position, zero velocity, attitude carried on), (b) compensated data restarted at
     # the smoothed states, (c) the reverse run
     tab_a = NavState(q_bn=tab_f.q_bn, v_n=z, pos=kn)
-    stack = lambda *a: jax.tree_util.tree_map(lambda *x: jnp.stack(x), *a)  # noqa: E731
+    stack = lambda *a: jax.tree_util.tree_map(lambda *x: jnp.stack(x), *a)
     fr = np.asarray(plan.fwd_reset)
     pos4, st4 = jax.vmap(_strapdown_resets, in_axes=(0, 0, 0, None, 0, 0, 0, 0))(
         stack(nav0, nav0, nav0, rev[0]),
@@ -640,7 +640,7 @@ def cadastral_params(
     """
     from jaxnav.ins import ERROR_MODEL_18, ImuNoise
 
-    v3 = lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float64), (3,))  # noqa: E731
+    v3 = lambda x: jnp.broadcast_to(jnp.asarray(x, jnp.float64), (3,))
     gm = jnp.maximum(v3(gyro_markov), jnp.maximum(0.01 * v3(gyro_bias), 1e-10))
     r = 6.4e6
     P0 = jnp.diag(

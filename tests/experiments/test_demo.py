@@ -31,7 +31,7 @@ def test_demo_writes_results_and_figure(tmp_path, capsys):
 
 def test_run_chunked_pads_last_chunk_and_matches_vmap():
     keys = jax.random.split(jax.random.PRNGKey(0), 7)
-    f = lambda k: {"a": jax.random.normal(k, (3,)), "b": jax.random.uniform(k)}  # noqa: E731
+    f = lambda k: {"a": jax.random.normal(k, (3,)), "b": jax.random.uniform(k)}
     got = run_chunked(f, keys, chunk=3, progress=False)
     ref = jax.vmap(f)(keys)
     np.testing.assert_array_equal(got["a"], ref["a"])

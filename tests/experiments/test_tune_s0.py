@@ -81,7 +81,7 @@ def test_reverse_mode_with_checkpointing_equals_forward_mode(setup, derivatives)
     loss = lambda b: s0_metrics(
         setup,
         {"b": b, "q_scale": THETA[2], "r_scale": THETA[3]},
-        key,  # noqa: E731
+        key,
         filter="attenuated",
         remat=True,
     )["loss"]

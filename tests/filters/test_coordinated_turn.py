@@ -29,5 +29,5 @@ def test_ekf_follows_a_circle():
         m, jnp.array([0.0, 0.0, v, 0.0, 0.0]), jnp.diag(jnp.array([1.0, 1.0, 1.0, 0.1, 0.01])), jnp.asarray(zs)
     )
     assert abs(float(r.means[-1, 4]) - om) < 0.02
-    rms = lambda p: np.sqrt(np.mean(np.sum((p[20:, :2] - truth[20:]) ** 2, -1)))  # noqa: E731
+    rms = lambda p: np.sqrt(np.mean(np.sum((p[20:, :2] - truth[20:]) ** 2, -1)))
     assert rms(np.asarray(r.means)) < 0.85 * rms(zs)  # better than the fixes it filters

@@ -73,7 +73,7 @@ def test_attenuated_gap_counts_updates(burst):
 def test_sage_husa_burst_is_bounded_and_flagged(burst):
     """Unbounded, R ran away to (7 m)^2 and the RMS to 2.3 m; bounded, it is flagged and near the classic RMS."""
     model, x0, P0, sc, rms_classic = burst
-    run = lambda est: jf.kalman_filter(model, x0, P0, sc.zs, estimator=est, save=("means", "noise"))  # noqa: E731
+    run = lambda est: jf.kalman_filter(model, x0, P0, sc.zs, estimator=est, save=("means", "noise"))
     free = run(jf.sage_husa(0.95, r_max=1e12))
     bounded = run(jf.sage_husa(0.95))
     sig_free = np.sqrt(np.asarray(jnp.diagonal(free.noise.R, axis1=1, axis2=2)).max())
@@ -111,7 +111,7 @@ def test_sage_husa_learns_a_larger_noise_without_flag():
 def test_pure_igg3_lockout_is_flagged(burst):
     """Pure IGG-III rejects the burst for good (RMS 2.3 m, 100x): ROBUST_LOCKOUT; max_run avoids it."""
     model, x0, P0, sc, rms_classic = burst
-    run = lambda est: jf.kalman_filter(model, x0, P0, sc.zs, estimator=est, save=("means",))  # noqa: E731
+    run = lambda est: jf.kalman_filter(model, x0, P0, sc.zs, estimator=est, save=("means",))
     pure, default = run(jf.igg3(max_run=None)), run(jf.igg3())
     assert _rms(pure.means, sc.x_true) > 20 * rms_classic
     assert int(pure.status) & _status.ROBUST_LOCKOUT
@@ -223,7 +223,7 @@ def test_igg3_defaults_on_gross_errors_monte_carlo():
         zg = sc.zs + jnp.where(hit, 10.0 * sig * sign, 0.0)
         model = jf.constant_velocity(1.0, sigma=sig, accel_var=acc**2)
         x0 = jnp.concatenate([sc.zs[0], jnp.zeros(3)])
-        rms = lambda m: jnp.sqrt(jnp.mean((m[:, :3] - sc.x_true[:, :3]) ** 2))  # noqa: E731
+        rms = lambda m: jnp.sqrt(jnp.mean((m[:, :3] - sc.x_true[:, :3]) ** 2))
         clean = jf.kalman_filter(model, x0, P0, sc.zs, save=("means",))
         robust = jf.kalman_filter(model, x0, P0, zg, estimator=jf.igg3(), save=("means",))
         return rms(clean.means), rms(robust.means), robust.status

@@ -95,7 +95,7 @@ def test_textbook_covariance_update_equals_joseph(problem):
         atol=1e-11,
     )
     P0s = jnp.stack([P0, 2.0 * P0])
-    run = lambda P, j: jf.kalman_filter(model, x0, P, zs, mask=mask, joseph=j)  # noqa: E731
+    run = lambda P, j: jf.kalman_filter(model, x0, P, zs, mask=mask, joseph=j)
     got = jax.jit(jax.vmap(lambda P: run(P, False)))(P0s)
     for i in range(2):
         _assert_same(jax.tree_util.tree_map(lambda a: a[i], got), run(P0s[i], True), rtol=1e-9, atol=1e-11)
@@ -122,7 +122,7 @@ def test_trusted_data_under_vmap_share_one_covariance_recursion(problem):
     model, x0, P0, zs, mask = problem
     clean = jnp.where(jnp.isfinite(zs), zs, 0.0)
     batch = jnp.stack([clean, 0.5 * clean, clean + 1.0])
-    run = lambda z: jf.kalman_filter(model, x0, P0, z, mask=mask, check_finite=False)  # noqa: E731
+    run = lambda z: jf.kalman_filter(model, x0, P0, z, mask=mask, check_finite=False)
     axes = jf.KalmanResult(*[0] * len(jf.KalmanResult._fields))._replace(
         covs=None, pred_covs=None, innov_covs=None, P_final=None
     )
@@ -191,7 +191,7 @@ def test_plain_vmap_equals_the_loop(problem):
             rtol=1e-9,
             atol=1e-10,
         )  # rounding: XLA fuses the batched products differently
-    fading = lambda z: jf.kalman_filter(model, x0, P0, z, inflation=jf.fading(10)).means  # noqa: E731
+    fading = lambda z: jf.kalman_filter(model, x0, P0, z, inflation=jf.fading(10)).means
     np.testing.assert_allclose(
         np.asarray(jax.vmap(fading)(batch)[1]), np.asarray(fading(batch[1])), rtol=1e-9, atol=1e-10
     )
@@ -216,7 +216,7 @@ def test_kalman_filter_batch_equals_per_sequence(problem, T_, block):
     batch = batch.at[:, 2, 1].set(jnp.nan)
     x0s = jnp.stack([x0, x0 + 1.0, x0 - 0.5, x0.at[0].set(jnp.inf)])
     rule = jf.attenuated(0.3)
-    run = lambda z, x: jf.kalman_filter(mod, x, P0, z, mask=mk, inflation=rule)  # noqa: E731
+    run = lambda z, x: jf.kalman_filter(mod, x, P0, z, mask=mk, inflation=rule)
     with np.errstate(all="ignore"):
         got = jf.kalman_filter_batch(mod, x0s, P0, batch, mask=mk, inflation=rule, block=block)
         refs = [run(batch[i], x0s[i]) for i in range(4)]
@@ -337,7 +337,7 @@ def test_switch_equals_each_rule_in_one_program(problem):
             rtol=1e-13,
             atol=1e-13,
         )
-    run = lambda i: jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.switch(i, parts), save=("means",))  # noqa: E731
+    run = lambda i: jf.kalman_filter(model, x0, P0, zs, mask=mask, inflation=jf.switch(i, parts), save=("means",))
     batched = jax.jit(jax.vmap(run))(jnp.arange(3.0))
     for i in range(3):
         np.testing.assert_allclose(np.asarray(batched.means[i]), np.asarray(alone[i].means), rtol=1e-9, atol=1e-9)

@@ -74,7 +74,7 @@ def test_ekf_equals_filterpy_with_the_same_nonlinear_prediction():
     np.testing.assert_allclose(sm.means, xs, rtol=0, atol=1e-8)
     np.testing.assert_allclose(sm.covs, Ps, rtol=0, atol=1e-9)
     # smoothing helps against the known truth
-    err = lambda a: np.sqrt(np.mean((a[:, :2] - TRUTH[:, :2]) ** 2))  # noqa: E731
+    err = lambda a: np.sqrt(np.mean((a[:, :2] - TRUTH[:, :2]) ** 2))
     assert err(sm.means) < 0.8 * err(res.means)
 
 
@@ -189,7 +189,7 @@ def test_every_plugin_runs_on_ekf_and_ukf(name):
     kw = PLUGINS[name]
     lin, lmodel, x0, P0l, zs = _linear_case()
     ref = jf.kalman_filter(lin, x0, P0l, zs, **kw)
-    ukf = lambda *a, **k: jf.unscented_kalman_filter(*a, alpha=1.0, **k)  # noqa: E731
+    ukf = lambda *a, **k: jf.unscented_kalman_filter(*a, alpha=1.0, **k)
     for run in (jf.extended_kalman_filter, ukf):
         res = run(lmodel, x0, P0l, zs, **kw)
         np.testing.assert_allclose(res.means, ref.means, rtol=0, atol=1e-9 * np.max(np.abs(ref.means)))
@@ -230,7 +230,7 @@ def test_vmap_over_sequences_equals_loop():
     zs = ZS[None, :150] + np.random.default_rng(3).normal(size=(B, 150, M)) * np.sqrt(np.diag(R))
     # alpha = 0.5: at 1e-3 the sigma-point moments amplify a last-bit difference between the batched
     # and the single program's fused kernels to ~1e-7 m (the conditioning the UKF docstring states)
-    ukf = lambda *a, **k: jf.unscented_kalman_filter(*a, alpha=0.5, **k)  # noqa: E731
+    ukf = lambda *a, **k: jf.unscented_kalman_filter(*a, alpha=0.5, **k)
     for run in (jf.extended_kalman_filter, ukf):
         batched = jax.vmap(lambda z: run(MODEL, X0, P0, z, save=("means",)))(zs)
         for b in (0, 7, B - 1):
@@ -248,7 +248,7 @@ def test_grad_of_loglik_wrt_closed_over_parameters_equals_finite_differences():
         return run(model, X0, P0, zs, save=()).loglik
 
     theta = np.array([-195.0, 1.3])
-    ukf = lambda *a, **k: jf.unscented_kalman_filter(*a, alpha=0.5, **k)  # noqa: E731 (1e-3: FD noise)
+    ukf = lambda *a, **k: jf.unscented_kalman_filter(*a, alpha=0.5, **k)  # alpha 0.5, not 1e-3: finite-difference noise
     for run in (jf.extended_kalman_filter, ukf):
         ll = jax.jit(lambda th: loglik(th, run))  # one compile for the differences
         g = np.asarray(jax.grad(ll)(theta))

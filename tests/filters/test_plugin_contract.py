@@ -126,8 +126,8 @@ def test_a_subclass_inherits_the_defaults_and_runs():
 
 
 def test_nonlinear_model_keeps_the_jacobians_it_was_given():
-    f = lambda x, t: x  # noqa: E731
-    h = lambda x, t: x[:1]  # noqa: E731
+    f = lambda x, t: x
+    h = lambda x, t: x[:1]
     m = jf.NonlinearGaussian(f, h, jnp.eye(2), jnp.eye(1))
     assert m.F_jac is None and m.H_jac is None
     np.testing.assert_array_equal(m.jacobian_h(jnp.ones(2), 0), [[1.0, 0.0]])

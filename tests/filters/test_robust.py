@@ -145,7 +145,7 @@ def test_yang_factor_follows_change_of_dynamics():
     assert np.median(f[50:][~ch[50:]]) == 1.0
     assert np.max(f[ch]) > 2.0
     truth = np.asarray(sc.x_true[ch, :3])
-    rms = lambda r: float(np.sqrt(np.mean((np.asarray(r.pred_means[ch, :3]) - truth) ** 2)))  # noqa: E731
+    rms = lambda r: float(np.sqrt(np.mean((np.asarray(r.pred_means[ch, :3]) - truth) ** 2)))
     assert rms(ya) < 0.5 * rms(std)
 
 
@@ -168,7 +168,7 @@ def test_persistent_step_is_accepted_after_max_run(cv_data):
     prej = np.asarray(pure.noise.rejected)
     assert prej[200:230].all()  # pure IGG-III keeps rejecting the new level until P has grown enough
     assert int(pure.status) & _status.ROBUST_LOCKOUT and not int(r.status) & _status.ROBUST_LOCKOUT
-    err = lambda res: np.sqrt(np.mean(np.asarray(res.means[210:240, :3] - truth[210:240]) ** 2))  # noqa: E731
+    err = lambda res: np.sqrt(np.mean(np.asarray(res.means[210:240, :3] - truth[210:240]) ** 2))
     assert err(pure) > 2 * err(r)
 
 

@@ -74,7 +74,7 @@ def test_p0_per_sequence_equals_loop(zs, name, joseph):
     want = stack([f(P, zz) for P, zz in zip(P0S, z)])
     assert_tree_close(got, want)
     assert int(got.n_skipped[3]) == 1 and int(got.n_nonfinite[2]) == 1
-    sm = lambda P, zz: jf.rts_smoother(m, f(P, zz))  # noqa: E731
+    sm = lambda P, zz: jf.rts_smoother(m, f(P, zz))
     assert_tree_close(jax.jit(jax.vmap(sm))(P0S, z), stack([sm(P, zz) for P, zz in zip(P0S, z)]))
 
 
@@ -88,28 +88,28 @@ def test_runs_batch_minor(zs):
 def test_masks_nan_and_shared_data_equal_loop(zs):
     m = MODELS["static"]()
     masks = jnp.stack([jnp.arange(T) % (b + 2) != 1 for b in range(B)])
-    f = lambda mk, zz: jf.kalman_filter(m, X0, P0, zz, mask=mk, save=("means", "covs", "nis", "valid"))  # noqa: E731
+    f = lambda mk, zz: jf.kalman_filter(m, X0, P0, zz, mask=mk, save=("means", "covs", "nis", "valid"))
     assert_tree_close(jax.jit(jax.vmap(f))(masks, zs), stack([f(mk, zz) for mk, zz in zip(masks, zs)]))
     # one NaN per sequence, shared P0: the per-sequence branch of the run-time choice
     zn = zs.at[jnp.arange(B), jnp.arange(B) + 2, jnp.arange(B) % 3].set(jnp.nan)
-    g = lambda zz: jf.rts_smoother(m, jf.kalman_filter(m, X0, P0, zz))  # noqa: E731
+    g = lambda zz: jf.rts_smoother(m, jf.kalman_filter(m, X0, P0, zz))
     assert_tree_close(jax.jit(jax.vmap(g))(zn), stack([g(zz) for zz in zn]))
     # shared data, P0 and x0 per sequence
     x0s = 0.1 * jnp.arange(B * 6, dtype=float).reshape(B, 6)
-    h = lambda x0, P: jf.kalman_filter(m, x0, P, zs[0])  # noqa: E731
+    h = lambda x0, P: jf.kalman_filter(m, x0, P, zs[0])
     assert_tree_close(jax.jit(jax.vmap(h))(x0s, P0S), stack([h(x, P) for x, P in zip(x0s, P0S)]))
 
 
 def test_trusted_data_and_failed_factorisation_flags(zs):
     m = MODELS["static"]()
     zi = zs.at[1, 3, 0].set(jnp.inf)
-    f = lambda P, zz: jf.kalman_filter(m, X0, P, zz, check_finite=False)  # noqa: E731
+    f = lambda P, zz: jf.kalman_filter(m, X0, P, zz, check_finite=False)
     got = jax.jit(jax.vmap(f))(P0S, zi)
     assert_tree_close(got, stack([f(P, zz) for P, zz in zip(P0S, zi)]))
     assert got.status[1] & _status.NONFINITE_UNMASKED and not got.status[0] & _status.NONFINITE_UNMASKED
     # an indefinite prior in one sequence: S fails there only, the update is skipped and flagged
     bad = P0S.at[2].set(-P0)
-    g = lambda P, zz: jf.kalman_filter(m, X0, P, zz)  # noqa: E731
+    g = lambda P, zz: jf.kalman_filter(m, X0, P, zz)
     got = jax.jit(jax.vmap(g))(bad, zs)
     assert_tree_close(got, stack([g(P, zz) for P, zz in zip(bad, zs)]))
     assert got.status[2] & _status.CHOLESKY_FAILED and not got.status[0] & _status.CHOLESKY_FAILED
@@ -131,12 +131,12 @@ def test_grad_with_p0_per_sequence_equals_loop(zs):
 def test_nested_vmap_and_float32(zs):
     """vmap over two axes (an outer vmap of the batch-minor rule) and the opt-in float32 path."""
     m = MODELS["static"]()
-    f = lambda P, zz: jf.kalman_filter(m, X0, P, zz, save=("means", "covs"))  # noqa: E731
+    f = lambda P, zz: jf.kalman_filter(m, X0, P, zz, save=("means", "covs"))
     P2, z2 = jnp.stack([P0S, P0S[::-1]]), jnp.stack([zs, zs[::-1]])
     got = jax.jit(jax.vmap(jax.vmap(f)))(P2, z2)
     assert_tree_close(got, stack([stack([f(P, zz) for P, zz in zip(Pb, zb)]) for Pb, zb in zip(P2, z2)]))
     m32 = jax.tree_util.tree_map(lambda a: jnp.asarray(a, jnp.float32), m)
-    g = lambda P, zz: jf.kalman_filter(m32, X0.astype(jnp.float32), P, zz, allow_float32=True)  # noqa: E731
+    g = lambda P, zz: jf.kalman_filter(m32, X0.astype(jnp.float32), P, zz, allow_float32=True)
     P32, z32 = P0S.astype(jnp.float32), zs.astype(jnp.float32)
     got = jax.jit(jax.vmap(g))(P32, z32)
     want = stack([g(P, zz) for P, zz in zip(P32, z32)])

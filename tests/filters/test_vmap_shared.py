@@ -91,9 +91,9 @@ def test_vmap_per_sequence_p0_and_data_dependent_rule(data):
     zs = data["clean"]
     m = model()
     P0s = P0 * (1.0 + jnp.arange(B))[:, None, None]
-    f = lambda P, z: jf.kalman_filter(m, X0, P, z, save=("means", "covs"))  # noqa: E731
+    f = lambda P, z: jf.kalman_filter(m, X0, P, z, save=("means", "covs"))
     assert_tree_close(jax.jit(jax.vmap(f))(P0s, zs), stack([f(P, z) for P, z in zip(P0s, zs)]))
-    g = lambda z: jf.kalman_filter(m, X0, P0, z, save=("means",), inflation=jf.fading())  # noqa: E731
+    g = lambda z: jf.kalman_filter(m, X0, P0, z, save=("means",), inflation=jf.fading())
     assert_tree_close(jax.jit(jax.vmap(g))(zs), stack([g(z) for z in zs]))
 
 
@@ -115,7 +115,7 @@ def test_grad_under_vmap_equals_loop_of_grads(data, case):
     np.testing.assert_allclose(got, jnp.sum(want, axis=0), rtol=1e-10)
     got = jax.jit(jax.jacfwd(lambda th: jax.vmap(lambda z: loss(th, z))(zs)))(theta)
     np.testing.assert_allclose(got, want, rtol=1e-10)
-    ll = lambda th, z: jf.log_likelihood(model(q=jnp.exp(th[0]), sigma=jnp.exp(th[1])), X0, P0, z)  # noqa: E731
+    ll = lambda th, z: jf.log_likelihood(model(q=jnp.exp(th[0]), sigma=jnp.exp(th[1])), X0, P0, z)
     got = jax.jit(jax.vmap(jax.grad(ll), in_axes=(None, 0)))(theta, zs)
     np.testing.assert_allclose(got, jnp.stack([jax.grad(ll)(theta, z) for z in zs]), rtol=1e-10)
 

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pymap3d as pm
 import pytest
-from _paths import SHARED  # noqa: E402
+from _paths import SHARED
 
 from jaxnav import geodesy as g
 
@@ -101,7 +101,7 @@ def test_ecef2enuv_vector(vectors):
 
 def _parse_axis_expr(s, A, B):
     s = re.sub(r"(\d)([AB])", r"\1*\2", s.strip())
-    return float(eval(s, {"__builtins__": {}}, {"A": A, "B": B, "sqrt2": np.sqrt(2.0)}))  # noqa: S307
+    return float(eval(s, {"__builtins__": {}}, {"A": A, "B": B, "sqrt2": np.sqrt(2.0)}))
 
 
 def _axis_cases(vectors):

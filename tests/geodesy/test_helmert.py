@@ -60,7 +60,7 @@ def test_all_vector_blocks_parsed():
 def test_7_parameter_against_proj_vectors(block):
     """Both rotation conventions, exact and first-order, and time-dependent (14-parameter) cases."""
     p = block["params"]
-    f = lambda k: float(p.get(k, 0.0))  # noqa: E731
+    f = lambda k: float(p.get(k, 0.0))
     conv = p.get("convention", "position_vector")
     for acc, exp in block["pairs"]:
         dt = acc[3] - f("t_epoch") if len(acc) > 3 and "t_epoch" in p else 0.0
@@ -209,7 +209,7 @@ def test_too_few_points_and_bad_shapes():
 
 
 hyp = pytest.importorskip("hypothesis")
-from hypothesis import given, settings  # noqa: E402
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 _f = st.floats

@@ -302,7 +302,7 @@ def test_chi2_gate_rejects_injected_gnss_outliers_and_counts_them(car):
         r.imu.dtheta,
         r.imu.dv,
         m,
-        params,  # noqa: E731
+        params,
         dt_imu=cfg.dt,
         error_model=ins.ERROR_MODEL_15,
         save=ins.LCSave(("nav",)),
@@ -332,7 +332,7 @@ def test_chi2_gate_rejects_injected_gnss_outliers_and_counts_them(car):
     _, e_bad = _horizontal_error(ungated, truth)
     _, e_gate = _horizontal_error(gated, truth)
     ok = ~np.isin(np.arange(t.size), idx) & np.asarray(meas.mask[:, 0])  # epochs with good fixes
-    rms = lambda e: float(np.sqrt(np.mean(e[ok] ** 2)))  # noqa: E731
+    rms = lambda e: float(np.sqrt(np.mean(e[ok] ** 2)))
     assert rms(e_gate) < 1.1 * rms(e_clean) and rms(e_bad) > 1.3 * rms(e_gate), (rms(e_clean), rms(e_bad), rms(e_gate))
     with pytest.raises(ValueError, match="gate probability"):
         run(bad, gate=ins.LCGate(1.5))
@@ -499,7 +499,7 @@ def test_zupt_and_zaru_cut_the_drift_of_a_stop_and_go_walk():
         r.imu.dtheta,
         r.imu.dv,
         meas,
-        params,  # noqa: E731
+        params,
         dt_imu=cfg.dt,
         error_model=ins.ERROR_MODEL_15,
         aids=aids,
@@ -622,7 +622,7 @@ def test_inactive_aids_leave_the_gnss_filter_unchanged_and_bad_aid_input_is_name
         r.imu.dtheta,
         r.imu.dv,
         meas,
-        params,  # noqa: E731
+        params,
         dt_imu=cfg.dt,
         error_model=ins.ERROR_MODEL_15,
         **kw,

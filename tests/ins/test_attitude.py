@@ -370,7 +370,7 @@ def test_quat_to_rv_near_the_small_angle_switch():
 def test_batched_jit_vmap(rand):
     """Leading batch dimensions = jit(vmap) = a loop of single jitted calls; and equal scipy."""
     att = jnp.array(rand[0][:16])
-    f = lambda a: A.quat_to_rv(A.euler_to_quat(a))  # noqa: E731
+    f = lambda a: A.quat_to_rv(A.euler_to_quat(a))
     batched = np.array(jax.jit(f)(att))
     np.testing.assert_allclose(np.array(jax.jit(jax.vmap(f))(att)), batched, rtol=0, atol=1e-15)
     g = jax.jit(f)  # one compile for shape (3,), reused in the loop

@@ -533,7 +533,7 @@ def test_F21_predicts_the_mechanization_error_growth():
     # measured - applied = error: the computed increments carry bias and scale errors
     res = mechanize(nav0, dth * (1 + x[15:18]) + x[9:12] * dt, dv * (1 + x[18:21]) + x[12:15] * dt, dt)
     C = quat_to_dcm(ref.nav.q_bn)
-    avg = lambda a: jnp.mean(a, axis=0)  # noqa: E731
+    avg = lambda a: jnp.mean(a, axis=0)
     F = em.ERROR_MODEL_21.F(
         avg(ref.nav.pos),
         avg(ref.nav.v_n),
@@ -545,7 +545,7 @@ def test_F21_predicts_the_mechanization_error_growth():
     )
     Phi, _, _ = em.discretize_taylor(F, em.ERROR_MODEL_21.G(C0), jnp.zeros((18, 18)), K * dt)
     pred = (Phi @ x)[:9]
-    last = lambda a: a[-1]  # noqa: E731
+    last = lambda a: a[-1]
     got = _chart(
         quat_to_dcm(last(res.nav.q_bn)),
         last(C),

@@ -27,7 +27,7 @@ def _case(seed=0):
     heading = np.radians((350.0 + 0.5 * (t_ref - 1000.0)) % 360.0)  # crosses north
     rpy = np.stack([0.01 * np.sin(t_ref), 0.02 * np.cos(t_ref), heading], -1)
     t_sol = 1000.25 + np.arange(0, 59.0, 0.5)
-    interp = lambda y: np.interp(t_sol, t_ref, y)  # noqa: E731
+    interp = lambda y: np.interp(t_sol, t_ref, y)
     d = rng.normal(0, 1e-6, (t_sol.size, 2))
     pos_sol = np.stack([interp(lat) + d[:, 0], interp(lon) + d[:, 1], interp(h) + rng.normal(0, 0.5, t_sol.size)], -1)
     v_sol = np.stack([interp(v[:, j]) for j in range(3)], -1) + rng.normal(0, 0.05, (t_sol.size, 3))
@@ -71,7 +71,7 @@ def test_scores_equal_an_independent_computation():
     np.testing.assert_allclose(err.att[:, 2], 0.01, atol=1e-9)  # heading error across north: wrapped
     np.testing.assert_allclose(err.nees_pos, nees, rtol=1e-9)
     st = ins.error_statistics(err, n_windows=2)
-    rms = lambda x: math.sqrt(np.mean(np.square(x)))  # noqa: E731
+    rms = lambda x: math.sqrt(np.mean(np.square(x)))
     a = st["all"]
     assert a["pos_h_rms_m"] == pytest.approx(rms(dh), rel=1e-9)
     assert a["pos_3d_max_m"] == pytest.approx(d3.max(), rel=1e-9)

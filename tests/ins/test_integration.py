@@ -82,7 +82,7 @@ SEEDS = 64
 
 def _params(cfg, n_states=18):
     """The filter's model matches the simulation (P0 from the initial-error and sensor sigmas)."""
-    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
+    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))
     ie, nz = cfg.initial_errors, cfg.noise
     lat, h = np.radians(39.0), 205.8795
     RM = float(jaxnav.geodesy.meridian_radius(lat)) + h
@@ -103,7 +103,7 @@ def _params(cfg, n_states=18):
 
 def _meas(cfg, gnss):
     M = gnss.t.shape[0]
-    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))  # noqa: E731
+    v3 = lambda x: np.broadcast_to(np.asarray(x, float), (3,))
     R = np.diag(np.concatenate([v3(cfg.gnss.pos_sigma) ** 2, v3(cfg.gnss.vel_sigma) ** 2]))
     return PVMeasurements(
         t=np.asarray(gnss.t),
@@ -301,7 +301,7 @@ def test_taylor_discretization_equals_van_loan_and_flags_truncation(outage_run):
         r.imu.dtheta,
         r.imu.dv,
         meas,
-        params,  # noqa: E731
+        params,
         dt_imu=cfg.dt,
         save=ins.LCSave(("nav", "covs")),
         **kw,

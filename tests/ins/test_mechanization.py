@@ -221,7 +221,7 @@ def test_two_speed_tail_short_record_vmap_and_bad_input(s0_window):
 
     dv0 = jnp.array([[0.0, 0.0, 0.0], [0.1, -0.05, 0.0], [0.0, 0.2, 0.0]])
     batch = ins.NavState(jnp.tile(q[0], (3, 1)), v[0] + dv0, jnp.tile(p[0], (3, 1)))
-    run = lambda n: ins.mechanize(n, dth[:2000], dv[:2000], 0.01, nav_every=10, save_every=100).nav  # noqa: E731
+    run = lambda n: ins.mechanize(n, dth[:2000], dv[:2000], 0.01, nav_every=10, save_every=100).nav
     out = jax.jit(jax.vmap(run))(batch)
     for i in range(3):
         one = run(jax.tree_util.tree_map(lambda a: a[i], batch))

@@ -97,8 +97,8 @@ def test_gyro_course_rate_correlation_sees_the_up_axis_sign():
     a flipped up axis gives -1."""
     from jaxnav.ins import gyro_course_rate_correlation
 
-    psi = lambda t: 0.3 * np.sin(0.2 * t) + 0.1 * t  # noqa: E731  heading, rad (clockwise from north)
-    dpsi = lambda t: 0.06 * np.cos(0.2 * t) + 0.1  # noqa: E731
+    psi = lambda t: 0.3 * np.sin(0.2 * t) + 0.1 * t
+    dpsi = lambda t: 0.06 * np.cos(0.2 * t) + 0.1
     t_g = np.arange(0.0, 60.0, 0.1)
     v = 1.2 * np.stack([np.sin(psi(t_g)), np.cos(psi(t_g)), 0.0 * t_g], -1)
     t_i = np.arange(-1.0, 61.0, 0.01)

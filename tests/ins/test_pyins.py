@@ -92,13 +92,13 @@ from reference.pyins_run import DEG, LLA0, STATIONARY_RPH, P, random_rph, sine_m
 if importlib.util.find_spec("pyins") is None or importlib.util.find_spec("numba") is None:
     pytest.skip("python-ins / numba not installed (pip install -e '.[test]')", allow_module_level=True)
 
-import jax.numpy as jnp  # noqa: E402
-from scipy.spatial.transform import Rotation  # noqa: E402
+import jax.numpy as jnp
+from scipy.spatial.transform import Rotation
 
-from jaxnav.geodesy import meridian_radius, prime_vertical_radius  # noqa: E402
-from jaxnav.ins import NavState, mechanize, normal_gravity  # noqa: E402
-from jaxnav.ins import attitude as att  # noqa: E402
-from jaxnav.ins.earth import earth_rate_n  # noqa: E402
+from jaxnav.geodesy import meridian_radius, prime_vertical_radius
+from jaxnav.ins import NavState, mechanize, normal_gravity
+from jaxnav.ins import attitude as att
+from jaxnav.ins.earth import earth_rate_n
 
 T_FREE = 600.0  # s of free vertical channel compared
 
@@ -274,7 +274,7 @@ def test_free_vertical_channel_gravity_model(case10, ref):
     tt = c["t"][1:]
     pred = -dgamma * tau**2 * (np.cosh(tt / tau) - 1.0)  # jaxnav h - pyins h (weaker gravity -> higher)
     dh = jx[0][:, 2] - pyi[0][:, 2]
-    cut = lambda x, m: tuple(a[:m] for a in x)  # noqa: E731
+    cut = lambda x, m: tuple(a[:m] for a in x)
     d_jp, d_jt, d_pt = (nav_diff(cut(a, n), cut(b, n)) for a, b in ((jx, pyi), (jx, c["truth"]), (pyi, c["truth"])))
     print(
         f"\nfree vertical, 10 Hz: dgamma = {dgamma:.3e} m/s^2; jaxnav h - pyins h predicted / measured: "

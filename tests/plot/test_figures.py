@@ -10,15 +10,15 @@ import types
 import matplotlib
 
 matplotlib.use("Agg")
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.container import ErrorbarContainer  # noqa: E402
+import numpy as np
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.container import ErrorbarContainer
 
-import jaxnav.experiments.figures as _experiment_figures  # noqa: E402
-import jaxnav.plot._ins as _ins  # noqa: E402
-import jaxnav.plot._tune as _tune  # noqa: E402
-from jaxnav import plot  # noqa: E402
+import jaxnav.experiments.figures as _experiment_figures
+import jaxnav.plot._ins as _ins
+import jaxnav.plot._tune as _tune
+from jaxnav import plot
 
 # JAXNAV_KEEP_FIGURES=DIR keeps the PNGs for a look
 KEEP = os.environ.get("JAXNAV_KEEP_FIGURES")
@@ -144,7 +144,7 @@ def test_s0_factors_in_separate_panels_sweep_with_spread_and_seed_named(tmp_path
     rng = np.random.default_rng(1)
     d = lambda f: {
         "pos_err": rng.normal(0, 1, (M, 3)),
-        "vel_err": rng.normal(0, 0.1, (M, 3)),  # noqa: E731
+        "vel_err": rng.normal(0, 0.1, (M, 3)),
         "sig_pos": np.ones((M, 3)),
         "sig_vel": 0.1 * np.ones((M, 3)),
         "factors": f,
@@ -183,7 +183,7 @@ def test_s0_factors_in_separate_panels_sweep_with_spread_and_seed_named(tmp_path
 def test_s1_statistics_no_lines_between_independent_periods(tmp_path):
     P, S = 6, 2
     rng = np.random.default_rng(2)
-    st = lambda: types.SimpleNamespace(m_P=rng.random((P, S)) * 1e-3, m_H=rng.random((P, S)) * 2e-3)  # noqa: E731
+    st = lambda: types.SimpleNamespace(m_P=rng.random((P, S)) * 1e-3, m_H=rng.random((P, S)) * 2e-3)
     res = {
         "stats": {"standard": st(), "adaptive": st()},
         "forecast_rms": {"standard": rng.random((P, S)) * 1e-3, "adaptive": rng.random((P, S)) * 1e-3},
@@ -297,7 +297,7 @@ def test_ins_figures_keep_legends_off_the_panels(tmp_path, captured):
     rng = np.random.default_rng(8)
     t = np.linspace(100.0, 160.0, M)
     win = np.array([[120.0, 130.0]])
-    a3 = lambda s=1.0: s * rng.normal(size=(M, 3))  # noqa: E731
+    a3 = lambda s=1.0: s * rng.normal(size=(M, 3))
     d = _out(tmp_path, "ins")
     d.mkdir(exist_ok=True)
     plot.plot_ins_differences(

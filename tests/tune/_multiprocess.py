@@ -21,9 +21,9 @@ import jaxnav
 
 jaxnav.enable_x64()
 
-from jaxnav import filters as jf  # noqa: E402
-from jaxnav import tune  # noqa: E402
-from jaxnav.sim import simulate_linear  # noqa: E402
+from jaxnav import filters as jf
+from jaxnav import tune
+from jaxnav.sim import simulate_linear
 
 
 def cv_point(p, key):

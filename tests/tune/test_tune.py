@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 import pytest
-from _paths import ROOT  # noqa: E402
+from _paths import ROOT
 
 from jaxnav import filters as jf
 from jaxnav import tune
