@@ -59,49 +59,78 @@ def symmetrize(P):
 SMALL = 8
 
 
-def _cholesky_unrolled(A):
-    n = A.shape[-1]
+def cholesky_elements(a, n: int, *, reciprocal: bool = True) -> list:
+    """Lower Cholesky factor of an n x n matrix, element by element (the unrolled algorithm of every small factor).
+
+    Args:
+      a: ``a(i, j)`` -> element (i, j) of the matrix: an array over whatever batch the caller lays
+        out (trailing matrix axes here, leading ones in :mod:`jaxnav.filters._minor`).  n: static size.
+      reciprocal: static; divide each column by its diagonal element as one reciprocal and
+        multiplications (below), or element by element. In the batch-minor layout every division is
+        already one vector operation and the extra reciprocal cost 2-9 % (case (d) of
+        benchmarks/bench_filters.py, 485-488 against 501-532 ms in side runs), so it passes False.
+    Returns:
+      rows of elements, ``L[i][j]`` for j <= i (NaN where the matrix is not positive definite, as
+      LAPACK's potrf reports).
+    """
     L = [[None] * n for _ in range(n)]
     for j in range(n):
-        s = A[..., j, j]
+        s = a(j, j)
         for k in range(j):
             s = s - L[j][k] * L[j][k]
-        d = jnp.sqrt(s)  # NaN when A is not positive definite, as LAPACK's potrf reports
+        d = jnp.sqrt(s)
         L[j][j] = d
-        # one division, then multiplications: XLA re-evaluates cheap multiply-adds inside its fused
-        # kernels but keeps every division as a kernel of its own, so a 5 x 5 factor cost 15 kernels
-        # (the UKF's step, with two of them, ran 72 kernels per epoch, now 36: 5.5 -> 3.1 ms, T = 1000)
-        r = 1.0 / d
+        # one division per column, then multiplications: XLA re-evaluates cheap multiply-adds inside
+        # its fused kernels but keeps a division with several consumers as a kernel of its own (a 5 x 5
+        # factor divided element by element is 15 kernels; the UKF's epoch, with two, runs 36 in all)
+        r = 1.0 / d if reciprocal else None
         for i in range(j + 1, n):
-            s = A[..., i, j]
+            s = a(i, j)
             for k in range(j):
                 s = s - L[i][k] * L[j][k]
-            L[i][j] = s * r
+            L[i][j] = s * r if reciprocal else s / d
+    return L
+
+
+def solve_lower_rows(l, y, n: int) -> list:
+    """Rows of L^-1 Y by forward substitution: ``l(i, k)`` the elements of the lower factor, broadcast
+    against ``y(i)``, the rows of Y (see :func:`cholesky_elements` for the layouts)."""
+    x = []
+    for i in range(n):
+        s = y(i)
+        for k in range(i):
+            s = s - l(i, k) * x[k]
+        x.append(s / l(i, i))
+    return x
+
+
+def solve_upper_t_rows(l, y, n: int) -> list:
+    """Rows of L^-T Y by back substitution, with ``l`` and ``y`` as in :func:`solve_lower_rows`."""
+    x = [None] * n
+    for i in reversed(range(n)):
+        s = y(i)
+        for k in range(i + 1, n):
+            s = s - l(k, i) * x[k]
+        x[i] = s / l(i, i)
+    return x
+
+
+def _cholesky_unrolled(A):
+    n = A.shape[-1]
+    L = cholesky_elements(lambda i, j: A[..., i, j], n)
     zero = jnp.zeros_like(A[..., 0, 0])
     rows = [jnp.stack([L[i][j] if j <= i else zero for j in range(n)], axis=-1) for i in range(n)]
     return jnp.stack(rows, axis=-2)
 
 
 def _solve_lower_unrolled(L, B):
-    n = L.shape[-1]
-    y = []
-    for i in range(n):
-        s = B[..., i, :]
-        for k in range(i):
-            s = s - L[..., i, k, None] * y[k]
-        y.append(s / L[..., i, i, None])
-    return jnp.stack(y, axis=-2)
+    rows = solve_lower_rows(lambda i, k: L[..., i, k, None], lambda i: B[..., i, :], L.shape[-1])
+    return jnp.stack(rows, axis=-2)
 
 
 def _solve_upper_t_unrolled(L, Y):
-    n = L.shape[-1]
-    x = [None] * n
-    for i in reversed(range(n)):
-        s = Y[..., i, :]
-        for k in range(i + 1, n):
-            s = s - L[..., k, i, None] * x[k]
-        x[i] = s / L[..., i, i, None]
-    return jnp.stack(x, axis=-2)
+    rows = solve_upper_t_rows(lambda i, k: L[..., i, k, None], lambda i: Y[..., i, :], L.shape[-1])
+    return jnp.stack(rows, axis=-2)
 
 
 def cholesky(A):

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import _status
-from jaxnav._numerics import LOG_2PI, _loop_sum
+from jaxnav._numerics import LOG_2PI, _loop_sum, cholesky_elements, solve_lower_rows, solve_upper_t_rows
 from jaxnav.filters._smoother import SmootherResult
 from jaxnav.filters._step import KalmanResult
 
@@ -60,43 +60,19 @@ def _eye(n, dtype):
 def _cholesky(S):
     """Lower Cholesky factors of (m, m, B) matrices, element by element (NaN where not positive definite)."""
     m = S.shape[0]
-    L = [[None] * m for _ in range(m)]
-    for j in range(m):
-        s = S[j, j]
-        for k in range(j):
-            s = s - L[j][k] * L[j][k]
-        d = jnp.sqrt(s)
-        L[j][j] = d
-        for i in range(j + 1, m):
-            s = S[i, j]
-            for k in range(j):
-                s = s - L[i][k] * L[j][k]
-            L[i][j] = s / d
+    L = cholesky_elements(lambda i, j: S[i, j], m, reciprocal=False)
     zero = jnp.zeros_like(S[0, 0])
     return jnp.stack([jnp.stack([L[i][j] if j <= i else zero for j in range(m)]) for i in range(m)])
 
 
 def _solve_lower(L, Y):
     """L^-1 Y for (m, m, B) lower factors and (m, c, B) right-hand sides."""
-    rows = []
-    for i in range(L.shape[0]):
-        s = Y[i]
-        for k in range(i):
-            s = s - L[i, k][None] * rows[k]
-        rows.append(s / L[i, i][None])
-    return jnp.stack(rows)
+    return jnp.stack(solve_lower_rows(lambda i, k: L[i, k][None], lambda i: Y[i], L.shape[0]))
 
 
 def _solve_upper_t(L, Y):
     """L^-T Y for (m, m, B) lower factors and (m, c, B) right-hand sides."""
-    m = L.shape[0]
-    rows = [None] * m
-    for i in reversed(range(m)):
-        s = Y[i]
-        for k in range(i + 1, m):
-            s = s - L[k, i][None] * rows[k]
-        rows[i] = s / L[i, i][None]
-    return jnp.stack(rows)
+    return jnp.stack(solve_upper_t_rows(lambda i, k: L[i, k][None], lambda i: Y[i], L.shape[0]))
 
 
 # ---------------------------------------------------------------------------------------------
