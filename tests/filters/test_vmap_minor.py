@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _trees import assert_tree_close, stack
 
 import jaxnav
 from jaxnav import _status
@@ -22,19 +23,6 @@ B, T = 4, 15
 X0 = jnp.zeros(6)
 P0 = jnp.diag(jnp.array([1.0] * 3 + [0.01] * 3))
 P0S = P0 * (1.0 + 0.5 * jnp.arange(B))[:, None, None]
-
-
-def stack(results):
-    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *results)
-
-
-def assert_tree_close(got, want, tol=1e-12):
-    gl, gt = jax.tree_util.tree_flatten(got)
-    wl, wt = jax.tree_util.tree_flatten(want)
-    assert gt == wt
-    for a, b in zip(gl, wl):
-        assert a.shape == b.shape and a.dtype == b.dtype
-        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=tol, atol=tol)
 
 
 @pytest.fixture(scope="module")
@@ -141,7 +129,7 @@ def test_nested_vmap_and_float32(zs):
     got = jax.jit(jax.vmap(g))(P32, z32)
     want = stack([g(P, zz) for P, zz in zip(P32, z32)])
     assert got.means.dtype == jnp.float32
-    assert_tree_close(got, want, tol=1e-5)
+    assert_tree_close(got, want, rtol=1e-5, atol=1e-5)
 
 
 def test_model_per_sequence_equals_loop(zs):

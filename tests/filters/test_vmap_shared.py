@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _trees import assert_tree_close, stack
 
 import jaxnav
 from jaxnav import filters as jf
@@ -31,19 +32,6 @@ def data():
     zs = np.cumsum(np.broadcast_to(v, (B, T, 3)), axis=1) + 0.05 * rng.standard_normal((B, T, 3))
     clean = jnp.asarray(zs)
     return {"clean": clean, "one NaN": clean.at[1, 4, 2].set(jnp.nan)}
-
-
-def stack(results):
-    return jax.tree_util.tree_map(lambda *a: jnp.stack(a), *results)
-
-
-def assert_tree_close(got, want, rtol=1e-12, atol=1e-12):
-    gl, gt = jax.tree_util.tree_flatten(got)
-    wl, wt = jax.tree_util.tree_flatten(want)
-    assert gt == wt
-    for a, b in zip(gl, wl):
-        assert a.shape == b.shape and a.dtype == b.dtype
-        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=rtol, atol=atol)
 
 
 @pytest.mark.parametrize("case", ["clean", "one NaN"])
