@@ -83,7 +83,8 @@ def run(args) -> int:
     """Check the options and the file, read it, fit, write the outputs, print the summary."""
     import pathlib
 
-    from jaxnav.experiments.allan import format_allan, read_imu, run_allan
+    from jaxnav.experiments.allan import format_allan, run_allan
+    from jaxnav.io import read_imu
 
     path = input_file(args.imu_file, "IMU_FILE")
     if args.format != "csv" and (args.columns or args.units):
@@ -110,7 +111,14 @@ def run(args) -> int:
     log = logging.getLogger("jaxnav")
     log.info("reading %s (%s)", path, args.format)
     imu = read_imu(
-        path, args.format, tag=tag, columns=columns, units_map=units_map, delimiter=delim, gps_week=args.gps_week
+        path,
+        args.format,
+        tag=tag,
+        t_start=None if tag else 0.0,
+        columns=columns,
+        units=units_map,
+        delimiter=delim,
+        gps_week=args.gps_week,
     )
     tau_range = None
     if args.tau_min is not None or args.tau_max is not None:

@@ -1,6 +1,6 @@
 """``jaxnav ins CONFIG``: INS/GNSS post-processing of a real recording from a config file alone.
 
-CONFIG is a TOML file (keys: :mod:`jaxnav.experiments.ins_config`) or the name of a shipped one
+CONFIG is a TOML file (keys: :func:`jaxnav.io.load_ins_config`) or the name of a shipped one
 (``walk_0827``). Paths in the config are relative to it; ``${JAXNAV_DATA}`` is ``--data`` or the
 environment variable: the folder that holds the data sets, a relative one taken against the working
 directory (as in every command).
@@ -47,7 +47,7 @@ def register(subparsers):
 
 def run(args) -> int:
     """Check the config and the output folder, run, write the outputs, print the summary."""
-    from jaxnav.experiments.ins_config import load_ins_config
+    from jaxnav.io import load_ins_config
 
     variables = None
     if args.data:  # the folder that holds the data sets, as in every command (relative: to the working dir)

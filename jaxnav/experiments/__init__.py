@@ -17,19 +17,18 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
   (``jaxnav rtk``): :func:`run_rtk`, :func:`write_simulated_survey`.
 * :mod:`~jaxnav.experiments.s3`: S3 cadastral survey over Monte Carlo seeds (``jaxnav cadastral``):
   :func:`run_cadastral`, :func:`grade_params`, :func:`walk_detection`.
-* :mod:`~jaxnav.experiments.ins_config`, :mod:`~jaxnav.experiments.ins_run`,
+* :mod:`~jaxnav.experiments.ins_run`,
   :mod:`~jaxnav.experiments.ins_output`: INS/GNSS post-processing of a recording from a config
-  (``jaxnav ins``): :func:`load_ins_config`, :func:`prepare`, :func:`run_ins`, :func:`tune_noise`, :func:`process`.
+  (``jaxnav ins``): :func:`prepare`, :func:`run_ins`, :func:`tune_noise`, :func:`process`.
 * :mod:`~jaxnav.experiments.ct_drive`: a coordinated-turn model on the real 1 Hz RTK car drive,
   EKF/UKF x classic/fading/IGG-III against the reference: :func:`run_ct_drive`.
 * :mod:`~jaxnav.experiments.walk`: the walk set as the shipped ``walk_0827`` config (``jaxnav walk``):
   :func:`run_walk`, :func:`frame_check`, the set's reader :func:`load_walk`.
-* :mod:`~jaxnav.experiments.figures`: figures of single experiments (``plot_s0``, ``plot_walk``,
+* :mod:`~jaxnav.experiments.figures`: figures of single experiments (``plot_s0``,
   ``plot_filter_family``, ``plot_ct_drive``).
 """
 
 from jaxnav.experiments.filter_family import format_filter_family, run_filter_family
-from jaxnav.experiments.ins_config import InsConfig, load_ins_config
 from jaxnav.experiments.ins_output import format_ins, process
 from jaxnav.experiments.ins_run import InsRun, prepare, run_ins, tune_noise
 from jaxnav.experiments.s0 import (
@@ -142,10 +141,8 @@ __all__ += [
     "run_walk",
     "walk_config",
     "write_walk_scores",
-    "InsConfig",
     "InsRun",
     "format_ins",
-    "load_ins_config",
     "prepare",
     "process",
     "run_ins",

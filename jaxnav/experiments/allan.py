@@ -1,9 +1,9 @@
 """``jaxnav allan IMU_FILE``: IMU noise densities from a static recording (Allan variance).
 
-Reads the IMU log with the readers of ``jaxnav ins`` (:func:`read_imu`), puts the rates on a
+Reads the IMU log with the readers of ``jaxnav ins`` (:func:`jaxnav.io.read_imu`), puts the rates on a
 uniform grid (:func:`jaxnav.ins.uniform_rates`), fits white noise, bias instability and rate
 random walk per axis (:func:`jaxnav.ins.allan_noise_fit`) and writes a figure per sensor, a
-``[noise]`` TOML section with the keys of :mod:`jaxnav.experiments.ins_config` and ``results.json``.
+``[noise]`` TOML section with the keys of :func:`jaxnav.io.load_ins_config` and ``results.json``.
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ import pathlib
 import numpy as np
 
 from jaxnav import units
-from jaxnav.experiments.ins_config import IMU_FORMATS, RANGES
 from jaxnav.ins import (
     allan_fit_datasheet,
     allan_noise_fit,
@@ -23,22 +22,7 @@ from jaxnav.ins import (
     static_check,
     uniform_rates,
 )
-from jaxnav.io import read_csv_imu, read_kfgins_imu, read_rtklib_imu, write_json
-
-
-def read_imu(path, fmt: str, *, tag=None, columns=None, units_map=None, delimiter=",", gps_week=None):
-    """Read an IMU log as ``jaxnav ins`` does (:data:`IMU_FORMATS`); an RTKLIB CSV without a tag file is
-    timed by its counter from 0. Returns :class:`jaxnav.io.ImuLog` (SI, sensor axes)."""
-    if fmt not in IMU_FORMATS:
-        raise ValueError(f"unknown IMU format {fmt!r}; choose from {', '.join(IMU_FORMATS)}")
-    if fmt == "rtklib-csv":
-        return read_rtklib_imu(path, tag, t_start=None if tag else 0.0)
-    if fmt == "kf-gins":
-        return read_kfgins_imu(path, gps_week=gps_week)
-    if not columns:
-        raise ValueError("format csv needs a column map (--columns t=0,gx=1,...)")
-    return read_csv_imu(path, columns, units_map, delimiter=delimiter)
-
+from jaxnav.io import INS_CONFIG_RANGES, write_json
 
 #: a recording shorter than this (s) is warned about in the TOML: its bias terms are bounds at short taus
 SHORT_RECORDING_S = 3600.0
@@ -47,8 +31,8 @@ SHORT_RECORDING_S = 3600.0
 def noise_toml(gyro, accel, *, source: str) -> str:
     """A ``[noise]`` section for a ``jaxnav ins`` config from the two fits (largest axis of each term).
 
-    Keys and units are those of :mod:`jaxnav.experiments.ins_config`; a value outside the config's
-    plausible range (:data:`RANGES`) is written commented out, with the reason, and so are the bias
+    Keys and units are those of :func:`jaxnav.io.load_ins_config`; a value outside the config's
+    plausible range (:data:`INS_CONFIG_RANGES`) is written commented out, with the reason, and so are the bias
     terms of a recording shorter than :data:`SHORT_RECORDING_S`. ``grade`` is the
     preset nearest in ARW: it supplies the initial (turn-on) bias and scale-factor sigmas, which a
     static recording cannot measure; the values below override its densities.
@@ -94,7 +78,7 @@ def noise_toml(gyro, accel, *, source: str) -> str:
         "sigmas (not measurable from a static recording)",
     ]
     for key, v, what in vals:
-        lo, hi = RANGES[f"noise.{key}"]
+        lo, hi = INS_CONFIG_RANGES[f"noise.{key}"]
         v = float(v)
         if dur < SHORT_RECORDING_S and not key.startswith(("arw", "vrw")):
             lines.append(f"# {key} = {v:.4g}  # {what}")

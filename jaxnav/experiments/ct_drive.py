@@ -21,7 +21,7 @@ covariance plus a floor (``sigma_floor``) for its optimistic fixed-epoch sigmas.
 from __future__ import annotations
 
 import pathlib
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -50,11 +50,11 @@ class Drive(NamedTuple):
       n_epochs: rover epochs read.
     """
 
-    t: Any
-    zs: Any
-    R: Any
-    q: Any
-    truth: Any
+    t: np.ndarray
+    zs: np.ndarray
+    R: np.ndarray
+    q: np.ndarray
+    truth: np.ndarray
     n_epochs: int
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from jaxnav.experiments.ins_run import InsRun, run_error_model
 from jaxnav.ins import position_sigmas_enu
-from jaxnav.ins.attitude import quat_to_euler
+from jaxnav.ins.attitude import quat_to_roll_pitch_heading
 from jaxnav.io import NavSolution, Track, write_geojson, write_kml, write_pos, write_trajectory_csv
 
 
@@ -29,8 +29,7 @@ def _solution(run: InsRun, which: str) -> NavSolution:
         nav, P = ep.nav, ep.covs
     idx = run_error_model(run.prep.cfg).idx
     pos = np.asarray(nav.pos)
-    att = np.asarray(quat_to_euler(np.asarray(nav.q_bn)))  # [pitch, roll, yaw], body RFU in ENU
-    rpy = np.stack([att[:, 1], att[:, 0], np.mod(-att[:, 2], 2 * math.pi)], -1)
+    rpy = np.asarray(quat_to_roll_pitch_heading(np.asarray(nav.q_bn)))
     sd = np.sqrt(np.clip(np.diagonal(np.asarray(P), axis1=-2, axis2=-1), 0.0, None))
     row = np.asarray(ep.gnss_row)
     mask = np.asarray(run.prep.meas.mask)[:, :3].any(-1)
@@ -157,19 +156,15 @@ def _evaluation(sc) -> dict:
 def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
     """The figures of a run into ``out``: track + outage errors, differences to GNSS, attitude, biases, and
     the time offset likelihood where it was estimated."""
-    from jaxnav.experiments.figures import plot_walk
-    from jaxnav.plot import plot_ins_attitude, plot_ins_biases, plot_ins_differences
+    from jaxnav.plot import plot_ins_attitude, plot_ins_biases, plot_ins_differences, plot_outage_track
 
     out = pathlib.Path(out)
     name = run.prep.cfg.name
     paths = []
     if run.scores is not None:
         paths.append(
-            plot_walk(
-                run.scores,
-                {"enu_ref": run.enu_ref, "enu_fwd": run.enu_fwd, "enu_sm": run.enu_sm},
-                out / f"track_outages.{fmt}",
-                title=name,
+            plot_outage_track(
+                run.scores, run.enu_ref, run.enu_fwd, run.enu_sm, out / f"track_outages.{fmt}", title=name
             )
         )
     g = run.gnss_epochs
@@ -530,9 +525,9 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
 
 def check_shifts(cfg, t) -> None:
     """Every shifted outage schedule of ``[evaluate] shifts`` has a window in the IMU span ``t`` (N,) s,
-    else :class:`jaxnav.experiments.ins_config.ConfigError` naming the keys."""
-    from jaxnav.experiments.ins_config import ConfigError
+    else :class:`jaxnav.io.ConfigError` naming the keys."""
     from jaxnav.ins import shifted_outage_windows
+    from jaxnav.io import ConfigError
 
     ev = cfg.evaluate
     if ev is None or ev.shifts <= 1:

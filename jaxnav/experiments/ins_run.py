@@ -3,7 +3,7 @@
 Pipeline (host-side glue around the pure, jitted library functions):
 
 1. read the IMU and GNSS files (:func:`read_inputs`; formats of :mod:`jaxnav.io`), apply the
-   mounting (:func:`jaxnav.experiments.ins_config.sensor_to_body`) and the IMU-GNSS time offset;
+   mounting (:func:`jaxnav.ins.sensor_to_body`) and the IMU-GNSS time offset;
 2. align (:func:`jaxnav.ins.coarse_alignment`), build the GNSS measurements with the lever arm
    (:func:`gnss_measurements`) and the filter's noise (:func:`filter_params`);
 3. run the loosely coupled filter (:func:`jaxnav.ins.loosely_coupled`) and the RTS smoother
@@ -20,22 +20,25 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.experiments.ins_config import ConfigError, InsConfig
 from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins import (
     GATED_SHARE_WARN,
+    Alignment,
     ImuNoise,
     LCGate,
     LCNoise,
     LCParams,
+    LCResult,
     LCSave,
+    NavState,
     OutageScores,
+    PVMeasurements,
     SensorBiases,
     antenna_enu,
     attitude_sigmas,
@@ -73,19 +76,20 @@ from jaxnav.ins import (
 )
 from jaxnav.ins import calibration_params as ins_calibration_params
 from jaxnav.ins import heading as heading_aid
-from jaxnav.ins.attitude import quat_to_dcm
+from jaxnav.ins.attitude import quat_to_dcm, quat_to_roll_pitch_heading
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 from jaxnav.io import (
+    ConfigError,
+    ImuLog,
+    InsConfig,
+    PosSolution,
     imu_increments,
-    read_csv_gnss,
-    read_csv_imu,
     read_csv_series,
-    read_kfgins_gnss,
-    read_kfgins_imu,
+    read_gnss,
+    read_imu,
     read_kfgins_odometer,
-    read_pos,
-    read_rtklib_imu,
 )
+from jaxnav.io import read_truth as read_truth_file
 from jaxnav.tune import LCNoiseFit, calibrate_lc_noise, fit_lc_noise
 from jaxnav.units import DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR
 
@@ -112,26 +116,40 @@ def read_inputs(cfg: InsConfig):
         if p is not None and not p.is_file():
             what = "a folder, not a file" if p.is_dir() else "no such file"
             raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
-    if imu_c.format == "rtklib-csv":
-        imu = read_rtklib_imu(imu_c.file, imu_c.tag)
-    elif imu_c.format == "kf-gins":
-        odo_col = cfg.odometer is not None and cfg.odometer.source == "imu"
-        imu = read_kfgins_imu(imu_c.file, gps_week=imu_c.gps_week, n_columns=8 if odo_col else None)
-    else:
-        imu = _csv(cfg, "imu", lambda: read_csv_imu(imu_c.file, imu_c.columns, imu_c.units, delimiter=imu_c.delimiter))
-    if g.format == "rtklib-pos":
-        pos = read_pos(g.file)
-    elif g.format == "kf-gins":
-        pos = read_kfgins_gnss(g.file, gps_week=g.gps_week)
-    else:
-        pos = _csv(
-            cfg, "gnss", lambda: read_csv_gnss(g.file, g.columns, g.units, delimiter=g.delimiter, sigma_m=g.sigma_m)
-        )
+    odo_col = cfg.odometer is not None and cfg.odometer.source == "imu"
+    imu = _csv(
+        cfg,
+        "imu.",
+        lambda: read_imu(
+            imu_c.file,
+            imu_c.format,
+            tag=imu_c.tag,
+            columns=imu_c.columns,
+            units=imu_c.units,
+            delimiter=imu_c.delimiter,
+            gps_week=imu_c.gps_week,
+            odometer_column=odo_col,
+        ),
+    )
+    pos = _csv(
+        cfg,
+        "gnss.",
+        lambda: read_gnss(
+            g.file,
+            g.format,
+            columns=g.columns,
+            units=g.units,
+            delimiter=g.delimiter,
+            gps_week=g.gps_week,
+            sigma_m=g.sigma_m,
+        ),
+    )
     return imu, pos
 
 
-def _csv(cfg, section, read):
-    """A csv reader's ValueError about the column map or units (not a ReaderError) names the config keys."""
+def _csv(cfg, prefix, read):
+    """A csv reader's ValueError about the column map or units (not a ReaderError) names the config keys
+    ``{prefix}columns`` and ``{prefix}units``."""
     from jaxnav.io import ReaderError
 
     try:
@@ -139,7 +157,7 @@ def _csv(cfg, section, read):
     except ReaderError:
         raise
     except ValueError as exc:
-        raise ValueError(f"{cfg.path}: {section}.columns / {section}.units: {exc}") from None
+        raise ValueError(f"{cfg.path}: {prefix}columns / {prefix}units: {exc}") from None
 
 
 def read_odometer(cfg: InsConfig):
@@ -147,7 +165,7 @@ def read_odometer(cfg: InsConfig):
     o = cfg.odometer
     if o.source == "imu":
         return read_kfgins_odometer(cfg.imu.file, gps_week=cfg.imu.gps_week)
-    d = _csv(cfg, "odometer", lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter))
+    d = _csv(cfg, "odometer.", lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter))
     t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * 604800.0
     return t, d["speed"]
 
@@ -159,7 +177,9 @@ def heading_on_imu(cfg: InsConfig, t_imu):
     readings outside the IMU span or farther than one sample interval from every sample are dropped.
     """
     h = cfg.heading
-    d = _csv(cfg, "heading", lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter))
+    d = _csv(
+        cfg, "heading.", lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter)
+    )
     t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * 604800.0
     t_imu = np.asarray(t_imu, float)
     hd, sg = np.full(t_imu.size, np.nan), np.full(t_imu.size, np.nan)
@@ -232,30 +252,46 @@ def filter_params(noise: LCNoise, pos0, model, *, odo_scale_sigma=0.0) -> LCPara
 
 
 class Prepared(NamedTuple):
-    """Everything a run needs, made once from the config (host side)."""
+    """Everything a run needs, made once from the config (host side).
 
-    cfg: Any
-    imu: Any
-    pos: Any
-    C_bs: Any
-    lever_rfu: Any
+    Attributes:
+      cfg: the config.  imu, pos: the files read (IMU time shifted by ``time_offset`` s).
+      C_bs: (3, 3) sensor to body (RFU).  lever_rfu: (3,) GNSS antenna minus IMU, body frame, m.
+      time_offset_info: how the offset was found (results.json).
+      t, dth, dv, dt: the IMU increments (N,), (N, 3) rad, (N, 3) m/s, (N,) s.
+      alignment: the initial state.  outages: (K, 2) s simulated outage windows.
+      meas: the GNSS measurements the filter gets (withheld epochs masked).  keep: (M,) index of the
+        GNSS solution's epochs among ``pos``.  withheld: (M,) bool epochs withheld by ``[evaluate]``.
+      densities: the noise of the run.
+      standstill: (N,) bool per IMU sample, or None (no detection).
+      aids: pseudo-measurements (:mod:`jaxnav.ins` aids: ZUPT, ZARU, NHC, odometer, heading).
+      standstill_info: the detector report (:func:`detect_stops`), its series under "_series".
+      odometer_speed: (N,) m/s wheel speed per IMU sample (NaN: none), or None (no ``[odometer]``).
+      heading: (heading (N,) rad, sigma (N,) rad) per IMU sample (NaN: none), or None (no ``[heading]``).
+    """
+
+    cfg: InsConfig
+    imu: ImuLog
+    pos: PosSolution
+    C_bs: np.ndarray
+    lever_rfu: np.ndarray
     time_offset: float
     time_offset_info: dict
-    t: Any
-    dth: Any
-    dv: Any
-    dt: Any
-    alignment: Any
-    outages: Any
-    meas: Any
-    keep: Any
-    withheld: Any
+    t: np.ndarray
+    dth: np.ndarray
+    dv: np.ndarray
+    dt: np.ndarray
+    alignment: Alignment
+    outages: np.ndarray
+    meas: PVMeasurements
+    keep: np.ndarray
+    withheld: np.ndarray
     densities: LCNoise
-    standstill: Any = None  # (N,) bool per IMU sample, or None (no detection)
-    aids: tuple = ()  # pseudo-measurements (jaxnav.ins aids: ZUPT, ZARU, NHC, odometer)
-    standstill_info: dict = {}  # detector report (detect_stops), with its series under "_series"
-    odometer_speed: Any = None  # (N,) m/s wheel speed per IMU sample (NaN: none), or None (no [odometer])
-    heading: Any = None  # (heading (N,) rad, sigma (N,) rad) per IMU sample (NaN: none), or None (no [heading])
+    standstill: np.ndarray | None = None
+    aids: tuple = ()
+    standstill_info: dict = {}
+    odometer_speed: np.ndarray | None = None
+    heading: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
@@ -527,18 +563,18 @@ class InsRun(NamedTuple):
     """
 
     prep: Prepared
-    result: Any
-    smoothed_nav: Any
-    smoothed_biases: Any
-    smoothed_covs: Any
-    enu_ref: Any
-    enu_fwd: Any
-    enu_sm: Any
-    fixed: Any
+    result: LCResult
+    smoothed_nav: NavState
+    smoothed_biases: SensorBiases
+    smoothed_covs: jax.Array
+    enu_ref: np.ndarray
+    enu_fwd: np.ndarray
+    enu_sm: np.ndarray
+    fixed: np.ndarray
     scores: OutageScores | None
     runtime_s: float
     densities: LCNoise
-    gnss_epochs: Any = None
+    gnss_epochs: np.ndarray | None = None
 
 
 def run_ins(prep: Prepared, d: LCNoise | None = None) -> InsRun:
@@ -629,7 +665,7 @@ class FittedRun(NamedTuple):
     prep: Prepared
     calibration: dict
     run: InsRun
-    tune: Any = None
+    tune: LCNoiseFit | None = None
     untuned: InsRun | None = None
     gated_share: float = 0.0
 
@@ -983,22 +1019,19 @@ def read_truth(cfg: InsConfig):
       FileNotFoundError: a missing file (named with the key).  jaxnav.io.ReaderError: FILE:LINE.
       ValueError: a column map the reader refuses (naming the config keys).
     """
-    from jaxnav.io import ReaderError, read_csv_truth, read_kfgins_truth
-
     ev = cfg.evaluate
     if ev is None or ev.truth is None:
         return None
     if not ev.truth.is_file():
         what = "a folder, not a file" if ev.truth.is_dir() else "no such file"
         raise FileNotFoundError(f"{ev.truth}: {what} ({cfg.path}: evaluate.truth)")
-    if ev.truth_format == "kf-gins":
-        return read_kfgins_truth(ev.truth)
-    try:
-        return read_csv_truth(ev.truth, ev.truth_columns, ev.truth_units, delimiter=ev.truth_delimiter)
-    except ReaderError:
-        raise
-    except ValueError as exc:
-        raise ValueError(f"{cfg.path}: evaluate.truth_columns / evaluate.truth_units: {exc}") from None
+    return _csv(
+        cfg,
+        "evaluate.truth_",
+        lambda: read_truth_file(
+            ev.truth, ev.truth_format, columns=ev.truth_columns, units=ev.truth_units, delimiter=ev.truth_delimiter
+        ),
+    )
 
 
 def truth_errors(run: InsRun, truth, which: str):
@@ -1007,8 +1040,6 @@ def truth_errors(run: InsRun, truth, which: str):
     The solution's epochs are the filter's (GNSS and pseudo-measurement epochs); a reference in GPST
     since 1980 is put on seconds of week when the solution is (an IMU file without ``gps_week``).
     """
-    from jaxnav.ins.attitude import quat_to_euler
-
     ep = run.result.epochs
     nav, P = (run.smoothed_nav, run.smoothed_covs) if which == "smoothed" else (ep.nav, ep.covs)
     t = np.asarray(ep.t_nav, float)
@@ -1016,9 +1047,7 @@ def truth_errors(run: InsRun, truth, which: str):
     pos = np.asarray(nav.pos, float)[first]
     v = np.asarray(nav.v_n, float)[first]
     P = np.asarray(P, float)[first]
-    e = np.asarray(quat_to_euler(np.asarray(nav.q_bn)), float)[first]  # [pitch, roll, yaw], body RFU in ENU
-    heading = np.mod(-e[:, 2], 2 * math.pi)
-    rpy = np.stack([e[:, 1], e[:, 0], heading], -1)
+    rpy = np.asarray(quat_to_roll_pitch_heading(np.asarray(nav.q_bn)), float)[first]
     tt = np.asarray(truth.t, float)
     week = 604800.0
     if t[0] < 2 * week <= tt[0]:
@@ -1042,6 +1071,6 @@ def truth_errors(run: InsRun, truth, which: str):
         truth.rpy,
         cov_pos_enu=position_cov_enu(P, pos, idx),
         sig_vel=sd[:, idx.dv],
-        sig_att=attitude_sigmas(P, heading, idx),
+        sig_att=attitude_sigmas(P, rpy[:, 2], idx),
         windows=run.prep.outages,
     )

@@ -19,7 +19,7 @@ import numpy as np
 
 from jaxnav import io
 from jaxnav.io import explicit_step
-from jaxnav.monitoring import COMPONENTS, fit_stations
+from jaxnav.monitoring import COMPONENTS, decimal_year, fit_stations, iso_date, series_span
 from jaxnav.units import DAY
 
 UNITS = {
@@ -36,8 +36,6 @@ _log = logging.getLogger(__name__)
 
 
 def _known_step_dict(k) -> dict:
-    from jaxnav.monitoring._station import decimal_year, iso_date
-
     return dict(
         station=k.station,
         date=iso_date(k.epoch),
@@ -92,7 +90,6 @@ def run_monitor_velocities(
       The dictionary written ("text": the table printed by ``jaxnav monitor``).
     """
     from jaxnav import __version__
-    from jaxnav.monitoring._station import iso_date
     from jaxnav.plot import plot_station_fit
 
     out = pathlib.Path(out)
@@ -147,11 +144,9 @@ def run_monitor_velocities(
             f"warning: known step of {u['station']} at {u['date']} ({u['kind']}, {u['given_by']}): no such "
             "station among the files; not used"
         )
-    from jaxnav.monitoring._station import _day_index
-
     uses, outsides = [], []
     for s in series:
-        first, last = float(s.t[0]), float(s.t[0]) + float(_day_index(s)[-1]) * DAY  # the daily grid's ends
+        first, last = series_span(s)
         use, outside = [], []
         for k in io.merge_known_steps(by_station.get(s.station, [])):
             if first < k.epoch <= last and (not k.postseismic or k.epoch < last):

@@ -30,12 +30,10 @@ from __future__ import annotations
 import math
 import pathlib
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
-from jaxnav.experiments.figures import plot_walk
-from jaxnav.experiments.ins_config import load_ins_config
 from jaxnav.experiments.ins_run import filter_params, prepare, run_ins
 from jaxnav.ins import (
     ERROR_MODEL_15,
@@ -50,14 +48,15 @@ from jaxnav.ins import (
     sensor_to_body,
 )
 from jaxnav.ins.attitude import quat_to_euler
-from jaxnav.io import imu_increments, read_pos, read_rtklib_imu, write_json
+from jaxnav.io import ImuLog, PosSolution, imu_increments, load_ins_config, read_pos, read_rtklib_imu, write_json
+from jaxnav.plot import plot_outage_track
 
 
 class WalkData(NamedTuple):
     """The walk recording: :class:`jaxnav.io.ImuLog` and :class:`jaxnav.io.PosSolution` (both GPST s since 1980)."""
 
-    imu: Any
-    pos: Any
+    imu: ImuLog
+    pos: PosSolution
 
 
 def load_walk(data_dir) -> WalkData:
@@ -99,7 +98,7 @@ def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None
 
     Args:
       data: :class:`WalkData` (or a directory for :func:`load_walk`).
-      out_dir: if given, the track/outage figure (:func:`jaxnav.experiments.figures.plot_walk`) is written there.
+      out_dir: if given, the track/outage figure (:func:`jaxnav.plot.plot_outage_track`) is written there.
       cfg: a config to use instead of the shipped one (:func:`walk_config`).
     Returns:
       (:class:`jaxnav.ins.OutageScores`, extras dict with "alignment", "result", "meas",
@@ -123,7 +122,9 @@ def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None
     )
     scores = run.scores
     if out_dir is not None:
-        fig = plot_walk(scores, extras, pathlib.Path(out_dir) / fig_name, title=cfg.name)
+        fig = plot_outage_track(
+            scores, run.enu_ref, run.enu_fwd, run.enu_sm, pathlib.Path(out_dir) / fig_name, title=cfg.name
+        )
         scores = scores._replace(figure=str(fig))
     return scores, extras
 

@@ -170,6 +170,18 @@ def quat_to_euler(q):
     return dcm_to_euler(quat_to_dcm(q))
 
 
+def quat_to_roll_pitch_heading(q):
+    """q_bn (body RFU, nav ENU) -> [roll, pitch, heading] (rad), heading clockwise from north in [0, 2 pi).
+
+    Args:
+      q: (..., 4) unit quaternions.
+    Returns:
+      (..., 3) roll, pitch (as :func:`quat_to_euler`) and :func:`yaw_to_heading` of its yaw.
+    """
+    e = quat_to_euler(q)
+    return jnp.stack([e[..., 1], e[..., 0], yaw_to_heading(e[..., 2])], axis=-1)
+
+
 def heading_to_yaw(heading):
     """Heading (clockwise from north, rad) -> yaw (counter-clockwise about up, rad), wrapped."""
     return jnp.arctan2(jnp.sin(-heading), jnp.cos(-heading))

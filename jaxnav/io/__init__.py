@@ -1,5 +1,7 @@
 """File readers (host side): RTKLIB solutions, raw IMU logs with RTKLIB time tags, daily station
-series (NGL tenv3, SIO .neu, .col tables, EarthScope/PBO .pos), TOML configuration files;
+series (NGL tenv3, SIO .neu, .col tables, EarthScope/PBO .pos), TOML configuration files (among
+them the ``jaxnav ins`` config, :func:`load_ins_config`); IMU and GNSS files by format name
+(:func:`read_imu`, :func:`read_gnss`);
 S3 stop lists and S2 result tables (readers and writers); KF-GINS IMU/GNSS text files and generic
 CSV tables with a column map and units; reference (truth) trajectories: KF-GINS ``truth.nav`` and CSV;
 writers of a navigation solution (trajectory CSV, ``.pos``, GeoJSON, KML).
@@ -9,11 +11,17 @@ here, at the edge. :func:`write_json` is the one strict JSON writer (non-finite 
 with a reason); :func:`provenance` is the block every command's ``results.json`` carries.
 """
 
-from jaxnav._config import load_toml, loads_toml  # the one TOML parser sits below every layer (sim reads scenarios)
+from jaxnav._config import (  # the one TOML parser sits below every layer (sim reads scenarios)
+    ConfigError,
+    load_toml,
+    loads_toml,
+)
 from jaxnav.io._csv import read_csv_gnss, read_csv_imu, read_csv_series
 from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_pbo_pos, read_tenv3, year_to_seconds
 from jaxnav.io._errors import ReaderError
+from jaxnav.io._formats import GNSS_FORMATS, IMU_FORMATS, TRUTH_FORMATS, read_gnss, read_imu, read_truth
 from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, read_rtklib_imu, read_rtklib_tag
+from jaxnav.io._ins_config import INS_CONFIG_DIR, INS_CONFIG_RANGES, InsConfig, find_ins_config, load_ins_config
 from jaxnav.io._json import json_ready, write_json
 from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
 from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
@@ -119,3 +127,6 @@ __all__ += [
     "write_trajectory_csv",
 ]
 __all__ += ["DailySeries", "read_col", "read_daily", "read_neu", "read_pbo_pos", "read_tenv3", "year_to_seconds"]
+__all__ += ["GNSS_FORMATS", "IMU_FORMATS", "TRUTH_FORMATS", "read_gnss", "read_imu", "read_truth"]
+__all__ += ["INS_CONFIG_DIR", "INS_CONFIG_RANGES", "InsConfig", "find_ins_config", "load_ins_config"]
+__all__ += ["ConfigError"]

@@ -24,16 +24,19 @@ from jaxnav.monitoring._station import (
     Screening,
     StationFit,
     daily_grid,
+    decimal_year,
     detect_steps,
     fit_series_batch,
     fit_station,
     fit_stations,
+    iso_date,
     midas_check,
     period_amplitudes,
     polynomial_terms,
     profile_tau,
     residual_trend,
     screen_outliers,
+    series_span,
     step_penalty,
 )
 from jaxnav.monitoring._statistics import (
@@ -61,6 +64,9 @@ from jaxnav.monitoring._trajectory import (
 )
 
 __all__ = [
+    "decimal_year",
+    "iso_date",
+    "series_span",
     "Forecast",
     "InternalPrecision",
     "PSD_GRID",

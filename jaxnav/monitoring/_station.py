@@ -112,6 +112,15 @@ def _day_index(series):
     return cal if dups(cal) < dups(jul) and np.all(np.diff(cal) >= 0) else jul
 
 
+def series_span(series) -> tuple[float, float]:
+    """(first, last) epoch of a daily series' day grid, s since J2000: the range a step must fall in.
+
+    Args:
+      series: :class:`jaxnav.io.DailySeries` (its ``t`` and, for decimal-year files, ``year``).
+    """
+    return float(series.t[0]), float(series.t[0]) + float(_day_index(series)[-1]) * DAY
+
+
 def screen_outliers(
     series,
     *,

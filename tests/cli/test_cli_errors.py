@@ -563,7 +563,7 @@ def test_a_value_error_from_inside_numpy_is_internal(monkeypatch, capsys):
 
 def test_config_ranges_are_documented_beside_their_keys():
     """Every range of the ``ins`` and cadastral configs appears in the docs as ``| `key` | lo | hi |``."""
-    from jaxnav.experiments.ins_config import RANGES as INS
+    from jaxnav.io import INS_CONFIG_RANGES as INS
     from jaxnav.sim._cadastral import RANGES as CAD
 
     for doc, ranges in (("docs/guide/ins.md", INS), ("docs/api/survey.md", CAD)):
@@ -577,7 +577,7 @@ def test_a_value_error_deep_in_the_computation_is_not_an_input_error(monkeypatch
     computing (here: from inside the processing) exits 3 saying how long it ran, not 2 ("fix your
     input"); a ReaderError at that stage still exits 2."""
     import jaxnav.experiments.ins_output as ins_output
-    from jaxnav.experiments.ins_config import load_ins_config
+    from jaxnav.io import load_ins_config
 
     def broken(cfg, out, **kw):  # a check inside jaxnav's own code, met with internal data
         from jaxnav.sim._cadastral import short_survey

@@ -82,9 +82,9 @@ def test_overconfident_preset_is_calibrated_to_consistency(tmp_path):
 
 
 def test_preset_that_fits_is_kept_and_few_epochs_warn(tmp_path):
-    from jaxnav.experiments import load_ins_config
     from jaxnav.experiments.ins_run import calibrate_noise, prepare
     from jaxnav.ins import MIN_CALIBRATION_EPOCHS
+    from jaxnav.io import load_ins_config
 
     _, cfg = _car(tmp_path, 1.0)
     prep = prepare(load_ins_config(cfg), progress=None)
@@ -115,8 +115,8 @@ def test_velocity_noise_beyond_its_sigmas_is_calibrated(tmp_path):
     (nearly) every epoch. Before the velocity sigma factor existed (check and fit on position only) the
     calibration ran (position NIS per dof 1.41) but ended with 1.38 and a warning, velocity NIS per dof
     3.5, and its run gated 9.6 % of the GNSS epochs."""
-    from jaxnav.experiments import load_ins_config
     from jaxnav.experiments.ins_run import calibrate_noise, prepare, run_filter
+    from jaxnav.io import load_ins_config
 
     _, cfg = _car(tmp_path, 1.0, vel_factor=2.0)
     prep = prepare(load_ins_config(cfg), progress=None)

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from jaxnav.experiments.ins_config import C_RFU_FRD, CONFIG_DIR, ConfigError, load_ins_config, sensor_to_body
+from jaxnav.ins import C_RFU_FRD, sensor_to_body
+from jaxnav.io import INS_CONFIG_DIR, ConfigError, load_ins_config
 
 BASE = """
 [imu]
@@ -99,7 +100,7 @@ def test_unknown_shipped_name_lists_the_shipped_ones():
 
 def test_shipped_configs_load(monkeypatch):
     monkeypatch.setenv("JAXNAV_DATA", "/data")
-    for p in sorted(CONFIG_DIR.glob("*.toml")):
+    for p in sorted(INS_CONFIG_DIR.glob("*.toml")):
         cfg = load_ins_config(p.stem)
         assert str(cfg.imu.file).startswith("/data/")
 

@@ -99,7 +99,7 @@ def test_csv_source_gives_the_same_scale(runs, tmp_path):
     ],
 )
 def test_bad_odometer_settings_named(runs, tmp_path, section, match):
-    from jaxnav.experiments.ins_config import ConfigError, load_ins_config
+    from jaxnav.io import ConfigError, load_ins_config
 
     rec, folder, _ = runs
     cfg = car_config(rec, folder / "data", time_offset=0.15, extra=section)

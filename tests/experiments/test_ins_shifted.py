@@ -18,10 +18,10 @@ EVALUATE = "first_s = 40.0\noutage_s = 15.0\ngap_s = 20.0\nend_margin_s = 5.0\ns
 
 def test_shifted_outages_fitted_per_shift(tmp_path, capsys):
     from jaxnav.cli import main
-    from jaxnav.experiments import load_ins_config
     from jaxnav.experiments.ins_output import _densities_dict
     from jaxnav.experiments.ins_run import fit_and_run, read_inputs, shifted_config
     from jaxnav.ins import in_windows
+    from jaxnav.io import load_ins_config
 
     rec = write_car(tmp_path, spec=short_car_spec(), imu_rate=25.0, vibration=0.0)
     cfg_path = car_config(

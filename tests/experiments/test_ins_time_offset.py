@@ -15,7 +15,7 @@ TAG_ERROR = -0.0437  # not a multiple of the grid step: some trials put a GNSS e
 
 @pytest.fixture(scope="module")
 def car(tmp_path_factory):
-    from jaxnav.experiments import load_ins_config
+    from jaxnav.io import load_ins_config
 
     folder = tmp_path_factory.mktemp("car_offset")
     rec = write_car(folder, tag_error_s=TAG_ERROR, imu_start_s=0.96)
@@ -78,8 +78,8 @@ def test_clock_drift_detected(tmp_path):
     flagged; the model's offsets at the halves match the tags there, and the run's single offset lies
     between them. (The estimate scatters by about its sigma between seeds: 293-340 ppm on seeds 0-3, so
     a 10 % bound would fail on some seeds.)"""
-    from jaxnav.experiments import load_ins_config
     from jaxnav.experiments.ins_run import read_inputs
+    from jaxnav.io import load_ins_config
 
     tag0, rate = 0.03, -3e-4
     rec = write_car(tmp_path, tag_error_s=tag0, imu_rate=50.0)

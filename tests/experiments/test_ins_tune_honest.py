@@ -9,8 +9,8 @@ from _recording import car_config, write_car
 
 
 def test_withheld_fixes_do_not_move_the_fit(tmp_path):
-    from jaxnav.experiments import load_ins_config
     from jaxnav.experiments.ins_run import prepare, tune_noise
+    from jaxnav.io import load_ins_config
 
     rec = write_car(tmp_path)
     cfg = load_ins_config(car_config(rec, tmp_path, time_offset=0.15))

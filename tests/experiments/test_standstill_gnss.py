@@ -23,8 +23,8 @@ def car(tmp_path_factory):
 @pytest.mark.parametrize("platform, velocity", [(None, True), ("car", True), ("rover", False)])
 def test_no_zupt_while_cruising_and_zupt_at_stops(car, platform, velocity):
     """Default and car presets with the GNSS velocity; rover without it (speed from position differences)."""
-    from jaxnav.experiments.ins_config import load_ins_config
     from jaxnav.experiments.ins_run import prepare
+    from jaxnav.io import load_ins_config
 
     rec, p = car
     text = p.read_text()
@@ -49,7 +49,7 @@ def test_no_zupt_while_cruising_and_zupt_at_stops(car, platform, velocity):
 
 
 def test_config_keys(car, tmp_path):
-    from jaxnav.experiments.ins_config import ConfigError, load_ins_config
+    from jaxnav.io import ConfigError, load_ins_config
 
     _, p = car
     cfg = load_ins_config(p)
@@ -72,8 +72,8 @@ def test_slow_rover_default_preset(tmp_path):
     import math
 
     from jaxnav import sim
-    from jaxnav.experiments.ins_config import load_ins_config
     from jaxnav.experiments.ins_run import prepare
+    from jaxnav.io import load_ins_config
 
     S = sim.Segment
     spec = sim.TrajectorySpec(

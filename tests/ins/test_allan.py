@@ -13,8 +13,8 @@ import pytest
 
 from jaxnav import ins, units
 from jaxnav.cli import main
-from jaxnav.experiments.ins_config import load_ins_config
 from jaxnav.ins.allan import FLICKER_AVAR, GM_PEAK_ADEV, GM_PEAK_TAU, allan_ms
+from jaxnav.io import load_ins_config
 
 
 def _noise(rng, n, dt, white, flicker, rrw):

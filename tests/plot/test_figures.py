@@ -436,7 +436,14 @@ def _walk_inputs(K=16):
 
 def test_walk_outages_one_legend_entry_per_solution_and_labels_apart(tmp_path, captured):
     scores, extras = _walk_inputs()
-    _experiment_figures.plot_walk(scores, extras, tmp_path / "track_outages.png", title="synthetic")
+    _ins.plot_outage_track(
+        scores,
+        extras["enu_ref"],
+        extras["enu_fwd"],
+        extras["enu_sm"],
+        tmp_path / "track_outages.png",
+        title="synthetic",
+    )
     fig = captured["track_outages.png"]
     track, errors = fig.axes
     texts = _legend_texts(errors)

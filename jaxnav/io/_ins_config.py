@@ -20,39 +20,31 @@ from __future__ import annotations
 
 import math
 import pathlib
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from jaxnav._config import ConfigError, Table, load_toml
-from jaxnav.ins.mounting import (
-    C_RFU_FRD,
-    mounting_from_dcm,
-    mounting_from_groves_deg,
-    mounting_from_rpy_deg,
-    sensor_to_body,
-)
+from jaxnav.ins.calibration import TUNABLE
+from jaxnav.ins.mounting import mounting_from_dcm, mounting_from_groves_deg, mounting_from_rpy_deg
+from jaxnav.ins.noise import NOISE_GRADES
+from jaxnav.io._formats import GNSS_FORMATS, IMU_FORMATS, TRUTH_FORMATS
 from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
 
-__all__ = ["C_RFU_FRD", "CONFIG_DIR", "ConfigError", "InsConfig", "find_config", "load_ins_config", "sensor_to_body"]
+__all__ = ["INS_CONFIG_DIR", "INS_CONFIG_RANGES", "InsConfig", "find_ins_config", "load_ins_config"]
 
-#: folder of the shipped ``jaxnav ins`` configs (``jaxnav ins NAME`` finds ``NAME.toml`` here)
-CONFIG_DIR = pathlib.Path(__file__).with_name("configs") / "ins"
+#: folder of the shipped ``jaxnav ins`` configs (``jaxnav ins NAME`` finds ``NAME.toml`` here); they ship
+#: beside the experiments that run them
+INS_CONFIG_DIR = pathlib.Path(__file__).parents[1] / "experiments" / "configs" / "ins"
 
-IMU_FORMATS = ("rtklib-csv", "kf-gins", "csv")
-GNSS_FORMATS = ("rtklib-pos", "kf-gins", "csv")
-#: noise grades of :func:`jaxnav.ins.noise_preset`
-GRADES = ("consumer", "industrial", "tactical", "navigation")
+#: error-state counts of :func:`jaxnav.ins.error_model_for`
 STATE_CHOICES = (15, 18, 21)
-#: parameters ``--tune`` can estimate (``[tune] params``): noise densities, a factor on the GNSS
-#: position sigmas, the lever arm
-TUNABLE = ("arw", "vrw", "gyro_bias_instability", "pos_sigma_scale", "vel_sigma_scale", "lever_arm")
 
 _NUM = (int, float)
 
 #: plausible range [lo, hi] of every numeric key, in the key's own (config) unit: a value outside is a
 #: typing slip or a unit mix-up, refused before anything is read (documented in docs/guide/ins.md)
-RANGES = {
+INS_CONFIG_RANGES = {
     "imu.time_offset_s": (-10.0, 10.0),
     "imu.time_offset_search_s": (1e-3, 10.0),
     "gnss.pos_sigma_floor_m": (0.0, 100.0),
@@ -108,9 +100,9 @@ class ImuSection(NamedTuple):
     tag: pathlib.Path | None
     columns: dict | None
     units: dict | None
-    mounting: Any
+    mounting: np.ndarray
     mounting_source: str
-    time_offset_s: Any  # float (s) or "estimate"
+    time_offset_s: float | str  # s, or "estimate"
     time_offset_search_s: float
     gps_week: int | None = None
     delimiter: str | None = ","
@@ -123,7 +115,7 @@ class GnssSection(NamedTuple):
     format: str
     columns: dict | None
     units: dict | None
-    lever_arm_frd: Any
+    lever_arm_frd: np.ndarray
     use_velocity: bool
     fixed_only: bool
     pos_sigma_floor: float
@@ -131,7 +123,7 @@ class GnssSection(NamedTuple):
     gate_probability: float | None
     gps_week: int | None = None
     delimiter: str | None = ","
-    sigma_m: Any = None
+    sigma_m: float | None = None
     gate_max_run: int = 10
 
 
@@ -170,17 +162,17 @@ class AlignmentSection(NamedTuple):
     ``attitude``: None or (3,) [roll, pitch, heading] rad of the vehicle at the start, as given."""
 
     static_s: float
-    heading: Any
+    heading: float | str
     min_speed: float
     course_s: float
-    attitude: Any
+    attitude: np.ndarray | None
 
 
 class ConstraintSection(NamedTuple):
     """[constraints]: ZUPT ("auto" | False) with ZARU, NHC, their sigmas and rates, and the standstill
     detector (SHOE GLRT, :func:`jaxnav.ins.detect_standstill`) settings, SI."""
 
-    zupt: Any
+    zupt: str | bool
     zupt_sigma: float
     zupt_rate_hz: float
     zaru: bool
@@ -188,12 +180,12 @@ class ConstraintSection(NamedTuple):
     nhc: bool
     nhc_sigma: float
     nhc_rate_hz: float
-    nhc_lever_frd: Any
-    detector_window: Any  # samples, or None: the platform's window (seconds) at the IMU rate
-    detector_threshold: Any  # "auto" (from the recording's quiet periods) or a number
+    nhc_lever_frd: np.ndarray
+    detector_window: int | None  # samples, or None: the platform's window (seconds) at the IMU rate
+    detector_threshold: float | str  # "auto" (from the recording's quiet periods) or a number
     detector_sigma_a: float
     detector_sigma_w: float
-    detector_min_s: Any  # s, or None: the platform's
+    detector_min_s: float | None  # s, or None: the platform's
     platform: str = "handheld"  # [run] platform: a key of jaxnav.ins.standstill.PLATFORMS
     zupt_gnss_k: float = 3.0  # no ZUPT/ZARU where the GNSS speed exceeds this many of its sigmas
 
@@ -213,7 +205,7 @@ class OdometerSection(NamedTuple):
     gps_week: int | None
     sigma: float
     rate_hz: float
-    lever_arm_frd: Any
+    lever_arm_frd: np.ndarray
     estimate_scale: bool
     init_scale_sigma: float
 
@@ -268,7 +260,7 @@ class TuneSection(NamedTuple):
     steps: int
     mode: str
     loss: str = "innovations"
-    calibrate: Any = "auto"
+    calibrate: str | bool = "auto"
     calibrate_steps: int = 12
 
 
@@ -297,10 +289,10 @@ class InsConfig(NamedTuple):
 
 
 class _Reader(Table):
-    """One section of a ``jaxnav ins`` config: :class:`jaxnav._config.Table` with the plausible :data:`RANGES`."""
+    """One section of a ``jaxnav ins`` config: :class:`jaxnav._config.Table` with the plausible :data:`INS_CONFIG_RANGES`."""
 
     def __init__(self, path, d: dict, section: str, variables=None):
-        super().__init__(d, section, source=path, error=ConfigError, plausible=RANGES, variables=variables)
+        super().__init__(d, section, source=path, error=ConfigError, plausible=INS_CONFIG_RANGES, variables=variables)
 
 
 def _delimiter(r: _Reader):
@@ -419,7 +411,7 @@ def _gnss(path, d, variables=None) -> GnssSection:
 
 def _noise(path, d) -> NoiseSection:
     r = _Reader(path, d, "noise")
-    grade = r.get("grade", str, None, choices=GRADES)
+    grade = r.get("grade", str, None, choices=NOISE_GRADES)
     states = r.get("states", int, 15, choices=STATE_CHOICES)
 
     def opt(key, scale):
@@ -613,7 +605,6 @@ def _heading(path, d, variables=None) -> HeadingSection:
     return h
 
 
-TRUTH_FORMATS = ("kf-gins", "csv")
 _TRUTH_COLUMNS = ("t", "week", "tow", "lat", "lon", "h", "ve", "vn", "vu", "vd", "roll", "pitch", "heading", "yaw")
 
 
@@ -656,7 +647,7 @@ def _evaluate(path, d, variables=None) -> EvaluateSection:
     outage_s = r.get("outage_s", float, 15.0, lo=0.0, lo_open=True)
     gap_s = r.get("gap_s", float, 45.0, lo=0.0, lo_open=True)
     outages = r.get("outages", bool, True)
-    lo, hi = RANGES["evaluate.shifts"]
+    lo, hi = INS_CONFIG_RANGES["evaluate.shifts"]
     shifts = r.get("shifts", int, 1, lo=lo, hi=hi)
     period = outage_s + gap_s
     shift_s = r.get("shift_s", float, period / shifts, lo=0.0, lo_open=True)
@@ -714,17 +705,17 @@ def _tune(path, d) -> TuneSection:
     return t
 
 
-def find_config(spec) -> pathlib.Path:
+def find_ins_config(spec) -> pathlib.Path:
     """The config file of ``spec``: a path, or the name of a shipped config (``walk_0827``)."""
     p = pathlib.Path(spec)
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():
             raise ConfigError(f"{p}: no such config file")
         return p
-    shipped = CONFIG_DIR / f"{spec}.toml"
+    shipped = INS_CONFIG_DIR / f"{spec}.toml"
     if shipped.is_file():
         return shipped
-    names = sorted(q.stem for q in CONFIG_DIR.glob("*.toml"))
+    names = sorted(q.stem for q in INS_CONFIG_DIR.glob("*.toml"))
     raise ConfigError(f"{spec}: no such config file, and not a shipped config (shipped: {', '.join(names)})")
 
 
@@ -739,7 +730,7 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
       ConfigError (a ValueError): naming the file and the key: unknown section or key, wrong
         type, a value out of range, conflicting keys, an unset ``${VAR}`` in a path.
     """
-    path = find_config(spec)
+    path = find_ins_config(spec)
     d = load_toml(path)
     doc = Table(d, source=path, error=ConfigError)
     doc.expect(_SECTIONS)
