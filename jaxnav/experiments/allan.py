@@ -22,7 +22,7 @@ from jaxnav.ins import (
     static_check,
     uniform_rates,
 )
-from jaxnav.io import INS_CONFIG_RANGES, write_json
+from jaxnav.io import INS_CONFIG_RANGES, noise_in_config_units, write_json
 
 #: a recording shorter than this (s) is warned about in the TOML: its bias terms are bounds at short taus
 SHORT_RECORDING_S = 3600.0
@@ -38,28 +38,17 @@ def noise_toml(gyro, accel, *, source: str) -> str:
     static recording cannot measure; the values below override its densities.
     """
     n = imu_noise_from_allan(gyro, accel, reduce=np.max)
-    vals = [
-        ("arw_deg_per_sqrt_h", units.rad_per_sqrt_s_to_deg_per_sqrt_hour(n.gyro_arw), "gyro white noise"),
-        ("vrw_m_per_s_per_sqrt_h", units.mps_per_sqrt_s_to_mps_per_sqrt_hour(n.accel_vrw), "accelerometer white noise"),
-        (
-            "gyro_bias_instability_deg_per_h",
-            units.rad_per_s_to_deg_per_hour(n.gyro_bias_instability),
-            "Gauss-Markov sigma = 1.075 B (its Allan peak at the 0.664 B floor)",
-        ),
-        ("bias_correlation_time_s", n.gyro_bias_tau, "gyro: tau of the Allan minimum / 1.893"),
-        ("accel_bias_instability_mg", units.mps2_to_mg(n.accel_bias_instability), "Gauss-Markov sigma = 1.075 B"),
-        ("accel_bias_correlation_time_s", n.accel_bias_tau, "accelerometer: tau of the Allan minimum / 1.893"),
-        (
-            "gyro_bias_rw_deg_per_h_per_sqrt_h",
-            units.rad_per_s_per_sqrt_s_to_deg_per_hour_per_sqrt_hour(n.gyro_bias_rw),
-            "rate random walk (used with states = 21)",
-        ),
-        (
-            "accel_bias_rw_mg_per_sqrt_h",
-            units.mps2_per_sqrt_s_to_mg_per_sqrt_hour(n.accel_bias_rw),
-            "rate random walk (used with states = 21)",
-        ),
-    ]
+    notes = {
+        "arw_deg_per_sqrt_h": "gyro white noise",
+        "vrw_m_per_s_per_sqrt_h": "accelerometer white noise",
+        "gyro_bias_instability_deg_per_h": "Gauss-Markov sigma = 1.075 B (its Allan peak at the 0.664 B floor)",
+        "bias_correlation_time_s": "gyro: tau of the Allan minimum / 1.893",
+        "accel_bias_instability_mg": "Gauss-Markov sigma = 1.075 B",
+        "accel_bias_correlation_time_s": "accelerometer: tau of the Allan minimum / 1.893",
+        "gyro_bias_rw_deg_per_h_per_sqrt_h": "rate random walk (used with states = 21)",
+        "accel_bias_rw_mg_per_sqrt_h": "rate random walk (used with states = 21)",
+    }
+    values = noise_in_config_units(n, tuple(notes))
     lines = [
         f"# [noise] from the Allan variance of {source} (jaxnav allan): the largest of the three axes;",
         "# a term the recording could not resolve is given its 2-sigma upper bound (see results.json)",
@@ -77,9 +66,9 @@ def noise_toml(gyro, accel, *, source: str) -> str:
         f'grade = "{nearest_grade(n.gyro_arw)}"  # nearest preset in ARW: turn-on bias and scale-factor '
         "sigmas (not measurable from a static recording)",
     ]
-    for key, v, what in vals:
+    for key, what in notes.items():
         lo, hi = INS_CONFIG_RANGES[f"noise.{key}"]
-        v = float(v)
+        v = values[key]
         if dur < SHORT_RECORDING_S and not key.startswith(("arw", "vrw")):
             lines.append(f"# {key} = {v:.4g}  # {what}")
         elif math.isfinite(v) and lo <= v <= hi and v > 0:

@@ -15,9 +15,17 @@ import jax
 import numpy as np
 
 from jaxnav.experiments.ins_run import InsRun, run_error_model
-from jaxnav.ins import position_sigmas_enu
+from jaxnav.ins import outage_statistics, position_sigmas_enu
 from jaxnav.ins.attitude import quat_to_roll_pitch_heading
-from jaxnav.io import NavSolution, Track, write_geojson, write_kml, write_pos, write_trajectory_csv
+from jaxnav.io import (
+    NavSolution,
+    Track,
+    noise_in_config_units,
+    write_geojson,
+    write_kml,
+    write_pos,
+    write_trajectory_csv,
+)
 
 
 def _solution(run: InsRun, which: str) -> NavSolution:
@@ -98,59 +106,6 @@ def write_outputs(run: InsRun, out) -> list:
         str(write_geojson(out / "track.geojson", tracks)),
         str(write_kml(out / "track.kml", tracks, name=f"jaxnav ins: {cfg.name}")),
     ]
-
-
-def _evaluation(sc) -> dict:
-    if sc is None:
-        return None
-    per = []
-    for k, (a, b) in enumerate(sc.windows):
-        w = (sc.t >= a) & (sc.t < b) & np.isfinite(sc.err_fwd)
-        per.append(
-            {
-                "window": k + 1,
-                "gpst_start_s": float(a),
-                "gpst_end_s": float(b),
-                "n_fixed_epochs": int(sc.n_ref[k]),
-                "forward_rms_h_m": float(sc.fwd_rms[k]),
-                "forward_max_h_m": float(sc.fwd_max[k]),
-                "smoothed_rms_h_m": float(sc.sm_rms[k]),
-                "smoothed_max_h_m": float(sc.sm_max[k]),
-                "forward_sigma_h_at_end_m": float(sc.sig_fwd[w][-1]) if w.any() else float("nan"),
-                "smoothed_sigma_h_max_m": float(np.max(sc.sig_sm[w])) if w.any() else float("nan"),
-            }
-        )
-        if not sc.n_ref[k]:
-            per[-1].update(
-                {
-                    f"{key}_null_reason": "no fixed GNSS epoch in the window"
-                    for key in ("forward_rms_h_m", "forward_max_h_m", "smoothed_rms_h_m", "smoothed_max_h_m")
-                }
-            )
-        if not w.any():
-            per[-1].update(
-                {
-                    f"{key}_null_reason": "no scored epoch in the window"
-                    for key in ("forward_sigma_h_at_end_m", "smoothed_sigma_h_max_m")
-                }
-            )
-    sc_w = sc.withheld & np.isfinite(sc.err_fwd)
-    # consistency: share of scored outage epochs whose horizontal error is within 3 of its own sigma
-    # (the horizontal sigma sqrt(var_E + var_N); for a circular 2-D Gaussian P(r < 3 sigma_h / sqrt 2) = 98.9 %)
-    within_f = float(np.mean(sc.err_fwd[sc_w] <= 3 * sc.sig_fwd[sc_w])) if sc_w.any() else float("nan")
-    within_s = float(np.mean(sc.err_sm[sc_w] <= 3 * sc.sig_sm[sc_w])) if sc_w.any() else float("nan")
-    return {
-        "forward_rms_h_m": sc.fwd_rms_all,
-        "forward_max_h_m": float(np.nanmax(sc.fwd_max)) if np.any(sc.n_ref) else float("nan"),
-        "smoothed_rms_h_m": sc.sm_rms_all,
-        "smoothed_max_h_m": float(np.nanmax(sc.sm_max)) if np.any(sc.n_ref) else float("nan"),
-        "forward_rms_h_outside_outages_m": sc.fwd_rms_outside,
-        "forward_share_within_3_sigma_h": within_f,
-        "smoothed_share_within_3_sigma_h": within_s,
-        "n_windows": int(len(sc.windows)),
-        "n_scored_windows": int(np.count_nonzero(sc.n_ref)),
-        "windows": per,
-    }
 
 
 def write_figures(run: InsRun, out, *, fmt: str = "png") -> list:
@@ -301,16 +256,15 @@ def _truth_evaluation(run: InsRun, truth, evaluation, *, tuned: bool):
 
 
 def _densities_dict(d) -> dict:
-    from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
-
-    n = d.imu
+    """The run's noise (:class:`jaxnav.ins.LCNoise`) for results.json, in the config's units."""
+    keys = (
+        "arw_deg_per_sqrt_h",
+        "vrw_m_per_s_per_sqrt_h",
+        "gyro_bias_instability_deg_per_h",
+        "bias_correlation_time_s",
+    )
     return {
-        "arw_deg_per_sqrt_h": float(n.gyro_arw) / DEG_PER_SQRT_HOUR,
-        "vrw_m_per_s_per_sqrt_h": float(n.accel_vrw) * math.sqrt(HOUR),
-        "gyro_bias_instability_deg_per_h": float(n.gyro_bias_instability) / DEG_PER_HOUR,
-        "bias_correlation_time_s": float(n.gyro_bias_tau),
-        "init_gyro_bias_deg_per_s": float(n.gyro_bias_initial) / DEG,
-        "init_accel_bias_mg": float(n.accel_bias_initial) / MG,
+        **noise_in_config_units(d.imu, keys + ("init_gyro_bias_deg_per_s", "init_accel_bias_mg")),
         "pos_sigma_scale": float(d.pos_sigma_scale),
         "vel_sigma_scale": float(d.vel_sigma_scale),
     }
@@ -462,7 +416,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
         "n_skipped_updates": int(run.result.n_skipped),
         "loglik": float(run.result.loglik),
         "runtime_s": run.runtime_s,
-        "evaluation": _evaluation(run.scores),
+        "evaluation": None if run.scores is None else outage_statistics(run.scores),
     }
     if tune:
         rep, run_t = fr.tune, fr.run
@@ -479,7 +433,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
             "n_epochs": rep.n_epochs,
             "noise_after": _densities_dict(rep.noise),
             "evaluation_before": results["evaluation"],
-            "evaluation_after": _evaluation(run_t.scores),
+            "evaluation_after": None if run_t.scores is None else outage_statistics(run_t.scores),
             "n_gated_gnss_epochs_after": int(run_t.result.n_gated) if run_t.result.n_gated is not None else 0,
             "started_from": "the calibrated noise" if cal.get("ran") else "the configured noise",
         }

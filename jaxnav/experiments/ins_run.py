@@ -68,7 +68,7 @@ from jaxnav.ins import (
     score_outages,
     sensor_to_body,
     smooth,
-    standstill_intervals,
+    standstill_summary,
     training_windows,
     trajectory_errors,
     zaru,
@@ -79,6 +79,7 @@ from jaxnav.ins import heading as heading_aid
 from jaxnav.ins.attitude import quat_to_dcm, quat_to_roll_pitch_heading
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 from jaxnav.io import (
+    INS_NOISE_KEYS,
     ConfigError,
     ImuLog,
     InsConfig,
@@ -190,30 +191,13 @@ def heading_on_imu(cfg: InsConfig, t_imu):
     return hd, sg
 
 
-#: ``[noise]`` keys (SI) -> :class:`jaxnav.ins.ImuNoise` fields
-NOISE_KEYS = {
-    "arw": "gyro_arw",
-    "vrw": "accel_vrw",
-    "gyro_bias_instability": "gyro_bias_instability",
-    "bias_correlation_time": "gyro_bias_tau",
-    "accel_bias_instability": "accel_bias_instability",
-    "bias_correlation_time_accel": "accel_bias_tau",
-    "gyro_bias_rw": "gyro_bias_rw",
-    "accel_bias_rw": "accel_bias_rw",
-    "init_gyro_bias": "gyro_bias_initial",
-    "init_accel_bias": "accel_bias_initial",
-    "init_gyro_scale": "gyro_sf",
-    "init_accel_scale": "accel_sf",
-}
-
-
 def run_noise(cfg: InsConfig) -> LCNoise:
     """The run's :class:`LCNoise` from ``[noise]``: values given there, else the grade's :func:`jaxnav.ins.noise_preset`
     (without a grade: zeros, a 300 s gyro and a 3600 s accelerometer correlation time). The accelerometer's
     correlation time defaults to the gyro's when only that is given."""
     n = cfg.noise
     imu = noise_preset(n.grade) if n.grade else ImuNoise(gyro_arw=0.0, accel_vrw=0.0, gyro_bias_tau=300.0)
-    given = {f: getattr(n, k) for k, f in NOISE_KEYS.items() if getattr(n, k, None) is not None}
+    given = {f: getattr(n, k) for k, f, _ in INS_NOISE_KEYS.values() if getattr(n, k) is not None}
     if n.bias_correlation_time is not None:
         given.setdefault("accel_bias_tau", n.bias_correlation_time)
     return LCNoise(
@@ -331,36 +315,17 @@ def detect_stops(cfg: InsConfig, t, dth, dv, dt, static_s: float, meas=None):
         max_gap_s=gap,
         rate_hz=rate,
     )
-    sc, sc_imu = r.scores, r.imu_only_scores
     info = {
         "kind": "SHOE GLRT",
         "platform": c.platform,
-        "window_samples": r.window,
-        "min_s": r.min_s,
-        "threshold": r.threshold,
-        "threshold_source": "config" if r.threshold_source == "given" else r.threshold_source,
-        "quiet_samples": r.quiet_samples,
+        **standstill_summary(r, t, rate),
         "sigma_a_m_s2": c.detector_sigma_a,
         "sigma_w_rad_s": c.detector_sigma_w,
         "gnss_check": meas is not None,
         "gnss_k": c.zupt_gnss_k,
-        "vetoed_samples": int(np.count_nonzero(r.vetoed)),
-        "vetoed_intervals": int(standstill_intervals(t, r.vetoed).shape[0]),
-        "vetoed_s": float(np.count_nonzero(r.vetoed) / rate),
-        "unconfirmed_samples": int(np.count_nonzero(r.unconfirmed)),
-        "unconfirmed_intervals": int(standstill_intervals(t, r.unconfirmed).shape[0]),
-        "gnss_static_samples": int(np.count_nonzero(r.static)),
-        "gnss_moving_samples": int(np.count_nonzero(r.moving)),
-        "scored_samples": int(np.count_nonzero(r.covered)),
-        "precision": sc.precision,
-        "recall": sc.recall,
-        "tp": sc.tp,
-        "fp": sc.fp,
-        "fn": sc.fn,
-        "tn": sc.tn,
-        "imu_only_precision": sc_imu.precision,
-        "imu_only_recall": sc_imu.recall,
     }
+    if info["threshold_source"] == "given":
+        info["threshold_source"] = "config"
     info["_series"] = {
         "stat": r.stat,
         "raw": r.raw,

@@ -60,6 +60,7 @@ from jaxnav.ins.evaluation import (  # GNSS outage protocol and sigmas of error 
     horizontal_sigma,
     in_windows,
     outage_drift_maxima,
+    outage_statistics,
     outage_windows,
     pool_drifts,
     pooled_outage_drifts,
@@ -149,6 +150,7 @@ from jaxnav.ins.standstill import (
     runs_touching,
     shoe_statistic,
     standstill_intervals,
+    standstill_summary,
     threshold_standstill,
 )
 from jaxnav.ins.timing import (  # refinement by the filter's innovation likelihood
@@ -250,6 +252,7 @@ __all__ = [
     "detection_scores",
     "shoe_statistic",
     "standstill_intervals",
+    "standstill_summary",
     "threshold_standstill",
     "PLATFORMS",
     "gnss_motion_labels",
@@ -282,6 +285,7 @@ __all__ += [
     "in_windows",
     "outage_windows",
     "outage_drift_maxima",
+    "outage_statistics",
     "pool_drifts",
     "pooled_outage_drifts",
     "shifted_outage_windows",

@@ -520,6 +520,66 @@ def score_outages(
 
 
 # ----------------------------------------------------------------------------- sigmas from error covariances
+def outage_statistics(sc: OutageScores) -> dict:
+    """:class:`OutageScores` as a results.json block: overall and per-window horizontal errors (m) of the
+    forward and smoothed solutions, and the share of scored outage epochs within 3 of their own sigma.
+
+    The share compares the horizontal error r with 3 sigma_h, sigma_h = sqrt(var_E + var_N). For a circular
+    2-D Gaussian (per-axis sigma s = sigma_h / sqrt 2) P(r < 3 sigma_h) = 1 - exp(-9) = 99.99 %, and
+    P(r < 3 s) = 1 - exp(-4.5) = 98.9 %. A window without a fixed reference epoch has NaN errors with
+    a ``<key>_null_reason``.
+
+    Returns:
+      dict with unit-suffixed keys (``forward_rms_h_m``, ..., ``windows``: one dict per window).
+    """
+    per = []
+    for k, (a, b) in enumerate(sc.windows):
+        w = (sc.t >= a) & (sc.t < b) & np.isfinite(sc.err_fwd)
+        per.append(
+            {
+                "window": k + 1,
+                "gpst_start_s": float(a),
+                "gpst_end_s": float(b),
+                "n_fixed_epochs": int(sc.n_ref[k]),
+                "forward_rms_h_m": float(sc.fwd_rms[k]),
+                "forward_max_h_m": float(sc.fwd_max[k]),
+                "smoothed_rms_h_m": float(sc.sm_rms[k]),
+                "smoothed_max_h_m": float(sc.sm_max[k]),
+                "forward_sigma_h_at_end_m": float(sc.sig_fwd[w][-1]) if w.any() else float("nan"),
+                "smoothed_sigma_h_max_m": float(np.max(sc.sig_sm[w])) if w.any() else float("nan"),
+            }
+        )
+        if not sc.n_ref[k]:
+            per[-1].update(
+                {
+                    f"{key}_null_reason": "no fixed GNSS epoch in the window"
+                    for key in ("forward_rms_h_m", "forward_max_h_m", "smoothed_rms_h_m", "smoothed_max_h_m")
+                }
+            )
+        if not w.any():
+            per[-1].update(
+                {
+                    f"{key}_null_reason": "no scored epoch in the window"
+                    for key in ("forward_sigma_h_at_end_m", "smoothed_sigma_h_max_m")
+                }
+            )
+    sc_w = sc.withheld & np.isfinite(sc.err_fwd)
+    within_f = float(np.mean(sc.err_fwd[sc_w] <= 3 * sc.sig_fwd[sc_w])) if sc_w.any() else float("nan")
+    within_s = float(np.mean(sc.err_sm[sc_w] <= 3 * sc.sig_sm[sc_w])) if sc_w.any() else float("nan")
+    return {
+        "forward_rms_h_m": sc.fwd_rms_all,
+        "forward_max_h_m": float(np.nanmax(sc.fwd_max)) if np.any(sc.n_ref) else float("nan"),
+        "smoothed_rms_h_m": sc.sm_rms_all,
+        "smoothed_max_h_m": float(np.nanmax(sc.sm_max)) if np.any(sc.n_ref) else float("nan"),
+        "forward_rms_h_outside_outages_m": sc.fwd_rms_outside,
+        "forward_share_within_3_sigma_h": within_f,
+        "smoothed_share_within_3_sigma_h": within_s,
+        "n_windows": int(len(sc.windows)),
+        "n_scored_windows": int(np.count_nonzero(sc.n_ref)),
+        "windows": per,
+    }
+
+
 def position_sigmas_enu(covs, pos, idx) -> np.ndarray:
     """(M, 3) east, north, up 1-sigma, m, of error covariances (M, n, n) at positions ``pos`` (M, 3)
     [lat rad, lon rad, h m]; ``idx``: the model's :class:`jaxnav.ins.error_model.ErrorStateIndex`

@@ -371,6 +371,41 @@ class CheckedStandstill(NamedTuple):
     imu_only_scores: DetectionScores
 
 
+def standstill_summary(r: CheckedStandstill, t, rate_hz: float) -> dict:
+    """The numbers of a :func:`gnss_checked_standstill` run for a report (results.json): detector settings
+    used, samples / intervals / seconds the GNSS check vetoed or left unconfirmed, and the precision and
+    recall of the kept and the IMU-only standstills against the GNSS-static labels.
+
+    Args:
+      r: the detection.  t: (N,) s, the IMU sample times.  rate_hz: IMU rate, Hz.
+    """
+    sc, sc_imu = r.scores, r.imu_only_scores
+    n_vetoed = int(np.count_nonzero(r.vetoed))
+    return {
+        "window_samples": r.window,
+        "min_s": r.min_s,
+        "threshold": r.threshold,
+        "threshold_source": r.threshold_source,
+        "quiet_samples": r.quiet_samples,
+        "vetoed_samples": n_vetoed,
+        "vetoed_intervals": int(standstill_intervals(t, r.vetoed).shape[0]),
+        "vetoed_s": float(n_vetoed / rate_hz),
+        "unconfirmed_samples": int(np.count_nonzero(r.unconfirmed)),
+        "unconfirmed_intervals": int(standstill_intervals(t, r.unconfirmed).shape[0]),
+        "gnss_static_samples": int(np.count_nonzero(r.static)),
+        "gnss_moving_samples": int(np.count_nonzero(r.moving)),
+        "scored_samples": int(np.count_nonzero(r.covered)),
+        "precision": sc.precision,
+        "recall": sc.recall,
+        "tp": sc.tp,
+        "fp": sc.fp,
+        "fn": sc.fn,
+        "tn": sc.tn,
+        "imu_only_precision": sc_imu.precision,
+        "imu_only_recall": sc_imu.recall,
+    }
+
+
 def gnss_checked_standstill(
     t,
     f_b,

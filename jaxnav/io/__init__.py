@@ -21,7 +21,15 @@ from jaxnav.io._daily import DailySeries, read_col, read_daily, read_neu, read_p
 from jaxnav.io._errors import ReaderError
 from jaxnav.io._formats import GNSS_FORMATS, IMU_FORMATS, TRUTH_FORMATS, read_gnss, read_imu, read_truth
 from jaxnav.io._imu import STANDARD_GRAVITY, ImuLog, TimeTags, imu_increments, read_rtklib_imu, read_rtklib_tag
-from jaxnav.io._ins_config import INS_CONFIG_DIR, INS_CONFIG_RANGES, InsConfig, find_ins_config, load_ins_config
+from jaxnav.io._ins_config import (
+    INS_CONFIG_DIR,
+    INS_CONFIG_RANGES,
+    INS_NOISE_KEYS,
+    InsConfig,
+    find_ins_config,
+    load_ins_config,
+    noise_in_config_units,
+)
 from jaxnav.io._json import json_ready, write_json
 from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
 from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
@@ -128,5 +136,13 @@ __all__ += [
 ]
 __all__ += ["DailySeries", "read_col", "read_daily", "read_neu", "read_pbo_pos", "read_tenv3", "year_to_seconds"]
 __all__ += ["GNSS_FORMATS", "IMU_FORMATS", "TRUTH_FORMATS", "read_gnss", "read_imu", "read_truth"]
-__all__ += ["INS_CONFIG_DIR", "INS_CONFIG_RANGES", "InsConfig", "find_ins_config", "load_ins_config"]
+__all__ += [
+    "INS_CONFIG_DIR",
+    "INS_CONFIG_RANGES",
+    "INS_NOISE_KEYS",
+    "InsConfig",
+    "find_ins_config",
+    "load_ins_config",
+    "noise_in_config_units",
+]
 __all__ += ["ConfigError"]

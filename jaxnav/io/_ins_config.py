@@ -31,7 +31,15 @@ from jaxnav.ins.noise import NOISE_GRADES
 from jaxnav.io._formats import GNSS_FORMATS, IMU_FORMATS, TRUTH_FORMATS
 from jaxnav.units import DEG, DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR, MG
 
-__all__ = ["INS_CONFIG_DIR", "INS_CONFIG_RANGES", "InsConfig", "find_ins_config", "load_ins_config"]
+__all__ = [
+    "INS_CONFIG_DIR",
+    "INS_CONFIG_RANGES",
+    "INS_NOISE_KEYS",
+    "InsConfig",
+    "find_ins_config",
+    "load_ins_config",
+    "noise_in_config_units",
+]
 
 #: folder of the shipped ``jaxnav ins`` configs (``jaxnav ins NAME`` finds ``NAME.toml`` here); they ship
 #: beside the experiments that run them
@@ -130,7 +138,7 @@ class GnssSection(NamedTuple):
 class NoiseSection(NamedTuple):
     """[noise], SI; None where the grade's preset value is used.
 
-    Noise densities (fields of :class:`jaxnav.ins.ImuNoise`, ``jaxnav.experiments.ins_run.NOISE_KEYS``):
+    Noise densities (fields of :class:`jaxnav.ins.ImuNoise`, :data:`INS_NOISE_KEYS`):
     arw rad/sqrt(s), vrw m/s/sqrt(s), bias instabilities rad/s and m/s^2 with their
     correlation times s (``bias_correlation_time``: gyro, and accelerometer unless
     ``bias_correlation_time_accel`` is given), bias random walks rad/s/sqrt(s) and m/s^2/sqrt(s),
@@ -421,21 +429,10 @@ def _noise(path, d) -> NoiseSection:
     n = NoiseSection(
         grade=grade,
         states=states,
-        arw=opt("arw_deg_per_sqrt_h", DEG_PER_SQRT_HOUR),
-        vrw=opt("vrw_m_per_s_per_sqrt_h", 1.0 / math.sqrt(HOUR)),
-        gyro_bias_instability=opt("gyro_bias_instability_deg_per_h", DEG_PER_HOUR),
-        accel_bias_instability=opt("accel_bias_instability_mg", MG),
-        bias_correlation_time=opt("bias_correlation_time_s", 1.0),
-        gyro_bias_rw=opt("gyro_bias_rw_deg_per_h_per_sqrt_h", DEG_PER_HOUR / math.sqrt(HOUR)),
-        accel_bias_rw=opt("accel_bias_rw_mg_per_sqrt_h", MG / math.sqrt(HOUR)),
         init_attitude=tuple(float(x) * DEG for x in _pair(r, "init_attitude_deg", (1.0, 10.0))),
         init_velocity=r.get("init_velocity_m_s", float, 0.1, lo=0.0, lo_open=True),
         init_position=r.get("init_position_m", float, 0.05, lo=0.0, lo_open=True),
-        init_gyro_bias=opt("init_gyro_bias_deg_per_s", DEG),
-        init_accel_bias=opt("init_accel_bias_mg", MG),
-        bias_correlation_time_accel=opt("accel_bias_correlation_time_s", 1.0),
-        init_gyro_scale=opt("init_gyro_scale_ppm", 1e-6),
-        init_accel_scale=opt("init_accel_scale_ppm", 1e-6),
+        **{field: opt(key, scale) for key, (field, _, scale) in INS_NOISE_KEYS.items()},
     )
     if grade is None and (n.arw is None or n.vrw is None):
         r.fail("grade", "is required unless arw_deg_per_sqrt_h and vrw_m_per_s_per_sqrt_h are both given")
@@ -448,6 +445,33 @@ def _noise(path, d) -> NoiseSection:
             )
     r.done()
     return n
+
+
+#: ``[noise]`` keys of :class:`jaxnav.ins.ImuNoise` values: key -> (:class:`NoiseSection` field, ``ImuNoise``
+#: field, SI value of the key's unit); the one table for reading the keys and writing them back
+INS_NOISE_KEYS = {
+    "arw_deg_per_sqrt_h": ("arw", "gyro_arw", DEG_PER_SQRT_HOUR),
+    "vrw_m_per_s_per_sqrt_h": ("vrw", "accel_vrw", 1.0 / math.sqrt(HOUR)),
+    "gyro_bias_instability_deg_per_h": ("gyro_bias_instability", "gyro_bias_instability", DEG_PER_HOUR),
+    "accel_bias_instability_mg": ("accel_bias_instability", "accel_bias_instability", MG),
+    "bias_correlation_time_s": ("bias_correlation_time", "gyro_bias_tau", 1.0),
+    "accel_bias_correlation_time_s": ("bias_correlation_time_accel", "accel_bias_tau", 1.0),
+    "gyro_bias_rw_deg_per_h_per_sqrt_h": ("gyro_bias_rw", "gyro_bias_rw", DEG_PER_HOUR / math.sqrt(HOUR)),
+    "accel_bias_rw_mg_per_sqrt_h": ("accel_bias_rw", "accel_bias_rw", MG / math.sqrt(HOUR)),
+    "init_gyro_bias_deg_per_s": ("init_gyro_bias", "gyro_bias_initial", DEG),
+    "init_accel_bias_mg": ("init_accel_bias", "accel_bias_initial", MG),
+    "init_gyro_scale_ppm": ("init_gyro_scale", "gyro_sf", 1e-6),
+    "init_accel_scale_ppm": ("init_accel_scale", "accel_sf", 1e-6),
+}
+
+
+def noise_in_config_units(imu, keys=tuple(INS_NOISE_KEYS)) -> dict:
+    """``[noise]`` values of an :class:`jaxnav.ins.ImuNoise` in the config's units, keyed as the config is.
+
+    Args:
+      imu: the noise (SI).  keys: the ``[noise]`` keys wanted (of :data:`INS_NOISE_KEYS`).
+    """
+    return {k: float(getattr(imu, INS_NOISE_KEYS[k][1])) / INS_NOISE_KEYS[k][2] for k in keys}
 
 
 #: [noise] keys that only some state counts use (the others need no such entry: every model uses them)
