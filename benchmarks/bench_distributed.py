@@ -52,6 +52,8 @@ def worker(a):
     from jaxnav import filters as jf
     from jaxnav import tune
     from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules
+    from jaxnav.geodesy import curvilinear_to_enu
+    from jaxnav.ins import error_model_for
 
     if a.processes > 1:
         tune.initialize(f"127.0.0.1:{a.port}", a.processes, a.process_id, timeout_s=120)
@@ -59,17 +61,16 @@ def worker(a):
     S = S0Setup(exp, duration=a.duration)
     states = inflated_states(exp)
     fading = rules(exp)["fading"]
+    idx = error_model_for(exp["filter"]["n_states"]).idx
 
     def one(p, key):  # the summary of jaxnav demo's s0_run
         res = S.run(
             key, jf.switch(p["rule"], [jf.attenuated(p["b"], states=states), fading]), save=("nav", "covs", "factors")
         )
         pe, ve = S.errors(res)
-        cov = res.epochs.covs
-        sig_p = jnp.sqrt(
-            jnp.stack([cov[:, 7, 7] * (S.RN * jnp.cos(S.lat)) ** 2, cov[:, 6, 6] * S.RM**2, cov[:, 8, 8]], -1)
-        )
-        sig_v = jnp.sqrt(jnp.stack([cov[:, 3, 3], cov[:, 4, 4], cov[:, 5, 5]], -1))
+        var = jnp.diagonal(res.epochs.covs, axis1=-2, axis2=-1)
+        sig_p = jnp.abs(curvilinear_to_enu(S.truth.pos[S.gidx], jnp.sqrt(var[:, idx.dpos])))
+        sig_v = jnp.sqrt(var[:, idx.dv])
         return dict(rms=S.rms_of(res), pos_err=pe, vel_err=ve, sig_pos=sig_p, sig_vel=sig_v, factors=res.epochs.factors)
 
     grid = {"b": np.asarray([0.0, exp["filter"]["b"], 0.0]), "rule": np.asarray([0.0, 0.0, 1.0])}

@@ -77,6 +77,7 @@ from pyins import inertial_sensor, measurements, strapdown, transform
 
 from jaxnav import sim
 from jaxnav.experiments import S0Setup, load_experiment, s0_measurements
+from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins import LCPropagation, LCSave, error_model_for, loosely_coupled
 from jaxnav.ins import attitude as att
 
@@ -183,10 +184,8 @@ class PyinsCase:
 
 # --------------------------------------------------------------------------------------- errors
 def enu_err(S, pos, ref):
-    """(M, 3) E, N, U metres of pos - ref ([lat, lon, h] rows), radii at the fixes."""
-    d = np.asarray(pos) - np.asarray(ref)
-    RM, RN, lat = np.asarray(S.RM), np.asarray(S.RN), np.asarray(S.lat)
-    return np.stack([d[:, 1] * RN * np.cos(lat), d[:, 0] * RM, d[:, 2]], -1)
+    """(M, 3) E, N, U metres of pos - ref ([lat, lon, h] rows), radii (R + h) at the reference."""
+    return np.asarray(curvilinear_to_enu(np.asarray(ref), np.asarray(pos) - np.asarray(ref)))
 
 
 def pyins_pos_after_fix(S, out):

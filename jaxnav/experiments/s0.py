@@ -23,7 +23,7 @@ import numpy as np
 from jaxnav import filters as jf
 from jaxnav import ins, sim, tune
 from jaxnav._config import Table, load_toml
-from jaxnav.geodesy import meridian_radius, prime_vertical_radius
+from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins.attitude import quat_conj, quat_mul, quat_to_rv
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled
 from jaxnav.io import write_json
@@ -160,8 +160,6 @@ class S0Setup:
         g0 = sim.simulate(self.cfg, jax.random.PRNGKey(0), trajectory=self.truth).gnss
         self.t_gnss, self.gidx = np.asarray(g0.t), np.asarray(g0.index)
         self.params = filter_params(self.cfg, exp)
-        lat = self.truth.pos[self.gidx, 0]
-        self.RM, self.RN, self.lat = meridian_radius(lat), prime_vertical_radius(lat), lat
 
     def run(self, key, inflation, save=("nav",), *, q_scale=1.0, r_scale=1.0, remat=False):
         """Simulate the run of ``key`` and filter it (pure in key, the rule's leaves and the scales).
@@ -185,8 +183,8 @@ class S0Setup:
 
     def errors(self, res):
         """(M, 3) position errors ENU (m) and (M, 3) velocity errors ENU (m/s) at the GPS epochs."""
-        d = res.epochs.nav.pos - self.truth.pos[self.gidx]
-        pe = jnp.stack([d[:, 1] * self.RN * jnp.cos(self.lat), d[:, 0] * self.RM, d[:, 2]], -1)
+        ref = self.truth.pos[self.gidx]
+        pe = curvilinear_to_enu(ref, res.epochs.nav.pos - ref)
         return pe, res.epochs.nav.v_n - self.truth.v_n[self.gidx]
 
     def attitude_errors(self, res):
@@ -304,9 +302,8 @@ def run_s0(out="out/demo", *, seeds=None, config=None, sweep_points=None, progre
         pe, ve = S.errors(res)
         ae = S.attitude_errors(res)
         var = jnp.diagonal(res.epochs.covs, axis1=-2, axis2=-1)
-        dlat, dlon, dh = (var[:, idx.dpos][:, i] for i in range(3))
         # east, north, up with the radii S.errors uses for the position errors
-        sig_p = jnp.sqrt(jnp.stack([dlon * (S.RN * jnp.cos(S.lat)) ** 2, dlat * S.RM**2, dh], -1))
+        sig_p = jnp.abs(curvilinear_to_enu(S.truth.pos[S.gidx], jnp.sqrt(var[:, idx.dpos])))
         sig_v = jnp.sqrt(var[:, idx.dv])
         return dict(
             rms=_rms9(pe, ve, ae), pos_err=pe, vel_err=ve, sig_pos=sig_p, sig_vel=sig_v, factors=res.epochs.factors

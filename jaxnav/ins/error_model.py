@@ -70,7 +70,7 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import expm
 
-from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, meridian_radius, prime_vertical_radius
+from jaxnav.geodesy import WGS84, Ellipsoid, check_float64, enu_to_curvilinear, meridian_radius, prime_vertical_radius
 from jaxnav.ins.attitude import skew
 from jaxnav.ins.earth import normal_gravity
 from jaxnav.ins.noise import ImuNoise
@@ -569,11 +569,7 @@ class ErrorModel:
         pos = jnp.asarray(pos)
         dtype = jnp.result_type(pos, float)
         v = lambda x: _vec3(x, dtype)
-        lat, h = pos[0], pos[2]
-        pe = v(pos_enu)
-        dpos = jnp.stack(
-            [pe[1] / (meridian_radius(lat) + h), pe[0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)), pe[2]]
-        )
+        dpos = enu_to_curvilinear(pos, v(pos_enu))
         blocks = dict(
             phi=v(att),
             dv=v(vel),

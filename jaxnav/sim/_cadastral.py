@@ -305,12 +305,9 @@ def simulate_cadastral(scn: CadastralScenario, key, truth: SurveyTruth | None = 
     kp = jnp.asarray(truth.stops.pos)
     sig = jnp.asarray(truth.stops.sigma)
     e = sig * jax.random.normal(k_known, sig.shape, dtype)
-    lat, h = jnp.asarray(truth.stop_pos)[:, 0], jnp.asarray(truth.stop_pos)[:, 2]
-    from jaxnav.geodesy import meridian_radius, prime_vertical_radius
+    from jaxnav.geodesy import enu_to_curvilinear
 
-    d = jnp.stack(
-        [e[:, 1] / (meridian_radius(lat) + h), e[:, 0] / ((prime_vertical_radius(lat) + h) * jnp.cos(lat)), e[:, 2]], 1
-    )
+    d = enu_to_curvilinear(jnp.asarray(truth.stop_pos), e)
     return CadastralRun(
         dtheta=dth + sg,
         dv=dv + sa,

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.geodesy import WGS84, Ellipsoid, geodetic_to_enu, meridian_radius, prime_vertical_radius
+from jaxnav.geodesy import WGS84, Ellipsoid, enu_to_curvilinear, geodetic_to_enu
 from jaxnav.sim._trajectory import ScenarioError, Trajectory, _num, _vec3
 
 
@@ -156,10 +156,7 @@ def simulate_gnss(
         verr = verr + jnp.where(out[:, None], cfg.outlier_vel * u[:, 1], 0.0)
     else:
         out = jnp.zeros((M,), bool)
-    lat, h = pos_t[:, 0], pos_t[:, 2]
-    dlat = perr[:, 1] / (meridian_radius(lat, ellipsoid) + h)
-    dlon = perr[:, 0] / ((prime_vertical_radius(lat, ellipsoid) + h) * jnp.cos(lat))
-    pos_m = pos_t + jnp.stack([dlat, dlon, perr[:, 2]], -1)
+    pos_m = pos_t + enu_to_curvilinear(pos_t, perr, ellipsoid)
     vel_m = vel_t + verr
     o = jnp.asarray(origin, dtype)
     enu = jnp.stack(geodetic_to_enu(pos_m[:, 0], pos_m[:, 1], pos_m[:, 2], o[0], o[1], o[2], ellipsoid=ellipsoid), -1)

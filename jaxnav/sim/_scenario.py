@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 from jaxnav import units
 from jaxnav._config import Table, load_toml, loads_toml
-from jaxnav.geodesy import WGS84, meridian_radius, prime_vertical_radius
+from jaxnav.geodesy import WGS84, enu_to_curvilinear
 from jaxnav.ins.attitude import quat_mul, rv_to_quat
 from jaxnav.ins.mechanization import NavState
 from jaxnav.ins.noise import ImuNoise
@@ -219,14 +219,7 @@ def perturb_nav(nav: NavState, attitude, velocity, position_enu, ellipsoid=WGS84
 
     q_ins = rv2q(-phi) (x) q_true, i.e. C_bn^ins = (I - [phi x]) C_bn^true to first order.
     """
-    lat, h = nav.pos[0], nav.pos[2]
-    dpos = jnp.stack(
-        [
-            position_enu[1] / (meridian_radius(lat, ellipsoid) + h),
-            position_enu[0] / ((prime_vertical_radius(lat, ellipsoid) + h) * jnp.cos(lat)),
-            position_enu[2],
-        ]
-    )
+    dpos = enu_to_curvilinear(nav.pos, position_enu, ellipsoid)
     return NavState(q_bn=quat_mul(rv_to_quat(-attitude), nav.q_bn), v_n=nav.v_n + velocity, pos=nav.pos + dpos)
 
 
