@@ -31,7 +31,13 @@ def x64_enabled() -> bool:
 
 
 from jaxnav import filters, units  # noqa: E402  (after enable_x64 is defined)
-from jaxnav._status import StatusError, raise_for_status  # noqa: E402  (likewise)
+from jaxnav._status import (  # noqa: E402  (likewise)
+    INFO_FLAGS,
+    StatusError,
+    raise_for_status,
+    status_messages,
+    status_words,
+)
 
 __all__ = [
     "enable_x64",
@@ -39,6 +45,9 @@ __all__ = [
     "filters",
     "units",
     "raise_for_status",
+    "status_messages",
+    "status_words",
+    "INFO_FLAGS",
     "StatusError",
     "__version__",
 ]

@@ -2,7 +2,7 @@
 
 Every config loader (the ``jaxnav ins`` configs, scenarios, the S0 experiment, sweep/tune
 configs, cadastral surveys) reads its file with :func:`load_toml` (or :func:`loads_toml` for
-text) and its keys through one :class:`Table` reader: typed keys, bounds, plausible ranges,
+text) and its keys through one :class:`ConfigTable` reader: typed keys, bounds, plausible ranges,
 unknown keys refused, and every message naming the file and the key.
 """
 
@@ -58,7 +58,7 @@ class ConfigError(ValueError):
     """A configuration problem; the message names the file (when known) and the key (``FILE: section.key ...``)."""
 
 
-#: the ``default`` of :meth:`Table.get` for a key that must be given
+#: the ``default`` of :meth:`ConfigTable.get` for a key that must be given
 REQUIRED = ...
 
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
@@ -72,7 +72,7 @@ def _interval(lo, hi, lo_open=False, hi_open=False) -> str:
     return f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
 
 
-class Table:
+class ConfigTable:
     """Typed, checked access to one table of a TOML document: the package's one config reader.
 
     Every loader of a TOML file (the ``jaxnav ins`` configs, the S0 experiment, sweep/tune
@@ -165,7 +165,7 @@ class Table:
             if not isinstance(v, list) or not all(_is_number(x) and math.isfinite(x) for x in v):
                 self.fail(key, f"must be a list of finite numbers, got {v!r}")
         else:
-            raise TypeError(f"Table.get: unknown kind {kind!r}")
+            raise TypeError(f"ConfigTable.get: unknown kind {kind!r}")
         if choices is not None and v not in choices:
             self.fail(key, f"must be one of {list(choices)}, got {v!r}")
         if lo is not None or hi is not None:
@@ -193,14 +193,14 @@ class Table:
                     key, f"= {x!r} is outside the plausible range {_interval(*rng)} (a typing slip or a unit mix-up?)"
                 )
 
-    def table(self, key, required: bool = False) -> Table | None:
-        """The sub-table ``key`` as a :class:`Table` (None when absent and not required)."""
+    def table(self, key, required: bool = False) -> ConfigTable | None:
+        """The sub-table ``key`` as a :class:`ConfigTable` (None when absent and not required)."""
         self.used.add(key)
         if key not in self.data:
             if required:
                 self.fail(key, "is required")
             return None
-        return Table(
+        return ConfigTable(
             self.data[key],
             self.key(key),
             source=self.source,
@@ -210,13 +210,13 @@ class Table:
         )
 
     def tables(self, key) -> list:
-        """The array of tables ``[[key]]`` as :class:`Table` s named ``key[i]`` (empty when absent)."""
+        """The array of tables ``[[key]]`` as :class:`ConfigTable` s named ``key[i]`` (empty when absent)."""
         self.used.add(key)
         v = self.data.get(key, [])
         if not isinstance(v, list):
             self.fail(key, f"must be an array of tables ([[{self.key(key)}]]), got {v!r}")
         return [
-            Table(
+            ConfigTable(
                 t,
                 f"{self.key(key)}[{i}]",
                 source=self.source,

@@ -79,7 +79,7 @@ class StatusError(RuntimeError):
     """Raised by :func:`raise_for_status` when error flags are set."""
 
 
-def describe(status) -> list[str]:
+def status_messages(status) -> list[str]:
     """Human-readable list of the flags set in ``status`` (any shape; flags are OR-ed)."""
     s = int(np.bitwise_or.reduce(np.asarray(status, dtype=np.int64).ravel(), initial=0))
     return [msg for bit, msg in _MESSAGES.items() if s & bit]
@@ -104,4 +104,4 @@ def raise_for_status(status, *, ignore: int = INFO_FLAGS) -> None:
     s = int(np.bitwise_or.reduce(np.asarray(status, dtype=np.int64).ravel(), initial=0))
     bad = s & ~ignore
     if bad:
-        raise StatusError("; ".join(describe(bad)))
+        raise StatusError("; ".join(status_messages(bad)))

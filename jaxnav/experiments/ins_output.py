@@ -342,7 +342,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
       commit, date, config file and contents; ``command`` where given) and "files" (everything
       written, paths relative to ``out``).
     """
-    from jaxnav._status import INFO_FLAGS, describe
+    from jaxnav import INFO_FLAGS, status_messages
     from jaxnav.experiments.ins_run import fit_and_run, prepare
     from jaxnav.io import provenance, write_json
 
@@ -409,7 +409,7 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
             "imu_samples_with_reading": int(np.count_nonzero(np.isfinite(prep.heading[0]))),
         },
         "status": int(run.result.status),
-        "status_flags": describe(run.result.status),
+        "status_flags": status_messages(run.result.status),
         "status_ok": int(run.result.status) & ~INFO_FLAGS == 0,
         "n_nonfinite": int(run.result.n_nonfinite),
         "n_gated_gnss_epochs": int(run.result.n_gated) if run.result.n_gated is not None else 0,
@@ -688,7 +688,7 @@ def _offset_note(o: dict) -> str:
 
 def format_ins(results: dict) -> str:
     """Summary of :func:`process` with units."""
-    from jaxnav._status import status_words
+    from jaxnav import status_words
 
     r = results
     lines = [

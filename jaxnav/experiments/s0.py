@@ -22,11 +22,10 @@ import numpy as np
 
 from jaxnav import filters as jf
 from jaxnav import ins, sim, tune
-from jaxnav._config import Table, load_toml
 from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins.attitude import quat_conj, quat_mul, quat_to_rv
 from jaxnav.ins.integration import LCParams, PVMeasurements, loosely_coupled
-from jaxnav.io import write_json
+from jaxnav.io import ConfigTable, load_toml, write_json
 
 #: the three filters of S0's Table 1
 FILTERS = ("classic", "attenuated", "fading")
@@ -38,7 +37,7 @@ S0_LOSSES = ("rms", "nll", "nis")
 S0_PARAMS = {"classic": (), "constant": ("S",), "attenuated": ("b",), "fading": ("rho",)}
 _POSITIVE = dict(lo=0.0, lo_open=True, hi=1e6)
 _COUNT = dict(lo=1, hi=100_000)
-#: every section's keys: (kind of :meth:`jaxnav._config.Table.get`, its bounds or choices); all are required
+#: every section's keys: (kind of :meth:`jaxnav.io.ConfigTable.get`, its bounds or choices); all are required
 _SCHEMA = {
     "scenario": {"unsensed_velocity_steps": (bool, {})},
     "filter": {
@@ -60,7 +59,7 @@ def load_experiment(path=EXPERIMENT) -> dict:
     range; ValueError (:class:`jaxnav._config.ConfigError`) naming the file, the key and the
     allowed values otherwise."""
     path = pathlib.Path(path)
-    doc = Table(load_toml(path), source=path)
+    doc = ConfigTable(load_toml(path), source=path)
     doc.expect(_SCHEMA)
     d, tables = {}, {}
     for sec, keys in _SCHEMA.items():

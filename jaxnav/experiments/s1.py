@@ -22,8 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav import io
-from jaxnav._status import status_words
+from jaxnav import io, status_words
 from jaxnav.io import write_json
 from jaxnav.monitoring import (
     S1_THRESHOLDS_XYH,

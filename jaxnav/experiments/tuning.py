@@ -22,7 +22,6 @@ import optax
 
 from jaxnav import filters as jf
 from jaxnav import tune
-from jaxnav._config import Table, load_toml
 from jaxnav.experiments.s0 import (
     EXPERIMENT,
     S0_FILTERS,
@@ -32,7 +31,7 @@ from jaxnav.experiments.s0 import (
     load_experiment,
     s0_metrics,
 )
-from jaxnav.io import write_json
+from jaxnav.io import ConfigTable, load_toml, write_json
 from jaxnav.sim import simulate_linear
 
 _log = logging.getLogger(__name__)
@@ -40,7 +39,7 @@ _log = logging.getLogger(__name__)
 #: the shipped sweep/tune configs (``s0_b``, ``cv_noise``)
 CONFIGS = pathlib.Path(__file__).with_name("configs")
 _POS = dict(lo=0.0, lo_open=True, hi=1e6)
-#: keys of [problem] and [tune]: (kind of :meth:`jaxnav._config.Table.get`, bounds or choices)
+#: keys of [problem] and [tune]: (kind of :meth:`jaxnav.io.ConfigTable.get`, bounds or choices)
 _PROBLEM = {
     "kind": (str, dict(choices=("s0", "cv"))),
     "filter": (str, dict(choices=S0_FILTERS)),
@@ -63,7 +62,7 @@ _TUNE = {
     "mode": (str, dict(choices=_MODES)),
     "landscape": (int, dict(lo=0, hi=10**5)),
 }
-#: allowed values of each tunable parameter (bounds of :meth:`jaxnav._config.Table.get`)
+#: allowed values of each tunable parameter (bounds of :meth:`jaxnav.io.ConfigTable.get`)
 _PARAM_RANGE = {
     "b": dict(lo=0.0, hi=1.0, hi_open=True),
     "q_scale": _POS,
@@ -74,7 +73,7 @@ _PARAM_RANGE = {
 }
 
 
-def _keys(t: Table, schema: dict) -> dict:
+def _keys(t: ConfigTable, schema: dict) -> dict:
     """The keys of ``schema`` given in table ``t``, checked; unknown keys refused."""
     t.expect(schema)
     return {k: t.get(k, kind, **bounds) for k, (kind, bounds) in schema.items() if t.has(k)}
@@ -88,7 +87,7 @@ def load_config(spec) -> dict:
         path = CONFIGS / f"{spec}.toml"
     if not path.exists():
         raise ValueError(f"{spec}: no such config file (shipped: {sorted(p.stem for p in CONFIGS.glob('*.toml'))})")
-    doc = Table(load_toml(path), source=path)
+    doc = ConfigTable(load_toml(path), source=path)
     doc.expect(("problem", "params", "sweep", "tune"))
     pt = doc.table("problem", required=True)
     prob = _keys(pt, _PROBLEM)
@@ -139,7 +138,7 @@ def load_config(spec) -> dict:
         need = S0_PARAMS[prob["filter"]]
         if not set(need) <= set(params):
             params_t.fail(None, f"lacks {need}: filter {prob['filter']} needs them")
-    sw_t = doc.table("sweep") or Table({}, "sweep", source=path)
+    sw_t = doc.table("sweep") or ConfigTable({}, "sweep", source=path)
     sweep = {}
     for name in sw_t.data:
         if name == "chunk":
@@ -160,7 +159,7 @@ def load_config(spec) -> dict:
             if ax.get("log") and not ax[end] > 0:
                 t.fail(end, f"= {ax[end]!r} must be > 0 with log = true")
         sweep[name] = ax
-    tn_t = doc.table("tune") or Table({}, "tune", source=path)
+    tn_t = doc.table("tune") or ConfigTable({}, "tune", source=path)
     tn = _keys(tn_t, _TUNE)
     tn.setdefault("optimizer", "adam")
     tn.setdefault("learning_rate", 0.1)

@@ -13,6 +13,7 @@ with a reason); :func:`provenance` is the block every command's ``results.json``
 
 from jaxnav._config import (  # the one TOML parser sits below every layer (sim reads scenarios)
     ConfigError,
+    ConfigTable,
     load_toml,
     loads_toml,
 )
@@ -145,4 +146,4 @@ __all__ += [
     "load_ins_config",
     "noise_in_config_units",
 ]
-__all__ += ["ConfigError"]
+__all__ += ["ConfigError", "ConfigTable"]

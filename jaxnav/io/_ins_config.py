@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxnav._config import ConfigError, Table, load_toml
+from jaxnav._config import ConfigError, ConfigTable, load_toml
 from jaxnav.ins.calibration import TUNABLE
 from jaxnav.ins.mounting import mounting_from_dcm, mounting_from_groves_deg, mounting_from_rpy_deg
 from jaxnav.ins.noise import NOISE_GRADES
@@ -296,8 +296,8 @@ class InsConfig(NamedTuple):
     heading: HeadingSection | None = None
 
 
-class _Reader(Table):
-    """One section of a ``jaxnav ins`` config: :class:`jaxnav._config.Table` with the plausible :data:`INS_CONFIG_RANGES`."""
+class _Reader(ConfigTable):
+    """One section of a ``jaxnav ins`` config: :class:`jaxnav.io.ConfigTable` with the plausible :data:`INS_CONFIG_RANGES`."""
 
     def __init__(self, path, d: dict, section: str, variables=None):
         super().__init__(d, section, source=path, error=ConfigError, plausible=INS_CONFIG_RANGES, variables=variables)
@@ -756,7 +756,7 @@ def load_ins_config(spec, *, variables=None) -> InsConfig:
     """
     path = find_ins_config(spec)
     d = load_toml(path)
-    doc = Table(d, source=path, error=ConfigError)
+    doc = ConfigTable(d, source=path, error=ConfigError)
     doc.expect(_SECTIONS)
     for sec in ("imu", "gnss"):
         if sec not in d:

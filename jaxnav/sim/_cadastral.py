@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxnav import units
-from jaxnav._config import Table, load_toml, loads_toml
+from jaxnav._config import ConfigTable, load_toml, loads_toml
 from jaxnav.ins.noise import ImuNoise
 from jaxnav.sim._imu import SensorLimits, simulator_noise
 from jaxnav.sim._scenario import (
@@ -418,16 +418,16 @@ RANGES = {
 }
 
 
-def _plausible(t: Table, key, generic: str):
+def _plausible(t: ConfigTable, key, generic: str):
     """``key`` of table ``t`` (a number or a list of numbers, config units) inside ``RANGES[generic]``."""
     if generic in RANGES:
         t.check_plausible(key, t.data[key], RANGES[generic])
 
 
-def _check_ranges(doc: Table):
+def _check_ranges(doc: ConfigTable):
     """Every numeric key of a cadastral TOML inside :data:`RANGES` (before any conversion)."""
     for sec in ("survey", "wild", "known_points", "pipeline"):
-        t = doc.table(sec) or Table({}, sec, error=ScenarioError)
+        t = doc.table(sec) or ConfigTable({}, sec, error=ScenarioError)
         if sec == "pipeline":
             t.expect(q.split(".", 1)[1] for q in RANGES if q.startswith("pipeline."))
         for k in t.data:
@@ -444,7 +444,7 @@ def _check_ranges(doc: Table):
                 _plausible(t, k, f"imu.{sec}.{k}")
 
 
-def _number(t: Table, key, factor=1.0):
+def _number(t: ConfigTable, key, factor=1.0):
     """A finite number ``key`` of ``t``, or each of a list of them, times ``factor``."""
     v = t.data[key]
     t.used.add(key)
@@ -462,7 +462,7 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
     Raises:
       ScenarioError: naming the offending field.
     """
-    doc = Table(d, error=ScenarioError)
+    doc = ConfigTable(d, error=ScenarioError)
     doc.expect(("name", "description", "survey", "legs", "imu", "wild", "known_points", "pipeline"))
     sv = doc.table("survey", required=True)
     _check_ranges(doc)
@@ -490,7 +490,7 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
         legs.append(Leg(**lk))
     kw["legs"] = tuple(legs)
     for sec, table in (("wild", _WILD), ("known_points", _KNOWN)):
-        t = doc.table(sec) or Table({}, sec, error=ScenarioError)
+        t = doc.table(sec) or ConfigTable({}, sec, error=ScenarioError)
         t.expect(table)
         for k in t.data:
             attr, fac = table[k]
@@ -506,9 +506,11 @@ def cadastral_from_dict(d: dict) -> tuple[dict, dict]:
     for gname in imu.data:
         gt = imu.table(gname)
         gt.expect(("gyro", "accel", "initial_errors"))
-        g = _read(gt.table("gyro") or Table({}, f"imu.{gname}.gyro", error=ScenarioError), _GYRO)
-        a = _read(gt.table("accel") or Table({}, f"imu.{gname}.accel", error=ScenarioError), _ACCEL)
-        ie = _read(gt.table("initial_errors") or Table({}, f"imu.{gname}.initial_errors", error=ScenarioError), _INIT)
+        g = _read(gt.table("gyro") or ConfigTable({}, f"imu.{gname}.gyro", error=ScenarioError), _GYRO)
+        a = _read(gt.table("accel") or ConfigTable({}, f"imu.{gname}.accel", error=ScenarioError), _ACCEL)
+        ie = _read(
+            gt.table("initial_errors") or ConfigTable({}, f"imu.{gname}.initial_errors", error=ScenarioError), _INIT
+        )
         noise, limits = _imu_records({**g, **a})
         grade = ImuGrade(name=gname, noise=noise, limits=limits, initial_errors=InitialErrorConfig(**ie))
         out[gname] = CadastralScenario(grade=grade, **kw)

@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxnav import units
-from jaxnav._config import Table, load_toml, loads_toml
+from jaxnav._config import ConfigTable, load_toml, loads_toml
 from jaxnav.geodesy import WGS84, enu_to_curvilinear
 from jaxnav.ins.attitude import quat_mul, rv_to_quat
 from jaxnav.ins.mechanization import NavState
@@ -385,7 +385,7 @@ def _is_num(x):
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
-def _convert(t: Table, key, factor, kind):
+def _convert(t: ConfigTable, key, factor, kind):
     """Field ``key`` of table ``t`` of the given kind, times ``factor`` (edge unit -> SI)."""
     if kind == "str":
         return t.get(key, str)
@@ -414,7 +414,7 @@ def _convert(t: Table, key, factor, kind):
     return t.get(key, float, **bounds.get(kind, {})) * factor
 
 
-def _read(t: Table, schema, required=()):
+def _read(t: ConfigTable, schema, required=()):
     """The fields of ``schema`` given in table ``t``, in SI; unknown fields and missing ``required`` ones refused."""
     t.expect(s[0] for s in schema)
     for k in required:
@@ -429,14 +429,14 @@ def scenario_from_dict(d: dict, *, validate: bool = True) -> ScenarioConfig:
     Raises :class:`ScenarioError` (a ``ValueError``) naming the offending field, e.g.
     ``gyro.markov_tau_s = -3.0 must be > 0``, ``segments[3].dheading_deg is not allowed for kind 'accelerate'``.
     """
-    doc = Table(d, error=ScenarioError)
+    doc = ConfigTable(d, error=ScenarioError)
     doc.expect([s[0] for s in _TOP] + list(_SECTIONS) + ["segments"])
     top = {attr: doc.get(k, str) for k, attr, _, _ in _TOP if doc.has(k)}
     for name in _REQUIRED:
         if not doc.has(name):
             raise ScenarioError(f"[{name}] section is required")
     sec = {
-        name: _read(doc.table(name) or Table({}, name, error=ScenarioError), schema, _REQUIRED.get(name, ()))
+        name: _read(doc.table(name) or ConfigTable({}, name, error=ScenarioError), schema, _REQUIRED.get(name, ()))
         for name, schema in _SECTIONS.items()
     }
     segs = []
