@@ -15,11 +15,11 @@ import jax
 import numpy as np
 
 from jaxnav.experiments.ins_run import InsRun, run_error_model
-from jaxnav.ins import outage_statistics, position_sigmas_enu
-from jaxnav.ins.attitude import quat_to_roll_pitch_heading
+from jaxnav.ins import outage_statistics
 from jaxnav.io import (
     NavSolution,
     Track,
+    nav_solution,
     noise_in_config_units,
     write_geojson,
     write_kml,
@@ -29,31 +29,15 @@ from jaxnav.io import (
 
 
 def _solution(run: InsRun, which: str) -> NavSolution:
-    """The forward or smoothed solution at the filter epochs as :class:`jaxnav.io.NavSolution`."""
+    """The forward or smoothed solution at the filter epochs (:func:`jaxnav.io.nav_solution`), with the GNSS
+    epochs it used and their quality."""
     ep = run.result.epochs
-    if which == "smoothed":
-        nav, P = run.smoothed_nav, run.smoothed_covs
-    else:
-        nav, P = ep.nav, ep.covs
-    idx = run_error_model(run.prep.cfg).idx
-    pos = np.asarray(nav.pos)
-    rpy = np.asarray(quat_to_roll_pitch_heading(np.asarray(nav.q_bn)))
-    sd = np.sqrt(np.clip(np.diagonal(np.asarray(P), axis1=-2, axis2=-1), 0.0, None))
+    nav, P = (run.smoothed_nav, run.smoothed_covs) if which == "smoothed" else (ep.nav, ep.covs)
     row = np.asarray(ep.gnss_row)
     mask = np.asarray(run.prep.meas.mask)[:, :3].any(-1)
     used = np.where(row >= 0, mask[np.maximum(row, 0)], False)
     q = np.where(used, np.asarray(run.prep.pos.q)[run.prep.keep][np.maximum(row, 0)], 0)
-    return NavSolution(
-        t=np.asarray(ep.t_nav, float),
-        pos=pos,
-        v_enu=np.asarray(nav.v_n),
-        rpy=rpy,
-        sig_pos_enu=position_sigmas_enu(P, pos, idx),
-        sig_vel=sd[:, idx.dv],
-        sig_att=sd[:, idx.phi],
-        gnss_used=used,
-        quality=q,
-    )
+    return nav_solution(ep.t_nav, nav, P, run_error_model(run.prep.cfg).idx, gnss_used=used, quality=q)
 
 
 def _tracks(run: InsRun) -> list:

@@ -41,7 +41,6 @@ from jaxnav.ins import (
     PVMeasurements,
     SensorBiases,
     antenna_enu,
-    attitude_sigmas,
     check_tunable,
     clock_drift,
     coarse_alignment,
@@ -63,20 +62,19 @@ from jaxnav.ins import (
     odometer,
     offset_search_epochs,
     outage_windows,
-    position_cov_enu,
     scale_gnss_sigmas,
     score_outages,
     sensor_to_body,
     smooth,
+    solution_errors,
     standstill_summary,
     training_windows,
-    trajectory_errors,
     zaru,
     zupt,
 )
 from jaxnav.ins import calibration_params as ins_calibration_params
 from jaxnav.ins import heading as heading_aid
-from jaxnav.ins.attitude import quat_to_dcm, quat_to_roll_pitch_heading
+from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 from jaxnav.io import (
     INS_NOISE_KEYS,
@@ -1000,42 +998,11 @@ def read_truth(cfg: InsConfig):
 
 
 def truth_errors(run: InsRun, truth, which: str):
-    """:class:`jaxnav.ins.TrajectoryErrors` of the forward or smoothed IMU solution against the reference.
-
-    The solution's epochs are the filter's (GNSS and pseudo-measurement epochs); a reference in GPST
-    since 1980 is put on seconds of week when the solution is (an IMU file without ``gps_week``).
-    """
+    """:class:`jaxnav.ins.TrajectoryErrors` of the forward or smoothed IMU solution against the reference
+    (:func:`jaxnav.ins.solution_errors` at the filter's epochs, outages from ``[evaluate]``)."""
     ep = run.result.epochs
     nav, P = (run.smoothed_nav, run.smoothed_covs) if which == "smoothed" else (ep.nav, ep.covs)
-    t = np.asarray(ep.t_nav, float)
-    t, first = np.unique(t, return_index=True)
-    pos = np.asarray(nav.pos, float)[first]
-    v = np.asarray(nav.v_n, float)[first]
-    P = np.asarray(P, float)[first]
-    rpy = np.asarray(quat_to_roll_pitch_heading(np.asarray(nav.q_bn)), float)[first]
-    tt = np.asarray(truth.t, float)
-    week = 604800.0
-    if t[0] < 2 * week <= tt[0]:
-        tt = tt - math.floor(tt[0] / week) * week
-    if tt[-1] < t[0] or tt[0] > t[-1]:
-        raise ConfigError(
-            f"{run.prep.cfg.path}: evaluate.truth: {truth.path} spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, "
-            f"the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no common epoch (another time scale? the "
-            "reference must be in GPST like the GNSS solution)"
-        )
-    idx = run_error_model(run.prep.cfg).idx
-    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None))
-    return trajectory_errors(
-        t,
-        pos,
-        v,
-        rpy,
-        tt,
-        truth.pos,
-        truth.v_enu,
-        truth.rpy,
-        cov_pos_enu=position_cov_enu(P, pos, idx),
-        sig_vel=sd[:, idx.dv],
-        sig_att=attitude_sigmas(P, rpy[:, 2], idx),
-        windows=run.prep.outages,
-    )
+    try:
+        return solution_errors(ep.t_nav, nav, P, truth, run_error_model(run.prep.cfg).idx, windows=run.prep.outages)
+    except ValueError as exc:
+        raise ConfigError(f"{run.prep.cfg.path}: evaluate.truth: {truth.path}: {exc}") from None

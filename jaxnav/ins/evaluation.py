@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxnav.geodesy import curvilinear_to_enu
+from jaxnav.ins.attitude import quat_to_roll_pitch_heading
 
 #: chi-square quantile of 3 degrees of freedom at 99.73 % (the 3-sigma probability): a position
 #: NEES below it is inside the 3-sigma ellipsoid
@@ -186,6 +187,57 @@ def trajectory_errors(
         window=win,
         n_dropped=int(np.count_nonzero(~ok)),
         at=at,
+    )
+
+
+#: s in a GPS week
+WEEK_S = 604800.0
+
+
+def solution_errors(t, nav, covs, truth, idx, *, windows=None) -> TrajectoryErrors:
+    """Errors of an INS solution, with its own sigmas, against a reference trajectory (:func:`trajectory_errors`).
+
+    The solution is a filter's or smoother's navigation state at its epochs; an epoch that occurs twice (a
+    GNSS and a pseudo-measurement update at one time) counts once, the first. A reference timed in GPST
+    seconds since the GPS epoch is put on seconds of week when the solution is (an IMU file without a
+    GPS week).
+
+    Args:
+      t: (N,) s.  nav: :class:`jaxnav.ins.NavState` at ``t`` (body RFU, nav ENU).
+      covs: (N, n, n) error covariances of the model with index ``idx`` (:class:`ErrorStateIndex`).
+      truth: the reference: ``t`` (M,) s, ``pos`` (M, 3) [lat rad, lon rad, h m], ``v_enu`` (M, 3) m/s,
+        ``rpy`` (M, 3) rad (e.g. :class:`jaxnav.io.TruthTrajectory`).
+      windows: (W, 2) outage windows s, or None.
+    Raises:
+      ValueError: no common epoch (the message gives both spans), or what :func:`trajectory_errors` raises.
+    """
+    t, first = np.unique(np.asarray(t, float), return_index=True)
+    pos = np.asarray(nav.pos, float)[first]
+    v = np.asarray(nav.v_n, float)[first]
+    P = np.asarray(covs, float)[first]
+    rpy = np.asarray(quat_to_roll_pitch_heading(np.asarray(nav.q_bn)), float)[first]
+    tt = np.asarray(truth.t, float)
+    if t[0] < 2 * WEEK_S <= tt[0]:
+        tt = tt - math.floor(tt[0] / WEEK_S) * WEEK_S
+    if tt[-1] < t[0] or tt[0] > t[-1]:
+        raise ValueError(
+            f"the reference spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no "
+            "common epoch (another time scale? the reference must be in GPST like the GNSS solution)"
+        )
+    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None))
+    return trajectory_errors(
+        t,
+        pos,
+        v,
+        rpy,
+        tt,
+        truth.pos,
+        truth.v_enu,
+        truth.rpy,
+        cov_pos_enu=position_cov_enu(P, pos, idx),
+        sig_vel=sd[:, idx.dv],
+        sig_att=attitude_sigmas(P, rpy[:, 2], idx),
+        windows=windows,
     )
 
 

@@ -68,6 +68,35 @@ class NavSolution(NamedTuple):
     quality: np.ndarray
 
 
+def nav_solution(t, nav, covs, idx, *, gnss_used=None, quality=None) -> NavSolution:
+    """A filter's or smoother's navigation states with their sigmas as a :class:`NavSolution` for the writers.
+
+    Args:
+      t: (M,) GPST s.  nav: :class:`jaxnav.ins.NavState` at ``t`` (body RFU, nav ENU).
+      covs: (M, n, n) error covariances of the model with index ``idx`` (:class:`jaxnav.ins.error_model.ErrorStateIndex`).
+      gnss_used: (M,) bool, GNSS entered the solution at the epoch (None: all False).
+      quality: (M,) int GNSS quality used (None: 0, inertial only).
+    """
+    from jaxnav.ins import position_sigmas_enu
+    from jaxnav.ins.attitude import quat_to_roll_pitch_heading
+
+    pos = np.asarray(nav.pos, float)
+    P = np.asarray(covs)
+    sd = np.sqrt(np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None))
+    M = pos.shape[0]
+    return NavSolution(
+        t=np.asarray(t, float),
+        pos=pos,
+        v_enu=np.asarray(nav.v_n),
+        rpy=np.asarray(quat_to_roll_pitch_heading(np.asarray(nav.q_bn))),
+        sig_pos_enu=position_sigmas_enu(P, pos, idx),
+        sig_vel=sd[:, idx.dv],
+        sig_att=sd[:, idx.phi],
+        gnss_used=np.zeros(M, bool) if gnss_used is None else np.asarray(gnss_used, bool),
+        quality=np.zeros(M, int) if quality is None else np.asarray(quality),
+    )
+
+
 class Track(NamedTuple):
     """A line for :func:`write_geojson` / :func:`write_kml`.
 

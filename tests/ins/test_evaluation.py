@@ -105,6 +105,54 @@ def test_denser_solution_is_scored_at_the_reference_epochs_and_gaps_are_skipped(
         ins.trajectory_errors(t_ref + 1e6, pref, None, None, t_ref, pref)
 
 
+def test_solution_errors_of_nav_states_against_a_reference_in_another_week_count():
+    """``solution_errors`` on NavStates: a duplicated epoch counts once, a reference in GPST since 1980 is put
+    on the solution's seconds of week, and the sigmas are the covariance's (IMU states of the 15-state model)."""
+    from types import SimpleNamespace
+
+    from jaxnav.ins.attitude import euler_to_quat, heading_to_yaw, quat_to_roll_pitch_heading
+    from jaxnav.io import nav_solution
+
+    t_ref, pref, vref, rref, t_sol, pos_sol, v_sol, rpy_sol, cov, windows = _case()
+    q = np.asarray(euler_to_quat(np.stack([rpy_sol[:, 1], rpy_sol[:, 0], heading_to_yaw(rpy_sol[:, 2])], -1)))
+    np.testing.assert_allclose(np.asarray(quat_to_roll_pitch_heading(q)), rpy_sol, atol=1e-12)
+    dup = np.r_[np.arange(t_sol.size), 5]  # epoch 5 again at the end, as a pseudo-measurement update
+    order = np.argsort(t_sol[dup], kind="stable")
+    sel = dup[order]
+    nav = ins.NavState(q_bn=q[sel], v_n=v_sol[sel], pos=pos_sol[sel])
+    idx = ins.ERROR_MODEL_15.idx
+    P = np.zeros((sel.size, 15, 15))
+    P[:, idx.dv, idx.dv] = np.eye(3) * 0.04
+    P[:, idx.phi, idx.phi] = np.eye(3) * 1e-4
+    P[:, idx.dpos, idx.dpos] = np.diag([1e-12, 1e-12, 0.25])
+    week = 2071 * 604800.0
+    truth = SimpleNamespace(t=t_ref + week, pos=pref, v_enu=vref, rpy=rref)
+    got = ins.solution_errors(t_sol[sel], nav, P, truth, idx, windows=windows)
+    ref = ins.trajectory_errors(
+        t_sol,
+        pos_sol,
+        v_sol,
+        rpy_sol,
+        t_ref,
+        pref,
+        vref,
+        rref,
+        cov_pos_enu=ins.position_cov_enu(P[: t_sol.size], pos_sol, idx),
+        sig_vel=np.full((t_sol.size, 3), 0.2),
+        sig_att=ins.attitude_sigmas(P[: t_sol.size], rpy_sol[:, 2], idx),
+        windows=windows,
+    )
+    for f in ("t", "pos_enu", "vel_enu", "att", "sig_pos_enu", "sig_vel", "sig_att"):
+        np.testing.assert_allclose(getattr(got, f), getattr(ref, f), atol=1e-9, err_msg=f)
+    with pytest.raises(ValueError, match="no common epoch"):
+        ins.solution_errors(t_sol[sel] + 1e5, nav, P, truth, idx)
+    sol = nav_solution(t_sol[sel], nav, P, idx)
+    np.testing.assert_allclose(sol.rpy, rpy_sol[sel], atol=1e-12)
+    np.testing.assert_allclose(sol.sig_vel, 0.2, rtol=1e-12)
+    np.testing.assert_allclose(sol.sig_pos_enu[:, 2], 0.5, rtol=1e-12)
+    assert not sol.gnss_used.any() and not sol.quality.any()
+
+
 TRUTH = (
     "2071 378043.000 30.444 114.471 20.0 1.0 2.0 -0.5 0.1 -0.2 359.5\n"
     "2071 378043.005 30.444 114.471 20.0 1.0 2.0 -0.5 0.1 -0.2 0.5\n"
