@@ -82,7 +82,6 @@ from jaxnav.experiments.walk import (
     walk_config,
     write_walk_scores,
 )
-from jaxnav.sim import cut_timeline  # also here: the INS guide's short S0 runs import it from experiments
 
 __all__ = [
     "CONFIGS",
@@ -95,7 +94,6 @@ __all__ = [
     "S0_PARAMS",
     "S1Settings",
     "S1_PUBLISHED",
-    "cut_timeline",
     "filter_params",
     "format_filter_family",
     "format_s0",

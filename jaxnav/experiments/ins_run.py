@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.geodesy import curvilinear_to_enu, enu_to_curvilinear
+from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins import (
     GATED_SHARE_WARN,
     Alignment,
@@ -74,7 +74,6 @@ from jaxnav.ins import (
 )
 from jaxnav.ins import calibration_params as ins_calibration_params
 from jaxnav.ins import heading as heading_aid
-from jaxnav.ins.attitude import quat_to_dcm
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 from jaxnav.io import (
     INS_NOISE_KEYS,
@@ -409,12 +408,8 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         attitude=att,
         gyro_arw=float(dens.imu.gyro_arw),
         gyro_bias_sigma=float(dens.imu.gyro_bias_instability),
+        lever_rfu=lever_rfu,
     )
-    # the alignment starts at the first GNSS fix, i.e. at the antenna: move it to the IMU
-    C_bn = np.asarray(quat_to_dcm(np.asarray(align.nav0.q_bn)))
-    p0 = np.asarray(align.nav0.pos, float)
-    p_imu = p0 - np.asarray(enu_to_curvilinear(p0, C_bn @ lever_rfu))
-    align = align._replace(nav0=align.nav0._replace(pos=p_imu))
     ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
     outages = (
         np.zeros((0, 2))

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.geodesy import WGS84, curvilinear_to_enu
+from jaxnav.geodesy import WGS84, curvilinear_to_enu, enu_to_curvilinear
 from jaxnav.ins.attitude import euler_to_dcm, euler_to_quat, heading_to_yaw, quat_mul, quat_to_dcm, rv_to_quat
 from jaxnav.ins.mechanization import NavState
 
@@ -105,6 +105,7 @@ def coarse_alignment(
     gyro_arw=None,
     gyro_bias_sigma: float = 0.0,
     max_gyrocompass_sigma: float = math.radians(1.0),
+    lever_rfu=None,
 ) -> Alignment:
     """Coarse alignment for a static start (host side, numpy).
 
@@ -134,7 +135,8 @@ def coarse_alignment(
     3. Gyro bias: the mean static rate less the Earth rate in the body frame, C_bn^T w_ie^n, with
        the final attitude (with gyrocompassing its horizontal part is zero by construction).
     4. Position: ``position`` (lat rad, lon rad, h m) or the first GNSS epoch at or after ``t[0]``;
-       velocity zero.
+       velocity zero. A GNSS position is the antenna's: with ``lever_rfu`` it is moved to the IMU,
+       p_imu = p_ant - C_bn l (first order, :func:`jaxnav.geodesy.enu_to_curvilinear`).
 
     Args:
       t: (N,) IMU times (s).  f_b, w_b: (N, 3) body-frame specific force (m/s^2) and rate (rad/s),
@@ -147,6 +149,7 @@ def coarse_alignment(
       attitude: (3,) [pitch, roll, yaw] rad or None.
       gyro_arw: rad/sqrt(s) or None (from the data).  gyro_bias_sigma: rad/s.
       max_gyrocompass_sigma: rad, the ``"auto"`` criterion's bound.
+      lever_rfu: (3,) GNSS antenna minus IMU in the body frame (RFU), m, or None (the GNSS position as is).
     Returns:
       :class:`Alignment`.
     Raises:
@@ -235,7 +238,12 @@ def coarse_alignment(
     att0 = np.array([pitch, roll, yaw0])
     C_bn = np.asarray(euler_to_dcm(att0))
     gyro_bias = w_mean - C_bn.T @ w_ie_n
-    nav0 = NavState(q_bn=np.asarray(euler_to_quat(att0)), v_n=np.zeros(3), pos=np.array([lat0, lon0, h0]))
+    q0 = np.asarray(euler_to_quat(att0))
+    pos0 = np.array([lat0, lon0, h0])
+    if lever_rfu is not None and position is None:
+        lever = np.asarray(np.asarray(quat_to_dcm(q0)) @ np.asarray(lever_rfu, float))
+        pos0 = pos0 - np.asarray(enu_to_curvilinear(pos0, lever))
+    nav0 = NavState(q_bn=q0, v_n=np.zeros(3), pos=pos0)
     return Alignment(
         nav0=nav0,
         gyro_bias=gyro_bias,

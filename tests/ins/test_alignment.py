@@ -138,6 +138,27 @@ def test_given_heading_and_attitude():
     np.testing.assert_array_equal(al.att0, att)
 
 
+def test_gnss_position_moved_from_the_antenna_to_the_imu():
+    """With ``lever_rfu`` the first GNSS fix (the antenna's) becomes the IMU's: the antenna at the aligned
+    attitude, C_bn l, in ENU metres (radii of curvature at the fix written out here); a given position stays."""
+    t, f, w, pos, _ = _static_nav_grade(2, 10.0, T=5.0)
+    sol = _pos_solution(np.array([t[0], t[-1]]), np.array([pos, pos]), np.zeros((2, 3)))
+    lever = np.array([0.3, -1.2, 0.8])
+    kw = dict(static_s=5.0, heading=math.radians(30.0))
+    a0 = ins.coarse_alignment(t, f, w, sol, **kw)
+    a1 = ins.coarse_alignment(t, f, w, sol, lever_rfu=lever, **kw)
+    np.testing.assert_array_equal(a0.nav0.pos, pos)
+    C_bn = Rotation.from_quat(np.roll(np.asarray(a1.nav0.q_bn), -1)).as_matrix()
+    lat, h = pos[0], pos[2]
+    RM = WGS84.a * (1 - WGS84.e2) / (1 - WGS84.e2 * math.sin(lat) ** 2) ** 1.5 + h
+    RN = WGS84.a / math.sqrt(1 - WGS84.e2 * math.sin(lat) ** 2) + h
+    d = np.asarray(a1.nav0.pos) - pos
+    enu = np.array([d[1] * RN * math.cos(lat), d[0] * RM, d[2]])
+    np.testing.assert_allclose(enu, -C_bn @ lever, atol=1e-9)
+    a2 = ins.coarse_alignment(t, f, w, sol, position=pos, lever_rfu=lever, **kw)
+    np.testing.assert_array_equal(a2.nav0.pos, pos)
+
+
 def test_bad_input():
     t, f, w, pos, _ = _static_nav_grade(3, 0.0, T=2.0)
     with pytest.raises(ValueError, match="heading must be"):
