@@ -308,12 +308,6 @@ def run_rtk(
                 segment=str(point_segment[i]),
                 segment_epochs=int(ps.segment_epochs[i]),
                 segment_points=int(ps.segment_points[i]),
-                # the earlier per-point keys, kept
-                point=str(n),
-                n=int(res.n[i]),
-                x=float(res.xyh[i, 0]),
-                y=float(res.xyh[i, 1]),
-                h=float(res.xyh[i, 2]),
                 precision_mm=[float(v) / MM for v in res.precision[i]],
                 raw_precision_mm=[float(v) / MM for v in res.raw_precision[i]],
                 formal_precision_mm=[float(v) / MM for v in res.formal_precision[i]],

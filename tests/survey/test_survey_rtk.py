@@ -197,19 +197,19 @@ def test_cli_on_real_static_pos_files(tmp_path):
     main(["rtk", str(nagoya), str(spirent), "--out", str(tmp_path)])
     summary = json.loads((tmp_path / "rtk_results.json").read_text())
     assert summary["n_points"] == 8 and summary["lon0_deg"] == [9.0, 138.0]
-    pts = {p["point"]: p for p in summary["points"]}
+    pts = {p["name"]: p for p in summary["points"]}
     # Spirent truth (README_simulation.md): every 2-minute occupation within 3 mm (plane) / 3 mm (height)
     x0, y0 = g.gauss_kruger(np.radians(48.780735783), np.radians(9.199262450), lon0=np.radians(9.0))
     for k in range(1, 6):
         p = pts[f"{spirent.stem}#{k}"]
-        assert np.hypot(p["x"] - float(x0), p["y"] - float(y0)) < 0.003 and abs(p["h"] - 320.0) < 0.003
-    assert pts[f"{spirent.stem}#1"]["n"] == 40  # 20 float epochs of the first window masked
+        assert np.hypot(p["x_m"] - float(x0), p["y_m"] - float(y0)) < 0.003 and abs(p["h_m"] - 320.0) < 0.003
+    assert pts[f"{spirent.stem}#1"]["n_epochs"] == 40  # 20 float epochs of the first window masked
     # Nagoya: the author's position (a mean of the file) within 1.5 mm / 2 mm
     lat, lon, h = (float(v) for v in (DATA / "rtk_pos_matrtklib" / "static" / "rover_position.txt").read_text().split())
     xn, yn = g.gauss_kruger(np.radians(lat), np.radians(lon), lon0=np.radians(138.0))
     for k in (1, 2, 3):
         p = pts[f"rover_rtk#{k}"]
-        assert np.hypot(p["x"] - float(xn), p["y"] - float(yn)) < 0.0015 and abs(p["h"] - h) < 0.002
+        assert np.hypot(p["x_m"] - float(xn), p["y_m"] - float(yn)) < 0.0015 and abs(p["h_m"] - h) < 0.002
     # issue 19: the stable schema, the motion test (nothing moves in these files) and the precision
     assert summary["excluded_moving_epochs"] == 0 and summary["height_system"] == "WGS-84 ellipsoidal height (m)"
     assert summary["zone"]["central_meridian_deg"] == [9.0, 138.0] and summary["crs"].startswith("WGS-84 Gauss")
@@ -227,7 +227,7 @@ def test_cli_on_real_static_pos_files(tmp_path):
         "sigma_method",
     }
     for p in summary["points"]:
-        assert keys <= set(p) and p["sigma_method"] == "acf_ess_segment" and p["n_epochs"] == p["n"]
+        assert keys <= set(p) and p["sigma_method"] == "acf_ess_segment" and not {"point", "n", "x", "y", "h"} & set(p)
     p1 = pts["rover_rtk#1"]
     assert p1["t_start"] == "2024-06-24T08:20:00.000" and p1["t_end"] == "2024-06-24T08:21:58.000"
     # the correlated-epoch sigma is several times the independent-epoch one on the real rooftop file
