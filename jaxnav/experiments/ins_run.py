@@ -18,7 +18,6 @@ Outputs are written by :mod:`jaxnav.experiments.ins_output`.
 
 from __future__ import annotations
 
-import math
 import time
 from typing import NamedTuple
 
@@ -37,6 +36,7 @@ from jaxnav.ins import (
     LCResult,
     LCSave,
     NavState,
+    NoCommonEpochError,
     OutageScores,
     PVMeasurements,
     SensorBiases,
@@ -74,6 +74,7 @@ from jaxnav.ins import (
 )
 from jaxnav.ins import calibration_params as ins_calibration_params
 from jaxnav.ins import heading as heading_aid
+from jaxnav.ins.calibration import TUNABLE
 from jaxnav.ins.timing import MIN_SEARCH_EPOCHS
 from jaxnav.io import (
     INS_NOISE_KEYS,
@@ -89,7 +90,6 @@ from jaxnav.io import (
 )
 from jaxnav.io import read_truth as read_truth_file
 from jaxnav.tune import LCNoiseFit, calibrate_lc_noise, fit_lc_noise
-from jaxnav.units import DEG_PER_HOUR, DEG_PER_SQRT_HOUR, HOUR
 
 
 def read_inputs(cfg: InsConfig):
@@ -118,6 +118,7 @@ def read_inputs(cfg: InsConfig):
     imu = _csv(
         cfg,
         "imu.",
+        imu_c.format,
         lambda: read_imu(
             imu_c.file,
             imu_c.format,
@@ -132,6 +133,7 @@ def read_inputs(cfg: InsConfig):
     pos = _csv(
         cfg,
         "gnss.",
+        g.format,
         lambda: read_gnss(
             g.file,
             g.format,
@@ -145,11 +147,13 @@ def read_inputs(cfg: InsConfig):
     return imu, pos
 
 
-def _csv(cfg, prefix, read):
-    """A csv reader's ValueError about the column map or units (not a ReaderError) names the config keys
-    ``{prefix}columns`` and ``{prefix}units``."""
+def _csv(cfg, prefix, fmt, read):
+    """``read()``; for the "csv" format, a ValueError about the column map or units (not a ReaderError)
+    names the config keys ``{prefix}columns`` and ``{prefix}units``."""
     from jaxnav.io import ReaderError
 
+    if fmt != "csv":
+        return read()
     try:
         return read()
     except ReaderError:
@@ -163,7 +167,12 @@ def read_odometer(cfg: InsConfig):
     o = cfg.odometer
     if o.source == "imu":
         return read_kfgins_odometer(cfg.imu.file, gps_week=cfg.imu.gps_week)
-    d = _csv(cfg, "odometer.", lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter))
+    d = _csv(
+        cfg,
+        "odometer.",
+        "csv",
+        lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter),
+    )
     t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * 604800.0
     return t, d["speed"]
 
@@ -176,7 +185,10 @@ def heading_on_imu(cfg: InsConfig, t_imu):
     """
     h = cfg.heading
     d = _csv(
-        cfg, "heading.", lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter)
+        cfg,
+        "heading.",
+        "csv",
+        lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter),
     )
     t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * 604800.0
     t_imu = np.asarray(t_imu, float)
@@ -194,7 +206,7 @@ def run_noise(cfg: InsConfig) -> LCNoise:
     correlation time defaults to the gyro's when only that is given."""
     n = cfg.noise
     imu = noise_preset(n.grade) if n.grade else ImuNoise(gyro_arw=0.0, accel_vrw=0.0, gyro_bias_tau=300.0)
-    given = {f: getattr(n, k) for k, f, _ in INS_NOISE_KEYS.values() if getattr(n, k) is not None}
+    given = {f: getattr(n, k) for k, f, _, _ in INS_NOISE_KEYS.values() if getattr(n, k) is not None}
     if n.bias_correlation_time is not None:
         given.setdefault("accel_bias_tau", n.bias_correlation_time)
     return LCNoise(
@@ -902,14 +914,11 @@ def calibration_params(cfg: InsConfig) -> tuple:
     return ins_calibration_params(cfg.noise.states, cfg.gnss.use_velocity)
 
 
-#: config-key unit of each calibrated parameter, and the factor from SI to it (for ``results.json``)
-DISPLAY_UNITS = {
-    "arw": ("deg/sqrt(h)", 1.0 / DEG_PER_SQRT_HOUR),
-    "vrw": ("m/s/sqrt(h)", math.sqrt(HOUR)),
-    "gyro_bias_instability": ("deg/h", 1.0 / DEG_PER_HOUR),
-    "pos_sigma_scale": ("1", 1.0),
-    "vel_sigma_scale": ("1", 1.0),
-}
+def _config_unit(name: str) -> tuple:
+    """(unit, SI value of one unit) of a calibrated parameter (:data:`jaxnav.ins.calibration.TUNABLE`) as the
+    config gives it (:data:`jaxnav.io.INS_NOISE_KEYS`); a sigma factor is dimensionless."""
+    field = TUNABLE[name][0]
+    return next(((unit, si) for _, f, si, unit in INS_NOISE_KEYS.values() if f == field), ("1", 1.0))
 
 
 def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
@@ -945,8 +954,8 @@ def calibrate_noise(prep: Prepared, mode=None, *, progress=None) -> tuple:
     )
     if rep["ran"]:
         for when in ("before", "after"):
-            rep[f"{when}_display"] = {k: float(v) * DISPLAY_UNITS[k][1] for k, v in rep[f"{when}_si"].items()}
-        rep["display_units"] = {k: DISPLAY_UNITS[k][0] for k in rep["params"]}
+            rep[f"{when}_display"] = {k: float(v) / _config_unit(k)[1] for k, v in rep[f"{when}_si"].items()}
+        rep["display_units"] = {k: _config_unit(k)[0] for k in rep["params"]}
     return noise, rep
 
 
@@ -986,6 +995,7 @@ def read_truth(cfg: InsConfig):
     return _csv(
         cfg,
         "evaluate.truth_",
+        ev.truth_format,
         lambda: read_truth_file(
             ev.truth, ev.truth_format, columns=ev.truth_columns, units=ev.truth_units, delimiter=ev.truth_delimiter
         ),
@@ -999,5 +1009,5 @@ def truth_errors(run: InsRun, truth, which: str):
     nav, P = (run.smoothed_nav, run.smoothed_covs) if which == "smoothed" else (ep.nav, ep.covs)
     try:
         return solution_errors(ep.t_nav, nav, P, truth, run_error_model(run.prep.cfg).idx, windows=run.prep.outages)
-    except ValueError as exc:
+    except NoCommonEpochError as exc:
         raise ConfigError(f"{run.prep.cfg.path}: evaluate.truth: {truth.path}: {exc}") from None

@@ -56,7 +56,7 @@ _SCHEMA = {
 
 def load_experiment(path=EXPERIMENT) -> dict:
     """Read and check an S0 experiment TOML: every section and key present, of its type and in its
-    range; ValueError (:class:`jaxnav._config.ConfigError`) naming the file, the key and the
+    range; ValueError (:class:`jaxnav.io.ConfigError`) naming the file, the key and the
     allowed values otherwise."""
     path = pathlib.Path(path)
     doc = ConfigTable(load_toml(path), source=path)

@@ -81,7 +81,7 @@ def _keys(t: ConfigTable, schema: dict) -> dict:
 
 def load_config(spec) -> dict:
     """Read and check a sweep/tune TOML (a path or a shipped name); errors name the file and key
-    (:class:`jaxnav._config.ConfigError`, a ValueError)."""
+    (:class:`jaxnav.io.ConfigError`, a ValueError)."""
     path = pathlib.Path(spec)
     if not path.exists() and (CONFIGS / f"{spec}.toml").exists():
         path = CONFIGS / f"{spec}.toml"

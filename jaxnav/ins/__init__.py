@@ -53,6 +53,7 @@ from jaxnav.ins.error_model import (
     nav_error_F,
 )
 from jaxnav.ins.evaluation import (  # GNSS outage protocol and sigmas of error covariances
+    NoCommonEpochError,
     OutageScores,
     TrajectoryErrors,
     attitude_sigmas,
@@ -287,6 +288,7 @@ __all__ += [
     "outage_windows",
     "outage_drift_maxima",
     "outage_statistics",
+    "NoCommonEpochError",
     "pool_drifts",
     "pooled_outage_drifts",
     "shifted_outage_windows",

@@ -194,6 +194,10 @@ def trajectory_errors(
 WEEK_S = 604800.0
 
 
+class NoCommonEpochError(ValueError):
+    """A solution and a reference trajectory that share no time span (:func:`solution_errors`)."""
+
+
 def solution_errors(t, nav, covs, truth, idx, *, windows=None) -> TrajectoryErrors:
     """Errors of an INS solution, with its own sigmas, against a reference trajectory (:func:`trajectory_errors`).
 
@@ -209,7 +213,8 @@ def solution_errors(t, nav, covs, truth, idx, *, windows=None) -> TrajectoryErro
         ``rpy`` (M, 3) rad (e.g. :class:`jaxnav.io.TruthTrajectory`).
       windows: (W, 2) outage windows s, or None.
     Raises:
-      ValueError: no common epoch (the message gives both spans), or what :func:`trajectory_errors` raises.
+      NoCommonEpochError (a ValueError): the two spans do not overlap (the message gives both).
+      ValueError: what :func:`trajectory_errors` raises.
     """
     t, first = np.unique(np.asarray(t, float), return_index=True)
     pos = np.asarray(nav.pos, float)[first]
@@ -220,7 +225,7 @@ def solution_errors(t, nav, covs, truth, idx, *, windows=None) -> TrajectoryErro
     if t[0] < 2 * WEEK_S <= tt[0]:
         tt = tt - math.floor(tt[0] / WEEK_S) * WEEK_S
     if tt[-1] < t[0] or tt[0] > t[-1]:
-        raise ValueError(
+        raise NoCommonEpochError(
             f"the reference spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no "
             "common epoch (another time scale? the reference must be in GPST like the GNSS solution)"
         )

@@ -41,7 +41,8 @@ def read_imu(
         when there is none (:func:`read_rtklib_imu`).
       columns, units, delimiter: "csv": column map and units (:func:`read_csv_imu`).
       gps_week: "kf-gins": the GPS week of the seconds-of-week column.
-      odometer_column: "kf-gins": the file has an eighth (odometer) column.
+      odometer_column: "kf-gins": True, every line has the eighth (odometer) column; False, 7 or 8
+        columns, as the first record has (:func:`read_kfgins_imu` with ``n_columns=None``).
     Raises:
       ValueError: an unknown format, or "csv" without a column map; ReaderError: naming file and line.
     """

@@ -426,13 +426,14 @@ def _noise(path, d) -> NoiseSection:
         v = r.get(key, float, None, lo=0.0, lo_open=True)
         return None if v is None else v * scale
 
+    densities = {field: opt(key, scale) for key, (field, _, scale, _) in INS_NOISE_KEYS.items()}
     n = NoiseSection(
         grade=grade,
         states=states,
         init_attitude=tuple(float(x) * DEG for x in _pair(r, "init_attitude_deg", (1.0, 10.0))),
         init_velocity=r.get("init_velocity_m_s", float, 0.1, lo=0.0, lo_open=True),
         init_position=r.get("init_position_m", float, 0.05, lo=0.0, lo_open=True),
-        **{field: opt(key, scale) for key, (field, _, scale) in INS_NOISE_KEYS.items()},
+        **densities,
     )
     if grade is None and (n.arw is None or n.vrw is None):
         r.fail("grade", "is required unless arw_deg_per_sqrt_h and vrw_m_per_s_per_sqrt_h are both given")
@@ -448,20 +449,25 @@ def _noise(path, d) -> NoiseSection:
 
 
 #: ``[noise]`` keys of :class:`jaxnav.ins.ImuNoise` values: key -> (:class:`NoiseSection` field, ``ImuNoise``
-#: field, SI value of the key's unit); the one table for reading the keys and writing them back
+#: field, SI value of the key's unit, the unit); the one table for reading the keys and writing them back
 INS_NOISE_KEYS = {
-    "arw_deg_per_sqrt_h": ("arw", "gyro_arw", DEG_PER_SQRT_HOUR),
-    "vrw_m_per_s_per_sqrt_h": ("vrw", "accel_vrw", 1.0 / math.sqrt(HOUR)),
-    "gyro_bias_instability_deg_per_h": ("gyro_bias_instability", "gyro_bias_instability", DEG_PER_HOUR),
-    "accel_bias_instability_mg": ("accel_bias_instability", "accel_bias_instability", MG),
-    "bias_correlation_time_s": ("bias_correlation_time", "gyro_bias_tau", 1.0),
-    "accel_bias_correlation_time_s": ("bias_correlation_time_accel", "accel_bias_tau", 1.0),
-    "gyro_bias_rw_deg_per_h_per_sqrt_h": ("gyro_bias_rw", "gyro_bias_rw", DEG_PER_HOUR / math.sqrt(HOUR)),
-    "accel_bias_rw_mg_per_sqrt_h": ("accel_bias_rw", "accel_bias_rw", MG / math.sqrt(HOUR)),
-    "init_gyro_bias_deg_per_s": ("init_gyro_bias", "gyro_bias_initial", DEG),
-    "init_accel_bias_mg": ("init_accel_bias", "accel_bias_initial", MG),
-    "init_gyro_scale_ppm": ("init_gyro_scale", "gyro_sf", 1e-6),
-    "init_accel_scale_ppm": ("init_accel_scale", "accel_sf", 1e-6),
+    "arw_deg_per_sqrt_h": ("arw", "gyro_arw", DEG_PER_SQRT_HOUR, "deg/sqrt(h)"),
+    "vrw_m_per_s_per_sqrt_h": ("vrw", "accel_vrw", 1.0 / math.sqrt(HOUR), "m/s/sqrt(h)"),
+    "gyro_bias_instability_deg_per_h": ("gyro_bias_instability", "gyro_bias_instability", DEG_PER_HOUR, "deg/h"),
+    "accel_bias_instability_mg": ("accel_bias_instability", "accel_bias_instability", MG, "mg"),
+    "bias_correlation_time_s": ("bias_correlation_time", "gyro_bias_tau", 1.0, "s"),
+    "accel_bias_correlation_time_s": ("bias_correlation_time_accel", "accel_bias_tau", 1.0, "s"),
+    "gyro_bias_rw_deg_per_h_per_sqrt_h": (
+        "gyro_bias_rw",
+        "gyro_bias_rw",
+        DEG_PER_HOUR / math.sqrt(HOUR),
+        "deg/h/sqrt(h)",
+    ),
+    "accel_bias_rw_mg_per_sqrt_h": ("accel_bias_rw", "accel_bias_rw", MG / math.sqrt(HOUR), "mg/sqrt(h)"),
+    "init_gyro_bias_deg_per_s": ("init_gyro_bias", "gyro_bias_initial", DEG, "deg/s"),
+    "init_accel_bias_mg": ("init_accel_bias", "accel_bias_initial", MG, "mg"),
+    "init_gyro_scale_ppm": ("init_gyro_scale", "gyro_sf", 1e-6, "ppm"),
+    "init_accel_scale_ppm": ("init_accel_scale", "accel_sf", 1e-6, "ppm"),
 }
 
 
@@ -469,9 +475,20 @@ def noise_in_config_units(imu, keys=tuple(INS_NOISE_KEYS)) -> dict:
     """``[noise]`` values of an :class:`jaxnav.ins.ImuNoise` in the config's units, keyed as the config is.
 
     Args:
-      imu: the noise (SI).  keys: the ``[noise]`` keys wanted (of :data:`INS_NOISE_KEYS`).
+      imu: the noise (SI; a field may be per axis).  keys: the ``[noise]`` keys wanted (of :data:`INS_NOISE_KEYS`).
+    Returns:
+      {key: float, or a list for a per-axis field}.
+    Raises:
+      ValueError: a key that is not in :data:`INS_NOISE_KEYS`.
     """
-    return {k: float(getattr(imu, INS_NOISE_KEYS[k][1])) / INS_NOISE_KEYS[k][2] for k in keys}
+    bad = [k for k in keys if k not in INS_NOISE_KEYS]
+    if bad:
+        raise ValueError(f"not [noise] keys: {bad}; expected some of {list(INS_NOISE_KEYS)}")
+    out = {}
+    for k in keys:
+        v = np.asarray(getattr(imu, INS_NOISE_KEYS[k][1]), float) / INS_NOISE_KEYS[k][2]
+        out[k] = float(v) if v.ndim == 0 else v.tolist()
+    return out
 
 
 #: [noise] keys that only some state counts use (the others need no such entry: every model uses them)
@@ -744,7 +761,13 @@ def find_ins_config(spec) -> pathlib.Path:
 
 
 def load_ins_config(spec, *, variables=None) -> InsConfig:
-    """Read and check a ``jaxnav ins`` TOML (a path or a shipped name); see the module docstring.
+    """Read and check a ``jaxnav ins`` TOML (a path or a shipped name), converting it to SI.
+
+    Every key is checked before any file is read (type, range, allowed values, unknown keys named);
+    file paths are relative to the config file, and ``${VAR}`` in a path is replaced from
+    ``variables`` or the environment. The keys, their units and frames: the INS guide
+    (``docs/guide/ins.md``, "Your own IMU + GNSS logs"); vehicle frame forward-right-down, body frame
+    right-forward-up (:func:`jaxnav.ins.sensor_to_body`).
 
     Args:
       spec: a path, or the name of a shipped config.

@@ -219,6 +219,8 @@ def perturb_nav(nav: NavState, attitude, velocity, position_enu, ellipsoid=WGS84
 
     q_ins = rv2q(-phi) (x) q_true, i.e. C_bn^ins = (I - [phi x]) C_bn^true to first order.
     """
+    if not hasattr(position_enu, "dtype"):  # a list or tuple of numbers takes the state's dtype
+        position_enu = jnp.asarray(position_enu, jnp.result_type(nav.pos))
     dpos = enu_to_curvilinear(nav.pos, position_enu, ellipsoid)
     return NavState(q_bn=quat_mul(rv_to_quat(-attitude), nav.q_bn), v_n=nav.v_n + velocity, pos=nav.pos + dpos)
 

@@ -552,3 +552,12 @@ def test_scenario_noise_is_the_ins_record_and_refuses_what_it_cannot_draw():
         dataclasses.replace(cfg, noise=cfg.noise._replace(accel_bias_tau=0.0))
     with pytest.raises(sim.ScenarioError, match="limits.gyro_saturation"):
         sim.SensorLimits(gyro_saturation=-1.0)
+
+
+def test_perturb_nav_position_as_a_tuple():
+    nav = ins.NavState(q_bn=np.array([1.0, 0, 0, 0]), v_n=np.zeros(3), pos=np.array([0.7, 2.0, 100.0]))
+    z = np.zeros(3)
+    a = sim.perturb_nav(nav, z, z, (3.0, -4.0, 5.0))
+    b = sim.perturb_nav(nav, z, z, np.array([3.0, -4.0, 5.0]))
+    np.testing.assert_array_equal(np.asarray(a.pos), np.asarray(b.pos))
+    assert np.asarray(a.pos).dtype == np.float64
