@@ -24,6 +24,7 @@ import numpy as np
 
 from jaxnav import units
 from jaxnav._config import ConfigTable, load_toml, loads_toml
+from jaxnav.ins.mechanization import NavState
 from jaxnav.ins.noise import ImuNoise
 from jaxnav.sim._imu import SensorLimits, simulator_noise
 from jaxnav.sim._scenario import (
@@ -270,9 +271,9 @@ class CadastralRun(NamedTuple):
 
     dtheta: jax.Array
     dv: jax.Array
-    nav0: Any
+    nav0: NavState
     known_pos: jax.Array
-    n_wild: Any
+    n_wild: jax.Array
     gyro_bias: jax.Array
     accel_bias: jax.Array
 
@@ -592,7 +593,7 @@ class CalibrationRecord(NamedTuple):
     accel: jax.Array
     gyro_coloured: jax.Array
     accel_coloured: jax.Array
-    n_wild: Any
+    n_wild: jax.Array
 
 
 @functools.partial(jax.jit, static_argnames=("scn", "n"))

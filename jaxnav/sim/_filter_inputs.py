@@ -7,8 +7,9 @@ IMU noise as an :class:`jaxnav.ins.ImuNoise` of arrays (:func:`imu_noise`), the 
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -40,9 +41,9 @@ class LCInputs(NamedTuple):
     """
 
     nav0: NavState
-    t_imu: Any
-    dtheta: Any
-    dv: Any
+    t_imu: jax.Array
+    dtheta: jax.Array
+    dv: jax.Array
     meas: PVMeasurements
 
 

@@ -16,7 +16,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -155,9 +155,9 @@ class SensorErrors(NamedTuple):
 class InitialErrorDraw(NamedTuple):
     """Drawn initial INS errors: attitude phi (3,) rad (ENU), velocity (3,) m/s, position (3,) m ENU."""
 
-    attitude: Any
-    velocity: Any
-    position: Any
+    attitude: jax.Array
+    velocity: jax.Array
+    position: jax.Array
 
 
 class SimResult(NamedTuple):
