@@ -21,6 +21,7 @@ MM = 1e-3  # m per millimetre
 CM = 1e-2  # m per centimetre
 DAY = 86400.0  # s per day
 YEAR = 365.25 * DAY  # s per Julian year (daily-series velocities)
+WEEK = 7 * DAY  # s per GPS week
 MM_PER_YEAR = MM / YEAR  # m/s per mm/yr
 
 

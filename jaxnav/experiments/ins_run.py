@@ -90,6 +90,7 @@ from jaxnav.io import (
 )
 from jaxnav.io import read_truth as read_truth_file
 from jaxnav.tune import LCNoiseFit, calibrate_lc_noise, fit_lc_noise
+from jaxnav.units import WEEK
 
 
 def read_inputs(cfg: InsConfig):
@@ -173,7 +174,7 @@ def read_odometer(cfg: InsConfig):
         "csv",
         lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter),
     )
-    t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * 604800.0
+    t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * WEEK
     return t, d["speed"]
 
 
@@ -190,7 +191,7 @@ def heading_on_imu(cfg: InsConfig, t_imu):
         "csv",
         lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter),
     )
-    t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * 604800.0
+    t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * WEEK
     t_imu = np.asarray(t_imu, float)
     hd, sg = np.full(t_imu.size, np.nan), np.full(t_imu.size, np.nan)
     j, ok = nearest_samples(t, t_imu)

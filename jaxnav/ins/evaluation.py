@@ -23,6 +23,7 @@ import numpy as np
 
 from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins.attitude import quat_to_roll_pitch_heading
+from jaxnav.units import WEEK
 
 #: chi-square quantile of 3 degrees of freedom at 99.73 % (the 3-sigma probability): a position
 #: NEES below it is inside the 3-sigma ellipsoid
@@ -190,10 +191,6 @@ def trajectory_errors(
     )
 
 
-#: s in a GPS week
-WEEK_S = 604800.0
-
-
 class NoCommonEpochError(ValueError):
     """A solution and a reference trajectory that share no time span (:func:`solution_errors`)."""
 
@@ -222,8 +219,8 @@ def solution_errors(t, nav, covs, truth, idx, *, windows=None) -> TrajectoryErro
     P = np.asarray(covs, float)[first]
     rpy = np.asarray(quat_to_roll_pitch_heading(np.asarray(nav.q_bn)), float)[first]
     tt = np.asarray(truth.t, float)
-    if t[0] < 2 * WEEK_S <= tt[0]:
-        tt = tt - math.floor(tt[0] / WEEK_S) * WEEK_S
+    if t[0] < 2 * WEEK <= tt[0]:
+        tt = tt - math.floor(tt[0] / WEEK) * WEEK
     if tt[-1] < t[0] or tt[0] > t[-1]:
         raise NoCommonEpochError(
             f"the reference spans [{tt[0]:.3f}, {tt[-1]:.3f}] s, the solution [{t[0]:.3f}, {t[-1]:.3f}] s: no "

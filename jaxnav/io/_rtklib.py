@@ -10,9 +10,10 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxnav.io._errors import HEIGHT_RANGE_M, ReaderError, text_lines
+from jaxnav.units import WEEK
 
 GPS_EPOCH = _dt.datetime(1980, 1, 6)
-SECONDS_PER_WEEK = 604800.0
+SECONDS_PER_WEEK = WEEK
 #: GPST accepted, s since the GPS epoch: 1980-01-06 .. 2100-01-01 (anything else is a corrupted time)
 GPST_RANGE_S = (0.0, (_dt.datetime(2100, 1, 1) - GPS_EPOCH).total_seconds())
 #: solution quality flags RTKLIB writes
