@@ -49,8 +49,8 @@ EVALUATE = "first_s = 40.0\noutage_s = 15.0\ngap_s = 20.0\nend_margin_s = 5.0"
 
 def case(folder, platform, factor, seed):
     """(prep, truth) of one recording: the consumer-preset config on a car or a walk."""
-    from jaxnav.experiments.ins_run import prepare, read_truth
-    from jaxnav.io import load_ins_config
+    from jaxnav.experiments.ins_run import prepare
+    from jaxnav.io import load_ins_config, read_ins_truth
 
     spec = short_car_spec() if platform == "car" else walk_spec()
     rec = write_car(
@@ -76,7 +76,7 @@ def case(folder, platform, factor, seed):
         min_speed=3.0 if platform == "car" else 1.0,
     )
     c = load_ins_config(cfg)
-    return prepare(c, progress=None), read_truth(c)
+    return prepare(c, progress=None), read_ins_truth(c)
 
 
 def score(prep, truth, d=None):

@@ -23,7 +23,7 @@ its outputs (``results.json``, figures); the ``jaxnav`` commands are thin wrappe
 * :mod:`~jaxnav.experiments.ct_drive`: a coordinated-turn model on the real 1 Hz RTK car drive,
   EKF/UKF x classic/fading/IGG-III against the reference: :func:`run_ct_drive`.
 * :mod:`~jaxnav.experiments.walk`: the walk set as the shipped ``walk_0827`` config (``jaxnav walk``):
-  :func:`run_walk`, :func:`frame_check`, the set's reader :func:`load_walk`.
+  :func:`frame_check`, the set's reader :func:`load_walk`.
 * :mod:`~jaxnav.experiments.figures`: figures of single experiments (``plot_s0``,
   ``plot_filter_family``, ``plot_ct_drive``).
 """
@@ -74,13 +74,9 @@ from jaxnav.experiments.velocities import run_monitor_velocities
 from jaxnav.experiments.walk import (
     WALK_LEVER_RFU,
     WALK_SENSOR_TO_BODY,
-    WalkData,
-    format_walk,
     frame_check,
     load_walk,
-    run_walk,
     walk_config,
-    write_walk_scores,
 )
 
 __all__ = [
@@ -132,13 +128,9 @@ __all__ += [
     "walk_detection",
     "WALK_LEVER_RFU",
     "WALK_SENSOR_TO_BODY",
-    "WalkData",
-    "format_walk",
     "frame_check",
     "load_walk",
-    "run_walk",
     "walk_config",
-    "write_walk_scores",
     "InsRun",
     "format_ins",
     "prepare",

@@ -8,7 +8,6 @@ random walk per axis (:func:`jaxnav.ins.allan_noise_fit`) and writes a figure pe
 
 from __future__ import annotations
 
-import math
 import pathlib
 
 import numpy as np
@@ -17,65 +16,10 @@ from jaxnav import units
 from jaxnav.ins import (
     allan_fit_datasheet,
     allan_noise_fit,
-    imu_noise_from_allan,
-    nearest_grade,
     static_check,
     uniform_rates,
 )
-from jaxnav.io import INS_CONFIG_RANGES, noise_in_config_units, write_json
-
-#: a recording shorter than this (s) is warned about in the TOML: its bias terms are bounds at short taus
-SHORT_RECORDING_S = 3600.0
-
-
-def noise_toml(gyro, accel, *, source: str) -> str:
-    """A ``[noise]`` section for a ``jaxnav ins`` config from the two fits (largest axis of each term).
-
-    Keys and units are those of :func:`jaxnav.io.load_ins_config`; a value outside the config's
-    plausible range (:data:`INS_CONFIG_RANGES`) is written commented out, with the reason, and so are the bias
-    terms of a recording shorter than :data:`SHORT_RECORDING_S`. ``grade`` is the
-    preset nearest in ARW: it supplies the initial (turn-on) bias and scale-factor sigmas, which a
-    static recording cannot measure; the values below override its densities.
-    """
-    n = imu_noise_from_allan(gyro, accel, reduce=np.max)
-    notes = {
-        "arw_deg_per_sqrt_h": "gyro white noise",
-        "vrw_m_per_s_per_sqrt_h": "accelerometer white noise",
-        "gyro_bias_instability_deg_per_h": "Gauss-Markov sigma = 1.075 B (its Allan peak at the 0.664 B floor)",
-        "bias_correlation_time_s": "gyro: tau of the Allan minimum / 1.893",
-        "accel_bias_instability_mg": "Gauss-Markov sigma = 1.075 B",
-        "accel_bias_correlation_time_s": "accelerometer: tau of the Allan minimum / 1.893",
-        "gyro_bias_rw_deg_per_h_per_sqrt_h": "rate random walk (used with states = 21)",
-        "accel_bias_rw_mg_per_sqrt_h": "rate random walk (used with states = 21)",
-    }
-    values = noise_in_config_units(n, tuple(notes))
-    lines = [
-        f"# [noise] from the Allan variance of {source} (jaxnav allan): the largest of the three axes;",
-        "# a term the recording could not resolve is given its 2-sigma upper bound (see results.json)",
-    ]
-    dur = gyro.n * gyro.dt
-    if dur < SHORT_RECORDING_S:
-        lines += [
-            f"# only {dur:.0f} s of data (taus up to {float(gyro.taus[-1]):.3g} s): the bias instability, its "
-            "correlation time and the rate random walk",
-            "# are bounds or weak estimates here, written commented out (the grade's values stand); "
-            "record an hour or longer to measure them",
-        ]
-    lines += [
-        "[noise]",
-        f'grade = "{nearest_grade(n.gyro_arw)}"  # nearest preset in ARW: turn-on bias and scale-factor '
-        "sigmas (not measurable from a static recording)",
-    ]
-    for key, what in notes.items():
-        lo, hi = INS_CONFIG_RANGES[f"noise.{key}"]
-        v = values[key]
-        if dur < SHORT_RECORDING_S and not key.startswith(("arw", "vrw")):
-            lines.append(f"# {key} = {v:.4g}  # {what}")
-        elif math.isfinite(v) and lo <= v <= hi and v > 0:
-            lines.append(f"{key} = {v:.4g}  # {what}")
-        else:
-            lines.append(f"# {key} = {v:.4g}  # {what}; outside the config's range [{lo:g}, {hi:g}], left to the grade")
-    return "\n".join(lines) + "\n"
+from jaxnav.io import noise_toml, write_json
 
 
 def run_allan(imu, out, *, source: str, start_s=None, end_s=None, tau_range=None, title=None) -> dict:

@@ -333,10 +333,10 @@ def process(cfg, out, *, tune: bool = False, calibrate=None, command: str = "", 
     out = pathlib.Path(out)
     say = progress or (lambda *_: None)
     say(f"reading {cfg.imu.file.name} and {cfg.gnss.file.name}")
-    from jaxnav.experiments.ins_run import read_inputs, read_truth
+    from jaxnav.io import read_ins_inputs, read_ins_truth
 
-    truth = read_truth(cfg)  # before the filter: a bad reference file fails fast
-    imu, pos = read_inputs(cfg)
+    truth = read_ins_truth(cfg)  # before the filter: a bad reference file fails fast
+    imu, pos = read_ins_inputs(cfg)
     prep = prepare(cfg, imu=imu, pos=pos, progress=progress)
     check_shifts(cfg, prep.t)  # before any fit: a shift without an outage window fails fast
     mode = cfg.tune.calibrate if calibrate is None else calibrate

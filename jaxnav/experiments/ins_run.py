@@ -2,7 +2,7 @@
 
 Pipeline (host-side glue around the pure, jitted library functions):
 
-1. read the IMU and GNSS files (:func:`read_inputs`; formats of :mod:`jaxnav.io`), apply the
+1. read the IMU and GNSS files (:func:`jaxnav.io.read_ins_inputs`; formats of :mod:`jaxnav.io`), apply the
    mounting (:func:`jaxnav.ins.sensor_to_body`) and the IMU-GNSS time offset;
 2. align (:func:`jaxnav.ins.coarse_alignment`), build the GNSS measurements with the lever arm
    (:func:`gnss_measurements`) and the filter's noise (:func:`filter_params`);
@@ -42,10 +42,8 @@ from jaxnav.ins import (
     SensorBiases,
     antenna_enu,
     check_tunable,
-    clock_drift,
     coarse_alignment,
     error_model_for,
-    estimate_time_offset,
     gnss_checked_standstill,
     gnss_solution_measurements,
     gnss_speed_test,
@@ -54,7 +52,6 @@ from jaxnav.ins import (
     in_windows,
     interpolate_on_samples,
     lc_params,
-    likelihood_time_offset,
     loosely_coupled,
     nearest_samples,
     nhc,
@@ -64,6 +61,7 @@ from jaxnav.ins import (
     outage_windows,
     scale_gnss_sigmas,
     score_outages,
+    search_time_offset,
     sensor_to_body,
     smooth,
     solution_errors,
@@ -83,121 +81,41 @@ from jaxnav.io import (
     InsConfig,
     PosSolution,
     imu_increments,
-    read_csv_series,
-    read_gnss,
-    read_imu,
-    read_kfgins_odometer,
+    read_ins_heading,
+    read_ins_inputs,
+    read_ins_odometer,
 )
-from jaxnav.io import read_truth as read_truth_file
 from jaxnav.tune import LCNoiseFit, calibrate_lc_noise, fit_lc_noise
-from jaxnav.units import WEEK
 
 
-def read_inputs(cfg: InsConfig):
-    """(:class:`jaxnav.io.ImuLog`, :class:`jaxnav.io.PosSolution`) of the config's files (SI, sensor axes).
+def _evaluated(cfg: InsConfig):
+    """The ``[evaluate]`` section when it withholds GNSS on outages, else None."""
+    return cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
 
-    Raises:
-      jaxnav.io.ReaderError: naming file and line of anything unreadable.
-      FileNotFoundError: a missing file (named).
-    """
-    imu_c, g = cfg.imu, cfg.gnss
-    truth = cfg.evaluate.truth if cfg.evaluate is not None else None
-    odo = cfg.odometer.file if cfg.odometer is not None else None
-    hdg = cfg.heading.file if cfg.heading is not None else None
-    for p, key in (
-        (imu_c.file, "imu.file"),
-        (g.file, "gnss.file"),
-        (imu_c.tag, "imu.tag"),
-        (truth, "evaluate.truth"),
-        (odo, "odometer.file"),
-        (hdg, "heading.file"),
-    ):
-        if p is not None and not p.is_file():
-            what = "a folder, not a file" if p.is_dir() else "no such file"
-            raise FileNotFoundError(f"{p}: {what} ({cfg.path}: {key})")
-    odo_col = cfg.odometer is not None and cfg.odometer.source == "imu"
-    imu = _csv(
-        cfg,
-        "imu.",
-        imu_c.format,
-        lambda: read_imu(
-            imu_c.file,
-            imu_c.format,
-            tag=imu_c.tag,
-            columns=imu_c.columns,
-            units=imu_c.units,
-            delimiter=imu_c.delimiter,
-            gps_week=imu_c.gps_week,
-            odometer_column=odo_col,
-        ),
+
+def _outages(cfg: InsConfig, t0: float, t1: float) -> np.ndarray:
+    """(K, 2) s: the ``[evaluate]`` outage windows in the IMU span [t0, t1] s (:func:`jaxnav.ins.outage_windows`)."""
+    ev = _evaluated(cfg)
+    if ev is None:
+        return np.zeros((0, 2))
+    return outage_windows(
+        t0, t1, first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
     )
-    pos = _csv(
-        cfg,
-        "gnss.",
-        g.format,
-        lambda: read_gnss(
-            g.file,
-            g.format,
-            columns=g.columns,
-            units=g.units,
-            delimiter=g.delimiter,
-            gps_week=g.gps_week,
-            sigma_m=g.sigma_m,
-        ),
-    )
-    return imu, pos
-
-
-def _csv(cfg, prefix, fmt, read):
-    """``read()``; for the "csv" format, a ValueError about the column map or units (not a ReaderError)
-    names the config keys ``{prefix}columns`` and ``{prefix}units``."""
-    from jaxnav.io import ReaderError
-
-    if fmt != "csv":
-        return read()
-    try:
-        return read()
-    except ReaderError:
-        raise
-    except ValueError as exc:
-        raise ValueError(f"{cfg.path}: {prefix}columns / {prefix}units: {exc}") from None
-
-
-def read_odometer(cfg: InsConfig):
-    """(t (R,) s on the IMU file's clock, speed (R,) m/s) of the ``[odometer]`` source (NaN: no reading)."""
-    o = cfg.odometer
-    if o.source == "imu":
-        return read_kfgins_odometer(cfg.imu.file, gps_week=cfg.imu.gps_week)
-    d = _csv(
-        cfg,
-        "odometer.",
-        "csv",
-        lambda: read_csv_series(o.file, o.columns, o.units, kind="speed", delimiter=o.delimiter),
-    )
-    t = d["t"] if o.gps_week is None else d["t"] + o.gps_week * WEEK
-    return t, d["speed"]
 
 
 def heading_on_imu(cfg: InsConfig, t_imu):
-    """The ``[heading]`` CSV at the IMU samples: (heading (N,) rad, sigma (N,) rad), NaN where no reading.
+    """The ``[heading]`` file at the IMU samples: (heading (N,) rad, sigma (N,) rad), NaN where no reading.
 
     Each reading goes to the IMU sample nearest its time (GNSS time scale, :func:`jaxnav.ins.nearest_samples`);
     readings outside the IMU span or farther than one sample interval from every sample are dropped.
     """
-    h = cfg.heading
-    d = _csv(
-        cfg,
-        "heading.",
-        "csv",
-        lambda: read_csv_series(h.file, h.columns, h.units, kind="heading", delimiter=h.delimiter),
-    )
-    t = d["t"] if h.gps_week is None else d["t"] + h.gps_week * WEEK
+    t, head, sigma = read_ins_heading(cfg)
     t_imu = np.asarray(t_imu, float)
     hd, sg = np.full(t_imu.size, np.nan), np.full(t_imu.size, np.nan)
     j, ok = nearest_samples(t, t_imu)
-    hd[j[ok]] = d["heading"][ok]
-    if d["sigma"] is not None:
-        sg[j[ok]] = d["sigma"][ok]
+    hd[j[ok]] = head[ok]
+    if sigma is not None:
+        sg[j[ok]] = sigma[ok]
     return hd, sg
 
 
@@ -382,7 +300,7 @@ def build_aids(cfg: InsConfig, standstill, odo_speed=None, hdg=None):
 def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     """Read, mount, time-shift and align; build the measurements with the ``[evaluate]`` outages."""
     if imu is None or pos is None:
-        imu, pos = read_inputs(cfg)
+        imu, pos = read_ins_inputs(cfg)
     C_bs = sensor_to_body(cfg.imu.mounting)
     lever_rfu = sensor_to_body(np.eye(3)) @ np.asarray(cfg.gnss.lever_arm_frd, float)
     off_info: dict = {"source": "config"}
@@ -391,16 +309,9 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         off, off_info = recording_time_offset(cfg, imu, pos, C_bs, lever_rfu, progress=progress)
     imu = imu._replace(t=np.asarray(imu.t, float) + float(off))
     t, dth, dv, dt = imu_increments(imu, C_bs)
-    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
-    if (
-        ev is not None
-        and len(
-            outage_windows(
-                t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
-            )
-        )
-        == 0
-    ):
+    outages = _outages(cfg, t[0], t[-1])
+    ev = _evaluated(cfg)
+    if ev is not None and len(outages) == 0:
         raise ConfigError(
             f"{cfg.path}: evaluate.first_s = {ev.first_s:g} + outage_s = {ev.outage_s:g} + "
             f"end_margin_s = {ev.end_margin_s:g} s leave no outage window in the {t[-1] - t[0]:.1f} s "
@@ -423,14 +334,6 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
         gyro_bias_sigma=float(dens.imu.gyro_bias_instability),
         lever_rfu=lever_rfu,
     )
-    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
-    outages = (
-        np.zeros((0, 2))
-        if ev is None
-        else outage_windows(
-            t[0], t[-1], first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
-        )
-    )
     meas, keep, withheld = gnss_solution_measurements(
         pos,
         t,
@@ -446,7 +349,7 @@ def prepare(cfg: InsConfig, *, imu=None, pos=None, progress=print) -> Prepared:
     )
     odo = None
     if cfg.odometer is not None:
-        t_odo, sp = read_odometer(cfg)
+        t_odo, sp = read_ins_odometer(cfg)
         odo = interpolate_on_samples(t_odo + float(off), sp, t)  # the odometer shares the IMU's clock
         if not np.isfinite(odo).any():
             raise ConfigError(
@@ -648,7 +551,7 @@ def fit_and_run(cfg: InsConfig, *, imu, pos, prep=None, calibrate=None, tune: bo
     the withheld epochs.
 
     Args:
-      cfg: the config (e.g. :func:`shifted_config`).  imu, pos: the recording as read (:func:`read_inputs`;
+      cfg: the config (e.g. :func:`shifted_config`).  imu, pos: the recording as read (:func:`jaxnav.io.read_ins_inputs`;
         the IMU times before the time offset).  prep: its :class:`Prepared` if already made (None: made here).
       calibrate: "auto" | True | False (None: ``[tune] calibrate``).  tune: run ``--tune``.
       progress: callable for one line of text, or None.
@@ -696,16 +599,8 @@ def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
     """
     gt = np.asarray(pos.t, float)
     t0, t1 = float(t_imu[0]), float(t_imu[-1])
-    ev = cfg.evaluate if cfg.evaluate is not None and cfg.evaluate.outages else None
-    windows = (
-        None
-        if ev is None
-        else outage_windows(
-            t0, t1, first_s=ev.first_s, outage_s=ev.outage_s, gap_s=ev.gap_s, end_margin_s=ev.end_margin_s
-        )
-    )
-    sel = offset_search_epochs(gt, t_imu, span, windows)
-    use, n = sel["use"], sel["n_used"]
+    sel = offset_search_epochs(gt, t_imu, span, _outages(cfg, t0, t1))
+    n = sel["n_used"]
     if n < MIN_SEARCH_EPOCHS:
         raise ValueError(
             f"time offset search: only {n} GNSS epoch(s) lie inside the IMU span "
@@ -713,68 +608,28 @@ def _search_epochs(cfg: InsConfig, pos, t_imu, span: float):
             f"[{gt[0]:.3f}, {gt[-1]:.3f}] s; at least {MIN_SEARCH_EPOCHS} needed): check the time "
             "systems, or reduce imu.time_offset_search_s"
         )
-    M = gt.size
-    sub = pos._replace(
-        **{
-            f: np.asarray(v)[use]
-            for f, v in zip(pos._fields, pos)
-            if isinstance(v, (np.ndarray, jnp.ndarray)) and np.ndim(v) >= 1 and np.shape(v)[0] == M
-        }
-    )
-    return sub, {
+    return pos.take(sel["use"]), {
         "n_epochs_used": n,
         "n_epochs_dropped_at_span_edges": sel["n_dropped_at_span_edges"],
         "n_epochs_withheld_by_evaluate": sel["n_withheld"],
         "fitted_on": (
             "GNSS epochs inside the IMU span at every trial offset"
-            + (", outside the [evaluate] outages (widened by the search span)" if ev else "")
+            + (", outside the [evaluate] outages (widened by the search span)" if _evaluated(cfg) else "")
         ),
     }
 
 
 def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress=print):
-    """IMU-GNSS time offset (s, added to IMU times) of a recording by the filter's innovation likelihood.
-
-    First guess: :func:`jaxnav.ins.estimate_time_offset` (yaw rate against GNSS course rate; it assumes the
-    body points along the velocity, which a handheld device does not). Search:
-    :func:`jaxnav.ins.likelihood_time_offset` over +-``imu.time_offset_search_s`` with this recording's
-    filter (no outages, gate or pseudo-measurements) on the epochs of :func:`_search_epochs`; clock drift:
-    :func:`jaxnav.ins.clock_drift` at the best offset, with a warning when significant.
+    """IMU-GNSS time offset (s, added to IMU times) of a recording: :func:`jaxnav.ins.search_time_offset`
+    over +-``imu.time_offset_search_s`` with this recording's filter (no outages, gate or pseudo-measurements,
+    so that the likelihoods of the trials compare) on the epochs of :func:`_search_epochs`.
 
     Returns:
-      (offset s, info dict with the grid, its log-likelihoods, the estimate's sigma, the epoch counts
-      and the method).
+      (offset s, info dict: the epoch counts and the search's report).
     """
     t, dth, dv, dt = imu_increments(imu, C_bs)
     span = cfg.imu.time_offset_search_s
     pos, common = _search_epochs(cfg, pos, t, span)
-    llh = np.stack([np.asarray(pos.lat), np.asarray(pos.lon), np.asarray(pos.h)], -1)
-    v = np.asarray(pos.v_enu, float)
-    info = {"source": "estimate", **common}
-    try:
-        est = estimate_time_offset(
-            t,
-            dth / dt[:, None],
-            np.asarray(pos.t, float),
-            v if np.all(np.isfinite(v)) else None,
-            llh=llh,
-            f_b=dv / dt[:, None],
-            max_offset_s=max(1.0, span + 0.5),
-        )
-        guess = float(est.offset_s)
-        info.update(
-            first_guess="yaw rate vs GNSS course rate cross-correlation",
-            first_guess_s=guess,
-            first_guess_sigma_s=float(est.sigma_s),
-            first_guess_corr=float(est.corr),
-            first_guess_epochs=int(est.n_epochs),
-        )
-        if not est.corr > 0.5:
-            raise ValueError(f"weak correlation {est.corr:.2f}")
-    except ValueError as exc:  # too few turns or epochs: search around zero
-        guess = 0.0
-        info.update(first_guess=f"0 (cross-correlation not usable: {exc})")
-    # likelihoods comparable between offsets: the same GNSS epochs, no gate, no pseudo-measurements
     no_eval = cfg._replace(
         evaluate=None,
         imu=cfg.imu._replace(time_offset_s=0.0),
@@ -783,44 +638,27 @@ def recording_time_offset(cfg: InsConfig, imu, pos, C_bs, lever_rfu, *, progress
         odometer=None,
         heading=None,
     )
-    cache = {}
-    tg = np.asarray(pos.t, float)
+    tg, ti = np.asarray(pos.t, float), np.asarray(imu.t, float)
     t_ref, T = 0.5 * (tg[0] + tg[-1]), float(tg[-1] - tg[0])
 
-    def loglik(off, change=0.0):
-        """Log-likelihood with IMU times t + off + change (t - t_ref) / T (a linear clock error)."""
-        key = (round(float(off), 6), round(float(change), 6))
-        if key not in cache:
-            ti = np.asarray(imu.t, float)
-            p = prepare(no_eval, imu=imu._replace(t=ti + key[0] + key[1] * (ti - t_ref) / T), pos=pos, progress=None)
-            cache[key] = float(run_filter(p, save=("nav",)).loglik)
-        return cache[key]
+    def loglik(off, change):
+        p = prepare(no_eval, imu=imu._replace(t=ti + off + change * (ti - t_ref) / T), pos=pos, progress=None)
+        return float(run_filter(p, save=("nav",)).loglik)
 
-    res = likelihood_time_offset(loglik, span, guess=guess, progress=progress)
-    best = res.offset_s
-    drift = clock_drift(loglik, best, tg, span, widen_hint="widen imu.time_offset_search_s")
-    grid = np.array(sorted(k[0] for k in cache if k[1] == 0.0))
-    info.update(
-        method="innovation log-likelihood: 50 ms grid over +-time_offset_search_s, 10 ms grid around its "
-        "best, parabolic refinement",
-        grid_s=grid,
-        loglik=np.array([cache[(g, 0.0)] for g in grid]),
-        offset_s=best,
-        sigma_s=res.sigma_s,
-        sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
-        "(treats the innovations as independent: optimistic when GNSS errors are correlated "
-        "in time)",
-        at_search_edge=res.at_edge,
-        drift=drift,
+    llh = np.stack([np.asarray(pos.lat), np.asarray(pos.lon), np.asarray(pos.h)], -1)
+    info = search_time_offset(
+        loglik,
+        span,
+        t,
+        dth / dt[:, None],
+        dv / dt[:, None],
+        tg,
+        llh,
+        pos.v_enu,
+        progress=progress,
+        widen_hint="widen imu.time_offset_search_s",
     )
-    if res.at_edge and progress:
-        progress(
-            f"warning: the time offset {best:+.3f} s is at the edge of the search (+-{span} s): widen "
-            "imu.time_offset_search_s"
-        )
-    if drift.get("significant") and progress:
-        progress(f"warning: {drift['warning']}")
-    return best, info
+    return info["offset_s"], {"source": "estimate", **common, **info}
 
 
 def run_training_windows(prep: Prepared) -> np.ndarray:
@@ -977,30 +815,6 @@ def _mask_without_outages(prep: Prepared):
         )[0]
         ok = np.asarray(full.mask)
     return ok
-
-
-# ----------------------------------------------------------------------------- reference trajectory
-def read_truth(cfg: InsConfig):
-    """The ``[evaluate] truth`` file as :class:`jaxnav.io.TruthTrajectory`, or None without one.
-
-    Raises:
-      FileNotFoundError: a missing file (named with the key).  jaxnav.io.ReaderError: FILE:LINE.
-      ValueError: a column map the reader refuses (naming the config keys).
-    """
-    ev = cfg.evaluate
-    if ev is None or ev.truth is None:
-        return None
-    if not ev.truth.is_file():
-        what = "a folder, not a file" if ev.truth.is_dir() else "no such file"
-        raise FileNotFoundError(f"{ev.truth}: {what} ({cfg.path}: evaluate.truth)")
-    return _csv(
-        cfg,
-        "evaluate.truth_",
-        ev.truth_format,
-        lambda: read_truth_file(
-            ev.truth, ev.truth_format, columns=ev.truth_columns, units=ev.truth_units, delimiter=ev.truth_delimiter
-        ),
-    )
 
 
 def truth_errors(run: InsRun, truth, which: str):

@@ -20,9 +20,9 @@ a 180 deg rotation about the sensor z axis (:data:`WALK_SENSOR_TO_BODY`). Checke
 GNSS innovation log-likelihood over the walk (the forward axis is the walking direction).
 
 The run itself is the shipped ``jaxnav ins`` config ``walk_0827``
-(``jaxnav/experiments/configs/ins/walk_0827.toml``, processed by :mod:`jaxnav.experiments.ins_run`);
-this module keeps the walk-specific checks (:func:`frame_check`) and a programmatic entry point
-(:func:`run_walk`) over an already loaded :class:`WalkData`.
+(``jaxnav/experiments/configs/ins/walk_0827.toml``, processed by :mod:`jaxnav.experiments.ins_run`:
+``run_ins(prepare(walk_config(), imu=data.imu, pos=data.pos))``); this module keeps the set's reader
+(:func:`load_walk`) and its frame check (:func:`frame_check`).
 """
 
 from __future__ import annotations
@@ -34,11 +34,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxnav.experiments.ins_run import filter_params, prepare, run_ins
+from jaxnav.experiments.ins_run import filter_params, run_noise
 from jaxnav.ins import (
     ERROR_MODEL_15,
     LCSave,
-    OutageScores,
     SensorBiases,
     coarse_alignment,
     gnss_solution_measurements,
@@ -48,8 +47,7 @@ from jaxnav.ins import (
     sensor_to_body,
 )
 from jaxnav.ins.attitude import quat_to_euler
-from jaxnav.io import ImuLog, PosSolution, imu_increments, load_ins_config, read_pos, read_rtklib_imu, write_json
-from jaxnav.plot import plot_outage_track
+from jaxnav.io import ImuLog, PosSolution, imu_increments, load_ins_config, read_pos, read_rtklib_imu
 
 
 class WalkData(NamedTuple):
@@ -93,99 +91,6 @@ def walk_config(data_root=None):
     return load_ins_config(WALK_CONFIG, variables=None if data_root is None else {"JAXNAV_DATA": str(data_root)})
 
 
-def run_walk(data, *, out_dir=None, fig_name: str = "walk_outages.png", cfg=None) -> tuple[OutageScores, dict]:
-    """The shipped ``walk_0827`` config (15-state LC filter + RTS, simulated 15 s outages) on loaded data.
-
-    Args:
-      data: :class:`WalkData` (or a directory for :func:`load_walk`).
-      out_dir: if given, the track/outage figure (:func:`jaxnav.plot.plot_outage_track`) is written there.
-      cfg: a config to use instead of the shipped one (:func:`walk_config`).
-    Returns:
-      (:class:`jaxnav.ins.OutageScores`, extras dict with "alignment", "result", "meas",
-      "smoothed_nav", "smoothed_biases", "enu_fwd", "enu_sm", "enu_ref", "fixed", "run").
-    """
-    if not isinstance(data, WalkData):
-        data = load_walk(data)
-    cfg = walk_config(pathlib.Path(data.imu.path).resolve().parent.parent.parent) if cfg is None else cfg
-    run = run_ins(prepare(cfg, imu=data.imu, pos=data.pos, progress=None))
-    extras = dict(
-        alignment=run.prep.alignment,
-        result=run.result,
-        meas=run.prep.meas,
-        smoothed_nav=run.smoothed_nav,
-        smoothed_biases=run.smoothed_biases,
-        enu_fwd=run.enu_fwd,
-        enu_sm=run.enu_sm,
-        enu_ref=run.enu_ref,
-        fixed=run.fixed,
-        run=run,
-    )
-    scores = run.scores
-    if out_dir is not None:
-        fig = plot_outage_track(
-            scores, run.enu_ref, run.enu_fwd, run.enu_sm, pathlib.Path(out_dir) / fig_name, title=cfg.name
-        )
-        scores = scores._replace(figure=str(fig))
-    return scores, extras
-
-
-#: ``scores.json`` key of each :class:`OutageScores` field: unit-suffixed (m, s), horizontal errors
-WALK_SCORE_KEYS = {
-    "windows": "outage_windows_gpst_s",
-    "n_ref": "n_fixed_epochs_per_outage",
-    "fwd_max": "forward_max_h_m",
-    "sm_max": "smoothed_max_h_m",
-    "fwd_rms": "forward_rms_h_m",
-    "sm_rms": "smoothed_rms_h_m",
-    "fwd_rms_all": "forward_rms_h_all_outages_m",
-    "sm_rms_all": "smoothed_rms_h_all_outages_m",
-    "fwd_max_mean": "forward_max_h_mean_over_outages_m",
-    "sm_max_mean": "smoothed_max_h_mean_over_outages_m",
-    "fwd_rms_outside": "forward_rms_h_outside_outages_m",
-    "t": "epoch_gpst_s",
-    "err_fwd": "forward_error_h_m",
-    "err_sm": "smoothed_error_h_m",
-    "withheld": "gnss_withheld",
-    "runtime_s": "runtime_s",
-    "figure": "figure",
-    "n_nonfinite_nav": "n_nonfinite_nav_values",
-    "sig_fwd": "forward_sigma_h_m",
-    "sig_sm": "smoothed_sigma_h_m",
-}
-
-
-def write_walk_scores(out_dir, scores: OutageScores, *, extra: dict | None = None) -> pathlib.Path:
-    """Write :class:`OutageScores` as ``out_dir/scores.json``: strict JSON (:func:`jaxnav.io.write_json`:
-    a NaN -- an epoch that is not a fixed reference, an outage without one -- is null with a
-    ``<key>_null_reason``), keys with units (:data:`WALK_SCORE_KEYS`), a ``"units"`` note; ``extra``
-    (e.g. a provenance block) is added at the top."""
-    path = pathlib.Path(out_dir) / "scores.json"
-    d = {WALK_SCORE_KEYS.get(k, k): v for k, v in scores._asdict().items()}
-    d = {
-        **(extra or {}),
-        "units": "suffix _m metres, _s seconds (GPST); errors and sigmas horizontal "
-        "(east-north) against the withheld RTK-fixed positions",
-        **d,
-    }
-    write_json(path, d)
-    return path
-
-
-def format_walk(scores: OutageScores) -> str:
-    """The per-outage and overall horizontal errors of :func:`run_walk` as text (m)."""
-    lines = [f"walk set, {len(scores.windows)} simulated GNSS outages of 15 s scored against withheld RTK-fixed fixes"]
-    for k, (w, n) in enumerate(zip(scores.windows, scores.n_ref)):
-        lines.append(
-            f"  outage {k + 1} [{w[0]:.1f}, {w[1]:.1f}] s, {int(n)} fixed epochs: max horizontal error "
-            f"forward {scores.fwd_max[k]:.2f} m, smoothed {scores.sm_max[k]:.2f} m"
-        )
-    lines.append(
-        f"  RMS over outages: forward {scores.fwd_rms_all:.2f} m, smoothed {scores.sm_rms_all:.2f} m; "
-        f"forward outside outages {scores.fwd_rms_outside:.3f} m"
-    )
-    return "\n".join(lines)
-
-
 def frame_check(
     data,
     *,
@@ -205,8 +110,6 @@ def frame_check(
         data = load_walk(data)
     if cfg is None:
         cfg = walk_config(pathlib.Path(data.imu.path).resolve().parent.parent.parent)
-    from jaxnav.experiments.ins_run import run_noise
-
     noise = run_noise(cfg)
     t0 = float(np.asarray(data.imu.t)[0])
     st = np.asarray(data.imu.t) <= t0 + 1.5

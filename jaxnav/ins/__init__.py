@@ -163,6 +163,7 @@ from jaxnav.ins.timing import (  # refinement by the filter's innovation likelih
     likelihood_time_offset,
     offset_search_epochs,
     parabola_peak,
+    search_time_offset,
 )
 
 __all__ = [
@@ -302,6 +303,7 @@ __all__ += [
     "LikelihoodOffset",
     "clock_drift",
     "likelihood_time_offset",
+    "search_time_offset",
     "offset_search_epochs",
     "parabola_peak",
     "CheckedStandstill",

@@ -437,3 +437,95 @@ def clock_drift(
             "re-tag the IMU (e.g. from GNSS time pulses) or process shorter pieces"
         )
     return out
+
+
+def search_time_offset(
+    loglik: Callable[[float, float], float],
+    span: float,
+    t_imu,
+    w_b,
+    f_b,
+    t_gnss,
+    llh,
+    v_enu=None,
+    *,
+    progress: Callable[[str], Any] | None = None,
+    widen_hint: str = "widen the search span",
+) -> dict:
+    """IMU-GNSS time offset and clock drift of a recording by a filter's innovation likelihood.
+
+    First guess :func:`estimate_time_offset` (yaw rate against GNSS course rate), kept when its
+    correlation exceeds 0.5, else 0 (it assumes the body points along the velocity, which a handheld
+    device does not); then :func:`likelihood_time_offset` over +-``span`` and :func:`clock_drift` at the
+    best offset. ``loglik`` is memoised here (trial clocks rounded to 1 us); ``progress`` gets the
+    stages and a warning when the offset is at the edge of the search or the drift significant.
+
+    Args:
+      loglik: (o s, c s) -> log-likelihood of the run with IMU times t + o + c (t - t_ref) / T (t_ref
+        the middle, T the span of ``t_gnss``), scoring the same GNSS epochs at every trial
+        (:func:`offset_search_epochs`).  span: search half-width, s.
+      t_imu: (N,) s.  w_b, f_b: (N, 3) body rate rad/s and specific force m/s^2 (right-forward-up).
+      t_gnss: (M,) s, the epochs the trials score.  llh: (M, 3) rad, rad, m.  v_enu: (M, 3) m/s or None.
+      widen_hint: what the warnings say to do at the edge of the span.
+    Returns:
+      dict: the first guess (``first_guess``, and when used ``first_guess_s``, ``first_guess_sigma_s``,
+      ``first_guess_corr``, ``first_guess_epochs``), ``method``, ``grid_s`` and ``loglik`` (the
+      zero-drift trials), ``offset_s``, ``sigma_s``, ``sigma_method``, ``at_search_edge``, ``drift``
+      (:func:`clock_drift`).
+    """
+    v = None if v_enu is None else np.asarray(v_enu, float)
+    info: dict = {}
+    try:
+        est = estimate_time_offset(
+            t_imu,
+            w_b,
+            t_gnss,
+            v if v is not None and np.all(np.isfinite(v)) else None,
+            llh=llh,
+            f_b=f_b,
+            max_offset_s=max(1.0, span + 0.5),
+        )
+        guess = float(est.offset_s)
+        info.update(
+            first_guess="yaw rate vs GNSS course rate cross-correlation",
+            first_guess_s=guess,
+            first_guess_sigma_s=float(est.sigma_s),
+            first_guess_corr=float(est.corr),
+            first_guess_epochs=int(est.n_epochs),
+        )
+        if not est.corr > 0.5:
+            raise ValueError(f"weak correlation {est.corr:.2f}")
+    except ValueError as exc:  # too few turns or epochs: search around zero
+        guess = 0.0
+        info.update(first_guess=f"0 (cross-correlation not usable: {exc})")
+    cache: dict = {}
+
+    def memo(off, change=0.0):
+        key = (round(float(off), 6), round(float(change), 6))
+        if key not in cache:
+            cache[key] = float(loglik(*key))
+        return cache[key]
+
+    res = likelihood_time_offset(memo, span, guess=guess, progress=progress)
+    drift = clock_drift(memo, res.offset_s, t_gnss, span, widen_hint=widen_hint)
+    grid = np.array(sorted(k[0] for k in cache if k[1] == 0.0))
+    info.update(
+        method=f"innovation log-likelihood: 50 ms grid over +-{span:g} s, 10 ms grid around its best, "
+        "parabolic refinement",
+        grid_s=grid,
+        loglik=np.array([cache[(g, 0.0)] for g in grid]),
+        offset_s=res.offset_s,
+        sigma_s=res.sigma_s,
+        sigma_method="curvature of the log-likelihood parabola through the best three fine-grid points "
+        "(treats the innovations as independent: optimistic when GNSS errors are correlated "
+        "in time)",
+        at_search_edge=res.at_edge,
+        drift=drift,
+    )
+    if progress and res.at_edge:
+        progress(
+            f"warning: the time offset {res.offset_s:+.3f} s is at the edge of the search (+-{span} s): {widen_hint}"
+        )
+    if progress and drift.get("significant"):
+        progress(f"warning: {drift['warning']}")
+    return info

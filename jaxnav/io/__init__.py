@@ -30,7 +30,9 @@ from jaxnav.io._ins_config import (
     find_ins_config,
     load_ins_config,
     noise_in_config_units,
+    noise_toml,
 )
+from jaxnav.io._ins_files import read_ins_heading, read_ins_inputs, read_ins_odometer, read_ins_truth
 from jaxnav.io._json import json_ready, write_json
 from jaxnav.io._kfgins import read_kfgins_gnss, read_kfgins_imu, read_kfgins_odometer
 from jaxnav.io._provenance import files_snapshot, files_written, git_commit, provenance, utc_now
@@ -147,5 +149,10 @@ __all__ += [
     "find_ins_config",
     "load_ins_config",
     "noise_in_config_units",
+    "noise_toml",
+    "read_ins_heading",
+    "read_ins_inputs",
+    "read_ins_odometer",
+    "read_ins_truth",
 ]
 __all__ += ["ConfigError", "ConfigTable"]

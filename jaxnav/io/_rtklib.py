@@ -54,6 +54,12 @@ class PosSolution(NamedTuple):
     vcov_enu: np.ndarray
     n_masked: int = 0
 
+    def take(self, sel) -> PosSolution:
+        """The epochs ``sel`` ((N,) bool mask or index array) of this solution; ``path`` and ``n_masked`` kept."""
+        n = np.shape(self.t)[0]
+        rows = {f: np.asarray(v)[sel] for f, v in zip(self._fields, self) if np.ndim(v) >= 1 and np.shape(v)[0] == n}
+        return self._replace(**rows)
+
 
 def _signed_sq(s):
     return np.sign(s) * s * s

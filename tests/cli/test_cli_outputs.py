@@ -6,12 +6,11 @@ through ``jaxnav.cli.main``, on the smallest inputs (a 2-point epoch log)."""
 from __future__ import annotations
 
 import io
-import json
 import logging
 
 import numpy as np
 import pytest
-from _outputs import check_provenance, no_constants
+from _outputs import check_provenance
 
 import jaxnav
 from jaxnav._progress import Progress
@@ -170,38 +169,3 @@ def test_every_command_has_its_own_default_folder():
         defaults[p.prog.split()[-1]] = p.get_default("out")
     assert defaults.pop("ins") is None  # out/ins/<config name>, chosen after reading the config
     assert defaults == {c: f"out/{c}" for c in defaults}, defaults
-
-
-def test_walk_scores_json_strict_with_units(tmp_path):
-    from jaxnav.experiments import write_walk_scores
-    from jaxnav.ins import OutageScores
-
-    nan = float("nan")
-    sc = OutageScores(
-        windows=np.array([[10.0, 25.0], [40.0, 55.0]]),
-        n_ref=np.array([3, 0]),
-        fwd_max=np.array([1.2, nan]),
-        sm_max=np.array([0.5, nan]),
-        fwd_rms=np.array([0.8, nan]),
-        sm_rms=np.array([0.3, nan]),
-        fwd_rms_all=0.8,
-        sm_rms_all=0.3,
-        fwd_max_mean=1.2,
-        sm_max_mean=0.5,
-        fwd_rms_outside=0.02,
-        t=np.arange(4.0),
-        err_fwd=np.array([nan, 0.1, nan, 0.2]),
-        err_sm=np.array([nan, 0.05, nan, 0.1]),
-        withheld=np.array([False, True, True, False]),
-        runtime_s=1.5,
-        figure=None,
-        n_nonfinite_nav=0,
-    )
-    path = write_walk_scores(tmp_path, sc)
-    text = path.read_text()
-    assert "NaN" not in text and "Infinity" not in text
-    d = json.loads(text, parse_constant=no_constants)
-    assert d["forward_max_h_m"] == [1.2, None] and "nan 1" in d["forward_max_h_m_null_reason"]
-    assert d["outage_windows_gpst_s"] == [[10.0, 25.0], [40.0, 55.0]] and d["runtime_s"] == 1.5
-    unitless = [k for k in d if not k.endswith(("_m", "_s", "_reason")) and not k.startswith("n_")]
-    assert sorted(unitless) == ["figure", "gnss_withheld", "units"], unitless

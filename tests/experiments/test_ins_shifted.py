@@ -19,9 +19,9 @@ EVALUATE = "first_s = 40.0\noutage_s = 15.0\ngap_s = 20.0\nend_margin_s = 5.0\ns
 def test_shifted_outages_fitted_per_shift(tmp_path, capsys):
     from jaxnav.cli import main
     from jaxnav.experiments.ins_output import _densities_dict
-    from jaxnav.experiments.ins_run import fit_and_run, read_inputs, shifted_config
+    from jaxnav.experiments.ins_run import fit_and_run, shifted_config
     from jaxnav.ins import in_windows
-    from jaxnav.io import load_ins_config
+    from jaxnav.io import load_ins_config, read_ins_inputs
 
     rec = write_car(tmp_path, spec=short_car_spec(), imu_rate=25.0, vibration=0.0)
     cfg_path = car_config(
@@ -58,7 +58,7 @@ def test_shifted_outages_fitted_per_shift(tmp_path, capsys):
 
     # shift 1's withheld fixes moved 30 m north: shift 1's fits must not notice, its scores must
     cfg = load_ins_config(cfg_path)
-    imu, pos = read_inputs(cfg)
+    imu, pos = read_ins_inputs(cfg)
     w1 = np.array([[o["gpst_start_s"], o["gpst_end_s"]] for o in rows if o["shift"] == 1])
     moved = in_windows(pos.t, w1)
     assert moved.sum() >= 25

@@ -25,19 +25,20 @@ def car(tmp_path_factory):
 
 
 def _search(cfg, pos):
-    from jaxnav.experiments.ins_run import read_inputs, recording_time_offset
+    from jaxnav.experiments.ins_run import recording_time_offset
     from jaxnav.ins import sensor_to_body
+    from jaxnav.io import read_ins_inputs
 
-    imu, _ = read_inputs(cfg)
+    imu, _ = read_ins_inputs(cfg)
     lever = sensor_to_body(np.eye(3)) @ np.asarray(cfg.gnss.lever_arm_frd, float)
     return recording_time_offset(cfg, imu, pos, sensor_to_body(cfg.imu.mounting), lever, progress=None)
 
 
 def test_search_across_imu_start(car):
-    from jaxnav.experiments.ins_run import read_inputs
+    from jaxnav.io import read_ins_inputs
 
     rec, cfg = car
-    imu, pos = read_inputs(cfg)
+    imu, pos = read_ins_inputs(cfg)
     assert pos.t[0] < imu.t[0] + 0.1  # some trial offsets push the first GNSS epoch before the IMU
     off, info = _search(cfg, pos)
     assert off == pytest.approx(-TAG_ERROR, abs=0.01)
@@ -63,10 +64,10 @@ def test_search_across_imu_start(car):
 
 
 def test_too_little_overlap_is_a_clear_error(car):
-    from jaxnav.experiments.ins_run import read_inputs
+    from jaxnav.io import read_ins_inputs
 
     _, cfg = car
-    imu, pos = read_inputs(cfg)
+    imu, pos = read_ins_inputs(cfg)
     late = pos._replace(t=np.asarray(pos.t) + (imu.t[-1] - pos.t[0]) - 2.0)  # 2 s of overlap
     with pytest.raises(ValueError, match="time_offset_search_s"):
         _search(cfg, late)
@@ -78,8 +79,7 @@ def test_clock_drift_detected(tmp_path):
     flagged; the model's offsets at the halves match the tags there, and the run's single offset lies
     between them. (The estimate scatters by about its sigma between seeds: 293-340 ppm on seeds 0-3, so
     a 10 % bound would fail on some seeds.)"""
-    from jaxnav.experiments.ins_run import read_inputs
-    from jaxnav.io import load_ins_config
+    from jaxnav.io import load_ins_config, read_ins_inputs
 
     tag0, rate = 0.03, -3e-4
     rec = write_car(tmp_path, tag_error_s=tag0, imu_rate=50.0)
@@ -90,7 +90,7 @@ def test_clock_drift_detected(tmp_path):
     p = car_config(rec, tmp_path)
     p.write_text(p.read_text().replace("time_offset_search_s = 0.2", "time_offset_search_s = 0.1"))
     cfg = load_ins_config(p)
-    _, pos = read_inputs(cfg)
+    _, pos = read_ins_inputs(cfg)
     off, info = _search(cfg, pos)
     dr = info["drift"]
     assert dr.get("significant") and "clock drift" in dr["warning"], dr

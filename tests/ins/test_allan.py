@@ -72,8 +72,7 @@ def test_fit_recovers_white_bias_instability_and_rate_random_walk_within_10_perc
     assert math.sqrt(gm) == pytest.approx(math.sqrt(FLICKER_AVAR) * fit.bias_instability[0], rel=1e-3)
     assert GM_PEAK_ADEV == pytest.approx(0.6174, abs=1e-3) and GM_PEAK_TAU == pytest.approx(1.8926, abs=1e-3)
     # a long recording (14.6 h): every term goes into the [noise] section, in the config's units
-    from jaxnav.experiments.allan import noise_toml
-    from jaxnav.io import loads_toml
+    from jaxnav.io import loads_toml, noise_toml
 
     fg, fa = ins.allan_noise_fit(y * 1e-4, dt), ins.allan_noise_fit(y * 1e-3, dt)  # rad/s, m/s^2
     sec = loads_toml(noise_toml(fg, fa, source="sim"))["noise"]

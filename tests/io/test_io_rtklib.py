@@ -114,3 +114,13 @@ def test_signed_square_root_covariances_of_a_real_file():
         rtol=1e-12,
     )
     assert np.all(np.linalg.eigvalsh(s.cov_enu) > 0)  # every epoch's covariance is positive definite
+
+
+def test_take_selects_epochs_of_every_per_epoch_field():
+    s = read_pos(WALK)
+    sel = np.asarray(s.q) == 1
+    sub = s.take(sel)
+    assert sub.path == s.path and sub.n_masked == s.n_masked and len(sub.t) == int(sel.sum()) < len(s.t)
+    for f in ("t", "lat", "lon", "h", "q", "ns", "cov_enu", "age", "ratio", "v_enu", "vcov_enu"):
+        np.testing.assert_array_equal(getattr(sub, f), np.asarray(getattr(s, f))[sel], err_msg=f)
+    np.testing.assert_array_equal(s.take(np.array([3, 1])).t, np.asarray(s.t)[[3, 1]])
