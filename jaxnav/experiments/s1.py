@@ -28,15 +28,16 @@ from jaxnav.monitoring import (
     S1_THRESHOLDS_XYH,
     daily_forecasts,
     forecast,
+    forecast_summary,
     improvement,
     initial_state,
     internal_precision,
     network_model,
-    outlier_flags,
     period_statistics,
     rms,
     s1_filters,
     station_velocity,
+    velocity_summary,
 )
 from jaxnav.sim import simulate_subsidence, subsidence_config
 from jaxnav.tune import map_chunked
@@ -297,13 +298,6 @@ def format_s1_tables(tables: dict, *, compare=("standard", "adaptive")) -> str:
     return "\n".join(L)
 
 
-def _tolist(a):
-    """JSON-ready nested list of an array (None stays None)."""
-    if a is None:
-        return None
-    return np.asarray(a).tolist()
-
-
 def _enu_dict(a):
     """A (3,) east/north/up array as {"east": ., "north": ., "up": .} (None stays None)."""
     if a is None:
@@ -360,40 +354,12 @@ def run_monitor_files(
     all_series = [io.read_daily(f) for f in files]  # every file read (and checked) before any work
     for f, s in zip(files, all_series):
         v = station_velocity(s)
-        fc = daily_forecasts(s, accel_psd=v.accel_psd, filters=filters)
-        st = {}
-        for name, r in fc.items():
-            P = max(1, min(period, len(s.t) - 1))
-            ps = period_statistics(np.asarray(r.deviation), P, thresholds=(3 * MM, 3 * MM, 10 * MM))
-            st[name] = dict(
-                m_P_mm=_tolist(np.asarray(ps.m_P)[:, 0] / MM),
-                m_H_mm=_tolist(np.asarray(ps.m_H)[:, 0] / MM),
-                max_abs_mm=_tolist(np.asarray(ps.max_abs)[:, 0] / MM),
-                mean_abs_mm=_tolist(np.asarray(ps.mean_abs)[:, 0] / MM),
-                share_under_3_3_10mm=_tolist(np.asarray(ps.share_under)[:, 0]),
-                status=int(r.status),
-            )
-            flags = outlier_flags(r.noise)
-            if flags is not None:
-                st[name]["outliers_flagged"] = int(np.sum(np.asarray(flags)))
+        st = forecast_summary(daily_forecasts(s, accel_psd=v.accel_psd, filters=filters), period)
         fig = out / f"velocity_{s.station}.png"
         plot_daily_velocity(s, v, fig)
         ref = v.reference_velocity
         result["stations"][s.station] = dict(
-            file=str(f),
-            format=s.fmt,
-            epochs=v.n,
-            span_years=v.span_years,
-            masked_values=s.n_masked,
-            velocity_mm_per_yr=_enu_dict(v.velocity / MM_PER_YEAR),
-            sigma_formal_mm_per_yr=_enu_dict(v.sigma / MM_PER_YEAR),
-            sigma_ar1_mm_per_yr=_enu_dict(v.sigma_ar1 / MM_PER_YEAR),
-            ls_slope_mm_per_yr=_enu_dict(v.ls_velocity / MM_PER_YEAR),
-            published_mm_per_yr=None if ref is None else _enu_dict(ref / MM_PER_YEAR),
-            published_sigma_mm_per_yr=None if ref is None else _enu_dict(v.reference_sigma / MM_PER_YEAR),
-            random_walk_psd_m2_per_s3=_enu_dict(v.accel_psd),
-            forecast_statistics=st,
-            figure=str(fig),
+            file=str(f), format=s.fmt, **velocity_summary(s, v), forecast_statistics=st, figure=str(fig)
         )
         for i, ax in enumerate("ENU"):
             pub = "" if ref is None else f"{ref[i] / MM_PER_YEAR:+.2f}+-{v.reference_sigma[i] / MM_PER_YEAR:.2f}"
@@ -454,8 +420,9 @@ def run_monitor_simulation(
         "",
         "Forecast minus truth, RMS over all periods and stations (mm): whole periods / inside the episodes",
     ]
-    for name in res["forecast_rms"]:
-        whole, ep = np.mean(res["forecast_rms"][name]) / MM, np.mean(res["episode_rms"][name]) / MM
+    rms_mm = {key: {k: float(np.mean(v) / MM) for k, v in res[key].items()} for key in ("forecast_rms", "episode_rms")}
+    for name, whole in rms_mm["forecast_rms"].items():
+        ep = rms_mm["episode_rms"][name]
         L.append(f"  {name:<18}{whole:>8.2f}{ep:>10.2f}   status {status_words(res['status'][name])}")
     ratio = np.mean(res["forecast_rms"]["standard"]) / np.mean(res["forecast_rms"]["adaptive"])
     ratio_ep = np.mean(res["episode_rms"]["standard"]) / np.mean(res["episode_rms"]["adaptive"])
@@ -468,8 +435,8 @@ def run_monitor_simulation(
         tables={**tables, "table3_5": _labelled_table3_5(tables["table3_5"])},
         published={**S1_PUBLISHED, **_labelled_table3_5({ax: S1_PUBLISHED[ax] for ax in ("X", "Y", "H")})},
         text=text,
-        forecast_rms_mm={k: float(np.mean(v) / MM) for k, v in res["forecast_rms"].items()},
-        episode_rms_mm={k: float(np.mean(v) / MM) for k, v in res["episode_rms"].items()},
+        forecast_rms_mm=rms_mm["forecast_rms"],
+        episode_rms_mm=rms_mm["episode_rms"],
         ratio_standard_adaptive=float(ratio),
         ratio_standard_adaptive_episodes=float(ratio_ep),
         status=res["status"],

@@ -16,7 +16,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxnav.geodesy import zone_central_meridian
 from jaxnav.io import (
     gpst_iso,
     read_control_points,
@@ -32,21 +31,22 @@ from jaxnav.plot import plot_rtk
 from jaxnav.sim import RtkPointsConfig, simulate_rtk_points
 from jaxnav.survey.rtk import (
     MotionParams,
-    compare_levelling,
+    central_meridians,
     connection_models,
+    connection_summary,
+    levelling_summary,
     pack_points,
+    point_records,
     point_sigmas,
+    precision_summary,
     process_points,
     sampling_grid,
+    sigma_summary,
+    unusable_epochs,
 )
-from jaxnav.units import CM, MM, rad_to_deg
+from jaxnav.units import MM, rad_to_deg
 
 _log = logging.getLogger(__name__)
-
-
-def _ratio(a: float, b: float) -> float:
-    """a / b, NaN where b is 0 or either is not finite (identical epochs give a zero precision)."""
-    return a / b if math.isfinite(a) and math.isfinite(b) and b != 0.0 else float("nan")
 
 
 def run_rtk(
@@ -125,8 +125,7 @@ def run_rtk(
     first = {n: i for i, n in reversed(list(enumerate(ep["point"])))}
     point_segment = np.array([ep["segment"][first[n]] for n in names])
     if lon0_deg is None:  # each point in its own zone
-        lon_pt = np.array([np.nanmean(np.where(m, lo, np.nan)) for lo, m in zip(series.lon, series.mask)])
-        lon0 = np.asarray(zone_central_meridian(jnp.asarray(lon_pt), zone_width)[0])
+        lon0 = central_meridians(series, zone_width)
     else:
         lon0 = np.full(len(names), math.radians(lon0_deg))
     zones = sorted({round(float(v), 9) for v in rad_to_deg(lon0)})
@@ -143,42 +142,16 @@ def run_rtk(
         excluded_moving_epochs=sum(c["n_moving"] for c in motion_counts),
         excluded_short_static_epochs=sum(c["n_short_static"] for c in motion_counts),
         motion_test=None if motion is None else dict(motion._asdict(), files=motion_counts),
-        masked_epochs=int(
-            np.sum(
-                ~np.asarray(ep["mask"])
-                | ~np.all(np.isfinite(ep["sigma"]), axis=1)
-                | ~np.isfinite(ep["lat"])
-                | ~np.isfinite(ep["lon"])
-                | ~np.isfinite(ep["H"])
-            )
-        ),
+        masked_epochs=unusable_epochs(ep["mask"], ep["lat"], ep["lon"], ep["H"], ep["sigma"]),
     )
     transform = anomaly = None
     if control is not None:
         con = connection_models(
             cp.lat, cp.lon, cp.H, np.stack([cp.x, cp.y], -1), cp.h, lon0=float(lon0[0]), surface=surface
         )
-        if con.transform is not None:
-            transform = con.transform.params
-            tp = con.transform
-            summary["datum_transformation"] = dict(
-                model="4-parameter plane similarity (x' = t + (1+m) R(theta) x)",
-                tx=float(tp.params.t[0]),
-                ty=float(tp.params.t[1]),
-                theta_arcsec=float(tp.params.theta) / (math.pi / 648000),
-                m_ppm=float(tp.params.m) * 1e6,
-                sigma0_mm=float(tp.sigma0) / MM,
-                residual_rms_mm=[float(v) / MM for v in tp.rms],
-                n_control=int(tp.residuals.shape[0]),
-            )
-        if con.anomaly is not None:
-            anomaly = con.anomaly
-            summary["height_anomaly"] = dict(
-                surface=anomaly.kind,
-                sigma0_mm=float(anomaly.sigma0) / MM,
-                n_control=int(anomaly.residuals.shape[0]),
-                residuals_mm=[float(v) / MM for v in anomaly.residuals],
-            )
+        transform = None if con.transform is None else con.transform.params
+        anomaly = con.anomaly
+        summary.update(connection_summary(con))
     _log.info(
         "filtering %d point(s) (%d epochs, %s)",
         len(names),
@@ -190,7 +163,6 @@ def run_rtk(
     grid = sampling_grid(np.asarray(series.t), np.asarray(series.mask), names, ep["point"], ep["grid"])
     # precision with time-correlated epochs, on the filter's measurements (WGS-84 GK x, y, H)
     ps = point_sigmas(res.gk, np.asarray(series.mask) & (res.n[:, None] > 0), grid, point_segment)
-    t_arr, m_arr = np.asarray(series.t), np.asarray(series.mask)
     crs = (
         "reference grid of the control survey (4-parameter similarity from WGS-84 Gauss-Krueger; x north, y east, m)"
         if transform is not None
@@ -213,39 +185,8 @@ def run_rtk(
     if levelling is not None:
         table = dict(zip(lev.point, lev.height))
         h_level = np.array([table.get(n, np.nan) for n in names])
-    prec = {
-        key: dict(
-            plane_mm=float(np.nanmean(np.hypot(p[:, 0], p[:, 1]))) / MM, height_mm=float(np.nanmean(p[:, 2])) / MM
-        )
-        for key, p in (
-            ("filtered", res.precision),
-            ("conventional", res.raw_precision),
-            ("formal", res.formal_precision),
-        )
-    }
-    for key in ("conventional", "formal"):
-        prec[f"factor_{key}_over_filtered"] = dict(  # NaN (null in the JSON) where the filtered precision is 0
-            plane=_ratio(prec[key]["plane_mm"], prec["filtered"]["plane_mm"]),
-            height=_ratio(prec[key]["height_mm"], prec["filtered"]["height_mm"]),
-        )
-    summary["internal_precision_mean"] = prec
-    if np.any(np.isfinite(h_level)):
-        for key, h in (
-            ("filtered", res.xyh[:, 2]),
-            ("conventional_terminal", res.terminal_xyh[:, 2]),
-            ("conventional_H_anomaly", res.raw_xyh[:, 2]),
-        ):
-            if np.any(np.isfinite(h - h_level)):
-                c = compare_levelling(h, h_level)
-                summary[f"levelling_{key}"] = dict(
-                    max_abs_cm=c.max_abs / CM,
-                    mean_cm=c.mean / CM,
-                    std_cm=c.std / CM,
-                    rms_cm=c.rms / CM,
-                    thresholds_cm=[float(v) / CM for v in c.thresholds],
-                    count_within=[int(v) for v in c.count_within],
-                    share_within=[float(v) for v in c.share_within],
-                )
+    summary["internal_precision_mean"] = precision_summary(res)
+    summary.update({f"levelling_{k}": v for k, v in levelling_summary(res, h_level).items()})
     _log.info("writing rtk_results.csv, rtk_results.json and rtk.png into %s", out)
     proj = "; ".join(f"+proj=tmerc +lat_0=0 +lon_0={z:g} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m" for z in zones)
     csv_crs = (
@@ -284,42 +225,12 @@ def run_rtk(
         title=f"RTK {len(names)} point{'s' if len(names) != 1 else ''} from "
         f"{', '.join(fnames[:3])}{f' and {len(fnames) - 3} more' if len(fnames) > 3 else ''}",
     )
-    pts = []
-    for i, n in enumerate(names):
-        tv = t_arr[i][m_arr[i]]
-        pts.append(
-            dict(
-                name=str(n),
-                n_epochs=int(res.n[i]),
-                t_start=gpst_iso(tv[0]) if tv.size else None,
-                t_end=gpst_iso(tv[-1]) if tv.size else None,
-                x_m=float(res.xyh[i, 0]),
-                y_m=float(res.xyh[i, 1]),
-                h_m=float(res.xyh[i, 2]),
-                sigma_x_m=float(ps.sigma[i, 0]),
-                sigma_y_m=float(ps.sigma[i, 1]),
-                sigma_h_m=float(ps.sigma[i, 2]),
-                sigma_method=ps.method,
-                sigma_naive_x_m=float(ps.sigma_naive[i, 0]),
-                sigma_naive_y_m=float(ps.sigma_naive[i, 1]),
-                sigma_naive_h_m=float(ps.sigma_naive[i, 2]),
-                n_eff=[float(v) for v in ps.n_eff[i]],
-                lag1_autocorrelation=[float(v) for v in ps.lag1[i]],
-                segment=str(point_segment[i]),
-                segment_epochs=int(ps.segment_epochs[i]),
-                segment_points=int(ps.segment_points[i]),
-                precision_mm=[float(v) / MM for v in res.precision[i]],
-                raw_precision_mm=[float(v) / MM for v in res.raw_precision[i]],
-                formal_precision_mm=[float(v) / MM for v in res.formal_precision[i]],
-            )
-        )
+    pts = point_records(names, res, ps, series.t, series.mask, point_segment)
+    for q in pts:  # GPST s -> ISO time
+        for k in ("t_start", "t_end"):
+            q[k] = None if q[k] is None else gpst_iso(q[k])
     summary["points"] = pts
-    ok = np.all(np.isfinite(ps.sigma), axis=1) & np.all(np.isfinite(ps.sigma_naive), axis=1)
-    summary["sigma_mean_mm"] = dict(
-        corrected=[float(v) / MM for v in np.sqrt(np.mean(ps.sigma[ok] ** 2, axis=0))] if ok.any() else None,
-        naive=[float(v) / MM for v in np.sqrt(np.mean(ps.sigma_naive[ok] ** 2, axis=0))] if ok.any() else None,
-        components=["x", "y", "h"],
-    )
+    summary["sigma_mean_mm"] = sigma_summary(ps)
     summary["outputs"] = [str(out / "rtk_results.csv"), str(out / "rtk_results.json"), str(out / "rtk.png")]
     write_json(out / "rtk_results.json", summary)
     if not quiet:

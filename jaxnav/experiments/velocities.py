@@ -5,7 +5,7 @@ white + power-law (+ random-walk) noise by maximum likelihood (:func:`jaxnav.mon
 all stations' fits batched),
 writes ``monitor.json`` (labelled east/north/up values, mm and mm/yr) and one figure per station.
 With ``s1=True`` the S1 adaptive-filter analysis of the same files
-(:func:`jaxnav.experiments.run_monitor_files`) runs as well, into ``OUT/s1``, and its per-station
+(:func:`jaxnav.experiments.s1.run_monitor_files`) runs as well, into ``OUT/s1``, and its per-station
 results are copied under ``s1_adaptive_filter``.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from jaxnav import io
 from jaxnav.io import explicit_step
-from jaxnav.monitoring import COMPONENTS, decimal_year, fit_stations, iso_date, series_span
+from jaxnav.monitoring import COMPONENTS, decimal_year, fit_stations, iso_date, median_position, series_span
 from jaxnav.units import DAY
 
 UNITS = {
@@ -44,6 +44,54 @@ def _known_step_dict(k) -> dict:
         postseismic=[dict(form=f, tau_days=None if tau is None else float(tau) / DAY) for f, tau in k.postseismic],
         given_by=k.origin,
     )
+
+
+def _station_lines(station: str, rec: dict) -> list[str]:
+    """The text table's lines of one station record (velocities, MIDAS, steps, post-seismic terms, warnings)."""
+    lines = []
+    for comp in COMPONENTS:
+        n = rec["noise"][comp]
+        no = sum(1 for d in rec["outliers"]["list"] if d["component"] == comp)
+        lines.append(
+            f"{station:<8}{comp:<6}{rec['velocity_mm_per_yr'][comp]:>15.2f}"
+            f"{rec['velocity_sigma_mm_per_yr'][comp]:>10.2f}"
+            f"{rec['velocity_sigma_white_noise_only_mm_per_yr'][comp]:>13.3f}{n['white_mm']:>9.2f}"
+            f"{n['powerlaw_amplitude']:>14.2f}{n['spectral_index']:>7.2f}"
+            f"{n['random_walk_mm_per_sqrt_yr']:>12.2f}{no:>9d}"
+        )
+    mv, ms = rec["midas_velocity_mm_per_yr"], rec["midas_velocity_sigma_mm_per_yr"]
+    lines.append(
+        f"{'':<8}MIDAS mm/yr: "
+        + ", ".join(
+            f"{k} {'n/a' if mv[k] is None else format(mv[k], '+.2f')} +- "
+            f"{'n/a' if ms[k] is None else format(ms[k], '.2f')}"
+            for k in COMPONENTS
+        )
+    )
+    for st in rec["steps"]:
+        lines.append(
+            f"{'':<8}step {st['date']} ({st['source']}"
+            + (f", {st['kind']}" if st["kind"] else "")
+            + "): "
+            + ", ".join(f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm" for k, v in st["size_mm"].items())
+        )
+    for ps in rec["postseismic"]:
+        lo, hi = ps["tau_range_days"]
+        lines.append(
+            f"{'':<8}post-seismic {ps['form']} after {ps['date']}, tau {ps['tau_days']:.3g} d"
+            + (f" (estimated, {lo:.3g} .. {hi:.3g})" if ps["tau_estimated"] else " (given)")
+            + ": "
+            + ", ".join(f"{k} {v:+.1f} +- {ps['amplitude_sigma_mm'][k]:.1f} mm" for k, v in ps["amplitude_mm"].items())
+        )
+    if "acceleration_mm_per_yr2" in rec["polynomial"]:
+        acc, asd = rec["polynomial"]["acceleration_mm_per_yr2"], rec["polynomial"]["acceleration_sigma_mm_per_yr2"]
+        lines.append(
+            f"{'':<8}acceleration mm/yr^2 (rate at {rec['polynomial']['reference_epoch']}): "
+            + ", ".join(f"{k} {acc[k]:+.3f} +- {asd[k]:.3f}" for k in COMPONENTS)
+        )
+    for w in rec["warnings"]:
+        lines.append(f"{'':<8}warning: {w}")
+    return lines
 
 
 def run_monitor_velocities(
@@ -183,11 +231,11 @@ def run_monitor_velocities(
         poly_degree=poly_degree,
     )
     for f, s, fit, use, outside in zip(files, series, fits, uses, outsides):
-        span = f"{iso_date(fit.grid.t[0])} .. {iso_date(fit.grid.t[fit.grid.n_days - 1])}"
+        first_day, last_day = iso_date(fit.grid.t[0]), iso_date(fit.grid.t[fit.grid.n_days - 1])
         for k in outside:
             fit.warnings.append(
-                f"known step at {iso_date(k.epoch)} ({k.kind}, {k.origin}) is outside the series ({span}): "
-                "not in the model"
+                f"known step at {iso_date(k.epoch)} ({k.kind}, {k.origin}) is outside the series "
+                f"({first_day} .. {last_day}): not in the model"
             )
         fig = out / f"{s.station}_fit.png"
         plot_station_fit(fit, fig)
@@ -195,56 +243,11 @@ def run_monitor_velocities(
             fit, file=f, figure=fig, step_labels={float(k.epoch): (k.kind, k.origin) for k in use}
         )
         rec["known_steps_outside_series"] = [_known_step_dict(k) for k in outside]
-        llh = np.asarray(s.llh, float)
-        ok = np.isfinite(llh[:, :2]).all(axis=1)
-        rec["latitude_deg"] = float(np.degrees(np.median(llh[ok, 0]))) if ok.any() else None
-        rec["longitude_deg"] = float(np.degrees(np.median(llh[ok, 1]))) if ok.any() else None
-        rec["first_day"], rec["last_day"] = iso_date(fit.grid.t[0]), iso_date(fit.grid.t[fit.grid.n_days - 1])
+        pos = median_position(s)
+        rec["latitude_deg"], rec["longitude_deg"] = (None, None) if pos is None else map(float, np.degrees(pos))
+        rec["first_day"], rec["last_day"] = first_day, last_day
         result["stations"][s.station] = rec
-        for comp in COMPONENTS:
-            n = rec["noise"][comp]
-            no = sum(1 for d in rec["outliers"]["list"] if d["component"] == comp)
-            lines.append(
-                f"{s.station:<8}{comp:<6}{rec['velocity_mm_per_yr'][comp]:>15.2f}"
-                f"{rec['velocity_sigma_mm_per_yr'][comp]:>10.2f}"
-                f"{rec['velocity_sigma_white_noise_only_mm_per_yr'][comp]:>13.3f}{n['white_mm']:>9.2f}"
-                f"{n['powerlaw_amplitude']:>14.2f}{n['spectral_index']:>7.2f}"
-                f"{n['random_walk_mm_per_sqrt_yr']:>12.2f}{no:>9d}"
-            )
-        mv, ms = rec["midas_velocity_mm_per_yr"], rec["midas_velocity_sigma_mm_per_yr"]
-        lines.append(
-            f"{'':<8}MIDAS mm/yr: "
-            + ", ".join(
-                f"{k} {'n/a' if mv[k] is None else format(mv[k], '+.2f')} +- "
-                f"{'n/a' if ms[k] is None else format(ms[k], '.2f')}"
-                for k in COMPONENTS
-            )
-        )
-        for st in rec["steps"]:
-            lines.append(
-                f"{'':<8}step {st['date']} ({st['source']}"
-                + (f", {st['kind']}" if st["kind"] else "")
-                + "): "
-                + ", ".join(f"{k} {v:+.1f} +- {st['sigma_mm'][k]:.1f} mm" for k, v in st["size_mm"].items())
-            )
-        for ps in rec["postseismic"]:
-            lo, hi = ps["tau_range_days"]
-            lines.append(
-                f"{'':<8}post-seismic {ps['form']} after {ps['date']}, tau {ps['tau_days']:.3g} d"
-                + (f" (estimated, {lo:.3g} .. {hi:.3g})" if ps["tau_estimated"] else " (given)")
-                + ": "
-                + ", ".join(
-                    f"{k} {v:+.1f} +- {ps['amplitude_sigma_mm'][k]:.1f} mm" for k, v in ps["amplitude_mm"].items()
-                )
-            )
-        if "acceleration_mm_per_yr2" in rec["polynomial"]:
-            acc, asd = rec["polynomial"]["acceleration_mm_per_yr2"], rec["polynomial"]["acceleration_sigma_mm_per_yr2"]
-            lines.append(
-                f"{'':<8}acceleration mm/yr^2 (rate at {rec['polynomial']['reference_epoch']}): "
-                + ", ".join(f"{k} {acc[k]:+.3f} +- {asd[k]:.3f}" for k in COMPONENTS)
-            )
-        for w in rec["warnings"]:
-            lines.append(f"{'':<8}warning: {w}")
+        lines += _station_lines(s.station, rec)
         if s.n_masked:
             lines.append(f"{'':<8}{s.n_masked} position value(s) given as nan in {f}: masked")
     if s1:

@@ -5,7 +5,16 @@ maximum likelihood through the Kalman filter, outlier screening).
 The S1 experiment itself (simulation, Tables 1-6) is :mod:`jaxnav.experiments.s1`.
 """
 
-from jaxnav.monitoring._daily import PSD_GRID, StationVelocity, daily_forecasts, station_velocity, weighted_slope
+from jaxnav.monitoring._daily import (
+    DAILY_THRESHOLDS_ENU,
+    PSD_GRID,
+    StationVelocity,
+    daily_forecasts,
+    forecast_summary,
+    station_velocity,
+    velocity_summary,
+    weighted_slope,
+)
 from jaxnav.monitoring._midas import MidasVelocity, midas_pairs, midas_velocity
 from jaxnav.monitoring._network import (
     Forecast,
@@ -30,6 +39,7 @@ from jaxnav.monitoring._station import (
     fit_station,
     fit_stations,
     iso_date,
+    median_position,
     midas_check,
     period_amplitudes,
     polynomial_terms,
@@ -67,6 +77,10 @@ __all__ = [
     "decimal_year",
     "iso_date",
     "series_span",
+    "median_position",
+    "DAILY_THRESHOLDS_ENU",
+    "forecast_summary",
+    "velocity_summary",
     "Forecast",
     "InternalPrecision",
     "PSD_GRID",

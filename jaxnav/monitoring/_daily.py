@@ -15,8 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxnav import filters as jf
-from jaxnav.monitoring._network import forecast, initial_state, network_model_irregular
-from jaxnav.units import MM, YEAR
+from jaxnav.monitoring._network import forecast, initial_state, network_model_irregular, outlier_flags
+from jaxnav.monitoring._statistics import period_statistics
+from jaxnav.units import MM, MM_PER_YEAR, YEAR
 
 #: default grid of velocity random-walk PSDs searched by maximum likelihood, m^2/s^3
 #: ((1e-3 .. 100 mm/yr per sqrt(yr))^2 / yr)
@@ -204,3 +205,71 @@ def daily_forecasts(series, *, accel_psd, filters: dict):
     z = jnp.asarray(series.enu)
     x0, P0 = initial_state(z[0], sigma_pos=1.0, sigma_vel=1e-6)
     return {name: forecast(model, x0, P0, z, **kw) for name, kw in filters.items()}
+
+
+def _enu(a, unit=1.0):
+    """A (3,) east/north/up array as {"east", "north", "up"} in multiples of ``unit`` (None stays None)."""
+    if a is None:
+        return None
+    return dict(zip(("east", "north", "up"), (float(v) for v in np.asarray(a, float).reshape(3) / unit)))
+
+
+def velocity_summary(series, velocity: StationVelocity) -> dict:
+    """JSON-ready summary of a station's velocity (:func:`station_velocity`), east/north/up in mm/yr.
+
+    Args:
+      series: its :class:`jaxnav.io.DailySeries` (for the count of masked values).
+      velocity: :class:`StationVelocity` (m/s inside).
+    Returns:
+      dict: ``epochs``, ``span_years``, ``masked_values``, ``velocity_mm_per_yr``,
+      ``sigma_formal_mm_per_yr``, ``sigma_ar1_mm_per_yr``, ``ls_slope_mm_per_yr``,
+      ``published_mm_per_yr`` and ``published_sigma_mm_per_yr`` (None without a published
+      velocity), ``random_walk_psd_m2_per_s3`` (each a {"east", "north", "up"} dict).
+    """
+    v = velocity
+    ref = v.reference_velocity
+    return dict(
+        epochs=v.n,
+        span_years=v.span_years,
+        masked_values=series.n_masked,
+        velocity_mm_per_yr=_enu(v.velocity, MM_PER_YEAR),
+        sigma_formal_mm_per_yr=_enu(v.sigma, MM_PER_YEAR),
+        sigma_ar1_mm_per_yr=_enu(v.sigma_ar1, MM_PER_YEAR),
+        ls_slope_mm_per_yr=_enu(v.ls_velocity, MM_PER_YEAR),
+        published_mm_per_yr=_enu(ref, MM_PER_YEAR),
+        published_sigma_mm_per_yr=None if ref is None else _enu(v.reference_sigma, MM_PER_YEAR),
+        random_walk_psd_m2_per_s3=_enu(v.accel_psd),
+    )
+
+
+#: per-axis thresholds (east, north, up) of the shares in :func:`forecast_summary`, m
+DAILY_THRESHOLDS_ENU = (3 * MM, 3 * MM, 10 * MM)
+
+
+def forecast_summary(forecasts: dict, period: int) -> dict:
+    """Statistics of one station's one-day forecasts per filter (S1 eq. (20) per period), mm.
+
+    Args:
+      forecasts: {name: :class:`Forecast`} of one station (:func:`daily_forecasts`; ``deviation`` (N, 1, 3) m).
+      period: epochs per statistics period (at most N - 1 are used, at least 1).
+    Returns:
+      {name: {``m_P_mm``, ``m_H_mm``: (P,) lists; ``max_abs_mm``, ``mean_abs_mm``, ``share_under_3_3_10mm``
+      (fraction below :data:`DAILY_THRESHOLDS_ENU`): (P, 3) lists; ``status``; ``outliers_flagged``
+      (robust filters only)}}.
+    """
+    out = {}
+    for name, r in forecasts.items():
+        dev = np.asarray(r.deviation)
+        ps = period_statistics(dev, max(1, min(period, dev.shape[0] - 1)), thresholds=DAILY_THRESHOLDS_ENU)
+        out[name] = dict(
+            m_P_mm=(np.asarray(ps.m_P)[:, 0] / MM).tolist(),
+            m_H_mm=(np.asarray(ps.m_H)[:, 0] / MM).tolist(),
+            max_abs_mm=(np.asarray(ps.max_abs)[:, 0] / MM).tolist(),
+            mean_abs_mm=(np.asarray(ps.mean_abs)[:, 0] / MM).tolist(),
+            share_under_3_3_10mm=np.asarray(ps.share_under)[:, 0].tolist(),
+            status=int(r.status),
+        )
+        flags = outlier_flags(r.noise)
+        if flags is not None:
+            out[name]["outliers_flagged"] = int(np.sum(np.asarray(flags)))
+    return out

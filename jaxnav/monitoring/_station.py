@@ -121,6 +121,19 @@ def series_span(series) -> tuple[float, float]:
     return float(series.t[0]), float(series.t[0]) + float(_day_index(series)[-1]) * DAY
 
 
+def median_position(series):
+    """Median latitude and longitude of a daily series' epochs that give both, rad (None if none does).
+
+    Args:
+      series: :class:`jaxnav.io.DailySeries` (its ``llh`` (N, 3): latitude, longitude rad, height m).
+    Returns:
+      (2,) [latitude, longitude] rad, or None.
+    """
+    llh = np.asarray(series.llh, float)
+    ok = np.isfinite(llh[:, :2]).all(axis=1)
+    return np.median(llh[ok, :2], axis=0) if ok.any() else None
+
+
 def screen_outliers(
     series,
     *,

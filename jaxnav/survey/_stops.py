@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
+from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins.standstill import StandstillParams, shoe_statistic
 
 KNOWN_COORDINATE, KNOWN_POSITION, LEVELLING, ZUPT, TARGET = range(5)
@@ -333,3 +334,30 @@ def detection_scores(static, t, true_spans, *, min_duration: float = 2.0, min_ga
         ),
         "n_true_stops": len(true_spans),
     }
+
+
+def stop_records(stops: StopList) -> list[dict]:
+    """JSON-ready records of a stop list: one {"name", "kind" (a :data:`STOP_KINDS` name), "t_start", "t_end" (s)} per stop."""
+    return [
+        {
+            "name": stops.name[k],
+            "kind": STOP_KINDS[stops.kind[k]],
+            "t_start": float(stops.t_start[k]),
+            "t_end": float(stops.t_end[k]),
+        }
+        for k in range(len(stops.t_start))
+    ]
+
+
+def horizontal_speed(t, pos):
+    """Horizontal speed along a geodetic track (e.g. RTK positions), from central differences of its local E, N.
+
+    Args:
+      t: (N,) s, increasing.  pos: (N, 3) [lat rad, lon rad, h m] (E, N about the first position).
+    Returns:
+      (N,) m/s.
+    """
+    t, pos = np.asarray(t, float), np.asarray(pos, float)
+    enu = np.asarray(curvilinear_to_enu(pos[0], pos - pos[0]))
+    v = np.gradient(enu, t, axis=0)
+    return np.hypot(v[:, 0], v[:, 1])

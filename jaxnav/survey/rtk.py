@@ -44,7 +44,9 @@ from jaxnav.geodesy import (
     gauss_kruger,
     height_anomaly,
     similarity2d,
+    zone_central_meridian,
 )
+from jaxnav.units import CM, MM
 
 
 class RtkSeries(NamedTuple):
@@ -897,3 +899,190 @@ def point_sigmas(z, mask, grid, segment) -> PointSigmas:
         segment_points=seg_p,
         method=SIGMA_METHOD,
     )
+
+
+def central_meridians(series: RtkSeries, zone_width: int = 3) -> np.ndarray:
+    """Central meridian of the Gauss-Krüger zone of each point's mean longitude.
+
+    Args:
+      series: :class:`RtkSeries` of P points (longitudes of the valid epochs averaged).
+      zone_width: zone width, deg (3 or 6).
+    Returns:
+      (P,) central meridians, rad.
+    """
+    lon, mask = np.asarray(series.lon, float), np.asarray(series.mask, bool)
+    lon_pt = np.array([np.nanmean(np.where(m, lo, np.nan)) for lo, m in zip(lon, mask)])
+    return np.asarray(zone_central_meridian(jnp.asarray(lon_pt), zone_width)[0])
+
+
+def unusable_epochs(mask, lat, lon, H, sigma) -> int:
+    """Number of epochs the filter cannot use: masked, or with a non-finite position or standard error.
+
+    Args:
+      mask: (N,) bool valid epochs.  lat, lon: (N,) rad.  H: (N,) m.  sigma: (N, 3) m.
+    """
+    bad = ~np.asarray(mask, bool) | ~np.all(np.isfinite(np.asarray(sigma, float)), axis=1)
+    for a in (lat, lon, H):
+        bad = bad | ~np.isfinite(np.asarray(a, float))
+    return int(np.sum(bad))
+
+
+def _ratio(a: float, b: float) -> float:
+    """a / b, NaN where b is 0 or either is not finite (identical epochs give a zero precision)."""
+    return a / b if math.isfinite(a) and math.isfinite(b) and b != 0.0 else float("nan")
+
+
+def connection_summary(con: ConnectionModels) -> dict:
+    """The connection survey's fitted models (S2 step 3) as JSON-ready numbers in the units their keys name.
+
+    Args:
+      con: :class:`ConnectionModels` (:func:`connection_models`).
+    Returns:
+      dict with ``datum_transformation`` (4-parameter similarity: ``tx``, ``ty`` m, ``theta_arcsec``,
+      ``m_ppm``, ``sigma0_mm``, ``residual_rms_mm`` (x, y), ``n_control``) where a transformation was
+      fitted, and ``height_anomaly`` (``surface``, ``sigma0_mm``, ``n_control``, ``residuals_mm`` (C,))
+      where a surface was fitted.
+    """
+    out = {}
+    if con.transform is not None:
+        tp = con.transform
+        out["datum_transformation"] = dict(
+            model="4-parameter plane similarity (x' = t + (1+m) R(theta) x)",
+            tx=float(tp.params.t[0]),
+            ty=float(tp.params.t[1]),
+            theta_arcsec=float(tp.params.theta) / (math.pi / 648000),
+            m_ppm=float(tp.params.m) * 1e6,
+            sigma0_mm=float(tp.sigma0) / MM,
+            residual_rms_mm=[float(v) / MM for v in tp.rms],
+            n_control=int(tp.residuals.shape[0]),
+        )
+    if con.anomaly is not None:
+        an = con.anomaly
+        out["height_anomaly"] = dict(
+            surface=an.kind,
+            sigma0_mm=float(an.sigma0) / MM,
+            n_control=int(an.residuals.shape[0]),
+            residuals_mm=[float(v) / MM for v in an.residuals],
+        )
+    return out
+
+
+def precision_summary(res: RtkResult) -> dict:
+    """Mean internal precision of the point means over P points (S2 eq. (19)), plane and height, mm.
+
+    Args:
+      res: :class:`RtkResult` (``precision``, ``raw_precision``, ``formal_precision``: (P, 3) m).
+    Returns:
+      {"filtered" | "conventional" | "formal": {"plane_mm", "height_mm"}} (NaN points left out;
+      plane: sqrt(x^2 + y^2) per point) and ``factor_conventional_over_filtered``,
+      ``factor_formal_over_filtered``: {"plane", "height"} ratios (NaN where the filtered one is 0).
+    """
+    out = {}
+    for key, p in (("filtered", res.precision), ("conventional", res.raw_precision), ("formal", res.formal_precision)):
+        p = np.asarray(p, float)
+        out[key] = dict(
+            plane_mm=float(np.nanmean(np.hypot(p[:, 0], p[:, 1]))) / MM, height_mm=float(np.nanmean(p[:, 2])) / MM
+        )
+    for key in ("conventional", "formal"):
+        out[f"factor_{key}_over_filtered"] = dict(
+            plane=_ratio(out[key]["plane_mm"], out["filtered"]["plane_mm"]),
+            height=_ratio(out[key]["height_mm"], out["filtered"]["height_mm"]),
+        )
+    return out
+
+
+def levelling_summary(res: RtkResult, h_level, thresholds=(0.007, 0.010, 0.015)) -> dict:
+    """S2 Table 3 for each height path of the results: :func:`compare_levelling` in cm.
+
+    Args:
+      res: :class:`RtkResult` of P points; its filtered (``xyh``), terminal (``terminal_xyh``) and
+        conventional (``raw_xyh``) heights are compared, m.
+      h_level: (P,) levelled heights, m (NaN: not levelled).
+      thresholds: |difference| thresholds, m (S2: 0.7, 1.0, 1.5 cm).
+    Returns:
+      {"filtered" | "conventional_terminal" | "conventional_H_anomaly": {``max_abs_cm``,
+      ``mean_cm``, ``std_cm``, ``rms_cm``, ``thresholds_cm``, ``count_within``, ``share_within``}},
+      only the paths with at least one point that has both heights.
+    """
+    h_level = np.asarray(h_level, float)
+    out = {}
+    for key, h in (
+        ("filtered", res.xyh[:, 2]),
+        ("conventional_terminal", res.terminal_xyh[:, 2]),
+        ("conventional_H_anomaly", res.raw_xyh[:, 2]),
+    ):
+        h = np.asarray(h, float)
+        if np.any(np.isfinite(h - h_level)):
+            c = compare_levelling(h, h_level, thresholds)
+            out[key] = dict(
+                max_abs_cm=c.max_abs / CM,
+                mean_cm=c.mean / CM,
+                std_cm=c.std / CM,
+                rms_cm=c.rms / CM,
+                thresholds_cm=[float(v) / CM for v in c.thresholds],
+                count_within=[int(v) for v in c.count_within],
+                share_within=[float(v) for v in c.share_within],
+            )
+    return out
+
+
+def point_records(names, res: RtkResult, sigmas: PointSigmas, t, mask, segment) -> list[dict]:
+    """One JSON-ready record per point: coordinates, precisions (m and mm as the keys name) and its epochs.
+
+    Args:
+      names: (P,) point names.  res: :class:`RtkResult`.  sigmas: :class:`PointSigmas` of the points.
+      t: (P, T) epoch times, s.  mask: (P, T) bool valid epochs.  segment: (P,) static-segment label.
+    Returns:
+      list of P dicts: ``name``, ``n_epochs``, ``t_start``, ``t_end`` (first and last valid epoch, s;
+      None without one), ``x_m``, ``y_m``, ``h_m``, ``sigma_{x,y,h}_m``, ``sigma_method``,
+      ``sigma_naive_{x,y,h}_m``, ``n_eff`` and ``lag1_autocorrelation`` (x, y, h), ``segment``,
+      ``segment_epochs``, ``segment_points``, ``precision_mm``, ``raw_precision_mm``,
+      ``formal_precision_mm`` (x, y, h; S2 eq. (19)).
+    """
+    t, mask = np.asarray(t, float), np.asarray(mask, bool)
+    ps = sigmas
+    mm = lambda a: [float(v) / MM for v in a]
+    out = []
+    for i, n in enumerate(names):
+        tv = t[i][mask[i]]
+        out.append(
+            dict(
+                name=str(n),
+                n_epochs=int(res.n[i]),
+                t_start=float(tv[0]) if tv.size else None,
+                t_end=float(tv[-1]) if tv.size else None,
+                x_m=float(res.xyh[i, 0]),
+                y_m=float(res.xyh[i, 1]),
+                h_m=float(res.xyh[i, 2]),
+                sigma_x_m=float(ps.sigma[i, 0]),
+                sigma_y_m=float(ps.sigma[i, 1]),
+                sigma_h_m=float(ps.sigma[i, 2]),
+                sigma_method=ps.method,
+                sigma_naive_x_m=float(ps.sigma_naive[i, 0]),
+                sigma_naive_y_m=float(ps.sigma_naive[i, 1]),
+                sigma_naive_h_m=float(ps.sigma_naive[i, 2]),
+                n_eff=[float(v) for v in ps.n_eff[i]],
+                lag1_autocorrelation=[float(v) for v in ps.lag1[i]],
+                segment=str(segment[i]),
+                segment_epochs=int(ps.segment_epochs[i]),
+                segment_points=int(ps.segment_points[i]),
+                precision_mm=mm(res.precision[i]),
+                raw_precision_mm=mm(res.raw_precision[i]),
+                formal_precision_mm=mm(res.formal_precision[i]),
+            )
+        )
+    return out
+
+
+def sigma_summary(sigmas: PointSigmas) -> dict:
+    """RMS over points of the point-mean precisions with correlated and with independent epochs, mm.
+
+    Args:
+      sigmas: :class:`PointSigmas` of P points (points with a NaN in either left out).
+    Returns:
+      {"corrected": (3,) list or None, "naive": (3,) list or None, "components": ["x", "y", "h"]}.
+    """
+    s, sn = np.asarray(sigmas.sigma, float), np.asarray(sigmas.sigma_naive, float)
+    ok = np.all(np.isfinite(s), axis=1) & np.all(np.isfinite(sn), axis=1)
+    rms = lambda a: [float(v) / MM for v in np.sqrt(np.mean(a[ok] ** 2, axis=0))] if ok.any() else None
+    return dict(corrected=rms(s), naive=rms(sn), components=["x", "y", "h"])
