@@ -51,7 +51,7 @@ def worker(a):
 
     from jaxnav import filters as jf
     from jaxnav import tune
-    from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules
+    from jaxnav.experiments.s0 import S0Setup, inflated_states, load_experiment, rules
     from jaxnav.geodesy import curvilinear_to_enu
     from jaxnav.ins import error_model_for
 

@@ -35,7 +35,7 @@ from _harness import cpu_model, git_revision, loadavg, write_section
 from _harness import package_version as _version
 from bench_insgnss import PyinsCase, enu_err, make_setup, pyins_pos_after_fix, rms, simulate_seeds, take
 
-from jaxnav.experiments import S0Setup, s0_measurements
+from jaxnav.experiments.s0 import S0Setup, s0_measurements
 from jaxnav.ins import LCPropagation, LCSave, loosely_coupled, smooth
 
 HERE = Path(__file__).resolve().parent

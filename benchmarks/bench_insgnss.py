@@ -19,7 +19,7 @@ with P = [[0,1,0],[1,0,0],[0,0,-1]] for pyins, see tests/test_pyins.py):
            gyro random constant, gyro first-order Markov drift (tau 300 s), accelerometer random
            constant; phi-angle error model in ENU; Phi/Qd by Van Loan once per 1 s epoch from the
            epoch-averaged F; 6-D position + velocity update; feedback after every fix), as the
-           demo calls it (``jaxnav.experiments.S0Setup`` parameters), saving only the per-epoch navigation
+           demo calls it (``jaxnav.experiments.s0.S0Setup`` parameters), saving only the per-epoch navigation
            state. Single seed: the user call (host-side validation + IMU segmentation included).
            Seeds: ``jax.jit(jax.vmap(...))`` over the per-seed IMU record, fixes and initial state.
   pyins    ``pyins.filters.run_feedback_filter`` (python-ins 1.0.1; EKF with feedback), what a
@@ -76,7 +76,7 @@ from pyins import filters as pfilters
 from pyins import inertial_sensor, measurements, strapdown, transform
 
 from jaxnav import sim
-from jaxnav.experiments import S0Setup, load_experiment, s0_measurements
+from jaxnav.experiments.s0 import S0Setup, load_experiment, s0_measurements
 from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins import LCPropagation, LCSave, error_model_for, loosely_coupled
 from jaxnav.ins import attitude as att

@@ -51,7 +51,7 @@ from jaxnav import (
     sim,
     tune,
 )
-from jaxnav.experiments import S0Setup, inflated_states, load_experiment, rules, s0_measurements
+from jaxnav.experiments.s0 import S0Setup, inflated_states, load_experiment, rules, s0_measurements
 from jaxnav.ins import LCDiscretization, LCPropagation, LCSave, error_model_for, loosely_coupled
 
 BEGIN, END = "<!-- BEGIN bench_s0_study -->", "<!-- END bench_s0_study -->"

@@ -52,7 +52,7 @@ import numpy as np
 import optax
 
 from jaxnav import tune
-from jaxnav.experiments import S0Setup, load_experiment, s0_metrics
+from jaxnav.experiments.s0 import S0Setup, load_experiment, s0_metrics
 
 BEGIN, END = "<!-- BEGIN bench_tune -->", "<!-- END bench_tune -->"
 B_PAPER = 0.254

@@ -1,5 +1,5 @@
 """``jaxnav cadastral``: the S3 cadastral-survey post-processing over Monte Carlo seeds
-(:func:`jaxnav.experiments.run_cadastral`)."""
+(:func:`jaxnav.experiments.s3.run_cadastral`)."""
 
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the S3 experiment, print its summary, write results.json and figures into ``--out``."""
-    from jaxnav.experiments import format_cadastral, run_cadastral
+    from jaxnav.experiments.s3 import format_cadastral, run_cadastral
     from jaxnav.io import loads_toml, read_stop_list
     from jaxnav.sim import load_cadastral
 

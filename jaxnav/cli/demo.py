@@ -1,4 +1,4 @@
-"""``jaxnav demo``: the S0 reproduction (:func:`jaxnav.experiments.run_s0`)."""
+"""``jaxnav demo``: the S0 reproduction (:func:`jaxnav.experiments.s0.run_s0`)."""
 
 from __future__ import annotations
 
@@ -39,8 +39,7 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the reproduction, print its table, write results.json and figures into ``--out``."""
-    from jaxnav.experiments import format_s0, load_experiment, run_s0
-    from jaxnav.experiments.s0 import EXPERIMENT
+    from jaxnav.experiments.s0 import EXPERIMENT, format_s0, load_experiment, run_s0
 
     writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     if args.config is not None:

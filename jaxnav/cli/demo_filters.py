@@ -1,4 +1,4 @@
-"""``jaxnav demo-filters``: the filter family on a CV series (:func:`jaxnav.experiments.run_filter_family`)."""
+"""``jaxnav demo-filters``: the filter family on a CV series (:func:`jaxnav.experiments.filter_family.run_filter_family`)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the demonstration, print its table, write results.json and filter_family.png into ``--out``."""
-    from jaxnav.experiments import format_filter_family, run_filter_family
+    from jaxnav.experiments.filter_family import format_filter_family, run_filter_family
 
     writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     prepare_out(args.out)

@@ -5,10 +5,10 @@
   annual, semi-annual, steps given by ``--step`` and ``--steps-file`` or detected, post-seismic
   terms, ``--poly-degree``) with white + flicker (+ random-walk) noise fitted by maximum
   likelihood, velocities and their uncertainties, one figure per station
-  (:func:`jaxnav.experiments.run_monitor_velocities`). ``--s1`` adds S1's adaptive-filter
-  forecasts and statistics of the same files (:func:`jaxnav.experiments.run_monitor_files`).
+  (:func:`jaxnav.experiments.velocities.run_monitor_velocities`). ``--s1`` adds S1's adaptive-filter
+  forecasts and statistics of the same files (:func:`jaxnav.experiments.s1.run_monitor_files`).
 * ``jaxnav monitor --simulate --out DIR``: the S1 experiment on simulated stations, S1's
-  Tables 1-6 (:func:`jaxnav.experiments.run_monitor_simulation`).
+  Tables 1-6 (:func:`jaxnav.experiments.s1.run_monitor_simulation`).
 
 Both write ``monitor.json`` and PNG figures to ``--out``.
 """
@@ -187,7 +187,8 @@ def _kappa(text: str):
 
 def run(args) -> int:
     """Process the files (or simulate), print the results, write monitor.json and figures into ``--out``."""
-    from jaxnav.experiments import run_monitor_simulation, run_monitor_velocities
+    from jaxnav.experiments.s1 import run_monitor_simulation
+    from jaxnav.experiments.velocities import run_monitor_velocities
 
     if not args.simulate and not args.files:
         raise UsageError("give daily series files (.tenv3, .neu, .col, .pos) or --simulate")

@@ -1,4 +1,4 @@
-"""``jaxnav rtk``: the S2 pipeline on RTK epoch logs or RTKLIB .pos files (:func:`jaxnav.experiments.run_rtk`)."""
+"""``jaxnav rtk``: the S2 pipeline on RTK epoch logs or RTKLIB .pos files (:func:`jaxnav.experiments.s2.run_rtk`)."""
 
 from __future__ import annotations
 
@@ -82,7 +82,7 @@ def register(subparsers):
 
 def run(args) -> int:
     """Optionally write the simulated survey, then run the pipeline on the files (prints a summary)."""
-    from jaxnav.experiments import run_rtk, write_simulated_survey
+    from jaxnav.experiments.s2 import run_rtk, write_simulated_survey
     from jaxnav.survey import MotionParams
 
     if not args.files and args.simulate is None:

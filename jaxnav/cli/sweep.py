@@ -1,4 +1,4 @@
-"""``jaxnav sweep CONFIG --out DIR``: a parameter grid x Monte Carlo runs (:func:`jaxnav.experiments.run_sweep`).
+"""``jaxnav sweep CONFIG --out DIR``: a parameter grid x Monte Carlo runs (:func:`jaxnav.experiments.tuning.run_sweep`).
 
 CONFIG is a TOML file or the name of a shipped one (``s0_b``, ``cv_noise``; see
 ``jaxnav/experiments/configs/``); writes ``DIR/results.json``, ``DIR/table.csv`` and figures.
@@ -20,7 +20,7 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the sweep, print its summary, write results.json, table.csv and figures into ``--out``."""
-    from jaxnav.experiments import format_sweep, load_config, run_sweep
+    from jaxnav.experiments.tuning import format_sweep, load_config, run_sweep
 
     writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     cfg = load_config(args.config)  # every section and key checked before any work

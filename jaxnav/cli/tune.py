@@ -1,4 +1,4 @@
-"""``jaxnav tune CONFIG --out DIR``: gradient tuning of filter parameters (:func:`jaxnav.experiments.run_tune`).
+"""``jaxnav tune CONFIG --out DIR``: gradient tuning of filter parameters (:func:`jaxnav.experiments.tuning.run_tune`).
 
 CONFIG is a TOML file or the name of a shipped one (``s0_b``, ``cv_noise``; see
 ``jaxnav/experiments/configs/``); writes ``DIR/results.json`` and figures.
@@ -18,7 +18,7 @@ def register(subparsers):
 
 def run(args) -> int:
     """Run the tuning, print its summary, write results.json and figures into ``--out``."""
-    from jaxnav.experiments import format_tune, load_config, run_tune
+    from jaxnav.experiments.tuning import format_tune, load_config, run_tune
 
     writer = start_processes(args)  # several processes: all compute, process 0 writes and prints
     cfg = load_config(args.config)  # every section and key checked before any work

@@ -30,7 +30,7 @@ def register(subparsers):
 def run(args) -> int:
     """Run the shipped ``walk_0827`` config of ``jaxnav ins`` on the walk set, write its outputs into ``--out``."""
     from jaxnav.cli.ins import check_input_files, run_config
-    from jaxnav.experiments import walk_config
+    from jaxnav.experiments.walk import walk_config
 
     data = data_dir(args.data, WALK_SET)  # <root>/rtklibexplorer-gnss-imu, root absolute
     cfg = walk_config(data.parent)

@@ -70,7 +70,7 @@ def plot_s1_statistics(result: dict, path):
     """Per-period plane and height forecast RMS (m_P, m_H) of every filter (S1 Tables 1-2 as a figure).
 
     Args:
-      result: output of :func:`jaxnav.experiments.run_s1_simulation`.
+      result: output of :func:`jaxnav.experiments.s1.run_s1_simulation`.
       path: PNG file.
     Returns:
       The figure.

@@ -17,7 +17,7 @@ import pytest
 from _paths import ROOT
 
 from jaxnav.cli import main
-from jaxnav.experiments import EXPERIMENT
+from jaxnav.experiments.s0 import EXPERIMENT
 from jaxnav.io import json_ready, write_json
 
 EPOCHS = "point,time,x,y,h,B,L,H,sigma_x,sigma_y,sigma_h\n" + "".join(

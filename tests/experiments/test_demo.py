@@ -8,7 +8,7 @@ import pytest
 from _outputs import check_provenance
 
 from jaxnav.cli import main
-from jaxnav.experiments import EXPERIMENT, load_experiment
+from jaxnav.experiments.s0 import EXPERIMENT, load_experiment
 from jaxnav.tune import run_chunked
 
 

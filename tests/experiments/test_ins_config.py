@@ -131,7 +131,7 @@ def test_frd_to_rfu_body_and_lever_arm():
 
 
 def test_walk_config_reproduces_the_walk_mounting(monkeypatch):
-    from jaxnav.experiments import WALK_LEVER_RFU, WALK_SENSOR_TO_BODY
+    from jaxnav.experiments.walk import WALK_LEVER_RFU, WALK_SENSOR_TO_BODY
 
     monkeypatch.setenv("JAXNAV_DATA", "/data")
     cfg = load_ins_config("walk_0827")

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from jaxnav.cli import main
-from jaxnav.experiments import S0Setup, load_config, load_experiment, s0_metrics
+from jaxnav.experiments.s0 import S0Setup, load_experiment, s0_metrics
+from jaxnav.experiments.tuning import load_config
 
 NAMES = ("b", "rho", "q_scale", "r_scale")
 THETA = np.array([0.254, 9.0, 1.3, 0.8])

@@ -56,7 +56,7 @@ def test_the_issue_case_is_13_6_deg_off():
 
 def test_walk_mounting_unchanged():
     """The walk set's (180, 0, -90) is symmetric: diag(-1, -1, 1), as the walk pipeline uses today."""
-    from jaxnav.experiments import WALK_SENSOR_TO_BODY
+    from jaxnav.experiments.walk import WALK_SENSOR_TO_BODY
 
     new = ins.sensor_to_body(ins.mounting_from_groves_deg(180.0, 0.0, -90.0))
     for C in (new, ins.sensor_to_body(ins.mounting_from_rpy_deg(180.0, 0.0, -90.0)), WALK_SENSOR_TO_BODY):

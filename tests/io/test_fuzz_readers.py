@@ -237,7 +237,7 @@ def _read_imu(p):
 
 
 def _read_experiment(p):
-    from jaxnav.experiments import load_experiment
+    from jaxnav.experiments.s0 import load_experiment
 
     return load_experiment(p)
 
@@ -249,7 +249,7 @@ def _check_experiment(d):
 
 
 def _experiment_source():
-    from jaxnav.experiments import EXPERIMENT
+    from jaxnav.experiments.s0 import EXPERIMENT
 
     return pathlib.Path(EXPERIMENT).read_bytes()
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from _paths import DATA_ROOT
 
-from jaxnav import experiments as ex
 from jaxnav import filters as jf
 from jaxnav import io, sim
 from jaxnav import monitoring as mon
+from jaxnav.experiments import s1 as ex
 from jaxnav.units import MM_PER_YEAR
 
 DATA = DATA_ROOT / "gnss_daily_timeseries"
