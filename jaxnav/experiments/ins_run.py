@@ -40,15 +40,12 @@ from jaxnav.ins import (
     OutageScores,
     PVMeasurements,
     SensorBiases,
-    antenna_enu,
     check_tunable,
     coarse_alignment,
     error_model_for,
     gnss_checked_standstill,
     gnss_solution_measurements,
     gnss_speed_test,
-    horizontal_fix_nll,
-    horizontal_sigma,
     in_windows,
     interpolate_on_samples,
     lc_params,
@@ -60,13 +57,14 @@ from jaxnav.ins import (
     offset_search_epochs,
     outage_windows,
     scale_gnss_sigmas,
-    score_outages,
+    score_run,
     search_time_offset,
     sensor_to_body,
     smooth,
     solution_errors,
     standstill_summary,
     training_windows,
+    withheld_fix_loss,
     zaru,
     zupt,
 )
@@ -460,49 +458,25 @@ def run_ins(prep: Prepared, d: LCNoise | None = None) -> InsRun:
     sm_nav, sm_b, sm_P = smooth(res, error_model=model)
     jax.block_until_ready(sm_nav.pos)
     runtime = time.perf_counter() - t0
-    meas = prep.meas
-    # the filter's epochs are the GNSS epochs merged with the pseudo-measurement (ZUPT/NHC) epochs
-    g = np.nonzero(np.asarray(res.epochs.gnss_row) >= 0)[0]
-    ep = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], res.epochs)
-    sm_nav_g = jax.tree_util.tree_map(lambda a: np.asarray(a)[g], sm_nav)
-    sm_P_g = np.asarray(sm_P)[g]
-    pos0 = np.array([float(x) for x in prep.alignment.nav0.pos])
-    lev = np.asarray(meas.lever)
-    enu_f = np.asarray(antenna_enu(ep.nav, ep.t_nav, meas.t, lev, pos0))
-    enu_s = np.asarray(antenna_enu(sm_nav_g, ep.t_nav, meas.t, lev, pos0))
-    enu_ref = np.asarray(curvilinear_to_enu(pos0, np.asarray(meas.pos) - pos0))
     fixed = np.asarray(prep.pos.q)[prep.keep] == 1
-    nonfinite = int(sum(np.count_nonzero(~np.isfinite(np.asarray(a))) for a in (*ep.nav, *sm_nav)))
-    scores = None
-    if prep.outages.shape[0]:
-        e_f = np.hypot(*(enu_f - enu_ref)[:, :2].T)
-        e_s = np.hypot(*(enu_s - enu_ref)[:, :2].T)
-        scores = score_outages(
-            np.asarray(meas.t),
-            e_f,
-            e_s,
-            fixed,
-            prep.withheld,
-            prep.outages,
-            runtime_s=runtime,
-            n_nonfinite=nonfinite,
-            sig_f=horizontal_sigma(ep.covs, ep.nav.pos, model.idx),
-            sig_s=horizontal_sigma(sm_P_g, sm_nav_g.pos, model.idx),
-        )
+    pos0 = np.array([float(x) for x in prep.alignment.nav0.pos])
+    tr, scores = score_run(
+        res, sm_nav, sm_P, prep.meas, fixed, prep.withheld, prep.outages, model.idx, pos0, runtime_s=runtime
+    )
     return InsRun(
         prep=prep,
         result=res,
         smoothed_nav=sm_nav,
         smoothed_biases=sm_b,
         smoothed_covs=sm_P,
-        enu_ref=enu_ref,
-        enu_fwd=enu_f,
-        enu_sm=enu_s,
+        enu_ref=tr.enu_ref,
+        enu_fwd=tr.enu_fwd,
+        enu_sm=tr.enu_sm,
         fixed=fixed,
         scores=scores,
         runtime_s=runtime,
         densities=d,
-        gnss_epochs=g,
+        gnss_epochs=tr.gnss_epochs,
     )
 
 
@@ -710,8 +684,6 @@ def tune_noise(
         base_mask = base_mask & ~inside[:, None]
     seen = prep.meas._replace(mask=base_mask)
     pos0 = jnp.asarray(np.asarray(prep.alignment.nav0.pos, float))
-    ref = jnp.asarray(np.asarray(prep.meas.pos, float))
-    R_h = jnp.asarray(np.asarray(prep.meas.R, float)[:, :2, :2])
     idx = run_error_model(prep.cfg).idx
 
     def loss(d, lev):
@@ -719,20 +691,7 @@ def tune_noise(
         if loss_kind == "innovations":
             return -run_filter(prep, d, meas=m, save=("nav",)).loglik
         res = run_filter(prep, d, meas=m, save=("nav", "covs"))
-        g = np.nonzero(np.asarray(res.epochs.gnss_row) >= 0)[0]
-        nav = jax.tree_util.tree_map(lambda a: a[g], res.epochs.nav)
-        nll = horizontal_fix_nll(
-            nav,
-            res.epochs.covs[g],
-            res.epochs.t_nav[g],
-            jnp.asarray(np.asarray(prep.meas.t)),
-            ref,
-            R_h * d.pos_sigma_scale**2,
-            lev,
-            pos0,
-            idx,
-        )
-        return jnp.sum(jnp.where(jnp.asarray(scored), nll, 0.0))
+        return withheld_fix_loss(res, prep.meas, scored, lev, pos0, idx, R_scale=d.pos_sigma_scale**2)
 
     return fit_lc_noise(
         loss,

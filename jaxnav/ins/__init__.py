@@ -55,6 +55,7 @@ from jaxnav.ins.error_model import (
 from jaxnav.ins.evaluation import (  # GNSS outage protocol and sigmas of error covariances
     NoCommonEpochError,
     OutageScores,
+    RunTracks,
     TrajectoryErrors,
     attitude_sigmas,
     error_statistics,
@@ -67,7 +68,9 @@ from jaxnav.ins.evaluation import (  # GNSS outage protocol and sigmas of error 
     pooled_outage_drifts,
     position_cov_enu,
     position_sigmas_enu,
+    run_tracks,
     score_outages,
+    score_run,
     shifted_outage_windows,
     solution_errors,
     training_windows,
@@ -93,7 +96,7 @@ from jaxnav.ins.integration import (
     segment_imu,
     smooth,
 )
-from jaxnav.ins.likelihood import antenna_enu, horizontal_fix_nll
+from jaxnav.ins.likelihood import antenna_enu, horizontal_fix_nll, withheld_fix_loss
 from jaxnav.ins.measurements import (
     Aid,
     MeasContext,
@@ -287,6 +290,9 @@ __all__ += [
     "horizontal_sigma",
     "in_windows",
     "outage_windows",
+    "RunTracks",
+    "run_tracks",
+    "score_run",
     "outage_drift_maxima",
     "outage_statistics",
     "NoCommonEpochError",
@@ -299,6 +305,7 @@ __all__ += [
     "score_outages",
     "training_windows",
     "horizontal_fix_nll",
+    "withheld_fix_loss",
     "antenna_enu",
     "LikelihoodOffset",
     "clock_drift",

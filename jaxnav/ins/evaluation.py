@@ -23,6 +23,7 @@ import numpy as np
 
 from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins.attitude import quat_to_roll_pitch_heading
+from jaxnav.ins.likelihood import antenna_enu
 from jaxnav.units import WEEK
 
 #: chi-square quantile of 3 degrees of freedom at 99.73 % (the 3-sigma probability): a position
@@ -574,6 +575,76 @@ def score_outages(
 
 
 # ----------------------------------------------------------------------------- sigmas from error covariances
+class RunTracks(NamedTuple):
+    """Antenna positions of a loosely coupled run at its GNSS epochs, local ENU around ``pos0``, m.
+
+    Attributes:
+      gnss_epochs: (M,) int index of the GNSS epochs among the filter's epochs (the others are
+        pseudo-measurement epochs: ZUPT, NHC, odometer).
+      enu_ref: (M, 3) the GNSS positions.  enu_fwd, enu_sm: (M, 3) the forward and smoothed solutions
+        moved to the GNSS times and out to the antenna (:func:`jaxnav.ins.antenna_enu`).
+      pos0: (3,) the ENU origin [lat rad, lon rad, h m].
+    """
+
+    gnss_epochs: np.ndarray
+    enu_ref: np.ndarray
+    enu_fwd: np.ndarray
+    enu_sm: np.ndarray
+    pos0: np.ndarray
+
+
+def run_tracks(result, smoothed_nav, meas, pos0) -> RunTracks:
+    """:class:`RunTracks` of a run: forward (``result``, :class:`jaxnav.ins.LCResult` saving ``nav``) and smoothed
+    (``smoothed_nav``, :func:`jaxnav.ins.smooth`, (E, ...) at the filter's E epochs) solutions at the M epochs of
+    ``meas`` (:class:`jaxnav.ins.PVMeasurements`) with its lever arm, ENU around ``pos0`` (3,) rad, rad, m."""
+    ep = result.epochs
+    g = np.nonzero(np.asarray(ep.gnss_row) >= 0)[0]
+    at_g = lambda tree: type(tree)(*(np.asarray(a)[g] for a in tree))
+    pos0 = np.asarray(pos0, float)
+    t_nav, t, lev = np.asarray(ep.t_nav)[g], np.asarray(meas.t), np.asarray(meas.lever)
+    return RunTracks(
+        gnss_epochs=g,
+        enu_ref=np.asarray(curvilinear_to_enu(pos0, np.asarray(meas.pos) - pos0)),
+        enu_fwd=np.asarray(antenna_enu(at_g(ep.nav), t_nav, t, lev, pos0)),
+        enu_sm=np.asarray(antenna_enu(at_g(smoothed_nav), t_nav, t, lev, pos0)),
+        pos0=pos0,
+    )
+
+
+def score_run(
+    result, smoothed_nav, smoothed_covs, meas, fixed, withheld, windows, idx, pos0, *, runtime_s=float("nan")
+) -> tuple[RunTracks, OutageScores | None]:
+    """A loosely coupled run on the GNSS outage protocol: its :class:`RunTracks` and :func:`score_outages` of the
+    horizontal antenna errors at the fixed epochs withheld in ``windows`` (None without a window).
+
+    Args:
+      result: :class:`jaxnav.ins.LCResult` saving ``nav`` and ``covs``.  smoothed_nav, smoothed_covs: its RTS
+        solution (:func:`jaxnav.ins.smooth`).  meas: the :class:`jaxnav.ins.PVMeasurements` (M epochs) it ran on.
+      fixed: (M,) bool fixed-quality reference epochs.  withheld: (M,) bool epochs withheld from the filter.
+      windows: (K, 2) outage windows, s.  idx: the error model's state indices.  pos0: (3,) ENU origin.
+      runtime_s: the run's wall time, s (reported).
+    """
+    tr = run_tracks(result, smoothed_nav, meas, pos0)
+    if not np.shape(windows)[0]:
+        return tr, None
+    g = tr.gnss_epochs
+    ep = result.epochs
+    nav_s = type(smoothed_nav)(*(np.asarray(a)[g] for a in smoothed_nav))
+    nonfinite = int(sum(np.count_nonzero(~np.isfinite(np.asarray(a))) for a in (*ep.nav, *smoothed_nav)))
+    return tr, score_outages(
+        np.asarray(meas.t),
+        np.hypot(*(tr.enu_fwd - tr.enu_ref)[:, :2].T),
+        np.hypot(*(tr.enu_sm - tr.enu_ref)[:, :2].T),
+        fixed,
+        withheld,
+        windows,
+        runtime_s=runtime_s,
+        n_nonfinite=nonfinite,
+        sig_f=horizontal_sigma(np.asarray(ep.covs)[g], np.asarray(ep.nav.pos)[g], idx),
+        sig_s=horizontal_sigma(np.asarray(smoothed_covs)[g], nav_s.pos, idx),
+    )
+
+
 def outage_statistics(sc: OutageScores) -> dict:
     """:class:`OutageScores` as a results.json block: overall and per-window horizontal errors (m) of the
     forward and smoothed solutions, and the share of scored outage epochs within 3 of their own sigma.

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxnav.geodesy import curvilinear_to_enu
 from jaxnav.ins.attitude import quat_to_dcm
@@ -71,3 +72,34 @@ def horizontal_fix_nll(nav, covs, t_nav, t_fix, pos_fix, R_h, lever_b, pos0, idx
         + jnp.linalg.slogdet(S)[1]
         + 2 * jnp.log(2 * jnp.pi)
     )
+
+
+def withheld_fix_loss(result, meas, scored, lever_b, pos0, idx, *, R_scale=1.0):
+    """Sum of :func:`horizontal_fix_nll` over the GNSS fixes ``scored`` of a loosely coupled run: the loss for
+    fitting noise to bridge outages (fixes withheld from the filter, predicted by it).
+
+    Args:
+      result: :class:`jaxnav.ins.LCResult` saving ``nav`` and ``covs`` (the scored fixes withheld from it).
+      meas: its :class:`jaxnav.ins.PVMeasurements` (M epochs; ``pos`` the fixes, ``R`` their covariance, m^2).
+      scored: (M,) bool the fixes scored.  lever_b: (3,) antenna minus IMU, body frame, m.
+      pos0: (3,) ENU origin [lat rad, lon rad, h m].  idx: the error model's state indices.
+      R_scale: factor on the fixes' variances (the noise's ``pos_sigma_scale`` squared).
+    Returns:
+      scalar, differentiable in the run's parameters and ``lever_b``.
+    """
+    ep = result.epochs
+    g = np.nonzero(np.asarray(ep.gnss_row) >= 0)[0]  # the GNSS epochs among the filter's
+    nav = jax.tree_util.tree_map(lambda a: a[g], ep.nav)
+    R_h = jnp.asarray(np.asarray(meas.R, float)[:, :2, :2]) * R_scale
+    nll = horizontal_fix_nll(
+        nav,
+        ep.covs[g],
+        ep.t_nav[g],
+        jnp.asarray(np.asarray(meas.t)),
+        jnp.asarray(np.asarray(meas.pos, float)),
+        R_h,
+        lever_b,
+        pos0,
+        idx,
+    )
+    return jnp.sum(jnp.where(jnp.asarray(scored), nll, 0.0))

@@ -142,3 +142,62 @@ def test_cli_walk_needs_a_data_folder(tmp_path, monkeypatch, capsys):
     assert main(["walk", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "--data" in err and "JAXNAV_DATA" in err
+
+
+def test_run_tracks_and_score_run_on_the_walk(run):
+    """ins.score_run: no window, no scores; the antenna track moves with the lever arm by its length (a rotation)."""
+    from jaxnav.geodesy import curvilinear_to_enu
+    from jaxnav.ins import run_tracks, score_run
+
+    sc, r = run
+    m, pos0 = r.prep.meas, np.asarray(r.prep.alignment.nav0.pos, float)
+    assert r.result.epochs.covs.shape[-1] == 15
+    tr, none = score_run(
+        r.result, r.smoothed_nav, r.smoothed_covs, m, r.fixed, r.prep.withheld, np.zeros((0, 2)), None, pos0
+    )
+    assert none is None and tr.gnss_epochs.size == m.t.size
+    np.testing.assert_allclose(tr.enu_ref, curvilinear_to_enu(pos0, np.asarray(m.pos) - pos0), atol=1e-9)
+    np.testing.assert_array_equal(tr.enu_fwd, r.enu_fwd)
+    at_imu = run_tracks(r.result, r.smoothed_nav, m._replace(lever=np.zeros_like(np.asarray(m.lever))), pos0)
+    lever = np.linalg.norm(np.asarray(m.lever)[0])
+    assert lever == pytest.approx(0.05)
+    np.testing.assert_allclose(np.linalg.norm(tr.enu_fwd - at_imu.enu_fwd, axis=1), lever, rtol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(tr.enu_sm - at_imu.enu_sm, axis=1), lever, rtol=1e-9)
+    assert np.isfinite(sc.fwd_rms_all) and sc.n_nonfinite_nav == 0
+
+
+def test_withheld_fix_loss_and_tuning_on_it(run):
+    """ins.withheld_fix_loss sums horizontal_fix_nll over the scored fixes (a fix alone: its own NLL); --tune's
+    "outages" loss fits on fixes withheld on the training windows and does not end worse than it started."""
+    from jaxnav.experiments.ins_run import run_filter, run_training_windows, tune_noise
+    from jaxnav.ins import ERROR_MODEL_15, horizontal_fix_nll, in_windows, withheld_fix_loss
+
+    _, r = run
+    prep = r.prep
+    res = run_filter(prep, save=("nav", "covs"))
+    m, pos0, idx = prep.meas, np.asarray(prep.alignment.nav0.pos, float), ERROR_MODEL_15.idx
+    lev = np.asarray(m.lever)[0]
+    none = np.zeros(m.t.size, bool)
+    assert float(withheld_fix_loss(res, m, none, lev, pos0, idx)) == 0.0
+    g = np.nonzero(np.asarray(res.epochs.gnss_row) >= 0)[0]
+    k = 40
+    one = none.copy()
+    one[k] = True
+    nav_k = type(res.epochs.nav)(*(np.asarray(a)[g[k : k + 1]] for a in res.epochs.nav))
+    ref = horizontal_fix_nll(
+        nav_k,
+        np.asarray(res.epochs.covs)[g[k : k + 1]],
+        np.asarray(res.epochs.t_nav)[g[k : k + 1]],
+        np.asarray(m.t)[k : k + 1],
+        np.asarray(m.pos)[k : k + 1],
+        4.0 * np.asarray(m.R)[k : k + 1, :2, :2],
+        lev,
+        pos0,
+        idx,
+    )
+    assert float(withheld_fix_loss(res, m, one, lev, pos0, idx, R_scale=4.0)) == pytest.approx(float(ref[0]), rel=1e-12)
+    tw = run_training_windows(prep)
+    assert tw.shape[1] == 2 and not np.any(in_windows(np.asarray(m.t), tw) & np.asarray(prep.withheld))
+    fit = tune_noise(prep, ("arw",), max_evals=3, loss_kind="outages")
+    assert fit.fitted_on.endswith("fixes withheld on the training windows") and fit.n_epochs >= 5
+    assert np.isfinite(fit.loglik_before) and fit.loglik_after >= fit.loglik_before - 1e-9
