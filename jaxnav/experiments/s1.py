@@ -359,7 +359,11 @@ def run_monitor_files(
         plot_daily_velocity(s, v, fig)
         ref = v.reference_velocity
         result["stations"][s.station] = dict(
-            file=str(f), format=s.fmt, **velocity_summary(s, v), forecast_statistics=st, figure=str(fig)
+            file=str(f),
+            format=s.fmt,
+            **velocity_summary(v, n_masked=s.n_masked),
+            forecast_statistics=st,
+            figure=str(fig),
         )
         for i, ax in enumerate("ENU"):
             pub = "" if ref is None else f"{ref[i] / MM_PER_YEAR:+.2f}+-{v.reference_sigma[i] / MM_PER_YEAR:.2f}"

@@ -21,7 +21,8 @@ GNSS innovation log-likelihood over the walk (the forward axis is the walking di
 
 The run itself is the shipped ``jaxnav ins`` config ``walk_0827``
 (``jaxnav/experiments/configs/ins/walk_0827.toml``, processed by :mod:`jaxnav.experiments.ins_run`:
-``run_ins(prepare(walk_config(), imu=data.imu, pos=data.pos))``); this module keeps the set's reader
+``run_ins(prepare(walk_config(data_root), imu=data.imu, pos=data.pos))``, ``data_root`` the folder holding
+``rtklibexplorer-gnss-imu/``); this module keeps the set's reader
 (:func:`load_walk`) and its frame check (:func:`frame_check`).
 """
 

@@ -449,15 +449,18 @@ def search_time_offset(
     llh,
     v_enu=None,
     *,
+    coarse_step: float = 0.05,
+    fine_step: float = 0.01,
+    min_corr: float = 0.5,
     progress: Callable[[str], Any] | None = None,
     widen_hint: str = "widen the search span",
 ) -> dict:
     """IMU-GNSS time offset and clock drift of a recording by a filter's innovation likelihood.
 
-    First guess :func:`estimate_time_offset` (yaw rate against GNSS course rate), kept when its
-    correlation exceeds 0.5, else 0 (it assumes the body points along the velocity, which a handheld
-    device does not); then :func:`likelihood_time_offset` over +-``span`` and :func:`clock_drift` at the
-    best offset. ``loglik`` is memoised here (trial clocks rounded to 1 us); ``progress`` gets the
+    First guess :func:`estimate_time_offset` (yaw rate against GNSS course rate, lags up to
+    max(1, ``span`` + 0.5) s), kept when its correlation exceeds ``min_corr``, else 0 (it assumes the body
+    points along the velocity, which a handheld device does not); then :func:`likelihood_time_offset` over
+    +-``span`` (grids of ``coarse_step`` and ``fine_step`` s) and :func:`clock_drift` at the best offset. ``loglik`` is memoised here (trial clocks rounded to 1 us); ``progress`` gets the
     stages and a warning when the offset is at the edge of the search or the drift significant.
 
     Args:
@@ -493,7 +496,7 @@ def search_time_offset(
             first_guess_corr=float(est.corr),
             first_guess_epochs=int(est.n_epochs),
         )
-        if not est.corr > 0.5:
+        if not est.corr > min_corr:
             raise ValueError(f"weak correlation {est.corr:.2f}")
     except ValueError as exc:  # too few turns or epochs: search around zero
         guess = 0.0
@@ -506,12 +509,14 @@ def search_time_offset(
             cache[key] = float(loglik(*key))
         return cache[key]
 
-    res = likelihood_time_offset(memo, span, guess=guess, progress=progress)
+    res = likelihood_time_offset(
+        memo, span, guess=guess, coarse_step=coarse_step, fine_step=fine_step, progress=progress
+    )
     drift = clock_drift(memo, res.offset_s, t_gnss, span, widen_hint=widen_hint)
     grid = np.array(sorted(k[0] for k in cache if k[1] == 0.0))
     info.update(
-        method=f"innovation log-likelihood: 50 ms grid over +-{span:g} s, 10 ms grid around its best, "
-        "parabolic refinement",
+        method=f"innovation log-likelihood: {coarse_step * 1e3:g} ms grid over +-{span:g} s, "
+        f"{fine_step * 1e3:g} ms grid around its best, parabolic refinement",
         grid_s=grid,
         loglik=np.array([cache[(g, 0.0)] for g in grid]),
         offset_s=res.offset_s,

@@ -95,9 +95,12 @@ def read_ins_inputs(cfg: InsConfig) -> tuple[ImuLog, PosSolution]:
     return imu, pos
 
 
-def read_ins_odometer(cfg: InsConfig) -> tuple[np.ndarray, np.ndarray]:
-    """(t (R,) s on the IMU file's clock, speed (R,) m/s) of the ``[odometer]`` source (NaN: no reading)."""
+def read_ins_odometer(cfg: InsConfig) -> tuple[np.ndarray, np.ndarray] | None:
+    """(t (R,) s on the IMU file's clock, speed (R,) m/s) of the ``[odometer]`` source (NaN: no reading), or None
+    without an ``[odometer]`` section."""
     o = cfg.odometer
+    if o is None:
+        return None
     if o.source == "imu":
         return read_kfgins_odometer(cfg.imu.file, gps_week=cfg.imu.gps_week)
     d = _csv(
@@ -109,9 +112,12 @@ def read_ins_odometer(cfg: InsConfig) -> tuple[np.ndarray, np.ndarray]:
     return (d["t"] if o.gps_week is None else d["t"] + o.gps_week * WEEK), d["speed"]
 
 
-def read_ins_heading(cfg: InsConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """(t (R,) s GPST, heading (R,) rad clockwise from north, sigma (R,) rad or None) of the ``[heading]`` file."""
+def read_ins_heading(cfg: InsConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
+    """(t (R,) s, heading (R,) rad clockwise from north, sigma (R,) rad or None) of the ``[heading]`` file, or None
+    without a ``[heading]`` section; t on the file's own time scale, plus ``heading.gps_week`` weeks when given."""
     h = cfg.heading
+    if h is None:
+        return None
     d = _csv(
         cfg,
         "heading.",

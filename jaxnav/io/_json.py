@@ -1,5 +1,5 @@
 """Strict JSON output (host side): the one writer of every ``results.json`` / ``monitor.json`` /
-``scores.json``.
+``rtk_results.json``.
 
 JSON has no NaN or infinity. :func:`json_ready` turns arrays and numpy/JAX scalars into lists and
 numbers and every non-finite number into ``null``; beside each key whose value holds such nulls

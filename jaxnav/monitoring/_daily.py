@@ -214,12 +214,11 @@ def _enu(a, unit=1.0):
     return dict(zip(("east", "north", "up"), (float(v) for v in np.asarray(a, float).reshape(3) / unit)))
 
 
-def velocity_summary(series, velocity: StationVelocity) -> dict:
+def velocity_summary(velocity: StationVelocity, *, n_masked: int = 0) -> dict:
     """JSON-ready summary of a station's velocity (:func:`station_velocity`), east/north/up in mm/yr.
 
     Args:
-      series: its :class:`jaxnav.io.DailySeries` (for the count of masked values).
-      velocity: :class:`StationVelocity` (m/s inside).
+      velocity: :class:`StationVelocity` (m/s inside).  n_masked: values the series file gave as missing.
     Returns:
       dict: ``epochs``, ``span_years``, ``masked_values``, ``velocity_mm_per_yr``,
       ``sigma_formal_mm_per_yr``, ``sigma_ar1_mm_per_yr``, ``ls_slope_mm_per_yr``,
@@ -231,7 +230,7 @@ def velocity_summary(series, velocity: StationVelocity) -> dict:
     return dict(
         epochs=v.n,
         span_years=v.span_years,
-        masked_values=series.n_masked,
+        masked_values=int(n_masked),
         velocity_mm_per_yr=_enu(v.velocity, MM_PER_YEAR),
         sigma_formal_mm_per_yr=_enu(v.sigma, MM_PER_YEAR),
         sigma_ar1_mm_per_yr=_enu(v.sigma_ar1, MM_PER_YEAR),
@@ -260,6 +259,10 @@ def forecast_summary(forecasts: dict, period: int) -> dict:
     out = {}
     for name, r in forecasts.items():
         dev = np.asarray(r.deviation)
+        if dev.ndim != 3 or dev.shape[1] != 1:
+            raise ValueError(
+                f"forecast_summary: {name!r} deviation has shape {dev.shape}, expected (N, 1, 3): one station"
+            )
         ps = period_statistics(dev, max(1, min(period, dev.shape[0] - 1)), thresholds=DAILY_THRESHOLDS_ENU)
         out[name] = dict(
             m_P_mm=(np.asarray(ps.m_P)[:, 0] / MM).tolist(),

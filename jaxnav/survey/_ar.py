@@ -200,23 +200,6 @@ def simulate_ar(key, phi, sigma, n: int, *, burn: int = 500):
     return xs[burn:]
 
 
-def se_coverage(key, phi, sigma, n: int, reps: int, method: str = "yule_walker") -> tuple[float, float]:
-    """Coverage of the AR standard errors of :func:`fit_ar` over ``reps`` simulated AR(p) series.
-
-    Args:
-      key: PRNG key.  phi: (p,) true coefficients.  sigma: driving-noise std.
-      n: samples per series.  reps: number of series.  method: of :func:`fit_ar`.
-    Returns:
-      (share of |phi_hat - phi| / se < 1, share < 2) over all coefficients and series (normal: 0.683, 0.954).
-    """
-    phi = jnp.asarray(phi)
-    p = phi.shape[0]
-    keys = jax.random.split(key, reps)
-    fits = jax.jit(jax.vmap(lambda k: fit_ar(simulate_ar(k, phi, sigma, n), p, method)))(keys)
-    z = np.abs(np.asarray(fits.phi - phi) / np.asarray(fits.se))
-    return float((z < 1).mean()), float((z < 2).mean())
-
-
 def ar_state_space(phi, sigma2, R) -> LinearGaussian:
     """Companion-form state space of AR(p) plus white measurement noise.
 

@@ -46,7 +46,7 @@ from jaxnav.geodesy import (
     similarity2d,
     zone_central_meridian,
 )
-from jaxnav.units import CM, MM
+from jaxnav.units import ARCSEC, CM, MM
 
 
 class RtkSeries(NamedTuple):
@@ -950,7 +950,7 @@ def connection_summary(con: ConnectionModels) -> dict:
             model="4-parameter plane similarity (x' = t + (1+m) R(theta) x)",
             tx=float(tp.params.t[0]),
             ty=float(tp.params.t[1]),
-            theta_arcsec=float(tp.params.theta) / (math.pi / 648000),
+            theta_arcsec=float(tp.params.theta) / ARCSEC,
             m_ppm=float(tp.params.m) * 1e6,
             sigma0_mm=float(tp.sigma0) / MM,
             residual_rms_mm=[float(v) / MM for v in tp.rms],
@@ -991,14 +991,14 @@ def precision_summary(res: RtkResult) -> dict:
     return out
 
 
-def levelling_summary(res: RtkResult, h_level, thresholds=(0.007, 0.010, 0.015)) -> dict:
+def levelling_summary(res: RtkResult, h_level, thresholds=None) -> dict:
     """S2 Table 3 for each height path of the results: :func:`compare_levelling` in cm.
 
     Args:
       res: :class:`RtkResult` of P points; its filtered (``xyh``), terminal (``terminal_xyh``) and
         conventional (``raw_xyh``) heights are compared, m.
       h_level: (P,) levelled heights, m (NaN: not levelled).
-      thresholds: |difference| thresholds, m (S2: 0.7, 1.0, 1.5 cm).
+      thresholds: |difference| thresholds, m (None: those of :func:`compare_levelling`, S2's 0.7, 1.0, 1.5 cm).
     Returns:
       {"filtered" | "conventional_terminal" | "conventional_H_anomaly": {``max_abs_cm``,
       ``mean_cm``, ``std_cm``, ``rms_cm``, ``thresholds_cm``, ``count_within``, ``share_within``}},
@@ -1013,7 +1013,7 @@ def levelling_summary(res: RtkResult, h_level, thresholds=(0.007, 0.010, 0.015))
     ):
         h = np.asarray(h, float)
         if np.any(np.isfinite(h - h_level)):
-            c = compare_levelling(h, h_level, thresholds)
+            c = compare_levelling(h, h_level) if thresholds is None else compare_levelling(h, h_level, thresholds)
             out[key] = dict(
                 max_abs_cm=c.max_abs / CM,
                 mean_cm=c.mean / CM,

@@ -23,7 +23,7 @@ function of array leaves:
   spread their batch over every process's devices and return the same numbers on each;
   :func:`is_writer` is the one test of who writes the results (process 0);
 * :func:`cv_nll`: a ready-made tuning target (constant-velocity noise scales); the S0
-  experiment's targets (``S0Setup``, ``s0_metrics``) are in :mod:`jaxnav.experiments`.
+  experiment's targets (``S0Setup``, ``s0_metrics``) are in :mod:`jaxnav.experiments.s0`.
 """
 
 from jaxnav.tune._bijectors import Bijector, Space, bijector, interval, log, positive, real, unit

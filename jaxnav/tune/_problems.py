@@ -1,6 +1,6 @@
 """Ready-made tuning target: maximum-likelihood noise scales of a constant-velocity model (S1/S2 model).
 
-The S0 INS/GNSS target is :func:`jaxnav.experiments.s0_metrics`.
+The S0 INS/GNSS target is :func:`jaxnav.experiments.s0.s0_metrics`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """What every command shares (issue 21): ``--version``, ``-q``/``-v`` through ``logging``, progress
 without carriage returns off a terminal, ``--figure-format``, the provenance block and files list of
-``results.json``, the rtk CSV's units/CRS header, strict unit-suffixed ``scores.json``. In process
+``results.json``, the rtk CSV's units/CRS header, strict unit-suffixed JSON. In process
 through ``jaxnav.cli.main``, on the smallest inputs (a 2-point epoch log)."""
 
 from __future__ import annotations

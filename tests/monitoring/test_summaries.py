@@ -33,7 +33,7 @@ def _velocity(reference=True):
 
 
 def test_velocity_summary_in_mm_per_yr():
-    s = mon.velocity_summary(SimpleNamespace(n_masked=4), _velocity())
+    s = mon.velocity_summary(_velocity(), n_masked=4)
     assert (s["epochs"], s["span_years"], s["masked_values"]) == (100, 3.5, 4)
     assert s["velocity_mm_per_yr"] == pytest.approx({"east": 1.0, "north": -2.0, "up": 0.5}, rel=1e-12)
     assert s["ls_slope_mm_per_yr"]["north"] == pytest.approx(-2.02, rel=1e-12)
@@ -41,7 +41,7 @@ def test_velocity_summary_in_mm_per_yr():
     assert s["published_mm_per_yr"]["up"] == pytest.approx(0.4, rel=1e-12)
     assert s["published_sigma_mm_per_yr"]["east"] == pytest.approx(0.2, rel=1e-12)
     assert s["random_walk_psd_m2_per_s3"] == {"east": 1e-30, "north": 2e-30, "up": 3e-30}
-    s0 = mon.velocity_summary(SimpleNamespace(n_masked=0), _velocity(reference=False)._replace(accel_psd=None))
+    s0 = mon.velocity_summary(_velocity(reference=False)._replace(accel_psd=None))
     assert s0["published_mm_per_yr"] is None and s0["published_sigma_mm_per_yr"] is None
     assert s0["random_walk_psd_m2_per_s3"] is None
 
