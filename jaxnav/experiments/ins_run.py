@@ -3,15 +3,17 @@
 Pipeline (host-side glue around the pure, jitted library functions):
 
 1. read the IMU and GNSS files (:func:`jaxnav.io.read_ins_inputs`; formats of :mod:`jaxnav.io`), apply the
-   mounting (:func:`jaxnav.ins.sensor_to_body`) and the IMU-GNSS time offset;
+   mounting (:func:`jaxnav.ins.sensor_to_body`) and the IMU-GNSS time offset (given, or
+   :func:`jaxnav.ins.search_time_offset` through :func:`recording_time_offset`);
 2. align (:func:`jaxnav.ins.coarse_alignment`), build the GNSS measurements with the lever arm
-   (:func:`gnss_measurements`) and the filter's noise (:func:`filter_params`);
+   (:func:`jaxnav.ins.gnss_solution_measurements`), the pseudo-measurements (:func:`build_aids`) and the
+   filter's noise (:func:`filter_params`, calibrated by :func:`calibrate_noise`);
 3. run the loosely coupled filter (:func:`jaxnav.ins.loosely_coupled`) and the RTS smoother
    (:func:`jaxnav.ins.smooth`);
 4. optionally withhold GNSS on simulated outages and score forward and smoothed solutions
-   against the withheld RTK-fixed epochs (:func:`jaxnav.ins.outage_windows`, :func:`jaxnav.ins.score_outages`);
-5. optionally tune the noise densities by maximum likelihood (:func:`tune_noise`): gradient of
-   the GNSS innovation negative log-likelihood over the whole run.
+   against the withheld RTK-fixed epochs (:func:`jaxnav.ins.outage_windows`, :func:`jaxnav.ins.score_run`);
+5. optionally tune the noise densities by maximum likelihood (:func:`tune_noise`): the GNSS innovations
+   over the whole run, or the fixes withheld on training windows (:func:`jaxnav.ins.withheld_fix_loss`).
 
 Outputs are written by :mod:`jaxnav.experiments.ins_output`.
 """

@@ -574,7 +574,6 @@ def score_outages(
     )
 
 
-# ----------------------------------------------------------------------------- sigmas from error covariances
 class RunTracks(NamedTuple):
     """Antenna positions of a loosely coupled run at its GNSS epochs, local ENU around ``pos0``, m.
 
@@ -629,7 +628,6 @@ def score_run(
         return tr, None
     g = tr.gnss_epochs
     ep = result.epochs
-    nav_s = type(smoothed_nav)(*(np.asarray(a)[g] for a in smoothed_nav))
     nonfinite = int(sum(np.count_nonzero(~np.isfinite(np.asarray(a))) for a in (*ep.nav, *smoothed_nav)))
     return tr, score_outages(
         np.asarray(meas.t),
@@ -641,7 +639,7 @@ def score_run(
         runtime_s=runtime_s,
         n_nonfinite=nonfinite,
         sig_f=horizontal_sigma(np.asarray(ep.covs)[g], np.asarray(ep.nav.pos)[g], idx),
-        sig_s=horizontal_sigma(np.asarray(smoothed_covs)[g], nav_s.pos, idx),
+        sig_s=horizontal_sigma(np.asarray(smoothed_covs)[g], np.asarray(smoothed_nav.pos)[g], idx),
     )
 
 
@@ -705,6 +703,7 @@ def outage_statistics(sc: OutageScores) -> dict:
     }
 
 
+# ----------------------------------------------------------------------------- sigmas from error covariances
 def position_sigmas_enu(covs, pos, idx) -> np.ndarray:
     """(M, 3) east, north, up 1-sigma, m, of error covariances (M, n, n) at positions ``pos`` (M, 3)
     [lat rad, lon rad, h m]; ``idx``: the model's :class:`jaxnav.ins.error_model.ErrorStateIndex`

@@ -40,6 +40,8 @@ __all__ = [
     "find_ins_config",
     "load_ins_config",
     "noise_in_config_units",
+    "noise_toml",
+    "NOISE_TOML_SHORT_S",
 ]
 
 #: folder of the shipped ``jaxnav ins`` configs (``jaxnav ins NAME`` finds ``NAME.toml`` here); they ship
